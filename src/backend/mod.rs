@@ -1,0 +1,1 @@
+//! The trainable grey-box network (the only module that names `dfdx`).

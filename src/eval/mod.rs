@@ -1,0 +1,1 @@
+//! Fast numeric programs compiled from IR expressions.

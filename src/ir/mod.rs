@@ -1,0 +1,376 @@
+//! The compiled model: plain, device-free data produced by [`lower`](crate::ir::lower) from a
+//! checked AST.
+//!
+//! Every name is resolved to an index ([`Var`]), every `let` is inlined, consts keep their
+//! evaluated values, and each closure carries its embedding layout and network shape. The
+//! simulator, the trainable backend and the diagnosis all start from this form; nothing here
+//! depends on how it is executed.
+
+pub use crate::ast::BinOp;
+
+/// A resolved reference to a model quantity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Var {
+    /// Actuator `inputs[i]`.
+    Input(usize),
+    /// Measured state `states[i]`.
+    State(usize),
+    /// Hidden (unmeasured) state `hidden[i]`.
+    Hidden(usize),
+    /// Known constant `consts[i]`.
+    Const(usize),
+    /// Trainable constant `params[i]` (its constrained value).
+    Param(usize),
+    /// Output `output` of closure `closure` (its final value, prior applied).
+    ClosureOutput {
+        /// Index into [`Model::closures`].
+        closure: usize,
+        /// Index into that closure's outputs.
+        output: usize,
+    },
+}
+
+/// A built-in function.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Func {
+    /// `exp(x)`
+    Exp,
+    /// `log(x)`: natural logarithm.
+    Log,
+    /// `sqrt(x)`
+    Sqrt,
+    /// `abs(x)`
+    Abs,
+    /// `tanh(x)`
+    Tanh,
+    /// `sigmoid(x) = 1 / (1 + exp(-x))`
+    Sigmoid,
+    /// `softplus(x) = log(1 + exp(x))`, evaluated safely for large |x|.
+    Softplus,
+    /// `min(a, b)`
+    Min,
+    /// `max(a, b)`
+    Max,
+    /// `pow(a, b) = a ^ b`
+    Pow,
+}
+
+impl Func {
+    /// Every function, for look-ups and suggestions.
+    pub const ALL: [Func; 10] = [
+        Func::Exp,
+        Func::Log,
+        Func::Sqrt,
+        Func::Abs,
+        Func::Tanh,
+        Func::Sigmoid,
+        Func::Softplus,
+        Func::Min,
+        Func::Max,
+        Func::Pow,
+    ];
+    /// The name used in source.
+    pub fn name(self) -> &'static str {
+        match self {
+            Func::Exp => "exp",
+            Func::Log => "log",
+            Func::Sqrt => "sqrt",
+            Func::Abs => "abs",
+            Func::Tanh => "tanh",
+            Func::Sigmoid => "sigmoid",
+            Func::Softplus => "softplus",
+            Func::Min => "min",
+            Func::Max => "max",
+            Func::Pow => "pow",
+        }
+    }
+    /// Number of arguments it takes.
+    pub fn arity(self) -> usize {
+        match self {
+            Func::Min | Func::Max | Func::Pow => 2,
+            _ => 1,
+        }
+    }
+    /// Looks a function up by its source name.
+    pub fn from_name(name: &str) -> Option<Func> {
+        Func::ALL.into_iter().find(|f| f.name() == name)
+    }
+}
+
+/// A compiled expression: names resolved, lets inlined.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Expr {
+    /// A literal.
+    Num(f64),
+    /// A model quantity.
+    Var(Var),
+    /// Unary minus.
+    Neg(Box<Expr>),
+    /// A binary operation.
+    Bin(BinOp, Box<Expr>, Box<Expr>),
+    /// A function call (arity already checked).
+    Call(Func, Vec<Expr>),
+}
+
+/// An actuator with optional bounds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Input {
+    /// Name (data column).
+    pub name: String,
+    /// `in [lo, hi]`.
+    pub bounds: Option<(f64, f64)>,
+}
+
+/// A measured or hidden state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    /// Name (data column for measured states).
+    pub name: String,
+    /// Initial value: a constant expression of consts and params.
+    pub init: Option<Expr>,
+}
+
+/// A known constant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Const {
+    /// Name.
+    pub name: String,
+    /// Evaluated value.
+    pub value: f64,
+}
+
+/// A constraint on a trainable value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Constraint {
+    /// Unconstrained.
+    Free,
+    /// Strictly positive (trained through softplus).
+    Positive,
+    /// Hard bounds `[lo, hi]` (trained through a sigmoid).
+    Bounds(f64, f64),
+}
+
+/// A trainable constant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Param {
+    /// Name.
+    pub name: String,
+    /// Initial guess (evaluated).
+    pub init: f64,
+    /// Its constraint.
+    pub constraint: Constraint,
+}
+
+/// A named algebraic quantity (`let` or `output`) with its definition inlined.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Definition {
+    /// Name.
+    pub name: String,
+    /// Inlined expression.
+    pub expr: Expr,
+}
+
+/// How a prior combines with the network (spec section 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PriorKind {
+    /// `o = p * (1 + n)`.
+    Mul,
+    /// `o = p + s * n`.
+    Add,
+}
+
+/// A prior on a closure output.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prior {
+    /// Multiplicative or additive.
+    pub kind: PriorKind,
+    /// The prior expression (states, inputs, consts, params).
+    pub expr: Expr,
+}
+
+/// One value a closure provides.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClosureOutput {
+    /// Name.
+    pub name: String,
+    /// `~` magnitude as written; `None` means the data-driven default is chosen at training.
+    pub scale: Option<f64>,
+    /// Prior, if any.
+    pub prior: Option<Prior>,
+    /// Constraint on the value, if declared.
+    pub constraint: Constraint,
+}
+
+/// The time-delay embedding of a closure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Embedding {
+    /// The observed variables `z` (inputs and measured states).
+    pub observe: Vec<Var>,
+    /// Delay between lags (model time units).
+    pub delay: f64,
+    /// Number of lags (>= 1).
+    pub dim: usize,
+}
+
+impl Embedding {
+    /// The network input layout: entry `k` is `(variable, lag)`, lag-major as in the paper
+    /// (`z(t)` first, then `z(t - delay)`, ...).
+    pub fn layout(&self) -> Vec<(Var, usize)> {
+        (0..self.dim)
+            .flat_map(|lag| self.observe.iter().map(move |&v| (v, lag)))
+            .collect()
+    }
+    /// Number of network inputs.
+    pub fn width(&self) -> usize {
+        self.observe.len() * self.dim
+    }
+    /// How much history the embedding needs before its first use.
+    pub fn span(&self) -> f64 {
+        (self.dim.saturating_sub(1)) as f64 * self.delay
+    }
+}
+
+/// Activation of the hidden layers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Activation {
+    /// `log(1 + exp(x))` (default).
+    Softplus,
+    /// `tanh(x)`
+    Tanh,
+    /// `max(0, x)`
+    Relu,
+    /// `1 / (1 + exp(-x))`
+    Sigmoid,
+    /// `x * Phi(x)` (tanh approximation).
+    Gelu,
+    /// Identity.
+    Linear,
+}
+
+impl Activation {
+    /// Every activation, for look-ups and suggestions.
+    pub const ALL: [Activation; 6] = [
+        Activation::Softplus,
+        Activation::Tanh,
+        Activation::Relu,
+        Activation::Sigmoid,
+        Activation::Gelu,
+        Activation::Linear,
+    ];
+    /// The name used in source.
+    pub fn name(self) -> &'static str {
+        match self {
+            Activation::Softplus => "softplus",
+            Activation::Tanh => "tanh",
+            Activation::Relu => "relu",
+            Activation::Sigmoid => "sigmoid",
+            Activation::Gelu => "gelu",
+            Activation::Linear => "linear",
+        }
+    }
+    /// Looks an activation up by its source name.
+    pub fn from_name(name: &str) -> Option<Activation> {
+        Activation::ALL.into_iter().find(|a| a.name() == name)
+    }
+}
+
+/// The network of a closure: a multilayer perceptron with a linear output layer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Network {
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// Hidden-layer activation.
+    pub activation: Activation,
+}
+
+/// An unknown constitutive law learned by one network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Closure {
+    /// Name.
+    pub name: String,
+    /// The values it provides (network output `k` is `outputs[k]`).
+    pub outputs: Vec<ClosureOutput>,
+    /// Its delay embedding.
+    pub embedding: Embedding,
+    /// Its network shape.
+    pub network: Network,
+}
+
+/// Whether balances are derivatives (`der`) or discrete updates (`next`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dynamics {
+    /// `der X = f`: dX/dt = f, integrated (RK4 in training, adaptive in simulation).
+    Continuous,
+    /// `next X = f`: X(t + h) = f.
+    Discrete,
+}
+
+/// The right-hand side of one state's balance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Balance {
+    /// The state it governs (`Var::State` or `Var::Hidden`).
+    pub state: Var,
+    /// Inlined right-hand side.
+    pub expr: Expr,
+}
+
+/// One patch of an effect, in printable form.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectPatch {
+    /// The patched name (for a balance patch, `der X`).
+    pub target: String,
+    /// `*=`, `+=` or `:=`.
+    pub op: crate::ast::PatchOp,
+    /// The patch expression, resolved in the patched model.
+    pub expr: Expr,
+}
+
+/// A candidate unmodelled effect, as listed in the compiled model (not applied).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Effect {
+    /// Name.
+    pub name: String,
+    /// Description.
+    pub description: Option<String>,
+    /// Params it adds.
+    pub params: Vec<Param>,
+    /// Hidden states it adds.
+    pub hidden: Vec<State>,
+    /// Balances of the hidden states it adds.
+    pub balances: Vec<Balance>,
+    /// Patches to existing names.
+    pub patches: Vec<EffectPatch>,
+}
+
+/// A compiled model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Model {
+    /// Model name.
+    pub name: String,
+    /// Header description.
+    pub description: Option<String>,
+    /// Time unit label.
+    pub time_unit: Option<String>,
+    /// Actuators.
+    pub inputs: Vec<Input>,
+    /// Measured states.
+    pub states: Vec<State>,
+    /// Hidden states.
+    pub hidden: Vec<State>,
+    /// Known constants.
+    pub consts: Vec<Const>,
+    /// Trainable constants.
+    pub params: Vec<Param>,
+    /// `let`s, inlined (kept for reporting and prediction).
+    pub lets: Vec<Definition>,
+    /// `output`s, inlined.
+    pub outputs: Vec<Definition>,
+    /// Closures.
+    pub closures: Vec<Closure>,
+    /// Continuous or discrete.
+    pub dynamics: Dynamics,
+    /// One balance per state, measured states first then hidden, in declaration order.
+    pub balances: Vec<Balance>,
+    /// Effects declared in the model (applied ones are already folded into the above).
+    pub effects: Vec<Effect>,
+}

@@ -1,0 +1,22 @@
+//! `gbc`: the compiler of the `.gbm` grey-box modelling language.
+//!
+//! Pipeline (see `docs/architecture.md`): [`syntax`] parses text into the [`ast`], [`check`]
+//! validates it and collects every error, [`ir`] lowers it into a plain compiled model,
+//! [`eval`] turns its expressions into fast numeric programs, [`sim`] integrates models
+//! without closures, [`data`] reads measured records, [`backend`] builds the trainable
+//! grey-box network, and [`cli`] is the command-line edge that renders diagnostics.
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod ast;
+pub mod backend;
+pub mod check;
+pub mod cli;
+pub mod data;
+pub mod diagnostics;
+pub mod eval;
+pub mod io;
+pub mod ir;
+pub mod signal;
+pub mod sim;
+pub mod syntax;

@@ -1,0 +1,1 @@
+//! Input programs: piecewise-constant actuator signals for simulation.

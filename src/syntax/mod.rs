@@ -1,0 +1,1 @@
+//! Syntax: the pest binding.
