@@ -20,3 +20,4 @@ pub mod ir;
 pub mod signal;
 pub mod sim;
 pub mod syntax;
+pub mod train;

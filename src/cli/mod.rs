@@ -41,3 +41,12 @@ pub fn main() -> i32 {
     let _cli = Cli::parse();
     0
 }
+
+/// Reads, parses, checks and lowers the model file at `path` (no effect applied); every
+/// problem becomes a user error carrying the file's source.
+pub fn load_model(path: &std::path::Path) -> Result<crate::ir::Model, CommandError> {
+    Err(CommandError::Internal(format!(
+        "front end not wired yet for {}",
+        path.display()
+    )))
+}

@@ -1,0 +1,1 @@
+//! Training of grey-box models on data.
