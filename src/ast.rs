@@ -75,6 +75,16 @@ pub enum BinOp {
 }
 
 impl BinOp {
+    /// Applies the operator to two numbers (the one scalar definition all evaluators share).
+    pub fn apply(self, a: f64, b: f64) -> f64 {
+        match self {
+            BinOp::Add => a + b,
+            BinOp::Sub => a - b,
+            BinOp::Mul => a * b,
+            BinOp::Div => a / b,
+            BinOp::Pow => a.powf(b),
+        }
+    }
     /// The operator's source symbol.
     pub fn symbol(self) -> &'static str {
         match self {

@@ -14,6 +14,7 @@ pub mod check;
 pub mod cli;
 pub mod data;
 pub mod diagnostics;
+pub mod driver;
 pub mod eval;
 pub mod io;
 pub mod ir;

@@ -1,1 +1,220 @@
 //! The trainable grey-box network (the only module that names `dfdx`).
+//!
+//! [`Network::build`] lowers a compiled [`ir::Model`](crate::ir::Model) and a [`Setup`] (step
+//! size, normalisation, closure scales, seed) into the recurrent network of the paper
+//! (Lovelett et al. 2020, eq. 4-7): for each batch row the closure networks are evaluated on
+//! the delay embedding at the RK4 stage times `t`, `t + h/2`, `t + h` with the stage state
+//! estimate as the current state, the physics layer ([`program`]) combines them with priors,
+//! consts and params into the balances, and the four stages are combined into `x(t + h)`
+//! (optionally in `K` sub-steps of `h / K`). A `next` model is the discrete map
+//! `x(t + h) = f(x(t), ...)`. The loss is the mean squared error of the next measured states
+//! z-scored with the training split's mean and std; [`Network::train_step`] takes one Adam
+//! step on it.
+//!
+//! Everything public here is plain data: batches, predictions and weights cross this
+//! boundary as `f64` vectors, so the graph backend could change without touching callers.
+//!
+//! Meaning of closure outputs (spec section 3), with network output `n` and magnitude `s`:
+//! no prior `o = s n`; `prior o *= p`: `o = p (1 + n)`; `prior o += p`: `o = p + s n`. A
+//! `positive` output is then mapped through `s softplus(o / s)` and an `in [lo, hi]` output
+//! through `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))` (unit slope at the middle).
+//! Params are trained unconstrained: `positive` through softplus (initialised at the
+//! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
+
+mod adam;
+mod graph;
+mod net;
+pub mod program;
+pub mod real;
+
+#[cfg(test)]
+mod tests;
+
+use crate::ir;
+
+pub use net::INIT_LAST_LAYER;
+
+/// The element type the network trains in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// 32-bit floats.
+    #[default]
+    F32,
+    /// 64-bit floats.
+    F64,
+}
+
+/// Per-column normalisation from the training split (spec sections 3 and 4).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Normalisation {
+    /// Mean of each measured state.
+    pub state_mean: Vec<f64>,
+    /// Standard deviation of each measured state (never zero).
+    pub state_std: Vec<f64>,
+    /// Mean of each input.
+    pub input_mean: Vec<f64>,
+    /// Standard deviation of each input (never zero).
+    pub input_std: Vec<f64>,
+}
+
+/// Everything besides the model that fixes the network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setup {
+    /// Sampling step `h` of the data.
+    pub step: f64,
+    /// RK4 sub-steps per sample (1 = the paper's single step).
+    pub substeps: usize,
+    /// Element type.
+    pub precision: Precision,
+    /// Seed of the weight initialisation.
+    pub seed: u64,
+    /// Normalisation of embeddings and loss.
+    pub normalisation: Normalisation,
+    /// Magnitude `s_o` of every closure output, `scales[closure][output]`.
+    pub scales: Vec<Vec<f64>>,
+}
+
+impl Setup {
+    /// Number of distinct stage times per step at which embeddings are needed: `2K + 1`
+    /// (offsets `m h / 2K`, `m = 0..=2K`) for `der` models, 1 for `next` models.
+    pub fn stage_offsets(&self, dynamics: ir::Dynamics) -> usize {
+        match dynamics {
+            ir::Dynamics::Continuous => 2 * self.substeps.max(1) + 1,
+            ir::Dynamics::Discrete => 1,
+        }
+    }
+}
+
+/// A batch of one-step pairs, row-major.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Batch {
+    /// Number of pairs.
+    pub rows: usize,
+    /// `rows x (measured + hidden)` states at `t`.
+    pub states: Vec<f64>,
+    /// `rows x inputs`: the inputs held over the step.
+    pub inputs: Vec<f64>,
+    /// `embeddings[closure][offset]`: `rows x width` raw (physical-unit) values of the
+    /// embedding layout at stage time `t + offset * h / 2K`; lag-0 state entries are
+    /// ignored (the stage estimate replaces them).
+    pub embeddings: Vec<Vec<Vec<f64>>>,
+    /// `rows x measured` states at `t + h` (may be empty when only predicting).
+    pub targets: Vec<f64>,
+}
+
+/// One-step predictions for a batch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prediction {
+    /// `rows x (measured + hidden)` predicted states at `t + h`.
+    pub next_states: Vec<f64>,
+    /// `rows x (all closure outputs)` at `t`, from the states at `t`.
+    pub closure_outputs: Vec<f64>,
+    /// `rows x (model outputs)` at `t`.
+    pub outputs: Vec<f64>,
+}
+
+/// A named array of trainable values (network weights, raw params).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedTensor {
+    /// Name, e.g. `closure.r.layer0.weight` or `params`.
+    pub name: String,
+    /// Dimensions.
+    pub shape: Vec<usize>,
+    /// Row-major values.
+    pub values: Vec<f64>,
+}
+
+/// Why the network could not be built or run.
+#[derive(Debug, thiserror::Error, miette::Diagnostic)]
+pub enum BackendError {
+    /// A bug: inconsistent model or batch.
+    #[error("internal error in the trainable network: {0}")]
+    #[diagnostic(code(gbm::E0400), help("this is a bug in gbc; please report it"))]
+    Internal(String),
+    /// Saved weights do not fit the model.
+    #[error("expected weights for this model, found {0}")]
+    #[diagnostic(
+        code(gbm::E0401),
+        help("use the weights trained with this model, or train it again")
+    )]
+    WeightsMismatch(String),
+}
+
+impl BackendError {
+    /// An internal error with a message.
+    pub fn internal(message: impl Into<String>) -> Self {
+        BackendError::Internal(message.into())
+    }
+}
+
+/// The trainable network in the chosen precision, with its Adam state.
+pub struct Network {
+    inner: Inner,
+}
+
+enum Inner {
+    Single(net::GreyBox<f32>),
+    Double(net::GreyBox<f64>),
+}
+
+macro_rules! dispatch {
+    ($self:expr, $net:ident => $body:expr) => {
+        match &$self.inner {
+            Inner::Single($net) => $body,
+            Inner::Double($net) => $body,
+        }
+    };
+    (mut $self:expr, $net:ident => $body:expr) => {
+        match &mut $self.inner {
+            Inner::Single($net) => $body,
+            Inner::Double($net) => $body,
+        }
+    };
+}
+
+impl Network {
+    /// Lowers `model` into a trainable network with freshly initialised weights.
+    pub fn build(model: &ir::Model, setup: &Setup) -> Result<Network, BackendError> {
+        let inner = match setup.precision {
+            Precision::F32 => Inner::Single(net::GreyBox::build(model, setup)?),
+            Precision::F64 => Inner::Double(net::GreyBox::build(model, setup)?),
+        };
+        Ok(Network { inner })
+    }
+
+    /// One Adam step on the batch's loss; returns the loss before the step.
+    pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
+        dispatch!(mut self, net => net.train_step(batch, learning_rate))
+    }
+
+    /// The normalised one-step loss of a batch.
+    pub fn loss(&self, batch: &Batch) -> Result<f64, BackendError> {
+        dispatch!(self, net => net.loss(batch))
+    }
+
+    /// The loss and its gradient with respect to every tensor of [`Network::weights`].
+    pub fn gradient(&self, batch: &Batch) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
+        dispatch!(self, net => net.gradient(batch))
+    }
+
+    /// One-step predictions (no targets needed).
+    pub fn predict(&self, batch: &Batch) -> Result<Prediction, BackendError> {
+        dispatch!(self, net => net.predict(batch))
+    }
+
+    /// The trainable tensors: each closure's layers, then the raw params (if any).
+    pub fn weights(&self) -> Vec<NamedTensor> {
+        dispatch!(self, net => net.weights())
+    }
+
+    /// Replaces the trainable tensors (names and shapes must match [`Network::weights`]).
+    pub fn set_weights(&mut self, weights: &[NamedTensor]) -> Result<(), BackendError> {
+        dispatch!(mut self, net => net.set_weights(weights))
+    }
+
+    /// The constrained values of the model's params, in declaration order.
+    pub fn param_values(&self) -> Vec<f64> {
+        dispatch!(self, net => net.param_values())
+    }
+}

@@ -1,7 +1,15 @@
 //! The command-line edge: argument parsing, dispatch over subcommands, and rendering of
 //! diagnostics. The only part of gbc that prints or chooses colours.
+//!
+//! Exit codes: 0 success, 1 user error (a coded diagnostic was printed), 2 internal error
+//! (a bug in gbc, including any panic).
 
+mod check;
+mod compile;
+
+use crate::diagnostics::{self, MessageFormat};
 use clap::{Parser, Subcommand};
+use std::io::IsTerminal;
 
 /// Why a command failed.
 #[derive(Debug)]
@@ -20,13 +28,22 @@ impl CommandError {
     }
 }
 
+impl From<Vec<miette::Report>> for CommandError {
+    fn from(reports: Vec<miette::Report>) -> Self {
+        CommandError::User(reports)
+    }
+}
+
 /// What a command returns.
 pub type CommandResult = Result<(), CommandError>;
 
-/// gbc: compile and train grey-box models written in the .gbm language.
+/// gbc: compile, simulate and train grey-box models written in the .gbm language.
 #[derive(Debug, Parser)]
-#[command(name = "gbc", version, about)]
+#[command(name = "gbc", version, about, propagate_version = true)]
 pub struct Cli {
+    /// How diagnostics are printed.
+    #[arg(long, global = true, value_enum, default_value_t = MessageFormat::Human)]
+    pub message_format: MessageFormat,
     /// The subcommand.
     #[command(subcommand)]
     pub command: Command,
@@ -34,19 +51,74 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Check model files and report every problem.
+    Check(check::CheckArgs),
+    /// Compile a model and print a stage of it (AST or IR).
+    Compile(compile::CompileArgs),
+}
+
+/// Runs one parsed command line.
+pub fn dispatch(cli: &Cli) -> CommandResult {
+    match &cli.command {
+        Command::Check(args) => check::run(args, cli.message_format),
+        Command::Compile(args) => compile::run(args),
+    }
+}
 
 /// Parses the command line, runs the command and returns the process exit code.
 pub fn main() -> i32 {
-    let _cli = Cli::parse();
-    0
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(error) => {
+            let code = if error.use_stderr() { 1 } else { 0 };
+            let _ = error.print();
+            return code;
+        }
+    };
+    let format = cli.message_format;
+    // Deep but legal models recurse in the front end; a large stack keeps that safe.
+    let worker = std::thread::Builder::new()
+        .name("gbc".to_string())
+        .stack_size(256 << 20)
+        .spawn(move || dispatch(&cli));
+    let outcome = match worker {
+        Ok(handle) => handle.join(),
+        Err(error) => Ok(Err(CommandError::Internal(format!(
+            "cannot start worker thread: {error}"
+        )))),
+    };
+    match outcome {
+        Ok(Ok(())) => 0,
+        Ok(Err(CommandError::User(reports))) => {
+            print_reports(&reports, format);
+            1
+        }
+        Ok(Err(CommandError::Internal(message))) => {
+            eprintln!("internal error: {message}\nthis is a bug in gbc; please report it");
+            2
+        }
+        Err(_) => {
+            eprintln!(
+                "internal error: gbc panicked (see above)\nthis is a bug in gbc; please report it"
+            );
+            2
+        }
+    }
+}
+
+/// Prints diagnostics to stderr in the chosen format.
+pub fn print_reports(reports: &[miette::Report], format: MessageFormat) {
+    let stderr = std::io::stderr();
+    let color = stderr.is_terminal() && std::env::var_os("NO_COLOR").is_none();
+    let width = 100;
+    for report in reports {
+        eprint!("{}", diagnostics::render(report, format, color, width));
+    }
 }
 
 /// Reads, parses, checks and lowers the model file at `path` (no effect applied); every
 /// problem becomes a user error carrying the file's source.
 pub fn load_model(path: &std::path::Path) -> Result<crate::ir::Model, CommandError> {
-    Err(CommandError::Internal(format!(
-        "front end not wired yet for {}",
-        path.display()
-    )))
+    Ok(crate::driver::compile_file(path, &[])?.model)
 }

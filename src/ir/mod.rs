@@ -8,6 +8,12 @@
 
 pub use crate::ast::BinOp;
 
+mod lower;
+mod print;
+
+pub use lower::{lower, uses_closure, LowerError};
+pub use print::print;
+
 /// A resolved reference to a model quantity.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Var {
@@ -94,6 +100,38 @@ impl Func {
     /// Looks a function up by its source name.
     pub fn from_name(name: &str) -> Option<Func> {
         Func::ALL.into_iter().find(|f| f.name() == name)
+    }
+    /// Applies the function to its arguments (`b` is ignored by one-argument functions).
+    /// The single scalar definition every evaluator shares; `softplus` and `sigmoid` are
+    /// written to stay finite and accurate for large |x|.
+    pub fn apply(self, a: f64, b: f64) -> f64 {
+        match self {
+            Func::Exp => a.exp(),
+            Func::Log => a.ln(),
+            Func::Sqrt => a.sqrt(),
+            Func::Abs => a.abs(),
+            Func::Tanh => a.tanh(),
+            Func::Sigmoid => sigmoid(a),
+            Func::Softplus => softplus(a),
+            Func::Min => a.min(b),
+            Func::Max => a.max(b),
+            Func::Pow => a.powf(b),
+        }
+    }
+}
+
+/// `log(1 + exp(x))` without overflow for large `x` or loss of precision for very negative `x`.
+pub fn softplus(x: f64) -> f64 {
+    x.max(0.0) + (-x.abs()).exp().ln_1p()
+}
+
+/// `1 / (1 + exp(-x))`, stable for large |x|.
+pub fn sigmoid(x: f64) -> f64 {
+    if x >= 0.0 {
+        1.0 / (1.0 + (-x).exp())
+    } else {
+        let e = x.exp();
+        e / (1.0 + e)
     }
 }
 
@@ -314,18 +352,8 @@ pub struct Balance {
     pub expr: Expr,
 }
 
-/// One patch of an effect, in printable form.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EffectPatch {
-    /// The patched name (for a balance patch, `der X`).
-    pub target: String,
-    /// `*=`, `+=` or `:=`.
-    pub op: crate::ast::PatchOp,
-    /// The patch expression, resolved in the patched model.
-    pub expr: Expr,
-}
-
-/// A candidate unmodelled effect, as listed in the compiled model (not applied).
+/// A candidate unmodelled effect, as listed in the compiled model (not applied: applying it
+/// means lowering again with its name, see [`lower`](crate::ir::lower)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Effect {
     /// Name.
@@ -334,12 +362,9 @@ pub struct Effect {
     pub description: Option<String>,
     /// Params it adds.
     pub params: Vec<Param>,
-    /// Hidden states it adds.
-    pub hidden: Vec<State>,
-    /// Balances of the hidden states it adds.
-    pub balances: Vec<Balance>,
-    /// Patches to existing names.
-    pub patches: Vec<EffectPatch>,
+    /// Its other declarations and patches, one canonical source line each
+    /// (e.g. `mu *= 1 / (1 + S / K_I)`, `hidden L = 0`, `der L = (u - L) / tau`).
+    pub lines: Vec<String>,
 }
 
 /// A compiled model.

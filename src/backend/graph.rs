@@ -1,0 +1,319 @@
+//! A recording session over dfdx 0.13: every intermediate is kept as a tape-free tensor and
+//! every backward operation goes onto one shared tape.
+//!
+//! dfdx moves a tape through the tensors of a computation, so a tensor used twice needs its
+//! tape split off first. Here each operation takes its operands as `retaped` copies (same
+//! id, empty tape), runs, and the resulting tape is merged into the session's tape; the
+//! value is returned without a tape. Since dfdx sorts backward operations by creation
+//! order when it executes a merged tape, this is the same computation as threading one tape
+//! by hand. Operations dfdx lacks (softplus, the fused physics, the embedding assembly and
+//! the normalised loss) are added through the tape API: the forward runs on the raw data and
+//! a backward closure accumulates into the operands' gradients.
+
+use std::ops::DerefMut;
+use std::sync::Arc;
+
+use dfdx::shapes::{Axis, HasShape, Shape};
+use dfdx::tensor::{
+    Cpu, CpuError, Gradients, Merge, OwnedTape, PutTape, SplitTape, Storage, Tape, Tensor,
+    TensorFromVec,
+};
+use dfdx::tensor_ops::{Backward, BroadcastTo, Device, TryAdd, TryMatMul, TryMul};
+
+use super::program::{Program, ProgramInputs};
+use super::real::Real;
+use super::BackendError;
+use crate::ir::Activation;
+
+/// An element type the graph can run in: the backend's [`Real`] and dfdx's `Dtype`.
+pub trait Element: Real + dfdx::shapes::Dtype {}
+impl Element for f32 {}
+impl Element for f64 {}
+
+/// A batch-major matrix `(rows, columns)`.
+pub type Matrix<E> = Tensor<(usize, usize), E, Cpu>;
+/// A vector.
+pub type Vector<E> = Tensor<(usize,), E, Cpu>;
+
+/// The buffer dfdx keeps a gradient in.
+pub type GradientBuffer<E> = <Cpu as Storage<E>>::Vec;
+
+type Taped<S, E> = Tensor<S, E, Cpu, OwnedTape<E, Cpu>>;
+
+/// One forward pass being recorded.
+pub struct Graph<E: Element> {
+    device: Cpu,
+    tape: OwnedTape<E, Cpu>,
+}
+
+/// The lag-0 state entries of a closure's network input: column `column` takes state-vector
+/// entry `state`, normalised by `1 / std`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateColumns {
+    /// `(column, state index, 1 / std)` triples.
+    pub entries: Vec<(usize, usize, f64)>,
+}
+
+impl<E: Element> Graph<E>
+where
+    Cpu: Device<E>,
+    GradientBuffer<E>: DerefMut<Target = Vec<E>>,
+{
+    /// Starts recording on `device`.
+    pub fn new(device: &Cpu) -> Self {
+        Graph {
+            device: device.clone(),
+            tape: OwnedTape::default(),
+        }
+    }
+
+    /// A constant matrix from row-major values.
+    pub fn matrix(&self, rows: usize, columns: usize, values: Vec<E>) -> Matrix<E> {
+        self.device.tensor_from_vec(values, (rows, columns))
+    }
+
+    /// A constant vector.
+    pub fn vector(&self, values: Vec<E>) -> Vector<E> {
+        let length = values.len();
+        self.device.tensor_from_vec(values, (length,))
+    }
+
+    /// Merges an operation's tape into the session's and returns the bare value.
+    fn keep<S: Shape>(&mut self, taped: Taped<S, E>) -> Tensor<S, E, Cpu> {
+        let (value, tape) = taped.split_tape();
+        let main = std::mem::take(&mut self.tape);
+        self.tape = main.merge(tape);
+        value
+    }
+
+    fn traced<S: Shape>(tensor: &Tensor<S, E, Cpu>) -> Taped<S, E> {
+        tensor.retaped::<OwnedTape<E, Cpu>>()
+    }
+
+    /// `input @ weight + bias`, the bias broadcast over rows.
+    pub fn affine(
+        &mut self,
+        input: &Matrix<E>,
+        weight: &Matrix<E>,
+        bias: &Vector<E>,
+    ) -> Result<Matrix<E>, BackendError> {
+        let rows = input.shape().0;
+        let columns = weight.shape().1;
+        let product = Self::traced(input).try_matmul(Self::traced(weight))?;
+        let spread = Self::traced(bias).try_broadcast_like::<_, Axis<0>>(&(rows, columns))?;
+        let sum = product.try_add(spread)?;
+        Ok(self.keep(sum))
+    }
+
+    /// `a + factor * b`.
+    pub fn axpy(
+        &mut self,
+        a: &Matrix<E>,
+        factor: f64,
+        b: &Matrix<E>,
+    ) -> Result<Matrix<E>, BackendError> {
+        let scaled = Self::traced(b).try_mul(E::from_double(factor))?;
+        let sum = Self::traced(a).try_add(scaled)?;
+        Ok(self.keep(sum))
+    }
+
+    /// A hidden-layer activation.
+    pub fn activation(
+        &mut self,
+        input: &Matrix<E>,
+        activation: Activation,
+    ) -> Result<Matrix<E>, BackendError> {
+        let taped = Self::traced(input);
+        let output = match activation {
+            Activation::Softplus => return self.softplus(input),
+            Activation::Linear => return Ok(input.clone()),
+            Activation::Tanh => taped.try_tanh()?,
+            Activation::Relu => taped.try_relu()?,
+            Activation::Sigmoid => taped.try_sigmoid()?,
+            Activation::Gelu => taped.try_fast_gelu()?,
+        };
+        Ok(self.keep(output))
+    }
+
+    /// Elementwise softplus, safe for large |x| in value and gradient (dfdx has none).
+    pub fn softplus(&mut self, input: &Matrix<E>) -> Result<Matrix<E>, BackendError> {
+        let values = input.as_vec();
+        let output: Vec<E> = values.iter().map(|x| x.softplus()).collect();
+        let result = self.device.try_tensor_from_vec(output, *input.shape())?;
+        let (input_ghost, result_ghost) = (input.ghost(), result.ghost());
+        self.tape.add_backward_op(move |grads| {
+            let upstream = grads.get_or_alloc_mut(&result_ghost)?.to_vec();
+            let target = grads.get_or_alloc_mut(&input_ghost)?;
+            for ((slot, g), x) in target.iter_mut().zip(upstream).zip(values) {
+                *slot += g * x.sigmoid();
+            }
+            Ok(())
+        });
+        Ok(result)
+    }
+
+    /// A closure's network input: the constant embedding part (lags >= 1, inputs, already
+    /// normalised, lag-0 state entries holding `-mean/std`) plus the current state estimate
+    /// scaled into the lag-0 state entries.
+    pub fn embed(
+        &mut self,
+        constant: &Matrix<E>,
+        states: &Matrix<E>,
+        columns: &Arc<StateColumns>,
+    ) -> Result<Matrix<E>, BackendError> {
+        let (rows, width) = *constant.shape();
+        let state_width = states.shape().1;
+        let state_values = states.as_vec();
+        let mut values = constant.as_vec();
+        for row in 0..rows {
+            for &(column, state, inverse_std) in &columns.entries {
+                values[row * width + column] +=
+                    state_values[row * state_width + state] * E::from_double(inverse_std);
+            }
+        }
+        let result = self.device.try_tensor_from_vec(values, (rows, width))?;
+        let (states_ghost, result_ghost) = (states.ghost(), result.ghost());
+        let columns = Arc::clone(columns);
+        self.tape.add_backward_op(move |grads| {
+            let upstream = grads.get_or_alloc_mut(&result_ghost)?.to_vec();
+            let target = grads.get_or_alloc_mut(&states_ghost)?;
+            for row in 0..rows {
+                for &(column, state, inverse_std) in &columns.entries {
+                    target[row * state_width + state] +=
+                        upstream[row * width + column] * E::from_double(inverse_std);
+                }
+            }
+            Ok(())
+        });
+        Ok(result)
+    }
+
+    /// The physics layer: the program's `targets` registers (balances, or next values for
+    /// discrete models) for each row, from the state estimate, the held inputs, the raw
+    /// params and every closure's network output. Also returns all register values.
+    pub fn physics(
+        &mut self,
+        program: &Arc<Program>,
+        targets: &Arc<Vec<usize>>,
+        states: &Matrix<E>,
+        inputs: &Arc<Vec<E>>,
+        params: Option<&Vector<E>>,
+        nets: &[Matrix<E>],
+    ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
+        let rows = states.shape().0;
+        let state_values = states.as_vec();
+        let param_values = params.map(|p| p.as_vec()).unwrap_or_default();
+        let net_values: Vec<Vec<E>> = nets.iter().map(|n| n.as_vec()).collect();
+        let values = {
+            let net_slices: Vec<&[E]> = net_values.iter().map(Vec::as_slice).collect();
+            let program_inputs = ProgramInputs {
+                rows,
+                states: &state_values,
+                inputs: inputs,
+                params: &param_values,
+                nets: &net_slices,
+            };
+            Arc::new(program.forward(&program_inputs))
+        };
+        let output = program.read(&values, rows, targets);
+        let result = self
+            .device
+            .try_tensor_from_vec(output, (rows, targets.len()))?;
+        let result_ghost = result.ghost();
+        let states_ghost = states.ghost();
+        let params_ghost = params.map(|p| p.ghost());
+        let nets_ghost: Vec<_> = nets.iter().map(|n| n.ghost()).collect();
+        let (program, targets, inputs) = (program.clone(), targets.clone(), inputs.clone());
+        let kept_values = Arc::clone(&values);
+        self.tape.add_backward_op(move |grads| {
+            let seed = grads.get_or_alloc_mut(&result_ghost)?.to_vec();
+            let net_slices: Vec<&[E]> = net_values.iter().map(Vec::as_slice).collect();
+            let program_inputs = ProgramInputs {
+                rows,
+                states: &state_values,
+                inputs: &inputs,
+                params: &param_values,
+                nets: &net_slices,
+            };
+            let gradients = program.backward(&program_inputs, &kept_values, &targets, &seed);
+            accumulate(grads.get_or_alloc_mut(&states_ghost)?, &gradients.states);
+            if let Some(ghost) = &params_ghost {
+                accumulate(grads.get_or_alloc_mut(ghost)?, &gradients.params);
+            }
+            for (ghost, gradient) in nets_ghost.iter().zip(&gradients.nets) {
+                accumulate(grads.get_or_alloc_mut(ghost)?, gradient);
+            }
+            Ok(())
+        });
+        Ok((result, values))
+    }
+
+    /// Mean over rows and measured states of `((prediction - target) * inverse_std)^2`;
+    /// measured states are the first `inverse_std.len()` columns of `prediction`.
+    pub fn normalised_mse(
+        &mut self,
+        prediction: &Matrix<E>,
+        targets: &[E],
+        inverse_std: &[E],
+    ) -> Result<Tensor<(), E, Cpu>, BackendError> {
+        let (rows, width) = *prediction.shape();
+        let measured = inverse_std.len();
+        let values = prediction.as_vec();
+        let count = E::from_double((rows * measured).max(1) as f64);
+        let mut residuals = vec![E::ZERO; rows * measured];
+        let mut total = E::ZERO;
+        for row in 0..rows {
+            for state in 0..measured {
+                let scaled = (values[row * width + state] - targets[row * measured + state])
+                    * inverse_std[state];
+                residuals[row * measured + state] = scaled;
+                total += scaled * scaled;
+            }
+        }
+        let loss = self.device.try_tensor_from_vec(vec![total / count], ())?;
+        let (loss_ghost, prediction_ghost) = (loss.ghost(), prediction.ghost());
+        let inverse_std = inverse_std.to_vec();
+        self.tape.add_backward_op(move |grads| {
+            let upstream = grads.get_or_alloc_mut(&loss_ghost)?[0];
+            let target = grads.get_or_alloc_mut(&prediction_ghost)?;
+            let factor = upstream * E::from_double(2.0) / count;
+            for row in 0..rows {
+                for state in 0..measured {
+                    target[row * width + state] +=
+                        factor * residuals[row * measured + state] * inverse_std[state];
+                }
+            }
+            Ok(())
+        });
+        Ok(loss)
+    }
+
+    /// Runs the reverse pass from `loss` through everything recorded.
+    pub fn backward(self, loss: Tensor<(), E, Cpu>) -> Result<Gradients<E, Cpu>, BackendError> {
+        Ok(loss.put_tape(self.tape).try_backward()?)
+    }
+}
+
+/// The gradient accumulated for `tensor` (zeros if it took no part in the loss).
+pub fn gradient_of<S: Shape, E: Element>(
+    grads: &mut Gradients<E, Cpu>,
+    tensor: &Tensor<S, E, Cpu>,
+) -> Result<Vec<E>, BackendError>
+where
+    Cpu: Device<E>,
+    GradientBuffer<E>: DerefMut<Target = Vec<E>>,
+{
+    Ok(grads.get_or_alloc_mut(tensor)?.to_vec())
+}
+
+fn accumulate<E: Real>(target: &mut [E], source: &[E]) {
+    for (slot, &value) in target.iter_mut().zip(source) {
+        *slot += value;
+    }
+}
+
+impl From<CpuError> for BackendError {
+    fn from(error: CpuError) -> Self {
+        BackendError::internal(format!("tensor operation failed: {error:?}"))
+    }
+}

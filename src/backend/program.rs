@@ -1,0 +1,644 @@
+//! The physics layer as a register program: the model's balances, closure outputs (priors
+//! and scales applied), param transforms and `output`s compiled from [`ir::Expr`] into a flat
+//! list of instructions evaluated column-wise on a batch, with a hand-written reverse sweep.
+//!
+//! Each register holds one value per batch row. Identical sub-expressions share a register
+//! (the IR inlines `let`s, so `mu` used in two balances is computed once), constant
+//! sub-expressions are folded at compile time, and only registers that depend on a state,
+//! a param or a network output take part in the reverse sweep. The graph backend wraps
+//! [`Program::forward`] and [`Program::backward`] as one fused operation.
+
+use std::collections::HashMap;
+
+use super::real::Real;
+use super::BackendError;
+use crate::ir::{self, BinOp, Constraint, Func, PriorKind, Var};
+
+/// A one-argument operation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Unary {
+    Neg,
+    Exp,
+    Log,
+    Sqrt,
+    Abs,
+    Tanh,
+    Sigmoid,
+    Softplus,
+}
+
+/// A two-argument operation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Binary {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Pow,
+    Min,
+    Max,
+}
+
+/// One instruction; operands are earlier registers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Instr {
+    /// A literal, stored as its bit pattern so instructions can be hashed.
+    Const(u64),
+    /// Entry `i` of the state vector (measured states, then hidden states).
+    State(usize),
+    /// Held input `i`.
+    Input(usize),
+    /// Unconstrained (raw) value of param `i`.
+    RawParam(usize),
+    /// Network output `output` of closure `closure` (before prior and scale).
+    Net { closure: usize, output: usize },
+    Unary(Unary, usize),
+    Binary(Binary, usize, usize),
+}
+
+/// How many values of each kind a program reads per row.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProgramShape {
+    /// Length of the state vector (measured + hidden).
+    pub states: usize,
+    /// Number of inputs.
+    pub inputs: usize,
+    /// Number of params.
+    pub params: usize,
+    /// Number of network outputs of each closure.
+    pub nets: Vec<usize>,
+}
+
+/// The values a program reads: row-major `rows x width` blocks.
+#[derive(Debug, Clone, Copy)]
+pub struct ProgramInputs<'a, E> {
+    /// Batch rows.
+    pub rows: usize,
+    /// `rows x shape.states`.
+    pub states: &'a [E],
+    /// `rows x shape.inputs`.
+    pub inputs: &'a [E],
+    /// Raw (unconstrained) params, one each.
+    pub params: &'a [E],
+    /// Per closure, `rows x shape.nets[c]`.
+    pub nets: &'a [&'a [E]],
+}
+
+/// Gradients of a scalar with respect to everything a program reads.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProgramGradients<E> {
+    /// `rows x shape.states`.
+    pub states: Vec<E>,
+    /// One per raw param (summed over rows).
+    pub params: Vec<E>,
+    /// Per closure, `rows x shape.nets[c]`.
+    pub nets: Vec<Vec<E>>,
+}
+
+/// The compiled physics of a model.
+#[derive(Debug, Clone)]
+pub struct Program {
+    instrs: Vec<Instr>,
+    /// Whether register `r` depends on a state, a raw param or a network output.
+    active: Vec<bool>,
+    shape: ProgramShape,
+    /// Per state-vector entry, the register of its balance (derivative or next value).
+    pub balances: Vec<usize>,
+    /// Registers of every closure output, closures in order, outputs in order.
+    pub closure_outputs: Vec<usize>,
+    /// Registers of the constrained param values.
+    pub param_values: Vec<usize>,
+    /// Registers of the model's `output`s.
+    pub outputs: Vec<usize>,
+}
+
+/// Builds a [`Program`] from a model; `scales[c][k]` is the magnitude `s_o` of output `k`
+/// of closure `c` (already resolved from `~` or the data-driven default).
+struct Compiler<'m> {
+    model: &'m ir::Model,
+    scales: &'m [Vec<f64>],
+    instrs: Vec<Instr>,
+    interned: HashMap<Instr, usize>,
+    closure_output_regs: HashMap<(usize, usize), usize>,
+    param_regs: HashMap<usize, usize>,
+    in_progress: Vec<(usize, usize)>,
+}
+
+impl Program {
+    /// Compiles the physics of `model` (spec section 3 for closure outputs; params through
+    /// their transforms: `positive` as softplus, `in [lo, hi]` as `lo + (hi - lo) sigmoid`).
+    pub fn compile(model: &ir::Model, scales: &[Vec<f64>]) -> Result<Program, BackendError> {
+        let mut compiler = Compiler {
+            model,
+            scales,
+            instrs: Vec::new(),
+            interned: HashMap::new(),
+            closure_output_regs: HashMap::new(),
+            param_regs: HashMap::new(),
+            in_progress: Vec::new(),
+        };
+        let state_count = model.states.len() + model.hidden.len();
+        let mut balances = vec![None; state_count];
+        for balance in &model.balances {
+            let index = state_index(model, balance.state)?;
+            balances[index] = Some(compiler.expr(&balance.expr)?);
+        }
+        let balances = balances
+            .into_iter()
+            .enumerate()
+            .map(|(index, reg)| {
+                reg.ok_or_else(|| BackendError::internal(format!("state {index} has no balance")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut closure_outputs = Vec::new();
+        for (closure, spec) in model.closures.iter().enumerate() {
+            for output in 0..spec.outputs.len() {
+                closure_outputs.push(compiler.closure_output(closure, output)?);
+            }
+        }
+        let param_values = (0..model.params.len())
+            .map(|index| compiler.param(index))
+            .collect::<Result<Vec<_>, _>>()?;
+        let outputs = model
+            .outputs
+            .iter()
+            .map(|definition| compiler.expr(&definition.expr))
+            .collect::<Result<Vec<_>, _>>()?;
+        let shape = ProgramShape {
+            states: state_count,
+            inputs: model.inputs.len(),
+            params: model.params.len(),
+            nets: model.closures.iter().map(|c| c.outputs.len()).collect(),
+        };
+        let active = activity(&compiler.instrs);
+        Ok(Program {
+            instrs: compiler.instrs,
+            active,
+            shape,
+            balances,
+            closure_outputs,
+            param_values,
+            outputs,
+        })
+    }
+
+    /// What the program reads per row.
+    pub fn shape(&self) -> &ProgramShape {
+        &self.shape
+    }
+
+    /// Number of registers (instructions).
+    pub fn len(&self) -> usize {
+        self.instrs.len()
+    }
+
+    /// Whether the program has no instructions.
+    pub fn is_empty(&self) -> bool {
+        self.instrs.is_empty()
+    }
+
+    /// Evaluates every register on a batch; register `r` is `values[r * rows..][..rows]`.
+    pub fn forward<E: Real>(&self, inputs: &ProgramInputs<E>) -> Vec<E> {
+        let rows = inputs.rows;
+        let mut values = vec![E::ZERO; self.instrs.len() * rows];
+        for (index, instr) in self.instrs.iter().enumerate() {
+            let (before, rest) = values.split_at_mut(index * rows);
+            let out = &mut rest[..rows];
+            let column = |reg: usize| &before[reg * rows..(reg + 1) * rows];
+            match *instr {
+                Instr::Const(bits) => out.fill(E::from_double(f64::from_bits(bits))),
+                Instr::State(i) => gather(out, inputs.states, self.shape.states, i),
+                Instr::Input(i) => gather(out, inputs.inputs, self.shape.inputs, i),
+                Instr::RawParam(i) => out.fill(inputs.params[i]),
+                Instr::Net { closure, output } => {
+                    gather(out, inputs.nets[closure], self.shape.nets[closure], output)
+                }
+                Instr::Unary(op, a) => {
+                    for (y, &x) in out.iter_mut().zip(column(a)) {
+                        *y = unary(op, x);
+                    }
+                }
+                Instr::Binary(op, a, b) => {
+                    for ((y, &x), &z) in out.iter_mut().zip(column(a)).zip(column(b)) {
+                        *y = binary(op, x, z);
+                    }
+                }
+            }
+        }
+        values
+    }
+
+    /// Reads registers `targets` from forward `values` as a row-major `rows x targets.len()`
+    /// block.
+    pub fn read<E: Real>(&self, values: &[E], rows: usize, targets: &[usize]) -> Vec<E> {
+        let mut block = vec![E::ZERO; rows * targets.len()];
+        for (column, &reg) in targets.iter().enumerate() {
+            for row in 0..rows {
+                block[row * targets.len() + column] = values[reg * rows + row];
+            }
+        }
+        block
+    }
+
+    /// Reverse sweep: given forward `values` and the adjoint `seed` (row-major
+    /// `rows x targets.len()`) of registers `targets`, returns the gradients of everything
+    /// the program reads.
+    pub fn backward<E: Real>(
+        &self,
+        inputs: &ProgramInputs<E>,
+        values: &[E],
+        targets: &[usize],
+        seed: &[E],
+    ) -> ProgramGradients<E> {
+        let rows = inputs.rows;
+        let mut adjoint = vec![E::ZERO; values.len()];
+        for (column, &reg) in targets.iter().enumerate() {
+            for row in 0..rows {
+                adjoint[reg * rows + row] += seed[row * targets.len() + column];
+            }
+        }
+        let mut gradients = ProgramGradients {
+            states: vec![E::ZERO; rows * self.shape.states],
+            params: vec![E::ZERO; self.shape.params],
+            nets: (self.shape.nets.iter())
+                .map(|&width| vec![E::ZERO; rows * width])
+                .collect(),
+        };
+        for index in (0..self.instrs.len()).rev() {
+            if !self.active[index] {
+                continue;
+            }
+            let (adjoint_before, adjoint_rest) = adjoint.split_at_mut(index * rows);
+            let upstream = &adjoint_rest[..rows];
+            let value = |reg: usize| &values[reg * rows..(reg + 1) * rows];
+            match self.instrs[index] {
+                Instr::Const(_) | Instr::Input(_) => {}
+                Instr::State(i) => scatter(&mut gradients.states, self.shape.states, i, upstream),
+                Instr::RawParam(i) => {
+                    for &g in upstream {
+                        gradients.params[i] += g;
+                    }
+                }
+                Instr::Net { closure, output } => scatter(
+                    &mut gradients.nets[closure],
+                    self.shape.nets[closure],
+                    output,
+                    upstream,
+                ),
+                Instr::Unary(op, a) => {
+                    let target = &mut adjoint_before[a * rows..(a + 1) * rows];
+                    let own = value(index);
+                    for row in 0..rows {
+                        target[row] +=
+                            upstream[row] * unary_derivative(op, value(a)[row], own[row]);
+                    }
+                }
+                Instr::Binary(op, a, b) => {
+                    for row in 0..rows {
+                        let (da, db) =
+                            binary_derivatives(op, value(a)[row], value(b)[row], value(index)[row]);
+                        adjoint_before[a * rows + row] += upstream[row] * da;
+                        adjoint_before[b * rows + row] += upstream[row] * db;
+                    }
+                }
+            }
+        }
+        gradients
+    }
+}
+
+impl Compiler<'_> {
+    fn push(&mut self, instr: Instr) -> usize {
+        if let Some(folded) = self.fold(instr) {
+            return self.push(Instr::Const(folded.to_bits()));
+        }
+        if let Some(&reg) = self.interned.get(&instr) {
+            return reg;
+        }
+        self.instrs.push(instr);
+        let reg = self.instrs.len() - 1;
+        self.interned.insert(instr, reg);
+        reg
+    }
+
+    /// The value of an instruction whose operands are all literals.
+    fn fold(&self, instr: Instr) -> Option<f64> {
+        let literal = |reg: usize| match self.instrs[reg] {
+            Instr::Const(bits) => Some(f64::from_bits(bits)),
+            _ => None,
+        };
+        match instr {
+            Instr::Unary(op, a) => Some(unary(op, literal(a)?)),
+            Instr::Binary(op, a, b) => Some(binary(op, literal(a)?, literal(b)?)),
+            _ => None,
+        }
+    }
+
+    fn constant(&mut self, value: f64) -> usize {
+        self.push(Instr::Const(value.to_bits()))
+    }
+
+    fn unary(&mut self, op: Unary, a: usize) -> usize {
+        self.push(Instr::Unary(op, a))
+    }
+
+    fn binary(&mut self, op: Binary, a: usize, b: usize) -> usize {
+        self.push(Instr::Binary(op, a, b))
+    }
+
+    fn expr(&mut self, expr: &ir::Expr) -> Result<usize, BackendError> {
+        Ok(match expr {
+            ir::Expr::Num(value) => self.constant(*value),
+            ir::Expr::Var(var) => self.var(*var)?,
+            ir::Expr::Neg(inner) => {
+                let a = self.expr(inner)?;
+                self.unary(Unary::Neg, a)
+            }
+            ir::Expr::Bin(op, left, right) => {
+                let a = self.expr(left)?;
+                let b = self.expr(right)?;
+                self.binary(binary_of(*op), a, b)
+            }
+            ir::Expr::Call(func, args) => self.call(*func, args)?,
+        })
+    }
+
+    fn call(&mut self, func: Func, args: &[ir::Expr]) -> Result<usize, BackendError> {
+        if args.len() != func.arity() {
+            return Err(BackendError::internal(format!(
+                "{} called with {} arguments",
+                func.name(),
+                args.len()
+            )));
+        }
+        let registers = args
+            .iter()
+            .map(|arg| self.expr(arg))
+            .collect::<Result<Vec<_>, _>>()?;
+        let op = match func {
+            Func::Exp => Unary::Exp,
+            Func::Log => Unary::Log,
+            Func::Sqrt => Unary::Sqrt,
+            Func::Abs => Unary::Abs,
+            Func::Tanh => Unary::Tanh,
+            Func::Sigmoid => Unary::Sigmoid,
+            Func::Softplus => Unary::Softplus,
+            Func::Min => return Ok(self.binary(Binary::Min, registers[0], registers[1])),
+            Func::Max => return Ok(self.binary(Binary::Max, registers[0], registers[1])),
+            Func::Pow => return Ok(self.binary(Binary::Pow, registers[0], registers[1])),
+        };
+        Ok(self.unary(op, registers[0]))
+    }
+
+    fn var(&mut self, var: Var) -> Result<usize, BackendError> {
+        match var {
+            Var::Input(i) => Ok(self.push(Instr::Input(i))),
+            Var::State(_) | Var::Hidden(_) => {
+                let index = state_index(self.model, var)?;
+                Ok(self.push(Instr::State(index)))
+            }
+            Var::Const(i) => {
+                let value = (self.model.consts.get(i))
+                    .ok_or_else(|| BackendError::internal(format!("no const {i}")))?
+                    .value;
+                Ok(self.constant(value))
+            }
+            Var::Param(i) => self.param(i),
+            Var::ClosureOutput { closure, output } => self.closure_output(closure, output),
+        }
+    }
+
+    /// The constrained value of param `index` (spec section 2: `positive`, `in [lo, hi]`).
+    fn param(&mut self, index: usize) -> Result<usize, BackendError> {
+        if let Some(&reg) = self.param_regs.get(&index) {
+            return Ok(reg);
+        }
+        let param = (self.model.params.get(index))
+            .ok_or_else(|| BackendError::internal(format!("no param {index}")))?;
+        let raw = self.push(Instr::RawParam(index));
+        let reg = self.constrain(raw, param.constraint, 1.0);
+        self.param_regs.insert(index, reg);
+        Ok(reg)
+    }
+
+    /// Maps an unconstrained register onto a constraint: `scale * softplus(raw / scale)` for
+    /// `positive` (scale 1 for params) and `lo + (hi - lo) sigmoid(raw)` for bounds.
+    fn constrain(&mut self, raw: usize, constraint: Constraint, scale: f64) -> usize {
+        match constraint {
+            Constraint::Free => raw,
+            Constraint::Positive => {
+                let inverse = self.constant(1.0 / scale);
+                let scaled = self.binary(Binary::Mul, raw, inverse);
+                let soft = self.unary(Unary::Softplus, scaled);
+                let outer = self.constant(scale);
+                self.binary(Binary::Mul, outer, soft)
+            }
+            Constraint::Bounds(lo, hi) => {
+                let squashed = self.unary(Unary::Sigmoid, raw);
+                let width = self.constant(hi - lo);
+                let spread = self.binary(Binary::Mul, width, squashed);
+                let low = self.constant(lo);
+                self.binary(Binary::Add, low, spread)
+            }
+        }
+    }
+
+    /// Output `output` of closure `closure`: network output, prior and scale combined as in
+    /// spec section 3, then its declared constraint.
+    fn closure_output(&mut self, closure: usize, output: usize) -> Result<usize, BackendError> {
+        if let Some(&reg) = self.closure_output_regs.get(&(closure, output)) {
+            return Ok(reg);
+        }
+        if self.in_progress.contains(&(closure, output)) {
+            return Err(BackendError::internal(
+                "a closure prior depends on its own output".to_string(),
+            ));
+        }
+        let spec = (self.model.closures.get(closure))
+            .and_then(|c| c.outputs.get(output))
+            .ok_or_else(|| BackendError::internal(format!("no closure output {closure}.{output}")))?;
+        let scale = (self.scales.get(closure))
+            .and_then(|s| s.get(output))
+            .copied()
+            .ok_or_else(|| BackendError::internal(format!("no scale for {}", spec.name)))?;
+        self.in_progress.push((closure, output));
+        let net = self.push(Instr::Net { closure, output });
+        let combined = match &spec.prior {
+            None => {
+                let s = self.constant(scale);
+                self.binary(Binary::Mul, s, net)
+            }
+            Some(prior) => {
+                let p = self.expr(&prior.expr)?;
+                match prior.kind {
+                    PriorKind::Mul => {
+                        let one = self.constant(1.0);
+                        let factor = self.binary(Binary::Add, one, net);
+                        self.binary(Binary::Mul, p, factor)
+                    }
+                    PriorKind::Add => {
+                        let s = self.constant(scale);
+                        let correction = self.binary(Binary::Mul, s, net);
+                        self.binary(Binary::Add, p, correction)
+                    }
+                }
+            }
+        };
+        let reg = self.constrain_output(combined, spec.constraint, scale);
+        self.in_progress.pop();
+        self.closure_output_regs.insert((closure, output), reg);
+        Ok(reg)
+    }
+
+    fn constrain_output(&mut self, combined: usize, constraint: Constraint, scale: f64) -> usize {
+        match constraint {
+            Constraint::Bounds(lo, hi) => {
+                let middle = self.constant(-(lo + hi) / 2.0);
+                let centred = self.binary(Binary::Add, combined, middle);
+                let slope = self.constant(4.0 / (hi - lo));
+                let argument = self.binary(Binary::Mul, slope, centred);
+                self.constrain(argument, constraint, 1.0)
+            }
+            other => self.constrain(combined, other, scale),
+        }
+    }
+}
+
+/// Position of a state or hidden state in the state vector (measured first).
+pub fn state_index(model: &ir::Model, var: Var) -> Result<usize, BackendError> {
+    match var {
+        Var::State(i) if i < model.states.len() => Ok(i),
+        Var::Hidden(j) if j < model.hidden.len() => Ok(model.states.len() + j),
+        other => Err(BackendError::internal(format!(
+            "{other:?} is not a state of the model"
+        ))),
+    }
+}
+
+fn binary_of(op: BinOp) -> Binary {
+    match op {
+        BinOp::Add => Binary::Add,
+        BinOp::Sub => Binary::Sub,
+        BinOp::Mul => Binary::Mul,
+        BinOp::Div => Binary::Div,
+        BinOp::Pow => Binary::Pow,
+    }
+}
+
+/// Marks registers that depend on a state, raw param or network output.
+fn activity(instrs: &[Instr]) -> Vec<bool> {
+    let mut active = Vec::with_capacity(instrs.len());
+    for instr in instrs {
+        let is_active = match *instr {
+            Instr::Const(_) | Instr::Input(_) => false,
+            Instr::State(_) | Instr::RawParam(_) | Instr::Net { .. } => true,
+            Instr::Unary(_, a) => active[a],
+            Instr::Binary(_, a, b) => active[a] || active[b],
+        };
+        active.push(is_active);
+    }
+    active
+}
+
+fn gather<E: Real>(out: &mut [E], block: &[E], width: usize, column: usize) {
+    for (row, value) in out.iter_mut().enumerate() {
+        *value = block[row * width + column];
+    }
+}
+
+fn scatter<E: Real>(block: &mut [E], width: usize, column: usize, values: &[E]) {
+    for (row, &value) in values.iter().enumerate() {
+        block[row * width + column] += value;
+    }
+}
+
+fn unary<E: Real>(op: Unary, x: E) -> E {
+    match op {
+        Unary::Neg => -x,
+        Unary::Exp => x.exp(),
+        Unary::Log => x.ln(),
+        Unary::Sqrt => x.sqrt(),
+        Unary::Abs => x.abs(),
+        Unary::Tanh => x.tanh(),
+        Unary::Sigmoid => x.sigmoid(),
+        Unary::Softplus => x.softplus(),
+    }
+}
+
+/// `d op(x) / dx` given the input `x` and the output `y`.
+fn unary_derivative<E: Real>(op: Unary, x: E, y: E) -> E {
+    match op {
+        Unary::Neg => -E::ONE,
+        Unary::Exp => y,
+        Unary::Log => E::ONE / x,
+        Unary::Sqrt => E::from_double(0.5) / y,
+        Unary::Abs => sign(x),
+        Unary::Tanh => E::ONE - y * y,
+        Unary::Sigmoid => y * (E::ONE - y),
+        Unary::Softplus => x.sigmoid(),
+    }
+}
+
+fn sign<E: Real>(x: E) -> E {
+    if x > E::ZERO {
+        E::ONE
+    } else if x < E::ZERO {
+        -E::ONE
+    } else {
+        E::ZERO
+    }
+}
+
+fn binary<E: Real>(op: Binary, a: E, b: E) -> E {
+    match op {
+        Binary::Add => a + b,
+        Binary::Sub => a - b,
+        Binary::Mul => a * b,
+        Binary::Div => a / b,
+        Binary::Pow => a.powf(b),
+        Binary::Min => {
+            if b < a {
+                b
+            } else {
+                a
+            }
+        }
+        Binary::Max => {
+            if b > a {
+                b
+            } else {
+                a
+            }
+        }
+    }
+}
+
+/// `(d op / da, d op / db)` given the operands and the output `y`. `min`/`max` send the
+/// whole derivative to the operand they select; `a^b` has no `b` derivative where `a <= 0`.
+fn binary_derivatives<E: Real>(op: Binary, a: E, b: E, y: E) -> (E, E) {
+    match op {
+        Binary::Add => (E::ONE, E::ONE),
+        Binary::Sub => (E::ONE, -E::ONE),
+        Binary::Mul => (b, a),
+        Binary::Div => (E::ONE / b, -y / b),
+        Binary::Pow => {
+            let da = b * a.powf(b - E::ONE);
+            let db = if a > E::ZERO { y * a.ln() } else { E::ZERO };
+            (da, db)
+        }
+        Binary::Min => {
+            if b < a {
+                (E::ZERO, E::ONE)
+            } else {
+                (E::ONE, E::ZERO)
+            }
+        }
+        Binary::Max => {
+            if b > a {
+                (E::ZERO, E::ONE)
+            } else {
+                (E::ONE, E::ZERO)
+            }
+        }
+    }
+}

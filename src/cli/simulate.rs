@@ -1,0 +1,257 @@
+//! `gbc simulate MODEL --t-end T --dt H -o OUT.csv`: integrate a model without closures
+//! and write the sampled record as CSV.
+//!
+//! Columns: `t`, the inputs, the measured states, the hidden states (with `--hidden`), then
+//! the outputs. `--noise S` perturbs the measured states only, relatively:
+//! `y * (1 + S * N(0, 1))`, drawn row by row from a ChaCha8 generator seeded with `--seed`;
+//! hidden states and outputs stay noise-free.
+
+use super::{CommandError, CommandResult};
+use crate::ir::Model;
+use crate::signal::Signal;
+use crate::sim::{SimOptions, Tolerances, Trajectory};
+use miette::Diagnostic;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Runs with more samples than this show a progress bar (on a terminal).
+const PROGRESS_THRESHOLD: usize = 20_000;
+
+/// Arguments of `gbc simulate`.
+#[derive(Debug, clap::Args)]
+pub struct SimulateArgs {
+    /// The model file (no closures).
+    pub model: PathBuf,
+    /// Time of the last sample.
+    #[arg(long, allow_negative_numbers = true)]
+    pub t_end: f64,
+    /// Sampling step (also the step of a `next` model).
+    #[arg(long)]
+    pub dt: f64,
+    /// The CSV file to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Time of the first sample.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub t_start: f64,
+    /// An input program, `NAME=PROGRAM`, e.g. `u=steps(hold=5..40, seed=1)` (one per input).
+    #[arg(long = "input", value_name = "NAME=PROGRAM")]
+    pub inputs: Vec<String>,
+    /// Settle this long at the first input values before recording.
+    #[arg(long, default_value_t = 0.0)]
+    pub warmup: f64,
+    /// Relative Gaussian noise on the measured states (standard deviation).
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Also write the hidden states.
+    #[arg(long)]
+    pub hidden: bool,
+    /// Relative tolerance of the integrator.
+    #[arg(long, default_value_t = Tolerances::default().rtol)]
+    pub rtol: f64,
+    /// Absolute tolerance of the integrator.
+    #[arg(long, default_value_t = Tolerances::default().atol)]
+    pub atol: f64,
+}
+
+/// A problem with the arguments of `gbc simulate` itself.
+#[derive(Debug, Clone, PartialEq, Error, Diagnostic)]
+pub enum SimulateError {
+    /// An input of the model has no `--input` program.
+    #[error("input `{name}` has no program")]
+    #[diagnostic(
+        code(gbm::E0709),
+        help(
+            "give it one, e.g. `--input {name}=steps(hold=5..40)` or `--input {name}=const(0.5)`"
+        )
+    )]
+    MissingInput {
+        /// The input.
+        name: String,
+    },
+    /// Two `--input` arguments name the same input.
+    #[error("input `{name}` has two programs")]
+    #[diagnostic(code(gbm::E0710), help("keep one `--input {name}=...`"))]
+    DuplicateInput {
+        /// The input.
+        name: String,
+    },
+    /// The noise level is negative or not a number.
+    #[error("expected a noise level >= 0, found {found}")]
+    #[diagnostic(code(gbm::E0711), help("`--noise 0.01` adds 1 % relative noise"))]
+    BadNoise {
+        /// The level given.
+        found: f64,
+    },
+}
+
+/// Simulates the model and writes the record.
+pub fn run(args: &SimulateArgs) -> CommandResult {
+    if !(args.noise >= 0.0 && args.noise.is_finite()) {
+        return Err(CommandError::user(SimulateError::BadNoise {
+            found: args.noise,
+        }));
+    }
+    crate::io::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
+    let model = super::load_model(&args.model)?;
+    let signals = input_signals(&model, args)?;
+    let options = SimOptions {
+        t_start: args.t_start,
+        warmup: args.warmup,
+        tolerances: Tolerances {
+            rtol: args.rtol,
+            atol: args.atol,
+        },
+        ..SimOptions::new(args.t_end, args.dt)
+    };
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let mut progress = |done: usize, total: usize| {
+        if total > PROGRESS_THRESHOLD {
+            bar.get_or_insert_with(|| progress_bar(total))
+                .set_position(done as u64);
+        }
+    };
+    let simulated = crate::sim::simulate_with_progress(&model, &signals, &options, &mut progress);
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    let mut trajectory = simulated.map_err(|error| {
+        if error.is_internal() {
+            CommandError::Internal(error.to_string())
+        } else {
+            CommandError::user(error)
+        }
+    })?;
+    add_noise(&mut trajectory, args.noise, args.seed);
+    let table = csv_table(&model, &trajectory, args.hidden, &args.output)?;
+    crate::io::write_atomic(&args.output, &table).map_err(CommandError::user)?;
+    Ok(())
+}
+
+/// One signal per model input, from the `--input` programs.
+fn input_signals(model: &Model, args: &SimulateArgs) -> Result<Vec<Signal>, CommandError> {
+    let mut programs = vec![None; model.inputs.len()];
+    let mut reports = Vec::new();
+    for text in &args.inputs {
+        let parsed = crate::signal::parse_input_argument(text).and_then(|argument| {
+            let input = argument.resolve(&model.inputs)?;
+            Ok((input.name.clone(), argument.program))
+        });
+        match parsed {
+            Ok((name, program)) => {
+                let index = model.inputs.iter().position(|i| i.name == name);
+                if let Some(Some(_)) = index.map(|index| programs[index].replace(program)) {
+                    reports.push(report(SimulateError::DuplicateInput { name }));
+                }
+            }
+            Err(error) => reports.push(report(error)),
+        }
+    }
+    let mut signals = Vec::with_capacity(model.inputs.len());
+    for (input, program) in model.inputs.iter().zip(&programs) {
+        let Some(program) = program else {
+            reports.push(report(SimulateError::MissingInput {
+                name: input.name.clone(),
+            }));
+            continue;
+        };
+        match program.generate(input, args.t_start, args.t_end, args.dt) {
+            Ok(signal) => signals.push(signal),
+            Err(error) => reports.push(report(error)),
+        }
+    }
+    if reports.is_empty() {
+        Ok(signals)
+    } else {
+        Err(CommandError::User(reports))
+    }
+}
+
+fn report(diagnostic: impl Diagnostic + Send + Sync + 'static) -> miette::Report {
+    miette::Report::new(diagnostic)
+}
+
+/// A progress bar over `total` samples on stderr (drawn only on a terminal).
+fn progress_bar(total: usize) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(total as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "simulating {bar:40} {pos}/{len} samples ({eta} left)",
+    ) {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// Multiplies every measured state by `1 + sigma * N(0, 1)`, row by row.
+fn add_noise(trajectory: &mut Trajectory, sigma: f64, seed: u64) {
+    if sigma == 0.0 {
+        return;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for k in 0..trajectory.len() {
+        for column in &mut trajectory.states {
+            let draw: f64 = StandardNormal.sample(&mut rng);
+            column[k] *= 1.0 + sigma * draw;
+        }
+    }
+}
+
+/// The record as CSV text: `t`, inputs, measured states, hidden states (if asked), outputs.
+fn csv_table<'a>(
+    model: &'a Model,
+    trajectory: &'a Trajectory,
+    with_hidden: bool,
+    path: &Path,
+) -> Result<Vec<u8>, CommandError> {
+    let named = |names: Vec<&'a String>, values: &'a [Vec<f64>]| {
+        names.into_iter().zip(values.iter().map(Vec::as_slice))
+    };
+    let mut columns: Vec<(&String, &[f64])> = Vec::new();
+    columns.extend(named(
+        model.inputs.iter().map(|i| &i.name).collect(),
+        &trajectory.inputs,
+    ));
+    columns.extend(named(
+        model.states.iter().map(|s| &s.name).collect(),
+        &trajectory.states,
+    ));
+    if with_hidden {
+        columns.extend(named(
+            model.hidden.iter().map(|s| &s.name).collect(),
+            &trajectory.hidden,
+        ));
+    }
+    columns.extend(named(
+        model.outputs.iter().map(|o| &o.name).collect(),
+        &trajectory.outputs,
+    ));
+    let header = std::iter::once("t").chain(columns.iter().map(|(name, _)| name.as_str()));
+    let failed = |error: csv::Error| {
+        CommandError::Internal(format!("cannot format `{}`: {error}", path.display()))
+    };
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    writer.write_record(header).map_err(failed)?;
+    for (k, &t) in trajectory.times.iter().enumerate() {
+        let row = std::iter::once(format_time(t))
+            .chain(columns.iter().map(|(_, column)| format!("{:?}", column[k])));
+        writer.write_record(row).map_err(failed)?;
+    }
+    writer.into_inner().map_err(|error| {
+        CommandError::Internal(format!("cannot format `{}`: {error}", path.display()))
+    })
+}
+
+/// A sample time without the rounding noise of `t_start + k dt` (12 significant digits).
+fn format_time(t: f64) -> String {
+    let rounded: f64 = format!("{t:.11e}").parse().unwrap_or(t);
+    format!("{rounded:?}")
+}

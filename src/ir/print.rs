@@ -1,0 +1,228 @@
+//! The canonical text form of a compiled model (`gbc compile --emit ir`): deterministic,
+//! one fact per line, expressions printed with names. Golden files test this text.
+
+use super::*;
+use crate::ast::{self, format_number, Span, Spanned};
+use std::fmt::Write;
+
+/// Prints the model in its canonical text form.
+pub fn print(model: &Model) -> String {
+    let mut out = String::new();
+    // Writing into a String cannot fail.
+    let _ = write_model(&mut out, model);
+    out
+}
+
+/// The name of a variable in `model`.
+pub fn var_name(model: &Model, var: Var) -> &str {
+    match var {
+        Var::Input(i) => &model.inputs[i].name,
+        Var::State(i) => &model.states[i].name,
+        Var::Hidden(i) => &model.hidden[i].name,
+        Var::Const(i) => &model.consts[i].name,
+        Var::Param(i) => &model.params[i].name,
+        Var::ClosureOutput { closure, output } => &model.closures[closure].outputs[output].name,
+    }
+}
+
+/// An expression of `model` as source text.
+pub fn expr_text(model: &Model, expr: &Expr) -> String {
+    to_ast(model, expr).to_string()
+}
+
+fn to_ast(model: &Model, expr: &Expr) -> ast::Expr {
+    let boxed = |e: &Expr| Box::new(Spanned::new(to_ast(model, e), Span::default()));
+    match expr {
+        Expr::Num(value) => ast::Expr::Num(*value),
+        Expr::Var(var) => ast::Expr::Name(var_name(model, *var).to_string()),
+        Expr::Neg(inner) => ast::Expr::Neg(boxed(inner)),
+        Expr::Bin(op, lhs, rhs) => ast::Expr::Binary(*op, boxed(lhs), boxed(rhs)),
+        Expr::Call(func, args) => ast::Expr::Call(
+            Spanned::new(func.name().to_string(), Span::default()),
+            args.iter()
+                .map(|a| Spanned::new(to_ast(model, a), Span::default()))
+                .collect(),
+        ),
+    }
+}
+
+fn constraint_text(constraint: Constraint) -> String {
+    match constraint {
+        Constraint::Free => String::new(),
+        Constraint::Positive => " positive".to_string(),
+        Constraint::Bounds(lo, hi) => {
+            format!(" in [{}, {}]", format_number(lo), format_number(hi))
+        }
+    }
+}
+
+fn write_model(out: &mut String, model: &Model) -> std::fmt::Result {
+    write!(out, "model {}", model.name)?;
+    if let Some(description) = &model.description {
+        write!(out, " \"{description}\"")?;
+    }
+    writeln!(out)?;
+    if let Some(unit) = &model.time_unit {
+        writeln!(out, "time {unit}")?;
+    }
+    let dynamics = match model.dynamics {
+        Dynamics::Continuous => "continuous (der)",
+        Dynamics::Discrete => "discrete (next)",
+    };
+    writeln!(out, "dynamics {dynamics}")?;
+    write_symbols(out, model)?;
+    for (index, closure) in model.closures.iter().enumerate() {
+        write_closure(out, model, index, closure)?;
+    }
+    write_definitions(out, model, "lets", &model.lets)?;
+    write_definitions(out, model, "outputs", &model.outputs)?;
+    writeln!(out, "\nbalances")?;
+    let keyword = match model.dynamics {
+        Dynamics::Continuous => "der",
+        Dynamics::Discrete => "next",
+    };
+    for balance in &model.balances {
+        let name = var_name(model, balance.state);
+        writeln!(
+            out,
+            "  {keyword} {name} = {}",
+            expr_text(model, &balance.expr)
+        )?;
+    }
+    for effect in &model.effects {
+        write!(out, "\neffect {}", effect.name)?;
+        if let Some(description) = &effect.description {
+            write!(out, " \"{description}\"")?;
+        }
+        writeln!(out)?;
+        for param in &effect.params {
+            let constraint = constraint_text(param.constraint);
+            let init = format_number(param.init);
+            writeln!(out, "  param {} = {init}{constraint}", param.name)?;
+        }
+        for line in &effect.lines {
+            writeln!(out, "  {line}")?;
+        }
+    }
+    Ok(())
+}
+
+fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
+    writeln!(out, "\ninputs ({})", model.inputs.len())?;
+    for (i, input) in model.inputs.iter().enumerate() {
+        write!(out, "  u{i} {}", input.name)?;
+        if let Some((lo, hi)) = input.bounds {
+            write!(out, " in [{}, {}]", format_number(lo), format_number(hi))?;
+        }
+        writeln!(out)?;
+    }
+    for (title, prefix, states) in [
+        ("states", "x", &model.states),
+        ("hidden", "h", &model.hidden),
+    ] {
+        writeln!(out, "\n{title} ({})", states.len())?;
+        for (i, state) in states.iter().enumerate() {
+            write!(out, "  {prefix}{i} {}", state.name)?;
+            if let Some(init) = &state.init {
+                write!(out, " = {}", expr_text(model, init))?;
+            }
+            writeln!(out)?;
+        }
+    }
+    writeln!(out, "\nconsts ({})", model.consts.len())?;
+    for (i, constant) in model.consts.iter().enumerate() {
+        let value = format_number(constant.value);
+        writeln!(out, "  c{i} {} = {value}", constant.name)?;
+    }
+    writeln!(out, "\nparams ({})", model.params.len())?;
+    for (i, param) in model.params.iter().enumerate() {
+        let constraint = constraint_text(param.constraint);
+        let init = format_number(param.init);
+        writeln!(out, "  p{i} {} = {init}{constraint}", param.name)?;
+    }
+    Ok(())
+}
+
+fn write_closure(
+    out: &mut String,
+    model: &Model,
+    index: usize,
+    closure: &Closure,
+) -> std::fmt::Result {
+    let embedding = &closure.embedding;
+    let widths: Vec<String> = closure
+        .network
+        .hidden
+        .iter()
+        .map(|w| w.to_string())
+        .collect();
+    writeln!(out, "\nclosure {} (network {index})", closure.name)?;
+    writeln!(
+        out,
+        "  network {} -> [{}] {} -> {} linear",
+        embedding.width(),
+        widths.join(", "),
+        closure.network.activation.name(),
+        closure.outputs.len()
+    )?;
+    writeln!(
+        out,
+        "  embedding delay {} dim {} ({} observed x {} lags = {} inputs, history {})",
+        format_number(embedding.delay),
+        embedding.dim,
+        embedding.observe.len(),
+        embedding.dim,
+        embedding.width(),
+        format_number(embedding.span())
+    )?;
+    for (k, (var, lag)) in embedding.layout().into_iter().enumerate() {
+        let name = var_name(model, var);
+        if lag == 0 {
+            writeln!(out, "    in {k}: {name}(t)")?;
+        } else {
+            let shift = format_number(lag as f64 * embedding.delay);
+            writeln!(out, "    in {k}: {name}(t - {shift})")?;
+        }
+    }
+    for (k, output) in closure.outputs.iter().enumerate() {
+        let scale = output.scale.map_or("default".to_string(), format_number);
+        let constraint = constraint_text(output.constraint);
+        let form = match &output.prior {
+            None => format!("{} = s * n{k}", output.name),
+            Some(prior) => {
+                let p = expr_text(model, &prior.expr);
+                match prior.kind {
+                    PriorKind::Mul => format!("{} = ({p}) * (1 + n{k})", output.name),
+                    PriorKind::Add => format!("{} = {p} + s * n{k}", output.name),
+                }
+            }
+        };
+        writeln!(
+            out,
+            "  out {k}: {} ~ {scale}{constraint}; {form}",
+            output.name
+        )?;
+    }
+    Ok(())
+}
+
+fn write_definitions(
+    out: &mut String,
+    model: &Model,
+    title: &str,
+    list: &[Definition],
+) -> std::fmt::Result {
+    if list.is_empty() {
+        return Ok(());
+    }
+    writeln!(out, "\n{title}")?;
+    for definition in list {
+        writeln!(
+            out,
+            "  {} = {}",
+            definition.name,
+            expr_text(model, &definition.expr)
+        )?;
+    }
+    Ok(())
+}

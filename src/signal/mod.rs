@@ -1,0 +1,235 @@
+//! Input programs: piecewise-constant actuator signals (spec section 4: inputs are held
+//! constant between switches), written on the command line as `--input NAME=PROGRAM`.
+//!
+//! # Programs
+//!
+//! A program is `KIND(ARGUMENTS)`; arguments are `KEY=VALUE` or, in the order listed,
+//! positional; values may be double-quoted (for file names with commas or parentheses).
+//! Every program is sampled on the simulation's grid `t_start + k dt` and held between
+//! samples (zero-order hold), so the result is always a [`Signal`].
+//!
+//! - `steps(lo=, hi=, hold=MIN..MAX, seed=)`: random levels drawn uniformly from
+//!   `[lo, hi]`, each held for a duration drawn uniformly among the multiples of the
+//!   sampling step in `[MIN, MAX]` (model time units), so switches fall on sample times.
+//!   `hold=H` means exactly `H`. Defaults: `lo`/`hi` the input's declared bounds (an
+//!   error if it declares none), holds of 5 to 40 sampling steps, `seed=0`. The same seed
+//!   gives the same signal (ChaCha8 generator).
+//! - `const(V)`: the value `V` throughout.
+//! - `chirp(lo=, hi=, f0=, f1=, period=)`: a sinusoid between `lo` and `hi` whose
+//!   frequency rises *linearly* from `f0` to `f1` over each `period` (then the sweep
+//!   restarts). Defaults: the input's bounds, `period` the whole simulated span,
+//!   `f0 = 1/period`, `f1 = 1/(10 dt)`. Frequencies (cycles per time unit) must lie in
+//!   `[0, 1/(2 dt)]`, the Nyquist range of the grid.
+//! - `csv(FILE)` or `csv(FILE, COLUMN)`: column `COLUMN` (default: the input's name) of a
+//!   data file read by the rules of [`crate::data`], held between its rows. The file must
+//!   start at or before the simulation and, its last row held for one step, reach its end.
+//!   Relative paths are relative to the working directory.
+//!
+//! Every level (given, defaulted or read) must lie within the input's declared bounds.
+
+mod error;
+mod generate;
+mod parse;
+mod program;
+
+pub use error::{ArgumentSource, SignalError};
+pub use generate::{DEFAULT_HOLD_STEPS, MAX_SAMPLES};
+
+use crate::data::suggest::did_you_mean;
+use crate::ir::Input;
+use generate::{Context, Grid};
+use miette::{NamedSource, SourceSpan};
+use parse::Piece;
+use program::Kind;
+use std::sync::Arc;
+
+/// A piecewise-constant signal: `values[i]` holds on `[breaks[i], breaks[i + 1])`, and the
+/// last value holds from the last break on. Before the first break the first value holds.
+///
+/// Invariant (checked by [`Signal::new`], kept by every constructor here): `breaks` and
+/// `values` have the same, non-zero length, `breaks` are finite and strictly increasing,
+/// `values` are finite. A signal built by hand that breaks it still never panics:
+/// [`Signal::value_at`] gives NaN for an empty signal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Signal {
+    /// Switch times, strictly increasing; `breaks[0]` is the start.
+    pub breaks: Vec<f64>,
+    /// The value held from each switch.
+    pub values: Vec<f64>,
+}
+
+impl Signal {
+    /// A signal holding `value` forever from `start`.
+    pub fn constant(start: f64, value: f64) -> Self {
+        Signal {
+            breaks: vec![start],
+            values: vec![value],
+        }
+    }
+
+    /// A signal from switch times and values, checking the invariant.
+    pub fn new(breaks: Vec<f64>, values: Vec<f64>) -> Result<Self, SignalError> {
+        let invalid = |expected: &str, found: String| SignalError::InvalidSignal {
+            expected: expected.to_string(),
+            found,
+        };
+        if breaks.is_empty() || breaks.len() != values.len() {
+            let found = format!("{} breaks and {} values", breaks.len(), values.len());
+            return Err(invalid("as many values as breaks, at least one", found));
+        }
+        let finite = |v: &f64| v.is_finite();
+        if let Some(bad) = breaks.iter().chain(&values).find(|v| !finite(v)) {
+            return Err(invalid("finite break times and values", bad.to_string()));
+        }
+        if let Some(index) = breaks.windows(2).position(|pair| pair[1] <= pair[0]) {
+            let found = format!("{} after {}", breaks[index + 1], breaks[index]);
+            return Err(invalid("strictly increasing break times", found));
+        }
+        Ok(Signal { breaks, values })
+    }
+
+    /// The value held at time `t`; NaN for an empty signal (which [`Signal::new`] refuses).
+    pub fn value_at(&self, t: f64) -> f64 {
+        let index = self.breaks.partition_point(|&b| b <= t).saturating_sub(1);
+        let last = self.values.len().checked_sub(1);
+        last.and_then(|last| self.values.get(index.min(last)))
+            .copied()
+            .unwrap_or(f64::NAN)
+    }
+
+    /// The values held at each of `times`.
+    pub fn sample(&self, times: &[f64]) -> Vec<f64> {
+        times.iter().map(|&t| self.value_at(t)).collect()
+    }
+}
+
+/// A parsed input program, ready to be sampled for an input on a time grid.
+#[derive(Debug, Clone)]
+pub struct Program {
+    source: ArgumentSource,
+    span: SourceSpan,
+    kind_name: Piece,
+    kind: Kind,
+}
+
+impl Program {
+    /// The program as written.
+    pub fn text(&self) -> &str {
+        let start = self.span.offset();
+        &self.source.inner()[start..start + self.span.len()]
+    }
+
+    /// Samples the program for `input` from `t_start` to `t_end` with sampling step `dt`.
+    pub fn generate(
+        &self,
+        input: &Input,
+        t_start: f64,
+        t_end: f64,
+        dt: f64,
+    ) -> Result<Signal, SignalError> {
+        let context = Context {
+            source: &self.source,
+            kind: &self.kind_name,
+            input,
+            grid: Grid::new(t_start, t_end, dt)?,
+        };
+        match &self.kind {
+            Kind::Steps { levels, hold, seed } => context.steps(levels, *hold, *seed),
+            Kind::Const(value) => context.constant(*value),
+            Kind::Chirp {
+                levels,
+                f0,
+                f1,
+                period,
+            } => context.chirp(levels, *f0, *f1, *period),
+            Kind::Csv { file, column } => context.csv(file, column.as_ref()),
+        }
+    }
+}
+
+/// Parses a program such as `steps(hold=5..40, seed=2)`.
+pub fn parse_program(text: &str) -> Result<Program, SignalError> {
+    let source = Arc::new(NamedSource::new("--input", text.to_string()));
+    program_at(&source, 0)
+}
+
+/// One `--input NAME=PROGRAM` argument.
+#[derive(Debug, Clone)]
+pub struct InputArgument {
+    /// The input's name.
+    pub name: String,
+    /// Where the name lies in the argument.
+    pub name_span: SourceSpan,
+    /// Its program.
+    pub program: Program,
+}
+
+impl InputArgument {
+    /// The model input this argument names, or an error suggesting the closest one.
+    pub fn resolve<'model>(&self, inputs: &'model [Input]) -> Result<&'model Input, SignalError> {
+        if let Some(input) = inputs.iter().find(|input| input.name == self.name) {
+            return Ok(input);
+        }
+        let names: Vec<&str> = inputs.iter().map(|input| input.name.as_str()).collect();
+        let help = if names.is_empty() {
+            "the model declares no inputs".to_string()
+        } else {
+            did_you_mean(&self.name, &names, "the model's inputs")
+        };
+        Err(SignalError::UnknownInput {
+            src: self.program.source.clone(),
+            span: self.name_span,
+            name: self.name.clone(),
+            help,
+        })
+    }
+}
+
+/// Splits and parses a `NAME=PROGRAM` argument, e.g. `u=steps(lo=0, hi=1)`.
+pub fn parse_input_argument(argument: &str) -> Result<InputArgument, SignalError> {
+    let source = Arc::new(NamedSource::new("--input", argument.to_string()));
+    let name_start = argument.len() - argument.trim_start().len();
+    let name_length = parse::identifier_length(&argument[name_start..]);
+    let after_name = &argument[name_start + name_length..];
+    let Some(program_text) = after_name
+        .trim_start()
+        .strip_prefix('=')
+        .filter(|_| name_length > 0)
+    else {
+        let span_end = if name_length > 0 {
+            name_start + name_length
+        } else {
+            argument.len()
+        };
+        return Err(SignalError::NotAnAssignment {
+            src: source,
+            span: SourceSpan::new(name_start.into(), span_end - name_start),
+            found: argument.to_string(),
+        });
+    };
+    let program = program_at(&source, argument.len() - program_text.len())?;
+    Ok(InputArgument {
+        name: argument[name_start..name_start + name_length].to_string(),
+        name_span: SourceSpan::new(name_start.into(), name_length),
+        program,
+    })
+}
+
+/// Parses the program starting at byte `start` of the argument.
+fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalError> {
+    let bound = parse::parse_bound(source, start)?;
+    let kind_name = bound.kind.clone();
+    let kind = program::typed(source, bound)?;
+    let text = source.inner();
+    let program_start = start + (text.len() - start - text[start..].trim_start().len());
+    let program_end = text.trim_end().len().max(program_start);
+    Ok(Program {
+        source: source.clone(),
+        span: SourceSpan::new(program_start.into(), program_end - program_start),
+        kind_name,
+        kind,
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,373 @@
+//! Test support: compiled models built by hand (no parser), the paper's models among them,
+//! and a reference integrator for making data.
+//!
+//! [`ModelBuilder`] resolves names the way the front end does and inlines `let`s; its
+//! expressions are read by a tiny precedence-climbing reader (`+ -` < `* /` < unary `-` <
+//! `^`, right associative), enough for the fixtures' equations.
+
+use std::collections::HashMap;
+
+use crate::ir::{
+    self, Activation, BinOp, Closure, ClosureOutput, Constraint, Dynamics, Embedding, Expr, Func,
+    Network, Prior, PriorKind, Var,
+};
+
+/// Builds an [`ir::Model`] declaration by declaration.
+pub struct ModelBuilder {
+    model: ir::Model,
+    names: HashMap<String, Var>,
+    lets: HashMap<String, Expr>,
+}
+
+/// One closure output for [`ModelBuilder::closure`]: name, `~` scale, prior.
+pub struct OutputSpec<'a> {
+    /// Name.
+    pub name: &'a str,
+    /// `~` magnitude.
+    pub scale: Option<f64>,
+    /// `("*=" | "+=", expression)`.
+    pub prior: Option<(&'a str, &'a str)>,
+}
+
+/// A closure for [`ModelBuilder::closure`].
+pub struct ClosureSpec<'a> {
+    /// Name.
+    pub name: &'a str,
+    /// Outputs.
+    pub outputs: Vec<OutputSpec<'a>>,
+    /// Observed names.
+    pub observe: &'a [&'a str],
+    /// Embedding delay.
+    pub delay: f64,
+    /// Embedding dimension.
+    pub dim: usize,
+    /// Hidden widths.
+    pub hidden: Vec<usize>,
+    /// Activation.
+    pub activation: Activation,
+}
+
+impl ModelBuilder {
+    /// An empty continuous-time model.
+    pub fn new(name: &str) -> Self {
+        ModelBuilder {
+            model: ir::Model {
+                name: name.to_string(),
+                description: None,
+                time_unit: None,
+                inputs: Vec::new(),
+                states: Vec::new(),
+                hidden: Vec::new(),
+                consts: Vec::new(),
+                params: Vec::new(),
+                lets: Vec::new(),
+                outputs: Vec::new(),
+                closures: Vec::new(),
+                dynamics: Dynamics::Continuous,
+                balances: Vec::new(),
+                effects: Vec::new(),
+            },
+            names: HashMap::new(),
+            lets: HashMap::new(),
+        }
+    }
+
+    /// `input name`.
+    pub fn input(mut self, name: &str) -> Self {
+        self.names
+            .insert(name.into(), Var::Input(self.model.inputs.len()));
+        self.model.inputs.push(ir::Input {
+            name: name.into(),
+            bounds: None,
+        });
+        self
+    }
+
+    /// `state name`.
+    pub fn state(mut self, name: &str) -> Self {
+        self.names
+            .insert(name.into(), Var::State(self.model.states.len()));
+        self.model.states.push(ir::State {
+            name: name.into(),
+            init: None,
+        });
+        self
+    }
+
+    /// `hidden name = init`.
+    pub fn hidden(mut self, name: &str, init: f64) -> Self {
+        self.names
+            .insert(name.into(), Var::Hidden(self.model.hidden.len()));
+        self.model.hidden.push(ir::State {
+            name: name.into(),
+            init: Some(Expr::Num(init)),
+        });
+        self
+    }
+
+    /// `const name = value`.
+    pub fn constant(mut self, name: &str, value: f64) -> Self {
+        self.names
+            .insert(name.into(), Var::Const(self.model.consts.len()));
+        self.model.consts.push(ir::Const {
+            name: name.into(),
+            value,
+        });
+        self
+    }
+
+    /// `param name = init constraint`.
+    pub fn param(mut self, name: &str, init: f64, constraint: Constraint) -> Self {
+        self.names
+            .insert(name.into(), Var::Param(self.model.params.len()));
+        self.model.params.push(ir::Param {
+            name: name.into(),
+            init,
+            constraint,
+        });
+        self
+    }
+
+    /// `let name = text` (inlined where used).
+    pub fn define(mut self, name: &str, text: &str) -> Self {
+        let expr = self.parse(text);
+        self.model.lets.push(ir::Definition {
+            name: name.into(),
+            expr: expr.clone(),
+        });
+        self.lets.insert(name.into(), expr);
+        self
+    }
+
+    /// `output name = text`.
+    pub fn output(mut self, name: &str, text: &str) -> Self {
+        let expr = self.parse(text);
+        self.model.outputs.push(ir::Definition {
+            name: name.into(),
+            expr,
+        });
+        self
+    }
+
+    /// A closure; its outputs become names.
+    pub fn closure(mut self, spec: ClosureSpec) -> Self {
+        let closure = self.model.closures.len();
+        for (output, out) in spec.outputs.iter().enumerate() {
+            self.names
+                .insert(out.name.into(), Var::ClosureOutput { closure, output });
+        }
+        let outputs = (spec.outputs.iter())
+            .map(|out| ClosureOutput {
+                name: out.name.into(),
+                scale: out.scale,
+                prior: out.prior.map(|(op, text)| Prior {
+                    kind: if op == "*=" {
+                        PriorKind::Mul
+                    } else {
+                        PriorKind::Add
+                    },
+                    expr: self.parse(text),
+                }),
+                constraint: Constraint::Free,
+            })
+            .collect();
+        let observe = spec.observe.iter().map(|n| self.names[*n]).collect();
+        self.model.closures.push(Closure {
+            name: spec.name.into(),
+            outputs,
+            embedding: Embedding {
+                observe,
+                delay: spec.delay,
+                dim: spec.dim,
+            },
+            network: Network {
+                hidden: spec.hidden,
+                activation: spec.activation,
+            },
+        });
+        self
+    }
+
+    /// `der name = text`.
+    pub fn der(mut self, name: &str, text: &str) -> Self {
+        let expr = self.parse(text);
+        let state = self.names[name];
+        self.model.balances.push(ir::Balance { state, expr });
+        self
+    }
+
+    /// `next name = text` (makes the model discrete).
+    pub fn next(mut self, name: &str, text: &str) -> Self {
+        self.model.dynamics = Dynamics::Discrete;
+        self.der(name, text)
+    }
+
+    /// The model, balances ordered measured states first then hidden.
+    pub fn build(mut self) -> ir::Model {
+        let measured = self.model.states.len();
+        self.model.balances.sort_by_key(|b| match b.state {
+            Var::State(i) => i,
+            Var::Hidden(j) => measured + j,
+            _ => usize::MAX,
+        });
+        self.model
+    }
+
+    fn parse(&self, text: &str) -> Expr {
+        let tokens = tokenize(text);
+        let mut reader = Reader {
+            tokens,
+            position: 0,
+            builder: self,
+        };
+        let expr = reader.sum();
+        assert_eq!(reader.position, reader.tokens.len(), "trailing input in {text}");
+        expr
+    }
+}
+
+fn tokenize(text: &str) -> Vec<String> {
+    let mut tokens = Vec::new();
+    let chars: Vec<char> = text.chars().collect();
+    let mut index = 0;
+    while index < chars.len() {
+        let c = chars[index];
+        if c.is_whitespace() {
+            index += 1;
+        } else if c.is_ascii_digit() || c == '.' {
+            let start = index;
+            while index < chars.len()
+                && (chars[index].is_ascii_digit()
+                    || chars[index] == '.'
+                    || chars[index] == 'e'
+                    || (chars[index] == '-' && chars[index - 1] == 'e'))
+            {
+                index += 1;
+            }
+            tokens.push(chars[start..index].iter().collect());
+        } else if c.is_alphabetic() || c == '_' {
+            let start = index;
+            while index < chars.len() && (chars[index].is_alphanumeric() || chars[index] == '_') {
+                index += 1;
+            }
+            tokens.push(chars[start..index].iter().collect());
+        } else {
+            tokens.push(c.to_string());
+            index += 1;
+        }
+    }
+    tokens
+}
+
+struct Reader<'b> {
+    tokens: Vec<String>,
+    position: usize,
+    builder: &'b ModelBuilder,
+}
+
+impl Reader<'_> {
+    fn peek(&self) -> Option<&str> {
+        self.tokens.get(self.position).map(String::as_str)
+    }
+
+    fn take(&mut self) -> String {
+        self.position += 1;
+        self.tokens[self.position - 1].clone()
+    }
+
+    fn sum(&mut self) -> Expr {
+        let mut left = self.product();
+        while let Some(op) = self.peek().and_then(|t| match t {
+            "+" => Some(BinOp::Add),
+            "-" => Some(BinOp::Sub),
+            _ => None,
+        }) {
+            self.take();
+            left = Expr::Bin(op, Box::new(left), Box::new(self.product()));
+        }
+        left
+    }
+
+    fn product(&mut self) -> Expr {
+        let mut left = self.unary();
+        while let Some(op) = self.peek().and_then(|t| match t {
+            "*" => Some(BinOp::Mul),
+            "/" => Some(BinOp::Div),
+            _ => None,
+        }) {
+            self.take();
+            left = Expr::Bin(op, Box::new(left), Box::new(self.unary()));
+        }
+        left
+    }
+
+    fn unary(&mut self) -> Expr {
+        if self.peek() == Some("-") {
+            self.take();
+            return Expr::Neg(Box::new(self.unary()));
+        }
+        self.power()
+    }
+
+    fn power(&mut self) -> Expr {
+        let base = self.atom();
+        if self.peek() == Some("^") {
+            self.take();
+            return Expr::Bin(BinOp::Pow, Box::new(base), Box::new(self.unary()));
+        }
+        base
+    }
+
+    fn atom(&mut self) -> Expr {
+        let token = self.take();
+        if token == "(" {
+            let inner = self.sum();
+            assert_eq!(self.take(), ")");
+            return inner;
+        }
+        if let Ok(value) = token.parse::<f64>() {
+            return Expr::Num(value);
+        }
+        if self.peek() == Some("(") {
+            self.take();
+            let func = Func::from_name(&token).unwrap_or_else(|| panic!("no function {token}"));
+            let mut args = vec![self.sum()];
+            while self.peek() == Some(",") {
+                self.take();
+                args.push(self.sum());
+            }
+            assert_eq!(self.take(), ")");
+            return Expr::Call(func, args);
+        }
+        if let Some(expr) = self.builder.lets.get(&token) {
+            return expr.clone();
+        }
+        let var = (self.builder.names.get(&token)).unwrap_or_else(|| panic!("unknown {token}"));
+        Expr::Var(*var)
+    }
+}
+
+/// `substeps` classical RK4 steps of `rhs` over `step` from `start` (a reference
+/// integrator written independently of the backend).
+pub fn rk4_reference(
+    rhs: impl Fn(&[f64]) -> Vec<f64>,
+    start: &[f64],
+    step: f64,
+    substeps: usize,
+) -> Vec<f64> {
+    let dt = step / substeps as f64;
+    let shifted = |x: &[f64], k: &[f64], factor: f64| -> Vec<f64> {
+        x.iter().zip(k).map(|(a, b)| a + factor * b).collect()
+    };
+    let mut x = start.to_vec();
+    for _ in 0..substeps {
+        let k1 = rhs(&x);
+        let k2 = rhs(&shifted(&x, &k1, dt / 2.0));
+        let k3 = rhs(&shifted(&x, &k2, dt / 2.0));
+        let k4 = rhs(&shifted(&x, &k3, dt));
+        for i in 0..x.len() {
+            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+    }
+    x
+}
