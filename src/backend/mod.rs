@@ -34,6 +34,12 @@ use crate::ir;
 
 pub use net::INIT_LAST_LAYER;
 
+/// The unconstrained starting values of the model's params (their transforms give the
+/// declared initial guesses), as [`program::Program`] reads them.
+pub fn initial_raw_params(model: &ir::Model) -> Vec<f64> {
+    model.params.iter().map(net::raw_initial_value::<f64>).collect()
+}
+
 /// The element type the network trains in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -434,7 +434,7 @@ fn closure_layout(
 }
 
 /// The unconstrained starting value of a param, so that its transform gives the guess.
-fn raw_initial_value<E: Element>(param: &ir::Param) -> E {
+pub fn raw_initial_value<E: Element>(param: &ir::Param) -> E {
     let raw = match param.constraint {
         Constraint::Free => param.init,
         Constraint::Positive => inverse_softplus(param.init.max(1e-12)),

@@ -87,7 +87,7 @@ pub enum CheckError {
     #[error("closure output `{name}` is never used")]
     #[diagnostic(
         code(gbm::E0106),
-        help("use it in a balance, a `let` or an `output`, or remove it from `outputs`")
+        help("use it in a balance, a `let`, an `output` or an effect patch, or remove it from `outputs`")
     )]
     UnusedClosureOutput {
         /// The output.

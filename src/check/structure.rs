@@ -146,14 +146,22 @@ fn check_closures(model: &ast::Model, symbols: &Symbols, values: &Values, sink: 
     }
 }
 
-/// Names used by the top-level equations (where a closure output must appear).
+/// Names used by the equations of the model and of its effects (a closure output that only
+/// an effect uses is a learned correction waiting for that effect to be applied).
 fn used_names(model: &ast::Model) -> HashSet<&str> {
     let mut used = HashSet::new();
-    for item in &model.items {
+    let items = model
+        .items
+        .iter()
+        .chain(effect_items(model).flat_map(|e| &e.items));
+    for item in items {
         match &item.kind {
-            ItemKind::Let(eq) | ItemKind::Output(eq) | ItemKind::Der(eq) | ItemKind::Next(eq) => {
-                used.extend(names(&eq.expr).into_iter().map(|(n, _)| n));
-            }
+            ItemKind::Let(eq)
+            | ItemKind::Output(eq)
+            | ItemKind::Der(eq)
+            | ItemKind::DerPatch(eq)
+            | ItemKind::Next(eq) => used.extend(names(&eq.expr).into_iter().map(|(n, _)| n)),
+            ItemKind::Patch(patch) => used.extend(names(&patch.expr).into_iter().map(|(n, _)| n)),
             _ => {}
         }
     }

@@ -29,7 +29,7 @@ pub struct SimulateArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub t_end: f64,
     /// Sampling step (also the step of a `next` model).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub dt: f64,
     /// The CSV file to write.
     #[arg(short, long)]
@@ -41,10 +41,10 @@ pub struct SimulateArgs {
     #[arg(long = "input", value_name = "NAME=PROGRAM")]
     pub inputs: Vec<String>,
     /// Settle this long at the first input values before recording.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub warmup: f64,
     /// Relative Gaussian noise on the measured states (standard deviation).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub noise: f64,
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
@@ -53,10 +53,10 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub hidden: bool,
     /// Relative tolerance of the integrator.
-    #[arg(long, default_value_t = Tolerances::default().rtol)]
+    #[arg(long, default_value = "1e-9", allow_negative_numbers = true)]
     pub rtol: f64,
     /// Absolute tolerance of the integrator.
-    #[arg(long, default_value_t = Tolerances::default().atol)]
+    #[arg(long, default_value = "1e-12", allow_negative_numbers = true)]
     pub atol: f64,
 }
 
@@ -254,4 +254,162 @@ fn csv_table<'a>(
 fn format_time(t: f64) -> String {
     let rounded: f64 = format!("{t:.11e}").parse().unwrap_or(t);
     format!("{rounded:?}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::ScratchDir;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Command {
+        #[command(flatten)]
+        args: SimulateArgs,
+    }
+
+    fn chemostat_path() -> String {
+        concat!(env!("CARGO_MANIFEST_DIR"), "/models/mm_chemostat/truth.gbm").to_string()
+    }
+
+    /// Parses `gbc simulate` arguments for the chemostat truth model writing to `output`.
+    fn args(output: &Path, extra: &[&str]) -> SimulateArgs {
+        let output = output.display().to_string();
+        let model = chemostat_path();
+        let mut words = vec!["simulate", model.as_str(), "--t-end", "20", "--dt", "1"];
+        words.extend(["-o", output.as_str()]);
+        words.extend(extra);
+        Command::try_parse_from(words).unwrap().args
+    }
+
+    fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+        let mut reader = csv::Reader::from_path(path).unwrap();
+        let header = reader.headers().unwrap().iter().map(String::from).collect();
+        let rows = reader
+            .records()
+            .map(|row| row.unwrap().iter().map(|v| v.parse().unwrap()).collect())
+            .collect();
+        (header, rows)
+    }
+
+    /// The chemostat's steady substrate level at inlet enzyme `e0`.
+    fn steady_substrate(e0: f64) -> f64 {
+        let (s0, theta, kcat, k_m) = (3e-2, 20.0, 0.14, 1.5e-2);
+        let b = k_m - s0 + theta * kcat * e0;
+        (-b + (b * b + 4.0 * s0 * k_m).sqrt()) / 2.0
+    }
+
+    #[test]
+    fn default_tolerances_are_the_library_defaults() {
+        let parsed = args(Path::new("out.csv"), &[]);
+        assert_eq!(parsed.rtol, Tolerances::default().rtol);
+        assert_eq!(parsed.atol, Tolerances::default().atol);
+    }
+
+    #[test]
+    fn writes_columns_in_order_from_the_settled_state() {
+        let scratch = ScratchDir::new("simulate-columns").unwrap();
+        let output = scratch.join("chemostat.csv");
+        let extra = ["--input", "E0=const(0.01)", "--warmup", "2000", "--hidden"];
+        run(&args(&output, &extra)).unwrap();
+        let (header, rows) = read_csv(&output);
+        assert_eq!(header, ["t", "E0", "S", "E", "P", "r_true"]);
+        assert_eq!(rows.len(), 21);
+        let steady = steady_substrate(0.01);
+        for (k, row) in rows.iter().enumerate() {
+            assert_eq!(row[0], k as f64);
+            assert_eq!(row[1], 0.01);
+            assert!((row[2] / steady - 1.0).abs() < 1e-8, "S = {}", row[2]);
+            assert!((row[3] / 0.01 - 1.0).abs() < 1e-8, "E = {}", row[3]);
+            assert!((row[4] - (3e-2 - row[2])).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn noise_is_relative_seeded_and_on_measured_states_only() {
+        let scratch = ScratchDir::new("simulate-noise").unwrap();
+        let clean = scratch.join("clean.csv");
+        let noisy = scratch.join("noisy.csv");
+        let again = scratch.join("again.csv");
+        let input = ["--input", "E0=steps(hold=3..6, seed=4)", "--hidden"];
+        run(&args(&clean, &input)).unwrap();
+        let with_noise =
+            |seed: &'static str| [&input[..], &["--noise", "0.01", "--seed", seed]].concat();
+        run(&args(&noisy, &with_noise("9"))).unwrap();
+        run(&args(&again, &with_noise("9"))).unwrap();
+        let (_, clean) = read_csv(&clean);
+        let (_, noisy) = read_csv(&noisy);
+        assert_eq!(noisy, read_csv(&again).1, "same seed, same record");
+        let mut changed = 0;
+        for (c, n) in clean.iter().zip(&noisy) {
+            assert_eq!((c[0], c[1], c[3], c[4]), (n[0], n[1], n[3], n[4]));
+            let relative = n[2] / c[2] - 1.0;
+            assert!(relative.abs() < 0.06, "relative deviation {relative}");
+            changed += usize::from(relative != 0.0);
+        }
+        assert_eq!(changed, clean.len());
+    }
+
+    #[test]
+    fn noise_has_the_requested_spread() {
+        let samples = 20_000;
+        let mut trajectory = Trajectory {
+            times: vec![0.0; samples],
+            inputs: vec![],
+            states: vec![vec![2.0; samples], vec![-5.0; samples]],
+            hidden: vec![vec![1.0; samples]],
+            outputs: vec![],
+            lets: vec![],
+            stats: Default::default(),
+        };
+        add_noise(&mut trajectory, 0.05, 1);
+        for (column, level) in trajectory.states.iter().zip([2.0, -5.0]) {
+            let draws: Vec<f64> = column.iter().map(|y| (y / level - 1.0) / 0.05).collect();
+            let mean = draws.iter().sum::<f64>() / samples as f64;
+            let variance = draws.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / samples as f64;
+            assert!(mean.abs() < 0.03, "mean {mean}");
+            assert!(
+                (variance.sqrt() - 1.0).abs() < 0.03,
+                "std {}",
+                variance.sqrt()
+            );
+        }
+        assert!(trajectory.hidden[0].iter().all(|&h| h == 1.0));
+    }
+
+    fn codes(error: CommandError) -> Vec<String> {
+        match error {
+            CommandError::User(reports) => reports
+                .iter()
+                .filter_map(|r| r.code().map(|c| c.to_string()))
+                .collect(),
+            CommandError::Internal(message) => vec![message],
+        }
+    }
+
+    #[test]
+    fn input_programs_must_cover_each_input_once() {
+        let scratch = ScratchDir::new("simulate-inputs").unwrap();
+        let output = scratch.join("never.csv");
+        let missing = run(&args(&output, &[])).unwrap_err();
+        assert_eq!(codes(missing), ["gbm::E0709"]);
+        let twice = ["--input", "E0=const(0.01)", "--input", "E0=const(0.02)"];
+        assert_eq!(
+            codes(run(&args(&output, &twice)).unwrap_err()),
+            ["gbm::E0710"]
+        );
+        let noise = ["--input", "E0=const(0.01)", "--noise", "-1"];
+        assert_eq!(
+            codes(run(&args(&output, &noise)).unwrap_err()),
+            ["gbm::E0711"]
+        );
+        assert!(!output.exists());
+    }
+
+    #[test]
+    fn sample_times_print_without_rounding_noise() {
+        assert_eq!(format_time(3.0 * 0.1), "0.3");
+        assert_eq!(format_time(1799.0), "1799.0");
+        assert_eq!(format_time(-2.5e-7), "-2.5e-7");
+    }
 }

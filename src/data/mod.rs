@@ -22,7 +22,6 @@
 
 mod error;
 mod read;
-pub(crate) mod suggest;
 
 pub use error::{ColumnRef, DataError, DataSource, Location};
 pub use read::STEP_TOLERANCE;

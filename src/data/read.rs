@@ -2,7 +2,7 @@
 //! the time grid, with a byte span for every defect.
 
 use super::error::{ColumnRef, DataError, DataSource, Location};
-use super::suggest::did_you_mean;
+use crate::suggest::did_you_mean;
 use super::{Column, Dataset, MinRows};
 use miette::{NamedSource, SourceSpan};
 use std::collections::HashMap;
@@ -142,9 +142,43 @@ struct Scanner {
 
 /// The parsed header.
 struct Header {
+    /// Every column's name.
     names: Vec<String>,
+    /// 0-based position of `t`.
     time: usize,
+    /// 0-based positions of the required columns, in the order asked for.
     required: Vec<usize>,
+}
+
+impl Header {
+    /// The columns to parse, `t` included, in the order they appear in a row.
+    fn wanted(&self) -> Vec<Wanted> {
+        let time = Wanted {
+            position: self.time,
+            slot: None,
+        };
+        let required = self
+            .required
+            .iter()
+            .enumerate()
+            .map(|(slot, &position)| Wanted {
+                position,
+                slot: Some(slot),
+            });
+        let mut wanted: Vec<Wanted> = std::iter::once(time).chain(required).collect();
+        wanted.sort_by_key(|column| column.position);
+        wanted
+    }
+}
+
+/// The parsed values of the data rows.
+struct Samples {
+    /// The time column.
+    times: Vec<f64>,
+    /// Where each time cell lies.
+    time_spans: Vec<SourceSpan>,
+    /// The required columns, in the order asked for.
+    columns: Vec<Vec<f64>>,
 }
 
 impl Scanner {
@@ -208,16 +242,16 @@ impl Scanner {
                 at: self.at(1, None),
             });
         }
-        let (times, spans, columns) = self.rows(&header, rows)?;
-        let step = self.uniform_step(&times, &spans, &header)?;
-        self.enough_rows(&times, rows, min_rows)?;
+        let samples = self.rows(&header, rows)?;
+        let step = self.uniform_step(&samples.times, &samples.time_spans, &header)?;
+        self.enough_rows(&samples.times, rows, min_rows)?;
         Ok(Dataset {
             path: PathBuf::from(&self.file),
-            times,
+            times: samples.times,
             step,
             columns: required
                 .iter()
-                .zip(columns)
+                .zip(samples.columns)
                 .map(|(name, values)| Column {
                     name: name.to_string(),
                     values,
@@ -300,31 +334,13 @@ impl Scanner {
     }
 
     /// Parses every data row: cell count, numbers, and time increasing.
-    #[allow(clippy::type_complexity)]
-    fn rows(
-        &self,
-        header: &Header,
-        rows: &[Line<'_>],
-    ) -> Result<(Vec<f64>, Vec<SourceSpan>, Vec<Vec<f64>>), DataError> {
-        let mut wanted: Vec<Wanted> = std::iter::once(Wanted {
-            position: header.time,
-            slot: None,
-        })
-        .chain(
-            header
-                .required
-                .iter()
-                .enumerate()
-                .map(|(slot, &position)| Wanted {
-                    position,
-                    slot: Some(slot),
-                }),
-        )
-        .collect();
-        wanted.sort_by_key(|column| column.position);
-        let mut times = Vec::with_capacity(rows.len());
-        let mut time_spans = Vec::with_capacity(rows.len());
-        let mut columns = vec![Vec::with_capacity(rows.len()); header.required.len()];
+    fn rows(&self, header: &Header, rows: &[Line<'_>]) -> Result<Samples, DataError> {
+        let wanted = header.wanted();
+        let mut samples = Samples {
+            times: Vec::with_capacity(rows.len()),
+            time_spans: Vec::with_capacity(rows.len()),
+            columns: vec![Vec::with_capacity(rows.len()); header.required.len()],
+        };
         let mut cells = Vec::with_capacity(header.names.len());
         for &line in rows {
             self.row_shape(line, header, &mut cells)?;
@@ -332,16 +348,17 @@ impl Scanner {
                 let cell = cells[column.position];
                 let value = self.number(line.row, cell, column.position, header)?;
                 match column.slot {
-                    Some(slot) => columns[slot].push(value),
+                    Some(slot) => samples.columns[slot].push(value),
                     None => {
-                        self.time_increases(times.last().copied(), value, line.row, cell, header)?;
-                        times.push(value);
-                        time_spans.push(cell.span());
+                        let previous = samples.times.last().copied();
+                        self.time_increases(previous, value, line.row, cell, header)?;
+                        samples.times.push(value);
+                        samples.time_spans.push(cell.span());
                     }
                 }
             }
         }
-        Ok((times, time_spans, columns))
+        Ok(samples)
     }
 
     /// Splits a row and checks it has one cell per header column.

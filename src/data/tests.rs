@@ -98,33 +98,76 @@ fn step_is_uniform_within_rounding_of_decimal_times() -> TestResult {
     Ok(())
 }
 
+/// Asserts the defect of a data row placed as row 3, between two good rows, of a file
+/// with header `t,u,X,note`.
+fn check_row(row: &str, code: &str, column: Option<(usize, &str)>) {
+    let text = format!("t,u,X,note\n0,0,0,ok\n{row}\n1,0,0,ok\n");
+    check_error(&text, code, 3, column);
+}
+
 #[test]
-fn structural_defects_name_file_row_and_column() {
+fn empty_file() {
     check_error("", "gbm::E0203", 1, None);
     check_error("\n \r\n", "gbm::E0203", 1, None);
+}
+
+#[test]
+fn header_only_file() {
     check_error("t,u,X\n", "gbm::E0204", 1, None);
+}
+
+#[test]
+fn unnamed_column() {
     check_error("t,u,,X\n0,0,0,0\n", "gbm::E0205", 1, Some((3, "")));
+}
+
+#[test]
+fn duplicate_column() {
     check_error("t,u,X,u\n0,0,0,0\n", "gbm::E0206", 1, Some((4, "u")));
+}
+
+#[test]
+fn missing_time_column() {
     check_error("time,u,X\n0,0,0\n", "gbm::E0207", 1, None);
+}
+
+#[test]
+fn missing_required_column() {
     check_error("t,u,Y\n0,0,0\n", "gbm::E0208", 1, None);
 }
 
 #[test]
-fn row_defects_name_file_row_and_column() {
-    let head = "t,u,X,note\n0,0,0,ok\n";
-    let case = |row: &str, code: &str, column: Option<(usize, &str)>| {
-        check_error(&format!("{head}{row}\n1,0,0,ok\n"), code, 3, column);
-    };
-    case("1,0,0", "gbm::E0209", Some((4, "note")));
-    case("1,0,0,ok,surplus", "gbm::E0209", Some((5, "")));
-    case("", "gbm::E0209", Some((1, "t")));
-    case("1,,0,ok", "gbm::E0210", Some((2, "u")));
-    case("1,0,abc,ok", "gbm::E0211", Some((3, "X")));
-    case("1,0,1.2.3,ok", "gbm::E0211", Some((3, "X")));
-    case("1,NaN,0,ok", "gbm::E0212", Some((2, "u")));
-    case("1,0,-inf,ok", "gbm::E0212", Some((3, "X")));
-    case("1,0,1e999,ok", "gbm::E0212", Some((3, "X")));
-    case("x,0,0,ok", "gbm::E0211", Some((1, "t")));
+fn ragged_row_too_few_cells() {
+    check_row("1,0,0", "gbm::E0209", Some((4, "note")));
+}
+
+#[test]
+fn ragged_row_too_many_cells() {
+    check_row("1,0,0,ok,surplus", "gbm::E0209", Some((5, "")));
+}
+
+#[test]
+fn blank_line_inside_the_data() {
+    check_row("", "gbm::E0209", Some((1, "t")));
+}
+
+#[test]
+fn empty_cell() {
+    check_row("1,,0,ok", "gbm::E0210", Some((2, "u")));
+}
+
+#[test]
+fn non_number_cell() {
+    check_row("1,0,abc,ok", "gbm::E0211", Some((3, "X")));
+    check_row("1,0,1.2.3,ok", "gbm::E0211", Some((3, "X")));
+    check_row("x,0,0,ok", "gbm::E0211", Some((1, "t")));
+}
+
+#[test]
+fn nan_or_infinite_cell() {
+    check_row("1,NaN,0,ok", "gbm::E0212", Some((2, "u")));
+    check_row("1,0,-inf,ok", "gbm::E0212", Some((3, "X")));
+    check_row("1,0,1e999,ok", "gbm::E0212", Some((3, "X")));
 }
 
 #[test]
@@ -135,29 +178,52 @@ fn extra_columns_are_not_parsed() -> TestResult {
 }
 
 #[test]
-fn time_defects_name_the_row() {
-    let t = Some((1, "t"));
-    check_error("t,u,X\n0,0,0\n2,0,0\n1,0,0\n", "gbm::E0213", 4, t);
-    check_error("t,u,X\n0,0,0\n1,0,0\n1,0,0\n", "gbm::E0214", 4, t);
+fn unsorted_time() {
     check_error(
-        "t,u,X\n0,0,0\n1,0,0\n2,0,0\n4,0,0\n5,0,0\n",
-        "gbm::E0215",
-        5,
-        t,
-    );
-    // The odd step is found even when it is the first one.
-    check_error("t,u,X\n0,0,0\n2,0,0\n3,0,0\n4,0,0\n", "gbm::E0215", 3, t);
-    // A relative deviation of 1e-5 is beyond the tolerance.
-    check_error(
-        "t,u,X\n0,0,0\n1,0,0\n2.00001,0,0\n3.00001,0,0\n",
-        "gbm::E0215",
+        "t,u,X\n0,0,0\n2,0,0\n1,0,0\n",
+        "gbm::E0213",
         4,
-        t,
+        Some((1, "t")),
     );
-    // Time in a later column is reported at its own position.
-    let error = read_ux("u,X,t\n0,0,0\n0,0,1\n0,0,3\n0,0,4\n", 0).err();
-    let column = error.as_ref().and_then(|e| e.location()?.column.clone());
-    assert_eq!(column.map(|c| c.index), Some(3));
+}
+
+#[test]
+fn repeated_time() {
+    check_error(
+        "t,u,X\n0,0,0\n1,0,0\n1,0,0\n",
+        "gbm::E0214",
+        4,
+        Some((1, "t")),
+    );
+}
+
+#[test]
+fn gapped_time() {
+    let text = "t,u,X\n0,0,0\n1,0,0\n2,0,0\n4,0,0\n5,0,0\n";
+    check_error(text, "gbm::E0215", 5, Some((1, "t")));
+}
+
+#[test]
+fn uneven_first_step() {
+    check_error(
+        "t,u,X\n0,0,0\n2,0,0\n3,0,0\n4,0,0\n",
+        "gbm::E0215",
+        3,
+        Some((1, "t")),
+    );
+}
+
+#[test]
+fn step_deviation_beyond_tolerance() {
+    // A relative deviation of 1e-5 is beyond the tolerance of 1e-6.
+    let text = "t,u,X\n0,0,0\n1,0,0\n2.00001,0,0\n3.00001,0,0\n";
+    check_error(text, "gbm::E0215", 4, Some((1, "t")));
+}
+
+#[test]
+fn time_defect_in_a_later_column_names_that_column() {
+    let text = "u,X,t\n0,0,0\n0,0,1\n0,0,3\n0,0,4\n";
+    check_error(text, "gbm::E0215", 4, Some((3, "t")));
 }
 
 #[test]
@@ -306,6 +372,13 @@ fn write_csv_refuses_mismatched_columns() -> TestResult {
     assert!(missing.is_err());
     assert!(!path.exists(), "nothing is written");
     Ok(())
+}
+
+#[test]
+fn errors_stay_small_enough_to_return_by_value() {
+    // clippy's `result_large_err` flags error types of 128 bytes or more in every caller.
+    assert!(std::mem::size_of::<DataError>() < 128);
+    assert!(std::mem::size_of::<IoError>() < 128);
 }
 
 #[test]

@@ -88,7 +88,7 @@ pub enum SignalError {
         #[label("unknown argument")]
         span: SourceSpan,
         /// The program.
-        program: String,
+        program: &'static str,
         /// The key given.
         key: String,
         /// The program's keys, with a suggestion.
@@ -109,7 +109,7 @@ pub enum SignalError {
         #[label("first here")]
         first_span: SourceSpan,
         /// The key.
-        key: String,
+        key: &'static str,
     },
     /// A positional argument where none is accepted.
     #[error("unexpected argument `{found}` to `{program}`")]
@@ -122,7 +122,7 @@ pub enum SignalError {
         #[label("unexpected")]
         span: SourceSpan,
         /// The program.
-        program: String,
+        program: &'static str,
         /// The argument's text.
         found: String,
         /// The accepted form.
@@ -140,14 +140,14 @@ pub enum SignalError {
         #[label("not {expected}")]
         span: SourceSpan,
         /// The key.
-        key: String,
+        key: &'static str,
         /// What was expected, e.g. "a finite number".
-        expected: String,
+        expected: &'static str,
         /// The value's text.
         found: String,
         /// An example.
         #[help]
-        help: String,
+        help: &'static str,
     },
     /// A needed argument is absent.
     #[error("expected an argument `{key}` for `{program}`, found none{reason}")]
@@ -160,9 +160,9 @@ pub enum SignalError {
         #[label("`{key}` missing")]
         span: SourceSpan,
         /// The program.
-        program: String,
+        program: &'static str,
         /// The missing key.
-        key: String,
+        key: &'static str,
         /// Why it cannot default, e.g. " (input `u` declares no bounds)"; may be empty.
         reason: String,
         /// How to supply it.
@@ -240,7 +240,7 @@ pub enum SignalError {
         #[label("this {key}")]
         span: SourceSpan,
         /// The key.
-        key: String,
+        key: &'static str,
         /// The accepted range, in words.
         expected: String,
         /// The value.

@@ -67,7 +67,10 @@ impl Grid {
 /// What every generator needs: the argument (for labels), the input and the grid.
 pub(super) struct Context<'a> {
     pub source: &'a ArgumentSource,
-    pub kind: &'a Piece,
+    /// The program's kind (`steps`, ...).
+    pub kind_name: &'static str,
+    /// Where the kind is written: the label of errors about defaulted arguments.
+    pub kind_span: SourceSpan,
     pub input: &'a Input,
     pub grid: Grid,
 }
@@ -117,7 +120,8 @@ impl Context<'_> {
         let period = self.chirp_period(period)?;
         let f0 = self.frequency(f0, "f0", 1.0 / period)?;
         let f1 = self.frequency(f1, "f1", 0.1 / grid.dt)?;
-        let (middle, amplitude) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+        // Halved before adding, so that levels near the float range cannot overflow.
+        let (middle, amplitude) = (0.5 * lo + 0.5 * hi, 0.5 * hi - 0.5 * lo);
         let breaks: Vec<f64> = (0..grid.intervals).map(|k| grid.time(k)).collect();
         let values = (0..grid.intervals)
             .map(|k| {
@@ -150,9 +154,13 @@ impl Context<'_> {
                 last,
             });
         }
-        for (row, &value) in values.iter().enumerate() {
-            let origin = format!(" in `{}` row {}, column `{name}`", file.text, row + 2);
-            self.within(value, file.span, origin)?;
+        let outside = self
+            .input
+            .bounds
+            .and_then(|(lo, hi)| values.iter().position(|value| !(lo..=hi).contains(value)));
+        if let Some(index) = outside {
+            let origin = format!(" in `{}` row {}, column `{name}`", file.text, index + 2);
+            self.within(values[index], file.span, origin)?;
         }
         Signal::new(dataset.times.clone(), values.to_vec())
     }
@@ -179,7 +187,7 @@ impl Context<'_> {
     fn level(
         &self,
         given: Option<Number>,
-        key: &str,
+        key: &'static str,
         pick: fn((f64, f64)) -> f64,
     ) -> Result<Number, SignalError> {
         if let Some(number) = given {
@@ -188,13 +196,13 @@ impl Context<'_> {
         match self.input.bounds {
             Some(bounds) => Ok(Number {
                 value: pick(bounds),
-                span: self.kind.span,
+                span: self.kind_span,
             }),
             None => Err(SignalError::MissingArgument {
                 src: self.source.clone(),
-                span: self.kind.span,
-                program: self.kind.text.clone(),
-                key: key.to_string(),
+                span: self.kind_span,
+                program: self.kind_name,
+                key,
                 reason: format!(
                     " (input `{}` declares no bounds to default to)",
                     self.input.name
@@ -273,7 +281,7 @@ impl Context<'_> {
         Err(SignalError::BadFrequency {
             src: self.source.clone(),
             span: period.span,
-            key: "period".to_string(),
+            key: "period",
             expected: "a positive duration".to_string(),
             found: period.value,
             help: "the period is the duration of one sweep from f0 to f1".to_string(),
@@ -284,10 +292,10 @@ impl Context<'_> {
     fn frequency(
         &self,
         given: Option<Number>,
-        key: &str,
+        key: &'static str,
         default: f64,
     ) -> Result<f64, SignalError> {
-        let (value, span) = given.map_or((default, self.kind.span), |n| (n.value, n.span));
+        let (value, span) = given.map_or((default, self.kind_span), |n| (n.value, n.span));
         let nyquist = 0.5 / self.grid.dt;
         if (0.0..=nyquist).contains(&value) {
             return Ok(value);
@@ -295,7 +303,7 @@ impl Context<'_> {
         Err(SignalError::BadFrequency {
             src: self.source.clone(),
             span,
-            key: key.to_string(),
+            key,
             expected: format!("a frequency from 0 to the Nyquist frequency 1/(2 dt) = {nyquist}"),
             found: value,
             help: format!(

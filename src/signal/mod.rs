@@ -35,11 +35,10 @@ mod program;
 pub use error::{ArgumentSource, SignalError};
 pub use generate::{DEFAULT_HOLD_STEPS, MAX_SAMPLES};
 
-use crate::data::suggest::did_you_mean;
+use crate::suggest::did_you_mean;
 use crate::ir::Input;
 use generate::{Context, Grid};
 use miette::{NamedSource, SourceSpan};
-use parse::Piece;
 use program::Kind;
 use std::sync::Arc;
 
@@ -108,7 +107,8 @@ impl Signal {
 pub struct Program {
     source: ArgumentSource,
     span: SourceSpan,
-    kind_name: Piece,
+    kind_name: &'static str,
+    kind_span: SourceSpan,
     kind: Kind,
 }
 
@@ -129,7 +129,8 @@ impl Program {
     ) -> Result<Signal, SignalError> {
         let context = Context {
             source: &self.source,
-            kind: &self.kind_name,
+            kind_name: self.kind_name,
+            kind_span: self.kind_span,
             input,
             grid: Grid::new(t_start, t_end, dt)?,
         };
@@ -218,7 +219,7 @@ pub fn parse_input_argument(argument: &str) -> Result<InputArgument, SignalError
 /// Parses the program starting at byte `start` of the argument.
 fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalError> {
     let bound = parse::parse_bound(source, start)?;
-    let kind_name = bound.kind.clone();
+    let (kind_name, kind_span) = (bound.name, bound.span);
     let kind = program::typed(source, bound)?;
     let text = source.inner();
     let program_start = start + (text.len() - start - text[start..].trim_start().len());
@@ -227,6 +228,7 @@ fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalEr
         source: source.clone(),
         span: SourceSpan::new(program_start.into(), program_end - program_start),
         kind_name,
+        kind_span,
         kind,
     })
 }

@@ -2,7 +2,7 @@
 //! keys each kind accepts.
 
 use super::error::{ArgumentSource, SignalError};
-use crate::data::suggest::did_you_mean;
+use crate::suggest::did_you_mean;
 use miette::SourceSpan;
 
 /// The kinds of program and the keys each accepts, in positional order.
@@ -32,8 +32,10 @@ struct RawArgument {
 /// A program whose arguments are bound to its kind's keys.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct Bound {
-    /// The kind's name and where it is written.
-    pub kind: Piece,
+    /// The kind's name.
+    pub name: &'static str,
+    /// Where the name is written.
+    pub span: SourceSpan,
     /// One slot per key of the kind, in [`KINDS`] order: the value given, if any.
     pub values: Vec<Option<Piece>>,
 }
@@ -47,7 +49,7 @@ pub(super) fn parse_bound(source: &ArgumentSource, start: usize) -> Result<Bound
     };
     let kind = scanner.kind()?;
     let arguments = scanner.arguments(&kind)?;
-    let Some((_, keys)) = KINDS.iter().find(|(name, _)| *name == kind.text) else {
+    let Some(&(name, keys)) = KINDS.iter().find(|(name, _)| *name == kind.text) else {
         let names: Vec<&str> = KINDS.iter().map(|(name, _)| *name).collect();
         return Err(SignalError::UnknownProgram {
             src: source.clone(),
@@ -56,21 +58,21 @@ pub(super) fn parse_bound(source: &ArgumentSource, start: usize) -> Result<Bound
             help: did_you_mean(&kind.text, &names, "input programs"),
         });
     };
-    bind(source, kind, keys, arguments)
+    bind(source, (name, kind.span), keys, arguments)
 }
 
 /// Binds positional arguments to keys in order, then keyword arguments by name.
 fn bind(
     source: &ArgumentSource,
-    kind: Piece,
-    keys: &[&str],
+    (name, span): (&'static str, SourceSpan),
+    keys: &'static [&'static str],
     arguments: Vec<RawArgument>,
 ) -> Result<Bound, SignalError> {
     let mut values: Vec<Option<Piece>> = vec![None; keys.len()];
     let mut keyed = false;
     let usage = || {
         let listed: Vec<String> = keys.iter().map(|key| format!("{key}=...")).collect();
-        format!("write `{}({})`", kind.text, listed.join(", "))
+        format!("write `{name}({})`", listed.join(", "))
     };
     for (index, argument) in arguments.into_iter().enumerate() {
         let slot = match &argument.key {
@@ -81,7 +83,7 @@ fn bind(
                     .ok_or_else(|| SignalError::UnknownKey {
                         src: source.clone(),
                         span: key.span,
-                        program: kind.text.clone(),
+                        program: name,
                         key: key.text.clone(),
                         help: did_you_mean(&key.text, keys, "its arguments"),
                     })?
@@ -90,7 +92,7 @@ fn bind(
                 return Err(SignalError::UnexpectedArgument {
                     src: source.clone(),
                     span: argument.value.span,
-                    program: kind.text.clone(),
+                    program: name,
                     found: argument.value.text.clone(),
                     help: format!(
                         "positional arguments come first and there are at most {}; {}",
@@ -106,12 +108,12 @@ fn bind(
                 src: source.clone(),
                 span: argument.key.map_or(argument.value.span, |key| key.span),
                 first_span: first.span,
-                key: keys[slot].to_string(),
+                key: keys[slot],
             });
         }
         values[slot] = Some(argument.value);
     }
-    Ok(Bound { kind, values })
+    Ok(Bound { name, span, values })
 }
 
 /// Walks the argument text.
@@ -146,7 +148,10 @@ impl<'a> Scanner<'a> {
             None => {
                 let last = self.text.chars().next_back().map_or(0, char::len_utf8);
                 let start = self.position.saturating_sub(last);
-                ("the end of the argument".to_string(), self.span(start, self.position))
+                (
+                    "the end of the argument".to_string(),
+                    self.span(start, self.position),
+                )
             }
         }
     }

@@ -55,16 +55,15 @@ pub(super) const DEFAULT_SEED: u64 = 0;
 pub(super) fn typed(source: &ArgumentSource, bound: Bound) -> Result<Kind, SignalError> {
     let mut values = bound.values.into_iter();
     let mut next = || values.next().flatten();
-    let kind = &bound.kind;
-    let missing = |key: &str, example: &str| SignalError::MissingArgument {
+    let missing = |key: &'static str, example: &str| SignalError::MissingArgument {
         src: source.clone(),
-        span: kind.span,
-        program: kind.text.clone(),
-        key: key.to_string(),
+        span: bound.span,
+        program: bound.name,
+        key,
         reason: String::new(),
         help: format!("write e.g. `{example}`"),
     };
-    Ok(match kind.text.as_str() {
+    Ok(match bound.name {
         "steps" => Kind::Steps {
             levels: levels(source, next(), next())?,
             hold: next().map(|piece| hold(source, &piece)).transpose()?,
@@ -104,13 +103,17 @@ fn levels(
 fn optional_number(
     source: &ArgumentSource,
     piece: Option<Piece>,
-    key: &str,
+    key: &'static str,
 ) -> Result<Option<Number>, SignalError> {
     piece.map(|piece| number(source, &piece, key)).transpose()
 }
 
 /// A finite number.
-fn number(source: &ArgumentSource, piece: &Piece, key: &str) -> Result<Number, SignalError> {
+fn number(
+    source: &ArgumentSource,
+    piece: &Piece,
+    key: &'static str,
+) -> Result<Number, SignalError> {
     match parse_finite(&piece.text) {
         Some(value) => Ok(Number {
             value,
@@ -171,16 +174,16 @@ fn parse_finite(text: &str) -> Option<f64> {
 fn bad_number(
     source: &ArgumentSource,
     piece: &Piece,
-    key: &str,
-    expected: &str,
-    help: &str,
+    key: &'static str,
+    expected: &'static str,
+    help: &'static str,
 ) -> SignalError {
     SignalError::BadNumber {
         src: source.clone(),
         span: piece.span,
-        key: key.to_string(),
-        expected: expected.to_string(),
+        key,
+        expected,
         found: piece.text.clone(),
-        help: help.to_string(),
+        help,
     }
 }

@@ -183,6 +183,19 @@ fn chirp_frequency_rises_linearly() -> TestResult {
 }
 
 #[test]
+fn extreme_levels_stay_finite() -> TestResult {
+    let free = input("v", None);
+    for program in [
+        "v=chirp(lo=-1e308, hi=1e308)",
+        "v=steps(lo=-1e308, hi=1e308)",
+    ] {
+        let signal = generate(program, &free, 100.0, 1.0)?;
+        assert!(signal.values.iter().all(|v| v.is_finite()), "{program}");
+    }
+    Ok(())
+}
+
+#[test]
 fn chirp_restarts_each_period() -> TestResult {
     let signal = generate("u=chirp(f0=0.05, f1=0.2, period=50)", &unit(), 200.0, 0.5)?;
     let samples_per_period = 100;
@@ -339,6 +352,12 @@ fn bad_horizons_are_errors() {
     assert_eq!(check(10.0, f64::NAN).as_deref(), Some("gbm::E0315"));
     assert_eq!(check(1e12, 1e-6).as_deref(), Some("gbm::E0315"));
     assert_eq!(check(10.0, 1.0), None);
+}
+
+#[test]
+fn errors_stay_small_enough_to_return_by_value() {
+    // clippy's `result_large_err` flags error types of 128 bytes or more in every caller.
+    assert!(std::mem::size_of::<SignalError>() < 128);
 }
 
 #[test]

@@ -245,7 +245,7 @@ fn sample_times(options: &SimOptions) -> Result<Vec<f64>, SimError> {
         return invalid("expected finite times, step and warm-up".into());
     }
     if dt <= 0.0 {
-        return invalid(format!("expected a positive sampling step, found {dt}"));
+        return invalid(format!("expected a positive sampling step, found {dt:?}"));
     }
     if t_end < t_start {
         return invalid(format!(
@@ -253,11 +253,11 @@ fn sample_times(options: &SimOptions) -> Result<Vec<f64>, SimError> {
         ));
     }
     if warmup < 0.0 {
-        return invalid(format!("expected a non-negative warm-up, found {warmup}"));
+        return invalid(format!("expected a non-negative warm-up, found {warmup:?}"));
     }
     if !(tolerances.rtol > 0.0 && tolerances.atol > 0.0) {
         return invalid(format!(
-            "expected positive tolerances, found rtol {} and atol {}",
+            "expected positive tolerances, found rtol {:?} and atol {:?}",
             tolerances.rtol, tolerances.atol
         ));
     }

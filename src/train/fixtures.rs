@@ -371,3 +371,159 @@ pub fn rk4_reference(
     }
     x
 }
+
+/// A piecewise-constant input: random levels in `[lo, hi]` held for a random whole number
+/// of samples in `holds`.
+pub fn random_steps(
+    rows: usize,
+    (lo, hi): (f64, f64),
+    holds: (usize, usize),
+    rng: &mut impl rand::Rng,
+) -> Vec<f64> {
+    let mut values = Vec::with_capacity(rows);
+    while values.len() < rows {
+        let level = rng.gen_range(lo..=hi);
+        let hold = rng.gen_range(holds.0..=holds.1);
+        values.extend(std::iter::repeat(level).take(hold));
+    }
+    values.truncate(rows);
+    values
+}
+
+/// Samples a truth model every `step` with inputs held over each interval, integrating
+/// with `substeps` RK4 steps per sample. Returns the state at every row.
+pub fn sample_truth(
+    rhs: impl Fn(&[f64], &[f64]) -> Vec<f64>,
+    start: &[f64],
+    inputs: &[Vec<f64>],
+    step: f64,
+    substeps: usize,
+) -> Vec<Vec<f64>> {
+    let rows = inputs.first().map_or(0, Vec::len);
+    let mut states = vec![start.to_vec()];
+    for row in 0..rows.saturating_sub(1) {
+        let held: Vec<f64> = inputs.iter().map(|u| u[row]).collect();
+        let next = rk4_reference(|x| rhs(x, &held), &states[row], step, substeps);
+        states.push(next);
+    }
+    states
+}
+
+/// A dataset with a time column and the named columns.
+pub fn dataset(step: f64, columns: Vec<(&str, Vec<f64>)>) -> crate::data::Dataset {
+    let rows = columns.first().map_or(0, |c| c.1.len());
+    crate::data::Dataset {
+        path: std::path::PathBuf::from("memory.csv"),
+        times: (0..rows).map(|i| i as f64 * step).collect(),
+        step,
+        columns: (columns.into_iter())
+            .map(|(name, values)| crate::data::Column {
+                name: name.to_string(),
+                values,
+            })
+            .collect(),
+    }
+}
+
+/// Chemostat constants (paper 3.1).
+pub mod chemostat {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// Inlet substrate.
+    pub const S0: f64 = 3e-2;
+    /// Residence time.
+    pub const THETA: f64 = 20.0;
+    /// Turnover number.
+    pub const KCAT: f64 = 0.14;
+    /// Michaelis constant.
+    pub const K_M: f64 = 1.5e-2;
+
+    /// Truth right-hand side over `[S, E]` with input `[E0]`.
+    pub fn rhs(state: &[f64], input: &[f64]) -> Vec<f64> {
+        let (s, e) = (state[0], state[1]);
+        vec![
+            (S0 - s) / THETA - KCAT * e * s / (K_M + s),
+            (input[0] - e) / THETA,
+        ]
+    }
+
+    /// The true rate `r` of the grey-box model (`dS/dt = (S0 - S)/theta + r`).
+    pub fn rate(state: &[f64]) -> f64 {
+        -KCAT * state[1] * state[0] / (K_M + state[0])
+    }
+
+    /// Steady substrate at enzyme level `e`.
+    pub fn steady_substrate(e: f64) -> f64 {
+        let b = S0 - K_M - THETA * KCAT * e;
+        (b + (b * b + 4.0 * S0 * K_M).sqrt()) / 2.0
+    }
+
+    /// Data as the paper describes: `E0` steps in `range` held 20-60 s, sampled every
+    /// second from the steady state at the first level. Returns the dataset (`E0`, `S`)
+    /// and the hidden enzyme level at every row.
+    pub fn data(rows: usize, range: (f64, f64), seed: u64) -> (crate::data::Dataset, Vec<f64>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let inlet = random_steps(rows, range, (20, 60), &mut rng);
+        let start = [steady_substrate(inlet[0]), inlet[0]];
+        let states = sample_truth(rhs, &start, &[inlet.clone()], 1.0, 20);
+        let substrate = states.iter().map(|x| x[0]).collect();
+        let enzyme = states.iter().map(|x| x[1]).collect();
+        (dataset(1.0, vec![("E0", inlet), ("S", substrate)]), enzyme)
+    }
+
+    /// The paper's grey-box model: `dS/dt = (S0 - S)/theta + r`, `r` learned from `S` and
+    /// `E0` (delay 10 s, dim 5).
+    pub fn grey_box() -> ir::Model {
+        ModelBuilder::new("chemostat_gb")
+            .input("E0")
+            .state("S")
+            .constant("S0", S0)
+            .constant("theta", THETA)
+            .closure(ClosureSpec {
+                name: "rate",
+                outputs: vec![OutputSpec { name: "r", scale: None, prior: None }],
+                observe: &["S", "E0"],
+                delay: 10.0,
+                dim: 5,
+                hidden: vec![20, 20, 20],
+                activation: Activation::Softplus,
+            })
+            .der("S", "(S0 - S) / theta + r")
+            .build()
+    }
+
+    /// The paper's black-box model: `next S = n(z_e)` with the same embedding.
+    pub fn black_box() -> ir::Model {
+        ModelBuilder::new("chemostat_bb")
+            .input("E0")
+            .state("S")
+            .closure(ClosureSpec {
+                name: "map",
+                outputs: vec![OutputSpec { name: "n", scale: None, prior: None }],
+                observe: &["S", "E0"],
+                delay: 10.0,
+                dim: 5,
+                hidden: vec![20, 20, 20],
+                activation: Activation::Softplus,
+            })
+            .next("S", "n")
+            .build()
+    }
+
+    /// The truth with its rate law as a `let`, `kcat` a positive param starting at `kcat`.
+    pub fn exact_law(kcat: f64) -> ir::Model {
+        ModelBuilder::new("chemostat_exact")
+            .input("E0")
+            .state("S")
+            .hidden("E", 0.0)
+            .constant("S0", S0)
+            .constant("theta", THETA)
+            .constant("K_M", K_M)
+            .param("kcat", kcat, Constraint::Positive)
+            .define("r", "kcat * E * S / (K_M + S)")
+            .der("S", "(S0 - S) / theta - r")
+            .der("E", "(E0 - E) / theta")
+            .build()
+    }
+}

@@ -1,4 +1,490 @@
-//! Training of grey-box models on data.
+//! Training of grey-box models on data (spec section 4; Lovelett et al. 2020, section 2).
+//!
+//! [`train`] turns a record into one-step pairs ([`pairs`]), normalises with the training
+//! split, resolves closure magnitudes and warns about stiff balances ([`analysis`]), then
+//! runs Adam on shuffled mini-batches of the backend network and reports the paper's two
+//! validation errors ([`evaluate`]). [`artifacts`] saves and reloads a trained network.
+//!
+//! Decisions this module makes:
+//! - **Split**: the first `--train-points` pairs train; the remaining pairs of the same record
+//!   validate, or every pair of `--val FILE`. Without `--train-points` all pairs train when a
+//!   validation file is given, else the first 70 %.
+//! - **Normalisation**: mean and standard deviation of each input and measured state over
+//!   the rows the training pairs cover (a constant column gets std 1).
+//! - **Hidden states** (none in the paper's models) start at their declared initial values at
+//!   the first row and are integrated along the record with the measured states reset to the
+//!   data at every step; their estimates enter the pairs as constants, refreshed each epoch
+//!   with the current network (no gradient flows through their history).
+//! - **Online error**: a free run starting at the first validation pair with the true history
+//!   before it, driven by the data's inputs, over `--online-horizon` (default: to the end).
+
+pub mod analysis;
+pub mod artifacts;
+mod error;
+#[cfg(test)]
+mod tests;
+pub mod evaluate;
+pub mod pairs;
 
 #[cfg(test)]
 pub(crate) mod fixtures;
+
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::backend::{Network, Normalisation, Precision, Setup};
+use crate::data::Dataset;
+use crate::ir;
+
+pub use analysis::StiffnessWarning;
+pub use error::TrainError;
+pub use evaluate::ErrorSet;
+use evaluate::{offline_error, online_error, run_in_hidden, simulate, Feed};
+use pairs::{first_pair_row, stage_fractions, PairTable, Record};
+
+/// Share of the pairs that train when neither `--train-points` nor `--val` is given.
+pub const DEFAULT_TRAIN_SHARE: f64 = 0.7;
+
+/// Options of a training run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainOptions {
+    /// Passes over the training pairs.
+    pub epochs: usize,
+    /// Pairs per Adam step.
+    pub batch_size: usize,
+    /// Adam learning rate.
+    pub learning_rate: f64,
+    /// Number of training pairs (the first ones); see the module documentation.
+    pub train_points: Option<usize>,
+    /// Seed of the initialisation and the shuffling.
+    pub seed: u64,
+    /// Element type.
+    pub precision: Precision,
+    /// RK4 sub-steps per sample.
+    pub substeps: usize,
+    /// Length (model time) of the online free run; `None` runs to the end.
+    pub online_horizon: Option<f64>,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        TrainOptions {
+            epochs: 100,
+            batch_size: 50,
+            learning_rate: 1e-3,
+            train_points: None,
+            seed: 0,
+            precision: Precision::F32,
+            substeps: 1,
+            online_horizon: None,
+        }
+    }
+}
+
+/// Something worth telling the user while training runs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event<'a> {
+    /// Before the first epoch: the stiffness estimate found a problem.
+    Warning(&'a StiffnessWarning),
+    /// Before the first epoch.
+    Started {
+        /// Epochs to run.
+        epochs: usize,
+        /// Training pairs.
+        train_pairs: usize,
+        /// Validation pairs.
+        validation_pairs: usize,
+    },
+    /// After each epoch.
+    Epoch {
+        /// 1-based epoch.
+        epoch: usize,
+        /// Mean training loss over the epoch (normalised units).
+        loss: f64,
+    },
+}
+
+/// Validation errors in normalised units (the paper's two errors).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct Metrics {
+    /// Offline validation error of the untrained network.
+    pub initial_offline: Option<ErrorSet>,
+    /// Offline validation error (one step from true history).
+    pub offline: Option<ErrorSet>,
+    /// Online validation error (free run).
+    pub online: Option<ErrorSet>,
+}
+
+/// What a training run reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainReport {
+    /// Validation errors.
+    pub metrics: Metrics,
+    /// Trained param values, in declaration order.
+    pub params: Vec<(String, f64)>,
+    /// Stiffness warnings issued before training.
+    pub warnings: Vec<StiffnessWarning>,
+    /// Mean training loss of each epoch.
+    pub losses: Vec<f64>,
+    /// Number of training pairs.
+    pub train_pairs: usize,
+    /// Number of validation pairs.
+    pub validation_pairs: usize,
+}
+
+/// A trained network with everything needed to reuse it.
+pub struct Trained {
+    /// The network.
+    pub network: Network,
+    /// How it was built.
+    pub setup: Setup,
+    /// What training reported.
+    pub report: TrainReport,
+}
+
+/// A record turned into pairs, with hidden-state estimates.
+struct Split {
+    record: Record,
+    table: PairTable,
+    hidden: Vec<Vec<f64>>,
+}
+
+/// Trains `model` on `data` (validating on `validation` when given); `on_event` hears of
+/// warnings and of every epoch.
+pub fn train(
+    model: &ir::Model,
+    data: &Dataset,
+    validation: Option<&Dataset>,
+    options: &TrainOptions,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Trained, TrainError> {
+    check_options(options)?;
+    check_trainable(model)?;
+    let record = record_of(model, data)?;
+    check_delays(model, record.step)?;
+    let first = first_pair_row(model, record.step);
+    let available = pair_count(data, &record, first)?;
+    let train_count = train_pair_count(options, validation.is_some(), available)?;
+    let train_rows: Vec<usize> = (first..first + train_count).collect();
+    let normalisation = normalise(&record, first + train_count + 1);
+    let hidden_init = hidden_initial_values(model)?;
+    let scales = analysis::closure_scales(model, &record, &train_rows, &hidden_init)?;
+    let warnings =
+        analysis::stiffness(model, &scales, &record, &train_rows, &hidden_init, options.substeps)?;
+    for warning in &warnings {
+        on_event(Event::Warning(warning));
+    }
+    let setup = Setup {
+        step: record.step,
+        substeps: options.substeps,
+        precision: options.precision,
+        seed: options.seed,
+        normalisation,
+        scales,
+    };
+    let mut network = Network::build(model, &setup)?;
+    let fractions = stage_fractions(model.dynamics, options.substeps);
+    let hidden = run_in_hidden(&network, model, &record, &fractions, &hidden_init)?;
+    let table = PairTable::build(model, &record, &train_rows, &hidden, &fractions);
+    let mut training = Split {
+        record,
+        table,
+        hidden,
+    };
+    let mut validating =
+        validation_split(model, &training, validation, (first, &fractions), &hidden_init)?;
+    let validation_pairs = validating.as_ref().map_or(0, |v| v.table.len());
+    on_event(Event::Started {
+        epochs: options.epochs,
+        train_pairs: train_count,
+        validation_pairs,
+    });
+    let initial_offline = (validating.as_ref())
+        .map(|v| offline_error(&network, model, &v.table, &setup.normalisation))
+        .transpose()?;
+    let losses = fit(&mut network, model, &mut training, options, &hidden_init, on_event)?;
+    let mut metrics = Metrics {
+        initial_offline,
+        ..Metrics::default()
+    };
+    if let Some(split) = validating.as_mut() {
+        refresh_hidden(&network, model, split, &fractions, &hidden_init)?;
+        metrics.offline = Some(offline_error(&network, model, &split.table, &setup.normalisation)?);
+        metrics.online = Some(online(&network, model, split, &setup, options)?);
+    }
+    let params = (model.params.iter().zip(network.param_values()))
+        .map(|(p, v)| (p.name.clone(), v))
+        .collect();
+    let report = TrainReport {
+        metrics,
+        params,
+        warnings,
+        losses,
+        train_pairs: train_count,
+        validation_pairs,
+    };
+    Ok(Trained {
+        network,
+        setup,
+        report,
+    })
+}
+
+/// The epochs: seeded shuffles, Adam steps, divergence checks. Returns per-epoch losses.
+fn fit(
+    network: &mut Network,
+    model: &ir::Model,
+    training: &mut Split,
+    options: &TrainOptions,
+    hidden_init: &[f64],
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Vec<f64>, TrainError> {
+    let fractions = stage_fractions(model.dynamics, options.substeps);
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
+    let mut order: Vec<usize> = (0..training.table.len()).collect();
+    let mut losses = Vec::with_capacity(options.epochs);
+    for epoch in 1..=options.epochs {
+        if epoch > 1 {
+            refresh_hidden(network, model, training, &fractions, hidden_init)?;
+        }
+        order.shuffle(&mut rng);
+        let mut total = 0.0;
+        for chunk in order.chunks(options.batch_size) {
+            let loss = network.train_step(&training.table.batch(chunk), options.learning_rate)?;
+            if !loss.is_finite() {
+                return Err(TrainError::Diverged { epoch, loss });
+            }
+            total += loss * chunk.len() as f64;
+        }
+        let loss = total / order.len().max(1) as f64;
+        losses.push(loss);
+        on_event(Event::Epoch { epoch, loss });
+    }
+    Ok(losses)
+}
+
+/// Re-runs the hidden states along a split's record with the current network.
+fn refresh_hidden(
+    network: &Network,
+    model: &ir::Model,
+    split: &mut Split,
+    fractions: &[f64],
+    hidden_init: &[f64],
+) -> Result<(), TrainError> {
+    if model.hidden.is_empty() {
+        return Ok(());
+    }
+    split.hidden = run_in_hidden(network, model, &split.record, fractions, hidden_init)?;
+    split.table.set_hidden(&split.hidden);
+    Ok(())
+}
+
+/// The validation pairs: the rest of the training record, or all pairs of `validation`.
+fn validation_split(
+    model: &ir::Model,
+    training: &Split,
+    validation: Option<&Dataset>,
+    (first, fractions): (usize, &[f64]),
+    hidden_init: &[f64],
+) -> Result<Option<Split>, TrainError> {
+    let (record, rows) = match validation {
+        Some(data) => {
+            let record = record_of(model, data)?;
+            if (record.step - training.record.step).abs() > 1e-9 * training.record.step {
+                return Err(TrainError::StepMismatch {
+                    file: data.path.display().to_string(),
+                    expected: training.record.step,
+                    found: record.step,
+                });
+            }
+            let count = pair_count(data, &record, first)?;
+            (record, (first..first + count).collect::<Vec<_>>())
+        }
+        None => {
+            let start = first + training.table.len();
+            let end = training.record.len().saturating_sub(1);
+            (training.record.clone(), (start..end).collect())
+        }
+    };
+    if rows.is_empty() {
+        return Ok(None);
+    }
+    let hidden = vec![hidden_init.to_vec(); record.len()];
+    let table = PairTable::build(model, &record, &rows, &hidden, fractions);
+    Ok(Some(Split {
+        record,
+        table,
+        hidden,
+    }))
+}
+
+/// Online error: free run from the first validation pair.
+fn online(
+    network: &Network,
+    model: &ir::Model,
+    split: &Split,
+    setup: &Setup,
+    options: &TrainOptions,
+) -> Result<ErrorSet, TrainError> {
+    let fractions = stage_fractions(model.dynamics, setup.substeps);
+    let start = split.table.rows[0];
+    let last = split.record.len() - 1;
+    let end = match options.online_horizon {
+        Some(horizon) => (start + (horizon / setup.step).round() as usize).min(last),
+        None => last,
+    };
+    let hidden = split.hidden.get(start).cloned().unwrap_or_default();
+    let run = simulate(
+        network,
+        model,
+        &split.record,
+        &fractions,
+        (start, end.saturating_sub(1).max(start)),
+        &hidden,
+        Feed::Own,
+    )?;
+    Ok(online_error(model, &split.record, &run, &setup.normalisation))
+}
+
+fn check_options(options: &TrainOptions) -> Result<(), TrainError> {
+    let bad = |option: &str, expected: &str, found: String| {
+        Err(TrainError::BadOption {
+            option: option.into(),
+            expected: expected.into(),
+            found,
+        })
+    };
+    if options.batch_size == 0 {
+        return bad("--batch", "a positive batch size", "0".into());
+    }
+    if options.substeps == 0 {
+        return bad("--substeps", "a positive number of sub-steps", "0".into());
+    }
+    if !(options.learning_rate > 0.0 && options.learning_rate.is_finite()) {
+        return bad("--lr", "a positive learning rate", options.learning_rate.to_string());
+    }
+    if options.train_points == Some(0) {
+        return bad("--train-points", "a positive number of pairs", "0".into());
+    }
+    Ok(())
+}
+
+fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
+    if model.closures.is_empty() && model.params.is_empty() {
+        return Err(TrainError::NothingToTrain {
+            model: model.name.clone(),
+        });
+    }
+    Ok(())
+}
+
+fn check_delays(model: &ir::Model, step: f64) -> Result<(), TrainError> {
+    for closure in &model.closures {
+        let embedding = &closure.embedding;
+        if embedding.dim > 1 && embedding.delay < step * (1.0 - 1e-9) {
+            return Err(TrainError::DelayBelowStep {
+                closure: closure.name.clone(),
+                delay: embedding.delay,
+                step,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The measured states and inputs of `model` from `data`, as a [`Record`].
+pub fn record_of(model: &ir::Model, data: &Dataset) -> Result<Record, TrainError> {
+    let column = |name: &str| {
+        data.column(name)
+            .map(<[f64]>::to_vec)
+            .ok_or_else(|| TrainError::BadRun {
+                path: data.path.display().to_string(),
+                reason: format!("expected a column `{name}`, found none"),
+            })
+    };
+    Ok(Record {
+        step: data.step,
+        times: data.times.clone(),
+        inputs: (model.inputs.iter())
+            .map(|i| column(&i.name))
+            .collect::<Result<_, _>>()?,
+        states: (model.states.iter())
+            .map(|s| column(&s.name))
+            .collect::<Result<_, _>>()?,
+    })
+}
+
+fn pair_count(data: &Dataset, record: &Record, first: usize) -> Result<usize, TrainError> {
+    if record.len() < first + 2 {
+        return Err(TrainError::TooFewRows {
+            file: data.path.display().to_string(),
+            needed: first + 2,
+            found: record.len(),
+            reason: format!("{first} rows of embedding history and one step"),
+        });
+    }
+    Ok(record.len() - 1 - first)
+}
+
+fn train_pair_count(
+    options: &TrainOptions,
+    has_validation_file: bool,
+    available: usize,
+) -> Result<usize, TrainError> {
+    match options.train_points {
+        Some(requested) if requested > available => Err(TrainError::TooManyTrainPoints {
+            available,
+            requested,
+        }),
+        Some(requested) => Ok(requested),
+        None if has_validation_file => Ok(available),
+        None => Ok(((available as f64 * DEFAULT_TRAIN_SHARE).round() as usize).clamp(1, available)),
+    }
+}
+
+/// Mean and std of every input and measured state over the first `rows` rows.
+pub fn normalise(record: &Record, rows: usize) -> Normalisation {
+    let stats = |series: &Vec<Vec<f64>>| -> (Vec<f64>, Vec<f64>) {
+        series
+            .iter()
+            .map(|values| {
+                let values = &values[..rows.min(values.len())];
+                let count = values.len().max(1) as f64;
+                let mean = values.iter().sum::<f64>() / count;
+                let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
+                let std = variance.sqrt();
+                let std = if std > 1e-12 * mean.abs().max(1e-300) && std.is_finite() {
+                    std
+                } else {
+                    1.0
+                };
+                (mean, std)
+            })
+            .unzip()
+    };
+    let (state_mean, state_std) = stats(&record.states);
+    let (input_mean, input_std) = stats(&record.inputs);
+    Normalisation {
+        state_mean,
+        state_std,
+        input_mean,
+        input_std,
+    }
+}
+
+/// Initial values of the hidden states (constant expressions of consts and params).
+pub fn hidden_initial_values(model: &ir::Model) -> Result<Vec<f64>, TrainError> {
+    (model.hidden.iter())
+        .map(|state| {
+            let init = state.init.as_ref().ok_or_else(|| TrainError::HiddenWithoutInit {
+                name: state.name.clone(),
+            })?;
+            Ok(crate::eval::interpret(init, &|var| match var {
+                ir::Var::Const(i) => model.consts.get(i).map_or(f64::NAN, |c| c.value),
+                ir::Var::Param(i) => model.params.get(i).map_or(f64::NAN, |p| p.init),
+                _ => f64::NAN,
+            }))
+        })
+        .collect()
+}

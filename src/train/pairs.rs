@@ -7,9 +7,9 @@
 //! - **States** between samples are interpolated linearly. A lag-0 state is the stage
 //!   estimate, supplied by the network; the value here is ignored.
 //! - **Inputs** are held (zero-order hold): the value of the sample at or before the
-//!   position. A stage after the start of a step (`f > 0`) takes the left limit, so a
-//!   switch at `t_i + h` acts from the next step on, as in a simulator that holds inputs
-//!   over each sampling interval.
+//!   position. The stage at the end of the step (`f = 1`) takes the left limit instead, as
+//!   the integral over `[t_i, t_i + h)` sees it: a switch at `t_i + h` acts from the next
+//!   step on, as in a simulator that holds inputs over each sampling interval.
 //! - **Leakage**: a delayed value must not come from inside the step being predicted. With
 //!   `delay >= h` every lag >= 1 lies at or before `t_i`; a closure with `delay < h` is
 //!   rejected before training ([`crate::train::TrainError::DelayBelowStep`]).
@@ -113,7 +113,7 @@ pub fn embedding_row(closure: &ir::Closure, record: &Record, row: usize, fractio
             let position = row as f64 + fraction - lag as f64 * lag_in_samples;
             match var {
                 Var::State(i) => interpolate(&record.states[i], position),
-                Var::Input(i) => hold(&record.inputs[i], position, fraction > 0.0),
+                Var::Input(i) => hold(&record.inputs[i], position, fraction >= 1.0),
                 _ => f64::NAN,
             }
         })
@@ -188,6 +188,17 @@ impl PairTable {
     /// The measured target block `pairs x measured`.
     pub fn targets(&self) -> &[f64] {
         &self.targets
+    }
+
+    /// Replaces the hidden-state estimates (`hidden[row]` for each pair's row).
+    pub fn set_hidden(&mut self, hidden: &[Vec<f64>]) {
+        let hidden_width = self.state_width - self.measured;
+        for (pair, &row) in self.rows.iter().enumerate() {
+            if let Some(values) = hidden.get(row).filter(|v| v.len() == hidden_width) {
+                let start = pair * self.state_width + self.measured;
+                self.states[start..start + hidden_width].copy_from_slice(values);
+            }
+        }
     }
 
     /// Gathers pairs `indices` into a batch.
@@ -278,10 +289,11 @@ mod tests {
         // Stage t = 8: x at samples 4, 2.5, 1 -> 80, 30, 10; u held at 4, 2.5, 1 -> 4, 2, 1.
         let start = embedding_row(closure, &record, 4, 0.0);
         assert_eq!(start, vec![80.0, 4.0, 30.0, 2.0, 10.0, 1.0]);
-        // Stage t = 9: samples 4.5, 3, 1.5 -> x 120, 40, 15; u 4, 2 (left limit at 3), 1.
+        // Stage t = 9: samples 4.5, 3, 1.5 -> x 120, 40, 15; u 4, 3 (switched at 3), 1.
         let middle = embedding_row(closure, &record, 4, 0.5);
-        assert_eq!(middle, vec![120.0, 4.0, 40.0, 2.0, 15.0, 1.0]);
-        // Stage t = 10: samples 5, 3.5, 2 -> x 160, 60, 20; u 4 (held over the step), 3, 1.
+        assert_eq!(middle, vec![120.0, 4.0, 40.0, 3.0, 15.0, 1.0]);
+        // Stage t = 10: samples 5, 3.5, 2 -> x 160, 60, 20; u 4 (left limit: held over the
+        // step), 3, 1 (left limit at 2).
         let end = embedding_row(closure, &record, 4, 1.0);
         assert_eq!(end, vec![160.0, 4.0, 60.0, 3.0, 20.0, 1.0]);
         let table = PairTable::build(&model, &record, &[4, 6], &[], &fractions);

@@ -262,3 +262,58 @@ fn model_with_closures_is_refused() {
     );
     assert!(matches!(error, Err(SimError::HasClosures { closures, .. }) if closures == "rate"));
 }
+
+fn shipped(file: &str) -> Model {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+    crate::cli::load_model(&path).unwrap()
+}
+
+#[test]
+fn shipped_truth_models_match_the_hand_built_ones() {
+    let cases = [
+        (
+            "models/bioreactor/truth.gbm",
+            models::bioreactor(),
+            steps(&[(0.0, 0.5), (7.0, 0.1), (19.0, 0.95), (33.0, 0.4)]),
+        ),
+        (
+            "models/mm_chemostat/truth.gbm",
+            models::chemostat(),
+            steps(&[(0.0, 0.005), (20.0, 0.018), (45.0, 0.002)]),
+        ),
+    ];
+    for (file, hand_built, signal) in cases {
+        let parsed = shipped(file);
+        let signals = std::slice::from_ref(&signal);
+        let reference = simulate(&hand_built, signals, &SimOptions::new(60.0, 1.0)).unwrap();
+        let columns = || reference.states.iter().chain(&reference.hidden);
+        let options = SimOptions {
+            initial: columns().map(|column| Some(column[0])).collect(),
+            ..SimOptions::new(60.0, 1.0)
+        };
+        let trajectory = simulate(&parsed, signals, &options).unwrap();
+        let parsed_columns = trajectory.states.iter().chain(&trajectory.hidden);
+        for (expected, found) in columns().zip(parsed_columns) {
+            for (a, b) in expected.iter().zip(found) {
+                assert!(relative_gap(*b, *a, 1e-3) < 1e-7, "{file}: {b} vs {a}");
+            }
+        }
+    }
+}
+
+#[test]
+fn shipped_truth_models_start_at_their_steady_state() {
+    let cases = [
+        ("models/bioreactor/truth.gbm", 0.5),
+        ("models/mm_chemostat/truth.gbm", 0.011),
+    ];
+    for (file, level) in cases {
+        let model = shipped(file);
+        let signal = [Signal::constant(0.0, level)];
+        let trajectory = simulate(&model, &signal, &SimOptions::new(200.0, 10.0)).unwrap();
+        for column in trajectory.states.iter().chain(&trajectory.hidden) {
+            let drift = relative_gap(*column.last().unwrap(), column[0], 1e-3);
+            assert!(drift < 1e-6, "{file}: drift {drift:e}");
+        }
+    }
+}

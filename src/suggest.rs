@@ -1,36 +1,42 @@
-//! "Did you mean" suggestions by edit distance, shared by the data reader and the input
-//! programs.
+//! "Did you mean" suggestions by edit distance, shared by the checks, the data reader and
+//! the input programs.
 
 /// The candidate closest to `name` by edit distance, if it is close enough to be a likely
 /// typo: a candidate equal to `name` ignoring case is the best match; otherwise a
 /// single-character name gets no suggestion, and longer names allow one edit or a third of
-/// their length, whichever is more.
-pub(crate) fn closest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
+/// their length, whichever is more. Ties go to the candidate of the most similar length
+/// (`SO` suggests `S0`, not `S`).
+pub fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
     let length = name.chars().count();
     let budget = if length <= 1 { 0 } else { (length / 3).max(1) };
     candidates
-        .iter()
-        .map(|&candidate| {
+        .into_iter()
+        .filter(|candidate| *candidate != name)
+        .map(|candidate| {
             let distance = if candidate.eq_ignore_ascii_case(name) {
                 0
             } else {
                 edit_distance(name, candidate)
             };
-            (distance, candidate)
+            (
+                distance,
+                candidate.chars().count().abs_diff(length),
+                candidate,
+            )
         })
-        .filter(|&(distance, _)| distance <= budget)
-        .min_by_key(|&(distance, _)| distance)
-        .map(|(_, candidate)| candidate)
+        .filter(|&(distance, _, _)| distance <= budget)
+        .min()
+        .map(|(_, _, candidate)| candidate)
 }
 
 /// A help line: "did you mean `x`?" when a close candidate exists, then the full list.
-pub(crate) fn did_you_mean(name: &str, candidates: &[&str], what: &str) -> String {
+pub fn did_you_mean(name: &str, candidates: &[&str], what: &str) -> String {
     let listed = candidates
         .iter()
         .map(|c| format!("`{c}`"))
         .collect::<Vec<_>>()
         .join(", ");
-    match closest(name, candidates) {
+    match closest(name, candidates.iter().copied()) {
         Some(close) => format!("did you mean `{close}`? {what}: {listed}"),
         None => format!("{what}: {listed}"),
     }
@@ -38,7 +44,7 @@ pub(crate) fn did_you_mean(name: &str, candidates: &[&str], what: &str) -> Strin
 
 /// Edit distance between `a` and `b` in characters: insertions, deletions, substitutions
 /// and transpositions of two neighbours each count one (optimal string alignment).
-pub(crate) fn edit_distance(a: &str, b: &str) -> usize {
+pub fn edit_distance(a: &str, b: &str) -> usize {
     let a: Vec<char> = a.chars().collect();
     let b: Vec<char> = b.chars().collect();
     let width = b.len() + 1;
@@ -80,12 +86,12 @@ mod tests {
 
     #[test]
     fn closest_suggests_only_near_misses() {
-        assert_eq!(closest("Xx", &["X", "A", "S"]), Some("X"));
-        assert_eq!(closest("s", &["X", "S"]), Some("S"));
-        assert_eq!(closest("substrate", &["u", "X"]), None);
-        assert_eq!(closest("v", &["u", "X"]), None);
+        assert_eq!(closest("Xx", ["X", "A", "S"]), Some("X"));
+        assert_eq!(closest("s", ["X", "S"]), Some("S"));
+        assert_eq!(closest("substrate", ["u", "X"]), None);
+        assert_eq!(closest("v", ["u", "X"]), None);
         assert_eq!(
-            closest("chrip", &["steps", "const", "chirp", "csv"]),
+            closest("chrip", ["steps", "const", "chirp", "csv"]),
             Some("chirp")
         );
     }

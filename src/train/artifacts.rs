@@ -1,0 +1,285 @@
+//! A training run on disk: `weights.safetensors` (every trainable tensor, `f64`) and
+//! `run.json` (everything needed to rebuild the network: the model source hash, step and
+//! sub-steps, normalisation, closure magnitudes, embeddings, params, seed, metrics and the
+//! gbc version). Reloading checks the model source against the recorded hash.
+
+use std::path::Path;
+
+use sha2::{Digest, Sha256};
+
+use crate::backend::{NamedTensor, Network, Normalisation, Precision, Setup};
+use crate::ir;
+
+use super::{Metrics, StiffnessWarning, TrainError, TrainOptions, Trained};
+
+/// File name of the weights inside a run directory.
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+/// File name of the metadata inside a run directory.
+pub const RUN_FILE: &str = "run.json";
+
+/// The metadata of a run (`run.json`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RunInfo {
+    /// Version of gbc that trained it.
+    pub gbc_version: String,
+    /// The model trained.
+    pub model: ModelInfo,
+    /// The training data file.
+    pub data: String,
+    /// `der` or `next`.
+    pub dynamics: String,
+    /// Element type.
+    pub precision: Precision,
+    /// Seed.
+    pub seed: u64,
+    /// Sampling step `h`.
+    pub step: f64,
+    /// RK4 sub-steps per sample.
+    pub substeps: usize,
+    /// Names of the inputs, in the order of the normalisation vectors.
+    pub inputs: Vec<String>,
+    /// Names of the measured states, in the order of the normalisation vectors.
+    pub states: Vec<String>,
+    /// Normalisation of the training split.
+    pub normalisation: Normalisation,
+    /// Closure embeddings and output magnitudes.
+    pub closures: Vec<ClosureInfo>,
+    /// Trained param values.
+    pub params: Vec<NamedValue>,
+    /// Training options.
+    pub training: TrainingInfo,
+    /// Validation errors.
+    pub metrics: Metrics,
+    /// Stiffness warnings issued.
+    pub warnings: Vec<StiffnessWarning>,
+    /// The weights file, relative to the run directory.
+    pub weights: String,
+}
+
+/// The model a run belongs to.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ModelInfo {
+    /// Model name.
+    pub name: String,
+    /// The model file as given.
+    pub path: String,
+    /// sha256 of the model file's text.
+    pub source_sha256: String,
+}
+
+/// A closure's embedding and magnitudes.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClosureInfo {
+    /// Closure name.
+    pub name: String,
+    /// Observed variables.
+    pub observe: Vec<String>,
+    /// Embedding delay.
+    pub delay: f64,
+    /// Embedding dimension.
+    pub dim: usize,
+    /// Output magnitudes `s_o`.
+    pub scales: Vec<NamedValue>,
+}
+
+/// A name with a number.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NamedValue {
+    /// Name.
+    pub name: String,
+    /// Value.
+    pub value: f64,
+}
+
+/// How the run trained.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrainingInfo {
+    /// Epochs.
+    pub epochs: usize,
+    /// Batch size.
+    pub batch_size: usize,
+    /// Learning rate.
+    pub learning_rate: f64,
+    /// Training pairs.
+    pub train_pairs: usize,
+    /// Validation pairs.
+    pub validation_pairs: usize,
+    /// Mean loss of the last epoch.
+    pub final_loss: Option<f64>,
+}
+
+/// sha256 of a text, lowercase hex.
+pub fn source_hash(source: &str) -> String {
+    Sha256::digest(source.as_bytes())
+        .iter()
+        .map(|byte| format!("{byte:02x}"))
+        .collect()
+}
+
+/// The metadata of a finished run.
+pub fn run_info(
+    model: &ir::Model,
+    (model_path, source): (&str, &str),
+    data_path: &str,
+    options: &TrainOptions,
+    trained: &Trained,
+) -> RunInfo {
+    let setup = &trained.setup;
+    let report = &trained.report;
+    let name_of = |var: ir::Var| match var {
+        ir::Var::Input(i) => model.inputs[i].name.clone(),
+        ir::Var::State(i) => model.states[i].name.clone(),
+        other => format!("{other:?}"),
+    };
+    let closures = (model.closures.iter().zip(&setup.scales))
+        .map(|(closure, scales)| ClosureInfo {
+            name: closure.name.clone(),
+            observe: closure.embedding.observe.iter().map(|&v| name_of(v)).collect(),
+            delay: closure.embedding.delay,
+            dim: closure.embedding.dim,
+            scales: (closure.outputs.iter().zip(scales))
+                .map(|(o, &value)| NamedValue {
+                    name: o.name.clone(),
+                    value,
+                })
+                .collect(),
+        })
+        .collect();
+    RunInfo {
+        gbc_version: env!("CARGO_PKG_VERSION").to_string(),
+        model: ModelInfo {
+            name: model.name.clone(),
+            path: model_path.to_string(),
+            source_sha256: source_hash(source),
+        },
+        data: data_path.to_string(),
+        dynamics: match model.dynamics {
+            ir::Dynamics::Continuous => "der".into(),
+            ir::Dynamics::Discrete => "next".into(),
+        },
+        precision: setup.precision,
+        seed: setup.seed,
+        step: setup.step,
+        substeps: setup.substeps,
+        inputs: model.inputs.iter().map(|i| i.name.clone()).collect(),
+        states: model.states.iter().map(|s| s.name.clone()).collect(),
+        normalisation: setup.normalisation.clone(),
+        closures,
+        params: (report.params.iter())
+            .map(|(name, value)| NamedValue {
+                name: name.clone(),
+                value: *value,
+            })
+            .collect(),
+        training: TrainingInfo {
+            epochs: options.epochs,
+            batch_size: options.batch_size,
+            learning_rate: options.learning_rate,
+            train_pairs: report.train_pairs,
+            validation_pairs: report.validation_pairs,
+            final_loss: report.losses.last().copied(),
+        },
+        metrics: report.metrics.clone(),
+        warnings: report.warnings.clone(),
+        weights: WEIGHTS_FILE.to_string(),
+    }
+}
+
+/// Writes `run.json` and the weights into `directory` (created if missing).
+pub fn save(directory: &Path, info: &RunInfo, network: &Network) -> Result<(), TrainError> {
+    let weights = network.weights();
+    let bytes: Vec<Vec<u8>> = (weights.iter())
+        .map(|t| t.values.iter().flat_map(|v| v.to_le_bytes()).collect())
+        .collect();
+    let views = (weights.iter().zip(&bytes))
+        .map(|(tensor, data)| {
+            let view = safetensors::tensor::TensorView::new(
+                safetensors::Dtype::F64,
+                tensor.shape.clone(),
+                data,
+            );
+            view.map(|v| (tensor.name.clone(), v))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
+    let serialized = safetensors::serialize(views, &None)
+        .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
+    crate::io::write_atomic(&directory.join(WEIGHTS_FILE), &serialized)?;
+    let json = serde_json::to_string_pretty(info)
+        .map_err(|error| bad_run(&directory.join(RUN_FILE), error))?;
+    crate::io::write_atomic(&directory.join(RUN_FILE), json.as_bytes())?;
+    Ok(())
+}
+
+/// Reads a run directory back: its metadata and its weights.
+pub fn load(directory: &Path) -> Result<(RunInfo, Vec<NamedTensor>), TrainError> {
+    let run_path = directory.join(RUN_FILE);
+    let text = std::fs::read_to_string(&run_path).map_err(|error| bad_run(&run_path, error))?;
+    let info: RunInfo = serde_json::from_str(&text).map_err(|error| bad_run(&run_path, error))?;
+    let weights_path = directory.join(&info.weights);
+    let bytes = std::fs::read(&weights_path).map_err(|error| bad_run(&weights_path, error))?;
+    let tensors = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|error| bad_run(&weights_path, error))?;
+    let mut weights = Vec::new();
+    for (name, view) in tensors.tensors() {
+        if view.dtype() != safetensors::Dtype::F64 {
+            return Err(bad_run(
+                &weights_path,
+                format!("expected f64 tensors, found {:?} in `{name}`", view.dtype()),
+            ));
+        }
+        let values = (view.data().chunks_exact(8))
+            .map(|chunk| {
+                let mut word = [0u8; 8];
+                word.copy_from_slice(chunk);
+                f64::from_le_bytes(word)
+            })
+            .collect();
+        weights.push(NamedTensor {
+            name,
+            shape: view.shape().to_vec(),
+            values,
+        });
+    }
+    Ok((info, weights))
+}
+
+/// Rebuilds the network of a run for `model`, whose file text is `source`; a model whose
+/// text changed since training is refused.
+pub fn restore(
+    model: &ir::Model,
+    source: &str,
+    directory: &Path,
+) -> Result<(Network, Setup, RunInfo), TrainError> {
+    let (info, mut weights) = load(directory)?;
+    let found = source_hash(source);
+    if found != info.model.source_sha256 {
+        return Err(TrainError::ModelChanged {
+            run: directory.display().to_string(),
+            expected: info.model.source_sha256.clone(),
+            found,
+        });
+    }
+    let setup = Setup {
+        step: info.step,
+        substeps: info.substeps,
+        precision: info.precision,
+        seed: info.seed,
+        normalisation: info.normalisation.clone(),
+        scales: (info.closures.iter())
+            .map(|c| c.scales.iter().map(|s| s.value).collect())
+            .collect(),
+    };
+    let mut network = Network::build(model, &setup)?;
+    let order: Vec<String> = network.weights().into_iter().map(|t| t.name).collect();
+    weights.sort_by_key(|t| order.iter().position(|n| n == &t.name).unwrap_or(usize::MAX));
+    network.set_weights(&weights)?;
+    Ok((network, setup, info))
+}
+
+fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {
+    TrainError::BadRun {
+        path: path.display().to_string(),
+        reason: error.to_string(),
+    }
+}

@@ -1,0 +1,154 @@
+//! Why training, prediction or reusing weights failed.
+
+use miette::Diagnostic;
+use thiserror::Error;
+
+use crate::backend::BackendError;
+use crate::io::IoError;
+
+/// A training or prediction failure.
+#[derive(Debug, Error, Diagnostic)]
+pub enum TrainError {
+    /// The model has nothing to train.
+    #[error("expected a model with a closure or a param to train, found neither in `{model}`")]
+    #[diagnostic(
+        code(gbm::E0410),
+        help("declare a `closure` or a `param`, or use `gbc simulate` for a fully known model")
+    )]
+    NothingToTrain {
+        /// Model name.
+        model: String,
+    },
+    /// An embedding delay shorter than the sampling step would read the target.
+    #[error(
+        "expected an embedding delay of at least the sampling step {step} in closure `{closure}`, \
+         found delay {delay}"
+    )]
+    #[diagnostic(
+        code(gbm::E0411),
+        help(
+            "a delayed value inside the step being predicted would come from the data it must \
+             predict; raise `delay` to a multiple of the sampling step"
+        )
+    )]
+    DelayBelowStep {
+        /// Closure name.
+        closure: String,
+        /// Its delay.
+        delay: f64,
+        /// The data's sampling step.
+        step: f64,
+    },
+    /// Too few rows for the embedding and one pair.
+    #[error("expected at least {needed} rows in `{file}` ({reason}), found {found}")]
+    #[diagnostic(code(gbm::E0412), help("use a longer record or a shorter embedding"))]
+    TooFewRows {
+        /// The data file.
+        file: String,
+        /// Rows needed.
+        needed: usize,
+        /// Rows present.
+        found: usize,
+        /// Why.
+        reason: String,
+    },
+    /// More training pairs asked for than the data holds.
+    #[error("expected --train-points of at most {available}, found {requested}")]
+    #[diagnostic(
+        code(gbm::E0413),
+        help("the record yields {available} training pairs after the embedding's history")
+    )]
+    TooManyTrainPoints {
+        /// Pairs available.
+        available: usize,
+        /// Pairs requested.
+        requested: usize,
+    },
+    /// A hidden state without an initial value.
+    #[error("expected an initial value for hidden state `{name}`, found none")]
+    #[diagnostic(
+        code(gbm::E0414),
+        help("hidden states are simulated from their initial value: write `hidden {name} = ...`")
+    )]
+    HiddenWithoutInit {
+        /// Hidden state name.
+        name: String,
+    },
+    /// The loss became NaN or infinite.
+    #[error("training diverged in epoch {epoch}: the loss became {loss}")]
+    #[diagnostic(
+        code(gbm::E0415),
+        help(
+            "lower the learning rate (--lr), check the stiffness warnings and add --substeps K, \
+             or train in --precision f64"
+        )
+    )]
+    Diverged {
+        /// 1-based epoch.
+        epoch: usize,
+        /// The offending loss value.
+        loss: f64,
+    },
+    /// Weights reused with a model that changed since training.
+    #[error(
+        "expected the model the weights in `{run}` were trained with (sha256 {expected}), found \
+         a changed model (sha256 {found})"
+    )]
+    #[diagnostic(
+        code(gbm::E0416),
+        help("train the changed model again, or pass the model file the weights came from")
+    )]
+    ModelChanged {
+        /// The run directory.
+        run: String,
+        /// Hash recorded at training.
+        expected: String,
+        /// Hash of the model given now.
+        found: String,
+    },
+    /// A run directory that cannot be read back.
+    #[error("cannot read trained weights from `{path}`: {reason}")]
+    #[diagnostic(
+        code(gbm::E0417),
+        help("pass the directory written by `gbc train -o DIR`")
+    )]
+    BadRun {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Validation data sampled differently from the training data.
+    #[error("expected `{file}` sampled every {expected}, found a step of {found}")]
+    #[diagnostic(
+        code(gbm::E0418),
+        help("the network steps by the training data's sampling time; resample the file")
+    )]
+    StepMismatch {
+        /// The data file.
+        file: String,
+        /// Step of the training data.
+        expected: f64,
+        /// Step of this file.
+        found: f64,
+    },
+    /// A bad option value.
+    #[error("expected {expected} for {option}, found {found}")]
+    #[diagnostic(code(gbm::E0419), help("see `gbc train --help`"))]
+    BadOption {
+        /// The option.
+        option: String,
+        /// What is allowed.
+        expected: String,
+        /// What was given.
+        found: String,
+    },
+    /// The network failed.
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Backend(#[from] BackendError),
+    /// Writing an artifact failed.
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Io(#[from] IoError),
+}

@@ -1,0 +1,185 @@
+//! Running a trained network along a record: one-step (offline) predictions, free runs
+//! (online), the run-in of hidden states, and the paper's two errors in normalised units.
+
+use crate::backend::{Batch, BackendError, Network, Normalisation};
+use crate::ir;
+
+use super::pairs::{embedding_row, PairTable, Record};
+
+/// Rows per prediction batch when evaluating many pairs at once.
+const EVALUATION_CHUNK: usize = 512;
+
+/// Mean squared errors of z-scored measured states.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ErrorSet {
+    /// Per measured state, in model order: `(name, mse)`.
+    pub per_state: Vec<(String, f64)>,
+    /// Mean over states.
+    pub overall: f64,
+    /// Number of predicted rows the errors average over.
+    pub rows: usize,
+}
+
+/// How measured states evolve along a simulated trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Feed {
+    /// Measured states are reset to the data at every step (one-step predictions; used to
+    /// run hidden states in along the record).
+    Data,
+    /// The network is fed its own predictions, through the state and the embedding alike.
+    Own,
+}
+
+/// A trajectory from row `start` to row `end`, inclusive.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectory {
+    /// First row.
+    pub start: usize,
+    /// Per row: the state vector (measured, then hidden) the step from that row starts at.
+    pub states: Vec<Vec<f64>>,
+    /// Per row: the one-step prediction made from it.
+    pub next_states: Vec<Vec<f64>>,
+    /// Per row: every closure output at that row.
+    pub closure_outputs: Vec<Vec<f64>>,
+    /// Per row: the model's outputs at that row.
+    pub outputs: Vec<Vec<f64>>,
+}
+
+/// Simulates rows `start..=end` of `record` step by step, starting from the measured states
+/// of row `start` and the hidden states `hidden_start`, inputs taken from the data.
+pub fn simulate(
+    network: &Network,
+    model: &ir::Model,
+    record: &Record,
+    fractions: &[f64],
+    range: (usize, usize),
+    hidden_start: &[f64],
+    feed: Feed,
+) -> Result<Trajectory, BackendError> {
+    let (start, end) = range;
+    let measured = model.states.len();
+    let mut history = record.clone();
+    let mut state: Vec<f64> = record.states.iter().map(|s| s[start]).collect();
+    state.extend_from_slice(hidden_start);
+    let mut trajectory = Trajectory {
+        start,
+        states: Vec::new(),
+        next_states: Vec::new(),
+        closure_outputs: Vec::new(),
+        outputs: Vec::new(),
+    };
+    for row in start..=end {
+        let batch = Batch {
+            rows: 1,
+            states: state.clone(),
+            inputs: record.inputs.iter().map(|u| u[row]).collect(),
+            embeddings: (model.closures.iter())
+                .map(|c| (fractions.iter()).map(|&f| embedding_row(c, &history, row, f)).collect())
+                .collect(),
+            targets: Vec::new(),
+        };
+        let prediction = network.predict(&batch)?;
+        trajectory.states.push(std::mem::take(&mut state));
+        trajectory.closure_outputs.push(prediction.closure_outputs);
+        trajectory.outputs.push(prediction.outputs);
+        let next = prediction.next_states;
+        if row + 1 < record.len() {
+            state = match feed {
+                Feed::Own => {
+                    for (series, &value) in history.states.iter_mut().zip(&next) {
+                        series[row + 1] = value;
+                    }
+                    next.clone()
+                }
+                Feed::Data => {
+                    let mut reset: Vec<f64> = record.states.iter().map(|s| s[row + 1]).collect();
+                    reset.extend_from_slice(&next[measured..]);
+                    reset
+                }
+            };
+        }
+        trajectory.next_states.push(next);
+    }
+    Ok(trajectory)
+}
+
+/// Hidden-state estimates at every row of `record`: from their initial values at row 0,
+/// integrated along the record with the measured states taken from the data. Empty rows
+/// for models without hidden states.
+pub fn run_in_hidden(
+    network: &Network,
+    model: &ir::Model,
+    record: &Record,
+    fractions: &[f64],
+    initial: &[f64],
+) -> Result<Vec<Vec<f64>>, BackendError> {
+    if model.hidden.is_empty() || record.is_empty() {
+        return Ok(vec![Vec::new(); record.len()]);
+    }
+    let last = record.len() - 1;
+    let run = simulate(network, model, record, fractions, (0, last), initial, Feed::Data)?;
+    let measured = model.states.len();
+    Ok(run.states.into_iter().map(|s| s[measured..].to_vec()).collect())
+}
+
+/// Offline error: one step from the true history for every pair of `table`.
+pub fn offline_error(
+    network: &Network,
+    model: &ir::Model,
+    table: &PairTable,
+    normalisation: &Normalisation,
+) -> Result<ErrorSet, BackendError> {
+    let measured = model.states.len();
+    let width = measured + model.hidden.len();
+    let mut squared = vec![0.0; measured];
+    let indices: Vec<usize> = (0..table.len()).collect();
+    for chunk in indices.chunks(EVALUATION_CHUNK) {
+        let batch = table.batch(chunk);
+        let prediction = network.predict(&batch)?;
+        for row in 0..chunk.len() {
+            for (state, total) in squared.iter_mut().enumerate() {
+                let error = prediction.next_states[row * width + state]
+                    - batch.targets[row * measured + state];
+                *total += (error / normalisation.state_std[state]).powi(2);
+            }
+        }
+    }
+    Ok(error_set(model, squared, table.len()))
+}
+
+/// Online error of a free run against the record, over the rows after its start.
+pub fn online_error(
+    model: &ir::Model,
+    record: &Record,
+    run: &Trajectory,
+    normalisation: &Normalisation,
+) -> ErrorSet {
+    let measured = model.states.len();
+    let mut squared = vec![0.0; measured];
+    let mut rows = 0;
+    for (offset, next) in run.next_states.iter().enumerate() {
+        let row = run.start + offset + 1;
+        if row >= record.len() {
+            break;
+        }
+        for (state, total) in squared.iter_mut().enumerate() {
+            let error = next[state] - record.states[state][row];
+            *total += (error / normalisation.state_std[state]).powi(2);
+        }
+        rows += 1;
+    }
+    error_set(model, squared, rows)
+}
+
+fn error_set(model: &ir::Model, squared: Vec<f64>, rows: usize) -> ErrorSet {
+    let count = rows.max(1) as f64;
+    let per_state: Vec<(String, f64)> = (model.states.iter().zip(squared))
+        .map(|(state, total)| (state.name.clone(), total / count))
+        .collect();
+    let overall = per_state.iter().map(|(_, e)| e).sum::<f64>() / per_state.len().max(1) as f64;
+    ErrorSet {
+        per_state,
+        overall,
+        rows,
+    }
+}
