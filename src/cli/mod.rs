@@ -6,6 +6,7 @@
 
 mod check;
 mod compile;
+mod simulate;
 
 use crate::diagnostics::{self, MessageFormat};
 use clap::{Parser, Subcommand};
@@ -56,6 +57,8 @@ pub enum Command {
     Check(check::CheckArgs),
     /// Compile a model and print a stage of it (AST or IR).
     Compile(compile::CompileArgs),
+    /// Simulate a model without closures (adaptive Dormand–Prince), writing a CSV record.
+    Simulate(simulate::SimulateArgs),
 }
 
 /// Runs one parsed command line.
@@ -63,6 +66,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
     match &cli.command {
         Command::Check(args) => check::run(args, cli.message_format),
         Command::Compile(args) => compile::run(args),
+        Command::Simulate(args) => simulate::run(args),
     }
 }
 

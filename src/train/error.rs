@@ -143,6 +143,15 @@ pub enum TrainError {
         /// What was given.
         found: String,
     },
+    /// A file that cannot be read.
+    #[error("cannot read `{path}`: {reason}")]
+    #[diagnostic(code(gbm::E0420), help("check the path and its permissions"))]
+    Unreadable {
+        /// The file.
+        path: String,
+        /// What the operating system said.
+        reason: String,
+    },
     /// The network failed.
     #[error(transparent)]
     #[diagnostic(transparent)]
@@ -151,4 +160,11 @@ pub enum TrainError {
     #[error(transparent)]
     #[diagnostic(transparent)]
     Io(#[from] IoError),
+}
+
+impl TrainError {
+    /// Whether this is a bug in gbc rather than a problem with the user's input.
+    pub fn is_internal(&self) -> bool {
+        matches!(self, TrainError::Backend(BackendError::Internal(_)))
+    }
 }

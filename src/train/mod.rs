@@ -25,6 +25,7 @@ mod error;
 mod tests;
 pub mod evaluate;
 pub mod pairs;
+pub mod predict;
 
 #[cfg(test)]
 pub(crate) mod fixtures;
@@ -110,6 +111,8 @@ pub enum Event<'a> {
 pub struct Metrics {
     /// Offline validation error of the untrained network.
     pub initial_offline: Option<ErrorSet>,
+    /// Online validation error of the untrained network.
+    pub initial_online: Option<ErrorSet>,
     /// Offline validation error (one step from true history).
     pub offline: Option<ErrorSet>,
     /// Online validation error (free run).
@@ -200,14 +203,13 @@ pub fn train(
         train_pairs: train_count,
         validation_pairs,
     });
-    let initial_offline = (validating.as_ref())
-        .map(|v| offline_error(&network, model, &v.table, &setup.normalisation))
-        .transpose()?;
+    let mut metrics = Metrics::default();
+    if let Some(split) = validating.as_ref() {
+        let offline = offline_error(&network, model, &split.table, &setup.normalisation)?;
+        metrics.initial_offline = Some(offline);
+        metrics.initial_online = Some(online(&network, model, split, &setup, options)?);
+    }
     let losses = fit(&mut network, model, &mut training, options, &hidden_init, on_event)?;
-    let mut metrics = Metrics {
-        initial_offline,
-        ..Metrics::default()
-    };
     if let Some(split) = validating.as_mut() {
         refresh_hidden(&network, model, split, &fractions, &hidden_init)?;
         metrics.offline = Some(offline_error(&network, model, &split.table, &setup.normalisation)?);

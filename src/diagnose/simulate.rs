@@ -1,0 +1,237 @@
+//! Running a mechanistic model along a record (spec section 5): the *free run* from the
+//! first row (measured states from the data, hidden states from their declared initial
+//! values, driven by the data's inputs alone) and *one-step* predictions from the measured
+//! history.
+//!
+//! Inputs are held constant over each sampling interval (zero-order hold, as the data
+//! record them). Continuous models are integrated by the adaptive Dormand–Prince method of
+//! [`crate::sim`], restarted wherever an input changes; discrete models apply their map
+//! once per row. An optional *correction* slot (the output of a synthesised closure, see
+//! [`super::locus`]) is held constant over each interval.
+
+use super::record::Record;
+use super::DiagnoseError;
+use crate::eval::Program;
+use crate::ir::{Dynamics, Model, Var};
+use crate::sim::{Dopri5, IntegrationError, ModelSystem, OdeSystem, Tolerances};
+
+/// Most integration steps per interval before a run is declared failed (wild params).
+const MAX_STEPS: usize = 20_000;
+
+/// States along a record, row-major: `values[row * dim + k]` is state `k` (measured, then
+/// hidden) at that row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Run {
+    /// States per row.
+    pub dim: usize,
+    /// The values.
+    pub values: Vec<f64>,
+}
+
+impl Run {
+    /// The state at `row`.
+    pub fn row(&self, row: usize) -> &[f64] {
+        &self.values[row * self.dim..(row + 1) * self.dim]
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.values.len() / self.dim.max(1)
+    }
+
+    /// Whether the run has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+}
+
+/// A compiled model ready to run along records with chosen param values.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    system: ModelSystem,
+    dynamics: Dynamics,
+    hidden_init: Vec<Program>,
+    measured: usize,
+    correction_slot: Option<usize>,
+    integrator: Dopri5,
+    scratch: Vec<f64>,
+}
+
+impl Simulator {
+    /// Compiles `model`; `correction` is the closure output whose slot
+    /// [`Simulator::set_correction`] writes (`None` for a plain mechanistic model).
+    pub fn new(
+        model: &Model,
+        correction: Option<Var>,
+        tolerances: Tolerances,
+    ) -> Result<Self, DiagnoseError> {
+        let internal = |e: crate::eval::CompileError| DiagnoseError::Internal(e.to_string());
+        let system = ModelSystem::new(model).map_err(internal)?;
+        let hidden_init = (model.hidden.iter())
+            .map(|state| match &state.init {
+                Some(init) => Program::compile(init, system.layout()).map_err(internal),
+                None => Err(DiagnoseError::MissingInitial {
+                    state: state.name.clone(),
+                }),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let correction_slot = correction.map(|var| system.layout().slot(var));
+        Ok(Simulator {
+            integrator: Dopri5::new(system.dim(), tolerances, MAX_STEPS),
+            dynamics: model.dynamics,
+            measured: model.states.len(),
+            hidden_init,
+            correction_slot,
+            system,
+            scratch: Vec::new(),
+        })
+    }
+
+    /// Number of states (measured, then hidden).
+    pub fn dim(&self) -> usize {
+        self.system.dim()
+    }
+
+    /// Sets the params (constrained values, declaration order).
+    pub fn set_params(&mut self, values: &[f64]) {
+        let range = self.system.layout().param_range();
+        self.system.slots_mut()[range].copy_from_slice(values);
+    }
+
+    /// Sets the correction held over the next interval (no effect without a correction).
+    pub fn set_correction(&mut self, value: f64) {
+        if let Some(slot) = self.correction_slot {
+            self.system.slots_mut()[slot] = value;
+        }
+    }
+
+    /// The state a run starts from at `row`: measured states from the data, hidden states
+    /// from their initial values under the current params.
+    pub fn start_state(&mut self, record: &Record, row: usize) -> Vec<f64> {
+        let mut state: Vec<f64> = record.states.iter().map(|c| c[row]).collect();
+        for init in &self.hidden_init {
+            state.push(init.eval(self.system.slots_mut(), &mut self.scratch));
+        }
+        state
+    }
+
+    /// Evaluates `program` (compiled against this model's layout) at `state` with the
+    /// inputs of `row`.
+    pub fn evaluate(&mut self, program: &Program, record: &Record, row: usize, state: &[f64]) -> f64 {
+        self.load(record, row, state);
+        program.eval(self.system.slots_mut(), &mut self.scratch)
+    }
+
+    fn load(&mut self, record: &Record, row: usize, state: &[f64]) {
+        let layout = self.system.layout();
+        let (inputs, states) = (layout.input_range(), layout.state_range());
+        let slots = self.system.slots_mut();
+        for (slot, value) in slots[inputs].iter_mut().zip(record.inputs_at(row)) {
+            *slot = value;
+        }
+        slots[states].copy_from_slice(state);
+    }
+
+    /// Advances `state` over the interval from `row` to `row + 1`.
+    pub fn step(
+        &mut self,
+        record: &Record,
+        row: usize,
+        state: &mut [f64],
+    ) -> Result<(), IntegrationError> {
+        self.advance(record, (row, row + 1), state, &mut |_, _| {})
+    }
+
+    /// Advances `state` from `rows.0` to `rows.1`, inputs held at their `rows.0` values,
+    /// calling `record_row(row, state)` at every row after the first.
+    fn advance(
+        &mut self,
+        record: &Record,
+        (first, last): (usize, usize),
+        state: &mut [f64],
+        record_row: &mut dyn FnMut(usize, &[f64]),
+    ) -> Result<(), IntegrationError> {
+        self.load(record, first, state);
+        match self.dynamics {
+            Dynamics::Continuous => {
+                let times = &record.times[first + 1..=last];
+                let span = (record.times[first], record.times[last]);
+                self.integrator
+                    .integrate(&mut self.system, span, state, times, |k, y| {
+                        record_row(first + 1 + k, y)
+                    })
+            }
+            Dynamics::Discrete => {
+                let mut next = vec![0.0; state.len()];
+                for row in first..last {
+                    self.system.rhs(record.times[row], state, &mut next);
+                    if next.iter().any(|v| !v.is_finite()) {
+                        return Err(IntegrationError::NonFinite {
+                            t: record.times[row + 1],
+                        });
+                    }
+                    state.copy_from_slice(&next);
+                    record_row(row + 1, state);
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The free run from row 0 to row `end - 1` of `record`, integrating between input
+    /// switches in one go.
+    pub fn free_run(&mut self, record: &Record, end: usize) -> Result<Run, IntegrationError> {
+        let mut state = self.start_state(record, 0);
+        let dim = state.len();
+        let mut values = Vec::with_capacity(end * dim);
+        values.extend_from_slice(&state);
+        let mut first = 0;
+        while first + 1 < end {
+            let mut last = first + 1;
+            while last + 1 < end && same_inputs(record, first, last) {
+                last += 1;
+            }
+            let mut push = |_: usize, y: &[f64]| values.extend_from_slice(y);
+            self.advance(record, (first, last), &mut state, &mut push)?;
+            first = last;
+        }
+        Ok(Run { dim, values })
+    }
+
+    /// One-step predictions along rows `0..end - 1`: from row `i`'s measured data (and the
+    /// hidden states carried along this way from row 0), the state at row `i + 1`.
+    /// Returns the states each step starts from and the predictions.
+    pub fn one_step(&mut self, record: &Record, end: usize) -> Result<(Run, Run), IntegrationError> {
+        let mut state = self.start_state(record, 0);
+        let dim = state.len();
+        let (mut starts, mut predictions) = (Vec::new(), Vec::new());
+        for row in 0..end.saturating_sub(1) {
+            for (k, column) in record.states.iter().enumerate() {
+                state[k] = column[row];
+            }
+            starts.extend_from_slice(&state);
+            self.step(record, row, &mut state)?;
+            predictions.extend_from_slice(&state);
+        }
+        let run = |values| Run { dim, values };
+        Ok((run(starts), run(predictions)))
+    }
+
+    /// Number of measured states.
+    pub fn measured(&self) -> usize {
+        self.measured
+    }
+}
+
+fn same_inputs(record: &Record, a: usize, b: usize) -> bool {
+    record.inputs.iter().all(|column| column[a] == column[b])
+}
+
+/// Tolerances of every run: tight enough that integration error stays far below any
+/// measurement noise and finite differences through the simulator stay smooth.
+pub fn tolerances() -> Tolerances {
+    Tolerances {
+        rtol: 1e-8,
+        atol: 1e-12,
+    }
+}
