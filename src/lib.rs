@@ -20,6 +20,7 @@ pub mod eval;
 pub mod io;
 pub mod ir;
 pub mod signal;
+pub mod plot;
 pub mod sim;
 pub mod suggest;
 pub mod syntax;
