@@ -137,15 +137,28 @@ where
 
     /// Elementwise softplus, safe for large |x| in value and gradient (dfdx has none).
     pub fn softplus(&mut self, input: &Matrix<E>) -> Result<Matrix<E>, BackendError> {
-        let values = input.as_vec();
-        let output: Vec<E> = values.iter().map(|x| x.softplus()).collect();
+        // softplus(x) = max(x, 0) + ln(1 + e), sigmoid(x) = 1/(1 + e) or e/(1 + e) with
+        // e = exp(-|x|): one exponential per element serves both passes.
+        let mut slopes = input.as_vec();
+        let mut output = Vec::with_capacity(slopes.len());
+        for x in slopes.iter_mut() {
+            let decay = (-x.abs()).exp();
+            let positive_part = if *x > E::ZERO { *x } else { E::ZERO };
+            output.push(positive_part + decay.ln_1p());
+            let denominator = <E as Real>::ONE + decay;
+            *x = if *x >= E::ZERO {
+                <E as Real>::ONE / denominator
+            } else {
+                decay / denominator
+            };
+        }
         let result = self.device.try_tensor_from_vec(output, *input.shape())?;
         let (input_ghost, result_ghost) = (input.ghost(), result.ghost());
         self.tape.add_backward_op(move |grads| {
             let upstream = grads.get_or_alloc_mut(&result_ghost)?.to_vec();
             let target = grads.get_or_alloc_mut(&input_ghost)?;
-            for ((slot, g), x) in target.iter_mut().zip(upstream).zip(values) {
-                *slot += g * x.sigmoid();
+            for ((slot, g), slope) in target.iter_mut().zip(upstream).zip(slopes) {
+                *slot += g * slope;
             }
             Ok(())
         });
@@ -209,7 +222,7 @@ where
             let program_inputs = ProgramInputs {
                 rows,
                 states: &state_values,
-                inputs: inputs,
+                inputs,
                 params: &param_values,
                 nets: &net_slices,
             };

@@ -22,6 +22,7 @@
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
 
 mod adam;
+mod elementwise;
 mod graph;
 mod net;
 pub mod program;
@@ -37,7 +38,11 @@ pub use net::INIT_LAST_LAYER;
 /// The unconstrained starting values of the model's params (their transforms give the
 /// declared initial guesses), as [`program::Program`] reads them.
 pub fn initial_raw_params(model: &ir::Model) -> Vec<f64> {
-    model.params.iter().map(net::raw_initial_value::<f64>).collect()
+    model
+        .params
+        .iter()
+        .map(net::raw_initial_value::<f64>)
+        .collect()
 }
 
 /// The element type the network trains in.

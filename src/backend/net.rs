@@ -132,7 +132,8 @@ where
     /// One Adam step; returns the loss before it.
     pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
         let (loss, gradients) = self.loss_and_gradient(batch)?;
-        self.adam.update(&mut self.weights, &gradients, learning_rate);
+        self.adam
+            .update(&mut self.weights, &gradients, learning_rate);
         Ok(loss)
     }
 
@@ -248,9 +249,12 @@ where
             params: &raw,
             nets: &net_slices,
         });
-        (self.program.read(&values, 1, &self.program.param_values).into_iter())
-            .map(|v| v.to_double())
-            .collect()
+        (self
+            .program
+            .read(&values, 1, &self.program.param_values)
+            .into_iter())
+        .map(|v| v.to_double())
+        .collect()
     }
 
     fn tensors(&self, graph: &Graph<E>) -> Tensors<E> {
@@ -287,7 +291,12 @@ where
         expect("states", batch.states.len(), rows * shape.states)?;
         expect("inputs", batch.inputs.len(), rows * shape.inputs)?;
         expect("closures", batch.embeddings.len(), self.closures.len())?;
-        let convert = |values: &[f64]| values.iter().map(|&v| E::from_double(v)).collect::<Vec<E>>();
+        let convert = |values: &[f64]| {
+            values
+                .iter()
+                .map(|&v| E::from_double(v))
+                .collect::<Vec<E>>()
+        };
         let mut constants = Vec::with_capacity(self.closures.len());
         for (closure, offsets) in self.closures.iter().zip(&batch.embeddings) {
             let mut per_offset = Vec::with_capacity(offsets.len());
@@ -351,8 +360,9 @@ where
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
         let mut nets = Vec::with_capacity(self.closures.len());
         for (index, closure) in self.closures.iter().enumerate() {
-            let constant = (batch.constants[index].get(offset))
-                .ok_or_else(|| BackendError::internal(format!("no embedding at offset {offset}")))?;
+            let constant = (batch.constants[index].get(offset)).ok_or_else(|| {
+                BackendError::internal(format!("no embedding at offset {offset}"))
+            })?;
             let mut hidden = graph.embed(constant, state, &closure.state_columns)?;
             let layers = &tensors.layers[index];
             for (layer, (weight, bias)) in layers.iter().enumerate() {
@@ -382,7 +392,11 @@ impl ClosureLayout {
         for (index, &value) in raw.iter().enumerate() {
             let column = index % self.width;
             let (mean, std) = (self.column_mean[column], self.column_std[column]);
-            let source = if self.is_stage_state[column] { 0.0 } else { value };
+            let source = if self.is_stage_state[column] {
+                0.0
+            } else {
+                value
+            };
             values.push(E::from_double((source - mean) / std));
         }
         values
@@ -410,9 +424,10 @@ fn closure_layout(
                 )))
             }
         };
-        let (mean, std) = mean.zip(std).map(|(m, s)| (*m, *s)).ok_or_else(|| {
-            BackendError::internal(format!("no normalisation for {var:?}"))
-        })?;
+        let (mean, std) = mean
+            .zip(std)
+            .map(|(m, s)| (*m, *s))
+            .ok_or_else(|| BackendError::internal(format!("no normalisation for {var:?}")))?;
         column_mean.push(mean);
         column_std.push(std);
         let stage_state = matches!(var, Var::State(_)) && lag == 0;

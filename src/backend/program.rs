@@ -10,34 +10,10 @@
 
 use std::collections::HashMap;
 
+use super::elementwise::{binary, binary_derivatives, unary, unary_derivative, Binary, Unary};
 use super::real::Real;
 use super::BackendError;
 use crate::ir::{self, BinOp, Constraint, Func, PriorKind, Var};
-
-/// A one-argument operation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-enum Unary {
-    Neg,
-    Exp,
-    Log,
-    Sqrt,
-    Abs,
-    Tanh,
-    Sigmoid,
-    Softplus,
-}
-
-/// A two-argument operation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-enum Binary {
-    Add,
-    Sub,
-    Mul,
-    Div,
-    Pow,
-    Min,
-    Max,
-}
 
 /// One instruction; operands are earlier registers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -51,7 +27,10 @@ enum Instr {
     /// Unconstrained (raw) value of param `i`.
     RawParam(usize),
     /// Network output `output` of closure `closure` (before prior and scale).
-    Net { closure: usize, output: usize },
+    Net {
+        closure: usize,
+        output: usize,
+    },
     Unary(Unary, usize),
     Binary(Binary, usize, usize),
 }
@@ -456,7 +435,9 @@ impl Compiler<'_> {
         }
         let spec = (self.model.closures.get(closure))
             .and_then(|c| c.outputs.get(output))
-            .ok_or_else(|| BackendError::internal(format!("no closure output {closure}.{output}")))?;
+            .ok_or_else(|| {
+                BackendError::internal(format!("no closure output {closure}.{output}"))
+            })?;
         let scale = (self.scales.get(closure))
             .and_then(|s| s.get(output))
             .copied()
@@ -549,96 +530,5 @@ fn gather<E: Real>(out: &mut [E], block: &[E], width: usize, column: usize) {
 fn scatter<E: Real>(block: &mut [E], width: usize, column: usize, values: &[E]) {
     for (row, &value) in values.iter().enumerate() {
         block[row * width + column] += value;
-    }
-}
-
-fn unary<E: Real>(op: Unary, x: E) -> E {
-    match op {
-        Unary::Neg => -x,
-        Unary::Exp => x.exp(),
-        Unary::Log => x.ln(),
-        Unary::Sqrt => x.sqrt(),
-        Unary::Abs => x.abs(),
-        Unary::Tanh => x.tanh(),
-        Unary::Sigmoid => x.sigmoid(),
-        Unary::Softplus => x.softplus(),
-    }
-}
-
-/// `d op(x) / dx` given the input `x` and the output `y`.
-fn unary_derivative<E: Real>(op: Unary, x: E, y: E) -> E {
-    match op {
-        Unary::Neg => -E::ONE,
-        Unary::Exp => y,
-        Unary::Log => E::ONE / x,
-        Unary::Sqrt => E::from_double(0.5) / y,
-        Unary::Abs => sign(x),
-        Unary::Tanh => E::ONE - y * y,
-        Unary::Sigmoid => y * (E::ONE - y),
-        Unary::Softplus => x.sigmoid(),
-    }
-}
-
-fn sign<E: Real>(x: E) -> E {
-    if x > E::ZERO {
-        E::ONE
-    } else if x < E::ZERO {
-        -E::ONE
-    } else {
-        E::ZERO
-    }
-}
-
-fn binary<E: Real>(op: Binary, a: E, b: E) -> E {
-    match op {
-        Binary::Add => a + b,
-        Binary::Sub => a - b,
-        Binary::Mul => a * b,
-        Binary::Div => a / b,
-        Binary::Pow => a.powf(b),
-        Binary::Min => {
-            if b < a {
-                b
-            } else {
-                a
-            }
-        }
-        Binary::Max => {
-            if b > a {
-                b
-            } else {
-                a
-            }
-        }
-    }
-}
-
-/// `(d op / da, d op / db)` given the operands and the output `y`. `min`/`max` send the
-/// whole derivative to the operand they select; `a^b` has no `b` derivative where `a <= 0`.
-fn binary_derivatives<E: Real>(op: Binary, a: E, b: E, y: E) -> (E, E) {
-    match op {
-        Binary::Add => (E::ONE, E::ONE),
-        Binary::Sub => (E::ONE, -E::ONE),
-        Binary::Mul => (b, a),
-        Binary::Div => (E::ONE / b, -y / b),
-        Binary::Pow => {
-            let da = b * a.powf(b - E::ONE);
-            let db = if a > E::ZERO { y * a.ln() } else { E::ZERO };
-            (da, db)
-        }
-        Binary::Min => {
-            if b < a {
-                (E::ZERO, E::ONE)
-            } else {
-                (E::ONE, E::ZERO)
-            }
-        }
-        Binary::Max => {
-            if b > a {
-                (E::ZERO, E::ONE)
-            } else {
-                (E::ONE, E::ZERO)
-            }
-        }
     }
 }

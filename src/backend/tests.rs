@@ -24,9 +24,21 @@ fn kitchen_sink(activation: Activation) -> ir::Model {
         .closure(ClosureSpec {
             name: "rates",
             outputs: vec![
-                OutputSpec { name: "a", scale: None, prior: Some(("*=", "0.5 * S / (1 + S)")) },
-                OutputSpec { name: "b", scale: Some(0.3), prior: Some(("+=", "0.1 * u * X * Y")) },
-                OutputSpec { name: "c", scale: Some(0.2), prior: None },
+                OutputSpec {
+                    name: "a",
+                    scale: None,
+                    prior: Some(("*=", "0.5 * S / (1 + S)")),
+                },
+                OutputSpec {
+                    name: "b",
+                    scale: Some(0.3),
+                    prior: Some(("+=", "0.1 * u * X * Y")),
+                },
+                OutputSpec {
+                    name: "c",
+                    scale: Some(0.2),
+                    prior: None,
+                },
             ],
             observe: &["X", "S", "u"],
             delay: 1.0,
@@ -133,20 +145,34 @@ fn checked_index(weights: &[NamedTensor], tensor: &NamedTensor) -> usize {
 #[test]
 fn gradient_matches_finite_differences_for_rk4_with_embedding_priors_and_params() {
     let model = kitchen_sink(Activation::Softplus);
-    assert_gradient_matches(&model, &setup(Precision::F64, 0.5, 1, vec![vec![1.0, 0.3, 0.2]]));
+    assert_gradient_matches(
+        &model,
+        &setup(Precision::F64, 0.5, 1, vec![vec![1.0, 0.3, 0.2]]),
+    );
 }
 
 #[test]
 fn gradient_matches_finite_differences_with_substeps() {
     let model = kitchen_sink(Activation::Tanh);
-    assert_gradient_matches(&model, &setup(Precision::F64, 0.5, 2, vec![vec![1.0, 0.3, 0.2]]));
+    assert_gradient_matches(
+        &model,
+        &setup(Precision::F64, 0.5, 2, vec![vec![1.0, 0.3, 0.2]]),
+    );
 }
 
 #[test]
 fn gradient_matches_finite_differences_for_every_activation() {
-    for activation in [Activation::Relu, Activation::Sigmoid, Activation::Gelu, Activation::Linear] {
+    for activation in [
+        Activation::Relu,
+        Activation::Sigmoid,
+        Activation::Gelu,
+        Activation::Linear,
+    ] {
         let model = kitchen_sink(activation);
-        assert_gradient_matches(&model, &setup(Precision::F64, 0.5, 1, vec![vec![1.0, 0.3, 0.2]]));
+        assert_gradient_matches(
+            &model,
+            &setup(Precision::F64, 0.5, 1, vec![vec![1.0, 0.3, 0.2]]),
+        );
     }
 }
 
@@ -159,8 +185,16 @@ fn gradient_matches_finite_differences_for_a_discrete_map() {
         .closure(ClosureSpec {
             name: "n",
             outputs: vec![
-                OutputSpec { name: "nx", scale: Some(0.7), prior: None },
-                OutputSpec { name: "ns", scale: Some(0.4), prior: None },
+                OutputSpec {
+                    name: "nx",
+                    scale: Some(0.7),
+                    prior: None,
+                },
+                OutputSpec {
+                    name: "ns",
+                    scale: Some(0.4),
+                    prior: None,
+                },
             ],
             observe: &["X", "S", "u"],
             delay: 1.0,
@@ -197,7 +231,10 @@ fn softplus_activation_is_safe_in_value_and_gradient() {
         let sigmoid = 1.0 / (1.0 + f64::exp(-x));
         let expected = 2.0 * y * sigmoid / inputs.len() as f64;
         assert!(g.is_finite());
-        assert!((g - expected).abs() <= 1e-12 * expected.abs().max(1e-300), "x = {x}");
+        assert!(
+            (g - expected).abs() <= 1e-12 * expected.abs().max(1e-300),
+            "x = {x}"
+        );
     }
 }
 
@@ -281,7 +318,10 @@ fn exact_rate_law_reproduces_the_trajectory_to_rk4_accuracy() {
     assert!(errors[0] < 1e-9, "one-step error {}", errors[0]);
     for pair in errors.windows(2) {
         let order = (pair[1] / pair[0]).log2();
-        assert!((4.5..5.6).contains(&order), "local order {order}: {errors:?}");
+        assert!(
+            (4.5..5.6).contains(&order),
+            "local order {order}: {errors:?}"
+        );
     }
 }
 
@@ -291,7 +331,12 @@ fn substeps_shrink_the_step_error_as_h_to_the_fourth() {
     let (state, inlet) = ([0.02, 0.004], 0.018);
     let exact = rk4_reference(|x| chemostat_rhs(x, inlet), &state, 8.0, 4000);
     let error = |substeps| {
-        let predicted = one_step(&model, &chemostat_setup(8.0, substeps, vec![]), state, inlet);
+        let predicted = one_step(
+            &model,
+            &chemostat_setup(8.0, substeps, vec![]),
+            state,
+            inlet,
+        );
         (predicted.next_states[0] - exact[0]).abs()
     };
     let ratio = error(1) / error(4);
@@ -329,7 +374,10 @@ fn a_multiplicative_prior_with_a_silent_network_is_its_prior() {
     let setup = chemostat_setup(1.0, 1, vec![vec![1.0]]);
     let mut network = Network::build(&grey, &setup).unwrap();
     let mut weights = network.weights();
-    let last = weights.iter().position(|t| t.name == "closure.rate.layer3.weight").unwrap();
+    let last = weights
+        .iter()
+        .position(|t| t.name == "closure.rate.layer3.weight")
+        .unwrap();
     weights[last].values.fill(0.0);
     network.set_weights(&weights).unwrap();
     let (state, inlet) = ([0.02, 0.004], 0.018);
@@ -347,7 +395,10 @@ fn a_multiplicative_prior_with_a_silent_network_is_its_prior() {
     let law = KCAT * state[1] * state[0] / (K_M + state[0]);
     assert!((grey_prediction.closure_outputs[0] - law).abs() < 1e-16);
     // A fresh network is close to its prior: the last layer starts near zero.
-    let fresh = Network::build(&grey, &setup).unwrap().predict(&batch).unwrap();
+    let fresh = Network::build(&grey, &setup)
+        .unwrap()
+        .predict(&batch)
+        .unwrap();
     assert!((fresh.closure_outputs[0] / law - 1.0).abs() < 0.05);
 }
 
@@ -389,17 +440,25 @@ fn single_precision_agrees_with_double() {
     let double = setup(Precision::F64, 0.5, 1, scales.clone());
     let single = setup(Precision::F32, 0.5, 1, scales);
     let batch = random_batch(&model, &double, 5, 9);
-    let loss64 = Network::build(&model, &double).unwrap().loss(&batch).unwrap();
-    let loss32 = Network::build(&model, &single).unwrap().loss(&batch).unwrap();
+    let loss64 = Network::build(&model, &double)
+        .unwrap()
+        .loss(&batch)
+        .unwrap();
+    let loss32 = Network::build(&model, &single)
+        .unwrap()
+        .loss(&batch)
+        .unwrap();
     assert!((loss64 / loss32 - 1.0).abs() < 1e-5, "{loss64} vs {loss32}");
 }
 
 #[test]
 fn mismatched_weights_are_rejected() {
     let model = kitchen_sink(Activation::Softplus);
-    let mut network =
-        Network::build(&model, &setup(Precision::F64, 0.5, 1, vec![vec![1.0, 0.3, 0.2]]))
-            .unwrap();
+    let mut network = Network::build(
+        &model,
+        &setup(Precision::F64, 0.5, 1, vec![vec![1.0, 0.3, 0.2]]),
+    )
+    .unwrap();
     let mut weights = network.weights();
     weights[0].shape = vec![1, 1];
     assert!(matches!(

@@ -6,7 +6,9 @@
 
 mod check;
 mod compile;
+mod predict;
 mod simulate;
+mod train;
 
 use crate::diagnostics::{self, MessageFormat};
 use clap::{Parser, Subcommand};
@@ -59,6 +61,10 @@ pub enum Command {
     Compile(compile::CompileArgs),
     /// Simulate a model without closures (adaptive Dormand–Prince), writing a CSV record.
     Simulate(simulate::SimulateArgs),
+    /// Train a grey-box (or black-box) model on a data record.
+    Train(train::TrainArgs),
+    /// Predict with trained weights: states and every closure output over time.
+    Predict(predict::PredictArgs),
 }
 
 /// Runs one parsed command line.
@@ -67,6 +73,8 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Check(args) => check::run(args, cli.message_format),
         Command::Compile(args) => compile::run(args),
         Command::Simulate(args) => simulate::run(args),
+        Command::Train(args) => train::run(args),
+        Command::Predict(args) => predict::run(args),
     }
 }
 

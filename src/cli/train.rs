@@ -79,7 +79,11 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
     let data = read_data(&model, &args.data)?;
-    let validation = args.val.as_deref().map(|path| read_data(&model, path)).transpose()?;
+    let validation = args
+        .val
+        .as_deref()
+        .map(|path| read_data(&model, path))
+        .transpose()?;
     let options = TrainOptions {
         epochs: args.epochs,
         batch_size: args.batch,
@@ -194,7 +198,10 @@ fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArg
         model.name,
         report.train_pairs,
         args.epochs,
-        report.losses.last().map_or("-".into(), |l| format!("{l:.4e}"))
+        report
+            .losses
+            .last()
+            .map_or("-".into(), |l| format!("{l:.4e}"))
     );
     let metrics = &report.metrics;
     match (&metrics.offline, &metrics.online) {
@@ -205,10 +212,13 @@ fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArg
             );
             println!("  {:<16} {:>12} {:>12}", "state", "offline", "online");
             for ((name, off), (_, on)) in offline.per_state.iter().zip(&online.per_state) {
-                println!("  {name:<16} {off:>12.4e} {on:>12.4e}");
+                println!("  {name:<16} {:>12} {:>12}", error(*off), error(*on));
             }
-            let overall = ("overall", offline.overall, online.overall);
-            println!("  {:<16} {:>12.4e} {:>12.4e}", overall.0, overall.1, overall.2);
+            let overall = (error(offline.overall), error(online.overall));
+            println!("  {:<16} {:>12} {:>12}", "overall", overall.0, overall.1);
+            if !online.overall.is_finite() {
+                println!("the free run diverged (see the stiffness warnings, or train longer)");
+            }
         }
         _ => println!("no validation pairs: pass --val FILE or a smaller --train-points"),
     }
@@ -220,5 +230,14 @@ fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArg
     }
     if let Some(directory) = &args.output {
         println!("weights written to {}", directory.display());
+    }
+}
+
+/// An error value for the summary: scientific notation, or `diverged`.
+fn error(value: f64) -> String {
+    if value.is_finite() {
+        format!("{value:.4e}")
+    } else {
+        "diverged".to_string()
     }
 }

@@ -56,6 +56,26 @@ pub fn offline_errors(
         .collect())
 }
 
+/// Whether the mean of `a - b` (per-row errors of two runs over the same rows) lies within
+/// two standard errors of zero. Free-run errors are correlated in time, so the standard
+/// error comes from the means of `blocks` contiguous blocks.
+pub fn indistinguishable(a: &[f64], b: &[f64], blocks: usize) -> bool {
+    let length = a.len().min(b.len());
+    let blocks = blocks.clamp(2, length.max(2));
+    if length < blocks {
+        return true;
+    }
+    let means: Vec<f64> = (0..blocks)
+        .map(|k| {
+            let (start, end) = (k * length / blocks, (k + 1) * length / blocks);
+            (start..end).map(|i| a[i] - b[i]).sum::<f64>() / (end - start) as f64
+        })
+        .collect();
+    let mean = means.iter().sum::<f64>() / blocks as f64;
+    let variance = means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (blocks - 1) as f64;
+    mean.abs() <= 2.0 * (variance / blocks as f64).sqrt()
+}
+
 /// Splits `rows` into `count` windows of (nearly) equal length and returns them by share
 /// of the squared error `errors` (one entry per row of `rows`), largest first.
 pub fn windows(times: &[f64], rows: Range<usize>, errors: &[f64], count: usize) -> Vec<Window> {
@@ -144,6 +164,16 @@ mod tests {
         // 70 of 100 units of error lie in the last window.
         assert!((found[0].share - 0.7).abs() < 1e-12);
         assert!((found.iter().map(|w| w.share).sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn paired_test_separates_a_shift_from_noise() {
+        // Alternating +-1 differences average to zero; a constant shift of 0.5 does not.
+        let a: Vec<f64> = (0..200).map(|i| 2.0 + if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        let b = vec![2.0; 200];
+        assert!(indistinguishable(&a, &b, 20));
+        let shifted: Vec<f64> = a.iter().map(|v| v + 0.5).collect();
+        assert!(!indistinguishable(&shifted, &b, 20));
     }
 
     #[test]

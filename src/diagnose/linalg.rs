@@ -89,15 +89,32 @@ impl Normal {
         }
     }
 
-    /// The ridge solution `(A + ridge * mean(diag A) * I) x = b`, or `None` if singular.
-    pub fn solve(&self, ridge: f64) -> Option<Vec<f64>> {
+    /// The ridge solution `(A + ridge * mean(diag A) * P) x = b`, where `P` is the identity
+    /// on the first `penalised` unknowns and zero on the rest (every diagonal also gets a
+    /// relative `1e-12` for stability); `None` if singular.
+    pub fn solve(&self, ridge: f64, penalised: usize) -> Option<Vec<f64>> {
         let n = self.n;
-        let scale = (0..n).map(|i| self.a[i * n + i]).sum::<f64>() / n.max(1) as f64;
+        let penalised = penalised.min(n);
+        let scale = (0..penalised).map(|i| self.a[i * n + i]).sum::<f64>() / penalised.max(1) as f64;
         let mut a = self.a.clone();
         for i in 0..n {
-            a[i * n + i] += ridge * scale.max(f64::MIN_POSITIVE) + 1e-12 * self.a[i * n + i];
+            let ridge = if i < penalised { ridge * scale.max(f64::MIN_POSITIVE) } else { 0.0 };
+            a[i * n + i] += ridge + 1e-12 * self.a[i * n + i];
         }
         solve_spd(&a, &self.b)
+    }
+
+    /// The least-squares loss `constant - 2 x.b + x.A x` of `x` (after [`Normal::finish`]),
+    /// `constant` being the sum of the weighted squared observations.
+    pub fn loss(&self, constant: f64, x: &[f64]) -> f64 {
+        let n = self.n;
+        let mut quadratic = 0.0;
+        for i in 0..n {
+            let row: f64 = (0..n).map(|j| self.a[i * n + j] * x[j]).sum();
+            quadratic += x[i] * row;
+        }
+        let linear: f64 = self.b.iter().zip(x).map(|(b, v)| b * v).sum();
+        constant - 2.0 * linear + quadratic
     }
 }
 
@@ -121,7 +138,25 @@ mod tests {
             normal.add(&[1.0, x], 3.0 - 0.5 * x, 1.0);
         }
         normal.finish();
-        let fit = normal.solve(0.0).unwrap();
+        let fit = normal.solve(0.0, 2).unwrap();
         assert!((fit[0] - 3.0).abs() < 1e-9 && (fit[1] + 0.5).abs() < 1e-9);
+        // The data lie on the line: the loss at the fit is zero, elsewhere it is the sum of
+        // squared misfits (intercept off by 1 at each of 20 points: 20).
+        let constant: f64 = (0..20).map(|k| (3.0 - 0.5 * k as f64 / 4.0).powi(2)).sum();
+        assert!(normal.loss(constant, &fit).abs() < 1e-8);
+        assert!((normal.loss(constant, &[4.0, -0.5]) - 20.0).abs() < 1e-8);
+    }
+
+    #[test]
+    fn ridge_spares_the_unpenalised_unknowns() {
+        // y = 2 + x exactly; a huge ridge on the slope alone leaves the intercept to fit the mean.
+        let mut normal = Normal::new(2);
+        for k in 0..10 {
+            let x = k as f64 - 4.5;
+            normal.add(&[x, 1.0], 2.0 + x, 1.0);
+        }
+        normal.finish();
+        let fit = normal.solve(1e12, 1).unwrap();
+        assert!(fit[0].abs() < 1e-9 && (fit[1] - 2.0).abs() < 1e-9);
     }
 }

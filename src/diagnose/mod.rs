@@ -14,11 +14,14 @@
 //!    ranked by held-out gap ([`effects`]), refitted on both halves of the training part
 //!    for confidence; the two best are also combined.
 
+mod correction;
 mod effects;
 mod error;
 mod evaluate;
+mod features;
 mod fit;
 mod linalg;
+mod locus;
 mod noise;
 mod record;
 mod report;
@@ -33,7 +36,6 @@ use crate::data::Dataset;
 use crate::ir::Model;
 use record::Normalisation;
 use simulate::{tolerances, Simulator};
-use std::collections::BTreeMap;
 
 /// The gap is significant when it exceeds this multiple of the noise floor.
 pub const SIGNIFICANCE: f64 = 2.0;
@@ -69,6 +71,11 @@ pub struct Options {
     pub seed: u64,
     /// Number of time windows of the held-out part.
     pub windows: usize,
+    /// Delay of the history embedding of corrections (model time units); `None` tries a
+    /// short (2 rows) and a long (12 rows) delay.
+    pub delay: Option<f64>,
+    /// Number of lags of the history embedding, the present included (>= 2).
+    pub dim: usize,
 }
 
 impl Default for Options {
@@ -78,6 +85,8 @@ impl Default for Options {
             restarts: 2,
             seed: 0,
             windows: 20,
+            delay: None,
+            dim: 6,
         }
     }
 }
@@ -151,6 +160,15 @@ pub fn diagnose(
         .first()
         .filter(|best| significant && gap_before - best.gap_after >= CREDIT * (gap_before - noise_floor))
         .map(|best| best.name.clone());
+    let targets = locus::targets(context.model).len();
+    progress(Progress::Stage {
+        name: "locating the gap",
+        total: targets,
+    });
+    let lags = locus::history_lags(delay_rows(&context)?, options.dim);
+    let tried = locus::locate(&context, &before.fitted.params, &lags, &tick)?;
+    let history_dependent = significant
+        && (tried.first()).is_some_and(|best| locus::needs_history(&best.locus, noise_floor, SIGNIFICANCE));
     let series = series(&context, before.run.as_ref(), ranking.best_run.as_ref());
     let (windows, regime) = where_and_when(&context, &series);
     let mut states = states;
@@ -161,8 +179,8 @@ pub fn diagnose(
         noise_floor,
         significant,
         states,
-        locus: Vec::new(),
-        history_dependent: false,
+        locus: tried.iter().map(|t| t.locus.clone()).collect(),
+        history_dependent,
         windows,
         regime,
         effects: ranking.scores,
@@ -174,6 +192,30 @@ pub fn diagnose(
         split: split_summary(&context),
         series,
     })
+}
+
+/// The history delay in rows, if the user gave one.
+fn delay_rows(context: &Context) -> Result<Option<usize>, DiagnoseError> {
+    let options = context.options;
+    if options.dim < 2 {
+        return Err(DiagnoseError::BadOption {
+            option: "--dim".into(),
+            expected: "at least 2 lags".into(),
+            found: options.dim.to_string(),
+        });
+    }
+    let Some(delay) = options.delay else {
+        return Ok(None);
+    };
+    let rows = (delay / context.split.train.step).round();
+    if !(rows >= 1.0 && rows.is_finite()) {
+        return Err(DiagnoseError::BadOption {
+            option: "--delay".into(),
+            expected: format!("at least one sampling step ({})", context.split.train.step),
+            found: delay.to_string(),
+        });
+    }
+    Ok(Some(rows as usize))
 }
 
 fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a>, DiagnoseError> {

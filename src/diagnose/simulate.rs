@@ -92,6 +92,12 @@ impl Simulator {
         self.system.dim()
     }
 
+    /// Compiles an expression of this model (e.g. a let's value) against its slots.
+    pub fn compile(&self, expr: &crate::ir::Expr) -> Result<Program, DiagnoseError> {
+        Program::compile(expr, self.system.layout())
+            .map_err(|e| DiagnoseError::Internal(e.to_string()))
+    }
+
     /// Sets the params (constrained values, declaration order).
     pub fn set_params(&mut self, values: &[f64]) {
         let range = self.system.layout().param_range();

@@ -69,7 +69,13 @@ fn run(model: &str, data: &Dataset, options: &Options) -> Report {
         train: data,
         test: None,
     };
-    diagnose(&problem, options, &|_| {}).unwrap()
+    let start = std::time::Instant::now();
+    diagnose(&problem, options, &|p| {
+        if let Progress::Stage { name, .. } = p {
+            eprintln!("{:>8.2?} {name}", start.elapsed())
+        }
+    })
+    .unwrap()
 }
 
 #[test]
@@ -87,4 +93,69 @@ fn enzyme_lag_case() {
     eprintln!("{:.2?}", start.elapsed());
     eprintln!("{}", serde_json::to_string_pretty(&report).unwrap());
     assert_eq!(report.credited.as_deref(), Some("enzyme_holdup"));
+}
+
+#[test]
+fn burden_case() {
+    let data = record("models/bioreactor/truth.gbm", &["steps(hold=5..40, seed=3)"], 800.0, 1.0, 0.01, 11);
+    let start = std::time::Instant::now();
+    let report = run("models/diagnose/burden/model.gbm", &data, &Options::default());
+    eprintln!("{:.2?}", start.elapsed());
+    eprintln!("{}", serde_json::to_string_pretty(&report).unwrap());
+    assert_eq!(report.credited.as_deref(), Some("burden"));
+}
+
+#[test]
+fn death_case() {
+    let data = record("models/diagnose/death/truth.gbm", &["steps(hold=5..40, seed=3)"], 800.0, 1.0, 0.01, 11);
+    let start = std::time::Instant::now();
+    let report = run("models/diagnose/death/model.gbm", &data, &Options::default());
+    eprintln!("{:.2?}", start.elapsed());
+    eprintln!("{}", serde_json::to_string_pretty(&report).unwrap());
+    assert_eq!(report.credited.as_deref(), Some("death"));
+}
+
+#[test]
+fn zz_oracle_probe() {
+    let data = record("models/bioreactor/truth.gbm", &["steps(hold=5..40, seed=3)"], 800.0, 1.0, 0.01, 11);
+    let path = root().join("models/diagnose/burden/model.gbm");
+    let source = crate::driver::read_source(&path).unwrap();
+    let compiled = crate::driver::compile("m", &source, &["burden"]).unwrap();
+    let base = crate::driver::compile("m", &source, &[]).unwrap();
+    let options = Options::default();
+    let problem = Problem { name: "m", source: &source, checked: &base.checked, model: &base.model, train: &data, test: None };
+    let context = context(&problem, &options).unwrap();
+    let sim = Simulator::new(&compiled.model, None, tolerances()).unwrap();
+    eprintln!("{:?}", compiled.model.params.iter().map(|p| &p.name).collect::<Vec<_>>());
+    for params in [[0.22, 0.272, 0.5], [0.22, 0.435, 0.5], [0.137, 0.272, 1e9]] {
+        let (gap, run) = effects::held_out(&context, &sim, &params);
+        let errors = evaluate::state_errors(run.as_ref().unwrap(), &context.split.test, context.split.test_rows.clone(), &context.normalisation);
+        eprintln!("{params:?}: {gap} {errors:?}");
+    }
+}
+
+#[test]
+fn zz_probe_correction() {
+    let data = record("models/bioreactor/truth.gbm", &["steps(hold=5..40, seed=3)"], 800.0, 1.0, 0.01, 11);
+    let path = root().join("models/diagnose/burden/model.gbm");
+    let source = crate::driver::read_source(&path).unwrap();
+    let base = crate::driver::compile("m", &source, &[]).unwrap();
+    let options = Options::default();
+    let problem = Problem { name: "m", source: &source, checked: &base.checked, model: &base.model, train: &data, test: None };
+    let context = context(&problem, &options).unwrap();
+    let params = [0.13692618458710532, 0.27208907912839364];
+    let target = locus::Target { name: "mu".into(), kind: LocusKind::Let };
+    let mut corrected = locus::synthesise(&context, &target, &params).unwrap().unwrap();
+    let theta = correction::theta_of(&corrected.constraints, &params);
+    let pass = correction::one_step_pass(&mut corrected, &theta, &context.split.train, context.split.train_rows.end).unwrap();
+    let map = locus::feature_map(&context, &pass, None);
+    let solution = correction::fit(&mut corrected, &pass, &map, &context.split.train, &context.normalisation).unwrap();
+    let fitted = correction::values_along(&pass, &map, &context.split.train, &solution.weights);
+    // oracle: E_B is present index 1 + 4 + 1 = 6 (u, X, A, B, S, E_A, E_B, ...)
+    let oracle: Vec<f64> = (0..pass.rows).map(|i| pass.locus[i] * (0.22 / params[0] * (-2.0 * pass.present[i][6]).exp() - 1.0)).collect();
+    let mean = oracle.iter().sum::<f64>() / oracle.len() as f64;
+    let ss: f64 = oracle.iter().map(|o| (o - mean).powi(2)).sum();
+    let res: f64 = oracle.iter().zip(&fitted).map(|(o, f)| (o - f).powi(2)).sum();
+    eprintln!("R2 of fitted vs oracle {} ; rms oracle {}", 1.0 - res / ss, (ss / oracle.len() as f64).sqrt());
+    for i in (0..pass.rows).step_by(40) { eprintln!("{i}: oracle {:.5} fitted {:.5} sens {:?} r {:?}", oracle[i], fitted[i], pass.sensitivity[i], pass.residual[i]); }
 }

@@ -3,8 +3,9 @@
 //!
 //! Both evaluate the physics with every network output at zero (the *known part*: the
 //! balances with the closure outputs at their priors, or zero without one) at the rows of
-//! the training split, the hidden states at their initial values, and compare it with the
-//! finite-difference derivative of the data `d_i = (x_{i+1} - x_i) / h`.
+//! the training split, the hidden states at their initial values, and compare it with what
+//! the data asks of it: the finite-difference derivative `d_i = (x_{i+1} - x_i) / h` for
+//! `der` models, the next value `d_i = x_{i+1}` for `next` models.
 //!
 //! **Default magnitude `s_o`** (an output without `~` and without a `*=` prior): for each
 //! measured balance `X` that `o` enters, with sensitivity `J_i = d f_X / d o` (central
@@ -53,17 +54,26 @@ impl fmt::Display for StiffnessWarning {
     fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             formatter,
-            "balance of `{}` is stiff: eigenvalue about {:.3} per time unit, so an RK4 step of \
-             {} ({} sub-step{}) is unstable; steps up to {:.3} are stable: use --substeps {}",
+            "balance of `{}` is stiff: eigenvalue about {} per time unit, so an RK4 step of {} \
+             ({} sub-step{} per sample) is unstable; steps up to {} are stable: use --substeps {}",
             self.balance,
-            self.eigenvalue,
-            self.step / self.substeps as f64,
+            compact(self.eigenvalue),
+            compact(self.step / self.substeps as f64),
             self.substeps,
             if self.substeps == 1 { "" } else { "s" },
-            self.stable_step,
+            compact(self.stable_step),
             self.substeps_needed
         )
     }
+}
+
+/// A number with about four significant digits, without trailing zeros.
+fn compact(value: f64) -> String {
+    if value != 0.0 && (value.abs() < 1e-3 || value.abs() >= 1e6) {
+        return format!("{value:.3e}");
+    }
+    let text = format!("{value:.4}");
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
 /// The physics evaluated at the training rows.
@@ -74,8 +84,9 @@ struct Probe {
     inputs: Vec<f64>,
     params: Vec<f64>,
     net_widths: Vec<usize>,
-    /// `rows x measured` finite-difference derivatives of the data.
-    derivatives: Vec<f64>,
+    /// `rows x measured` values the balances should take: the finite-difference
+    /// derivatives of the data (`der`), or the next values (`next`).
+    targets: Vec<f64>,
 }
 
 impl Probe {
@@ -94,17 +105,22 @@ impl Probe {
             states: Vec::new(),
             inputs: Vec::new(),
             params: initial_raw_params(model),
-            derivatives: Vec::new(),
+            targets: Vec::new(),
         };
+        let discrete = model.dynamics == Dynamics::Discrete;
         let last = record.len().saturating_sub(1);
         for &row in rows {
             probe.states.extend(record.states.iter().map(|s| s[row]));
             probe.states.extend_from_slice(hidden);
             probe.inputs.extend(record.inputs.iter().map(|u| u[row]));
             let next = (row + 1).min(last);
-            probe.derivatives.extend(
-                (record.states.iter()).map(|s| (s[next] - s[row]) / record.step),
-            );
+            probe.targets.extend((record.states.iter()).map(|s| {
+                if discrete {
+                    s[next]
+                } else {
+                    (s[next] - s[row]) / record.step
+                }
+            }));
         }
         Ok(probe)
     }
@@ -124,7 +140,8 @@ impl Probe {
             nets: &net_slices,
         };
         let values = self.program.forward(&inputs);
-        self.program.read(&values, self.rows, &self.program.balances)
+        self.program
+            .read(&values, self.rows, &self.program.balances)
     }
 
     fn silent_nets(&self) -> Vec<Vec<f64>> {
@@ -193,7 +210,7 @@ fn default_scale(
         let (mut total, mut count) = (0.0, 0usize);
         for (row, &j) in sensitivity.iter().enumerate() {
             if j.abs() >= 0.1 * median {
-                let residual = probe.derivatives[row * measured + state] - known[row * width + state];
+                let residual = probe.targets[row * measured + state] - known[row * width + state];
                 total += (residual / j).powi(2);
                 count += 1;
             }
@@ -246,7 +263,7 @@ pub fn stiffness(
                 if state >= measured {
                     return diagonal;
                 }
-                let unknown = probe.derivatives[r * measured + state] - known[index];
+                let unknown = probe.targets[r * measured + state] - known[index];
                 let magnitude = probe.states[index].abs().max(floor);
                 diagonal - (-unknown).max(0.0) / magnitude
             })

@@ -134,7 +134,12 @@ pub fn run_info(
     let closures = (model.closures.iter().zip(&setup.scales))
         .map(|(closure, scales)| ClosureInfo {
             name: closure.name.clone(),
-            observe: closure.embedding.observe.iter().map(|&v| name_of(v)).collect(),
+            observe: closure
+                .embedding
+                .observe
+                .iter()
+                .map(|&v| name_of(v))
+                .collect(),
             delay: closure.embedding.delay,
             dim: closure.embedding.dim,
             scales: (closure.outputs.iter().zip(scales))
@@ -272,7 +277,12 @@ pub fn restore(
     };
     let mut network = Network::build(model, &setup)?;
     let order: Vec<String> = network.weights().into_iter().map(|t| t.name).collect();
-    weights.sort_by_key(|t| order.iter().position(|n| n == &t.name).unwrap_or(usize::MAX));
+    weights.sort_by_key(|t| {
+        order
+            .iter()
+            .position(|n| n == &t.name)
+            .unwrap_or(usize::MAX)
+    });
     network.set_weights(&weights)?;
     Ok((network, setup, info))
 }

@@ -1,7 +1,7 @@
 //! Running a trained network along a record: one-step (offline) predictions, free runs
 //! (online), the run-in of hidden states, and the paper's two errors in normalised units.
 
-use crate::backend::{Batch, BackendError, Network, Normalisation};
+use crate::backend::{BackendError, Batch, Network, Normalisation};
 use crate::ir;
 
 use super::pairs::{embedding_row, PairTable, Record};
@@ -74,7 +74,11 @@ pub fn simulate(
             states: state.clone(),
             inputs: record.inputs.iter().map(|u| u[row]).collect(),
             embeddings: (model.closures.iter())
-                .map(|c| (fractions.iter()).map(|&f| embedding_row(c, &history, row, f)).collect())
+                .map(|c| {
+                    (fractions.iter())
+                        .map(|&f| embedding_row(c, &history, row, f))
+                        .collect()
+                })
                 .collect(),
             targets: Vec::new(),
         };
@@ -117,9 +121,21 @@ pub fn run_in_hidden(
         return Ok(vec![Vec::new(); record.len()]);
     }
     let last = record.len() - 1;
-    let run = simulate(network, model, record, fractions, (0, last), initial, Feed::Data)?;
+    let run = simulate(
+        network,
+        model,
+        record,
+        fractions,
+        (0, last),
+        initial,
+        Feed::Data,
+    )?;
     let measured = model.states.len();
-    Ok(run.states.into_iter().map(|s| s[measured..].to_vec()).collect())
+    Ok(run
+        .states
+        .into_iter()
+        .map(|s| s[measured..].to_vec())
+        .collect())
 }
 
 /// Offline error: one step from the true history for every pair of `table`.

@@ -139,16 +139,6 @@ impl ModelBuilder {
         self
     }
 
-    /// `output name = text`.
-    pub fn output(mut self, name: &str, text: &str) -> Self {
-        let expr = self.parse(text);
-        self.model.outputs.push(ir::Definition {
-            name: name.into(),
-            expr,
-        });
-        self
-    }
-
     /// A closure; its outputs become names.
     pub fn closure(mut self, spec: ClosureSpec) -> Self {
         let closure = self.model.closures.len();
@@ -221,7 +211,11 @@ impl ModelBuilder {
             builder: self,
         };
         let expr = reader.sum();
-        assert_eq!(reader.position, reader.tokens.len(), "trailing input in {text}");
+        assert_eq!(
+            reader.position,
+            reader.tokens.len(),
+            "trailing input in {text}"
+        );
         expr
     }
 }
@@ -384,7 +378,7 @@ pub fn random_steps(
     while values.len() < rows {
         let level = rng.gen_range(lo..=hi);
         let hold = rng.gen_range(holds.0..=holds.1);
-        values.extend(std::iter::repeat(level).take(hold));
+        values.extend(std::iter::repeat_n(level, hold));
     }
     values.truncate(rows);
     values
@@ -466,7 +460,7 @@ pub mod chemostat {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let inlet = random_steps(rows, range, (20, 60), &mut rng);
         let start = [steady_substrate(inlet[0]), inlet[0]];
-        let states = sample_truth(rhs, &start, &[inlet.clone()], 1.0, 20);
+        let states = sample_truth(rhs, &start, std::slice::from_ref(&inlet), 1.0, 20);
         let substrate = states.iter().map(|x| x[0]).collect();
         let enzyme = states.iter().map(|x| x[1]).collect();
         (dataset(1.0, vec![("E0", inlet), ("S", substrate)]), enzyme)
@@ -482,7 +476,11 @@ pub mod chemostat {
             .constant("theta", THETA)
             .closure(ClosureSpec {
                 name: "rate",
-                outputs: vec![OutputSpec { name: "r", scale: None, prior: None }],
+                outputs: vec![OutputSpec {
+                    name: "r",
+                    scale: None,
+                    prior: None,
+                }],
                 observe: &["S", "E0"],
                 delay: 10.0,
                 dim: 5,
@@ -500,7 +498,11 @@ pub mod chemostat {
             .state("S")
             .closure(ClosureSpec {
                 name: "map",
-                outputs: vec![OutputSpec { name: "n", scale: None, prior: None }],
+                outputs: vec![OutputSpec {
+                    name: "n",
+                    scale: None,
+                    prior: None,
+                }],
                 observe: &["S", "E0"],
                 delay: 10.0,
                 dim: 5,

@@ -20,12 +20,13 @@
 
 pub mod analysis;
 pub mod artifacts;
+pub mod bench;
 mod error;
-#[cfg(test)]
-mod tests;
 pub mod evaluate;
 pub mod pairs;
 pub mod predict;
+#[cfg(test)]
+mod tests;
 
 #[cfg(test)]
 pub(crate) mod fixtures;
@@ -173,8 +174,14 @@ pub fn train(
     let normalisation = normalise(&record, first + train_count + 1);
     let hidden_init = hidden_initial_values(model)?;
     let scales = analysis::closure_scales(model, &record, &train_rows, &hidden_init)?;
-    let warnings =
-        analysis::stiffness(model, &scales, &record, &train_rows, &hidden_init, options.substeps)?;
+    let warnings = analysis::stiffness(
+        model,
+        &scales,
+        &record,
+        &train_rows,
+        &hidden_init,
+        options.substeps,
+    )?;
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }
@@ -195,8 +202,13 @@ pub fn train(
         table,
         hidden,
     };
-    let mut validating =
-        validation_split(model, &training, validation, (first, &fractions), &hidden_init)?;
+    let mut validating = validation_split(
+        model,
+        &training,
+        validation,
+        (first, &fractions),
+        &hidden_init,
+    )?;
     let validation_pairs = validating.as_ref().map_or(0, |v| v.table.len());
     on_event(Event::Started {
         epochs: options.epochs,
@@ -204,15 +216,28 @@ pub fn train(
         validation_pairs,
     });
     let mut metrics = Metrics::default();
-    if let Some(split) = validating.as_ref() {
+    if let Some(split) = validating.as_mut() {
+        refresh_hidden(&network, model, split, &fractions, &hidden_init)?;
         let offline = offline_error(&network, model, &split.table, &setup.normalisation)?;
         metrics.initial_offline = Some(offline);
         metrics.initial_online = Some(online(&network, model, split, &setup, options)?);
     }
-    let losses = fit(&mut network, model, &mut training, options, &hidden_init, on_event)?;
+    let losses = fit(
+        &mut network,
+        model,
+        &mut training,
+        options,
+        &hidden_init,
+        on_event,
+    )?;
     if let Some(split) = validating.as_mut() {
         refresh_hidden(&network, model, split, &fractions, &hidden_init)?;
-        metrics.offline = Some(offline_error(&network, model, &split.table, &setup.normalisation)?);
+        metrics.offline = Some(offline_error(
+            &network,
+            model,
+            &split.table,
+            &setup.normalisation,
+        )?);
         metrics.online = Some(online(&network, model, split, &setup, options)?);
     }
     let params = (model.params.iter().zip(network.param_values()))
@@ -346,7 +371,12 @@ fn online(
         &hidden,
         Feed::Own,
     )?;
-    Ok(online_error(model, &split.record, &run, &setup.normalisation))
+    Ok(online_error(
+        model,
+        &split.record,
+        &run,
+        &setup.normalisation,
+    ))
 }
 
 fn check_options(options: &TrainOptions) -> Result<(), TrainError> {
@@ -364,10 +394,17 @@ fn check_options(options: &TrainOptions) -> Result<(), TrainError> {
         return bad("--substeps", "a positive number of sub-steps", "0".into());
     }
     if !(options.learning_rate > 0.0 && options.learning_rate.is_finite()) {
-        return bad("--lr", "a positive learning rate", options.learning_rate.to_string());
+        return bad(
+            "--lr",
+            "a positive learning rate",
+            options.learning_rate.to_string(),
+        );
     }
     if options.train_points == Some(0) {
         return bad("--train-points", "a positive number of pairs", "0".into());
+    }
+    if let Some(horizon) = options.online_horizon.filter(|h| !(*h > 0.0 && h.is_finite())) {
+        return bad("--online-horizon", "a positive time span", horizon.to_string());
     }
     Ok(())
 }
@@ -479,9 +516,12 @@ pub fn normalise(record: &Record, rows: usize) -> Normalisation {
 pub fn hidden_initial_values(model: &ir::Model) -> Result<Vec<f64>, TrainError> {
     (model.hidden.iter())
         .map(|state| {
-            let init = state.init.as_ref().ok_or_else(|| TrainError::HiddenWithoutInit {
-                name: state.name.clone(),
-            })?;
+            let init = state
+                .init
+                .as_ref()
+                .ok_or_else(|| TrainError::HiddenWithoutInit {
+                    name: state.name.clone(),
+                })?;
             Ok(crate::eval::interpret(init, &|var| match var {
                 ir::Var::Const(i) => model.consts.get(i).map_or(f64::NAN, |c| c.value),
                 ir::Var::Param(i) => model.params.get(i).map_or(f64::NAN, |p| p.init),

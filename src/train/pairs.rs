@@ -105,7 +105,12 @@ pub fn stage_fractions(dynamics: ir::Dynamics, substeps: usize) -> Vec<f64> {
 
 /// The raw embedding of `closure` for the step starting at `row`, at stage fraction
 /// `fraction`, read from `record`.
-pub fn embedding_row(closure: &ir::Closure, record: &Record, row: usize, fraction: f64) -> Vec<f64> {
+pub fn embedding_row(
+    closure: &ir::Closure,
+    record: &Record,
+    row: usize,
+    fraction: f64,
+) -> Vec<f64> {
     let embedding = &closure.embedding;
     let lag_in_samples = embedding.delay / record.step;
     (embedding.layout().into_iter())
@@ -230,7 +235,10 @@ mod tests {
 
     fn check_interpolate(values: &[f64], position: f64, expected: f64) {
         let found = interpolate(values, position);
-        assert!((found - expected).abs() < 1e-12, "at {position}: {found} vs {expected}");
+        assert!(
+            (found - expected).abs() < 1e-12,
+            "at {position}: {found} vs {expected}"
+        );
     }
 
     #[test]
@@ -265,7 +273,11 @@ mod tests {
             .state("x")
             .closure(ClosureSpec {
                 name: "c",
-                outputs: vec![OutputSpec { name: "o", scale: Some(1.0), prior: None }],
+                outputs: vec![OutputSpec {
+                    name: "o",
+                    scale: Some(1.0),
+                    prior: None,
+                }],
                 observe: &["x", "u"],
                 delay: 3.0,
                 dim: 3,

@@ -61,15 +61,34 @@ pub fn predict(
         Mode::Offline => Feed::Data,
         Mode::Online => Feed::Own,
     };
-    let run = simulate(network, model, &record, &fractions, (first, last), &hidden_start, feed)?;
+    let run = simulate(
+        network,
+        model,
+        &record,
+        &fractions,
+        (first, last),
+        &hidden_start,
+        feed,
+    )?;
     let states: Vec<Vec<f64>> = match mode {
         Mode::Online => run.states.clone(),
         Mode::Offline => std::iter::once(run.states[0].clone())
-            .chain(run.next_states.iter().take(run.next_states.len() - 1).cloned())
+            .chain(
+                run.next_states
+                    .iter()
+                    .take(run.next_states.len() - 1)
+                    .cloned(),
+            )
             .collect(),
     };
     let mut header = vec!["t".to_string()];
-    header.extend(model.states.iter().chain(&model.hidden).map(|s| s.name.clone()));
+    header.extend(
+        model
+            .states
+            .iter()
+            .chain(&model.hidden)
+            .map(|s| s.name.clone()),
+    );
     header.extend(
         (model.closures.iter())
             .flat_map(|c| c.outputs.iter())

@@ -17,15 +17,38 @@ fn quiet(_: Event) {}
 #[test]
 fn short_training_on_chemostat_data_cuts_the_validation_error() {
     let (data, _) = chemostat::data(700, (0.002, 0.02), 1);
-    let trained = train(&chemostat::grey_box(), &data, None, &options(15, 500), &mut quiet).unwrap();
+    let trained = train(
+        &chemostat::grey_box(),
+        &data,
+        None,
+        &options(15, 500),
+        &mut quiet,
+    )
+    .unwrap();
     let metrics = &trained.report.metrics;
     let before = metrics.initial_offline.as_ref().unwrap().overall;
     let after = metrics.offline.as_ref().unwrap().overall;
     assert!(after < before / 20.0, "offline error {before} -> {after}");
     let online_before = metrics.initial_online.as_ref().unwrap().overall;
     let online = metrics.online.as_ref().unwrap().overall;
-    assert!(online < online_before / 2.0, "online error {online_before} -> {online}");
+    assert!(
+        online < online_before / 2.0,
+        "online error {online_before} -> {online}"
+    );
     assert!(trained.report.warnings.is_empty());
+}
+
+/// The paper's comparison (section 3.1) in miniature: the grey-box model, knowing the
+/// dilution term, predicts one step far better than the black-box map `next S = n(z_e)`.
+#[test]
+fn grey_box_beats_the_black_box_map_offline() {
+    let (data, _) = chemostat::data(700, (0.002, 0.02), 1);
+    let offline = |model: &ir::Model| {
+        let trained = train(model, &data, None, &options(15, 500), &mut quiet).unwrap();
+        trained.report.metrics.offline.unwrap().overall
+    };
+    let (grey, black) = (offline(&chemostat::grey_box()), offline(&chemostat::black_box()));
+    assert!(grey * 10.0 < black, "grey-box {grey}, black-box {black}");
 }
 
 #[test]
@@ -52,11 +75,17 @@ fn divergence_stops_training_naming_the_epoch() {
         ..options(5, 100)
     };
     let mut epochs_done = 0;
-    let result = train(&chemostat::grey_box(), &data, None, &options, &mut |event| {
-        if let Event::Epoch { .. } = event {
-            epochs_done += 1;
-        }
-    });
+    let result = train(
+        &chemostat::grey_box(),
+        &data,
+        None,
+        &options,
+        &mut |event| {
+            if let Event::Epoch { .. } = event {
+                epochs_done += 1;
+            }
+        },
+    );
     match result {
         Err(TrainError::Diverged { epoch, loss }) => {
             assert!(!loss.is_finite());
@@ -97,7 +126,12 @@ fn default_magnitude_of_a_rate_is_its_typical_size() {
         .sum::<f64>()
         / rows.len() as f64;
     let ratio = scales[0][0] / rms.sqrt();
-    assert!((0.8..1.25).contains(&ratio), "scale {} vs rms {}", scales[0][0], rms.sqrt());
+    assert!(
+        (0.8..1.25).contains(&ratio),
+        "scale {} vs rms {}",
+        scales[0][0],
+        rms.sqrt()
+    );
 }
 
 /// With `E0` up to 1 the substrate balance has eigenvalues near -9 at 1 s sampling.
@@ -135,12 +169,20 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
         let record = record_of(&exact, &stiff).unwrap();
         let fractions = stage_fractions(exact.dynamics, substeps);
         let (_, enzyme) = chemostat::data(300, (0.002, 1.0), 7);
-        let run = simulate(&network, &exact, &record, &fractions, (0, 298), &[enzyme[0]], Feed::Own)
-            .unwrap();
+        let run = simulate(
+            &network,
+            &exact,
+            &record,
+            &fractions,
+            (0, 298),
+            &[enzyme[0]],
+            Feed::Own,
+        )
+        .unwrap();
         online_error(&exact, &record, &run, &setup.normalisation).overall
     };
     let unstable = free_run_error(1);
-    assert!(!(unstable < 1e3), "free run without sub-steps: {unstable}");
+    assert!(unstable.is_nan() || unstable > 1e3, "free run without sub-steps: {unstable}");
     let stable = free_run_error(warning.substeps_needed);
     assert!(stable < 1e-3, "free run with sub-steps: {stable}");
 }
@@ -171,9 +213,17 @@ fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
     let offline = |net: &Network, setup: &Setup| {
         predict::predict(&model, net, setup, &data, predict::Mode::Offline).unwrap()
     };
-    let (again, original) = (offline(&network, &setup), offline(&trained.network, &trained.setup));
+    let (again, original) = (
+        offline(&network, &setup),
+        offline(&trained.network, &trained.setup),
+    );
     assert_eq!(again.header, original.header);
-    for (a, b) in again.columns.iter().flatten().zip(original.columns.iter().flatten()) {
+    for (a, b) in again
+        .columns
+        .iter()
+        .flatten()
+        .zip(original.columns.iter().flatten())
+    {
         assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-12), "{a} vs {b}");
     }
     let changed = artifacts::restore(&model, "model chemostat_gb  # edited\n", &directory);
@@ -187,7 +237,10 @@ fn offline_predictions_are_one_step_and_online_ones_a_free_run() {
     let model = chemostat::grey_box();
     let trained = train(&model, &data, None, &options(1, 60), &mut quiet).unwrap();
     let table = |mode| predict::predict(&model, &trained.network, &trained.setup, &data, mode);
-    let (offline, online) = (table(predict::Mode::Offline).unwrap(), table(predict::Mode::Online).unwrap());
+    let (offline, online) = (
+        table(predict::Mode::Offline).unwrap(),
+        table(predict::Mode::Online).unwrap(),
+    );
     assert_eq!(offline.header, vec!["t", "S", "r"]);
     let first = pairs::first_pair_row(&model, 1.0);
     assert_eq!(offline.columns[0][0], first as f64);

@@ -1,0 +1,129 @@
+//! The regressors of a free correction `c = w . phi`.
+//!
+//! *Present* features see everything the model knows at time `t`: its inputs, measured and
+//! hidden states (z-scored and clipped to [`CLIP`]), and the value `l` of the corrected
+//! quantity itself (a let's value, or the state of a corrected balance; divided by its root
+//! mean square). They are the quadratic monomials `q = [1, v_j, v_j v_k]` of the variables
+//! and the same multiplied by `l`, so that additive (`c = g(v)`) and multiplicative
+//! (`c = l g(v)`) corrections are both within reach.
+//!
+//! *History* features add the delay embedding of the measured record (spec section 3):
+//! inputs and measured states at `t - k delay`, `k = 1..dim-1`, each alone, times `l`, and
+//! times each present variable.
+
+/// Z-scored variables are clipped to this many standard deviations, so a correction stays
+/// bounded when a free run leaves the training range.
+pub const CLIP: f64 = 4.0;
+
+/// A delay embedding in rows of the record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Lags {
+    /// Rows between lags.
+    pub delay: usize,
+    /// Number of lags including the present (>= 2 to add anything).
+    pub dim: usize,
+}
+
+/// How to turn variables into features.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FeatureMap {
+    /// Mean of each present variable (inputs, measured states, hidden states).
+    pub center: Vec<f64>,
+    /// Standard deviation of each present variable.
+    pub scale: Vec<f64>,
+    /// Root mean square of the corrected quantity.
+    pub locus_scale: f64,
+    /// Number of embedded variables (inputs, then measured states: the first of `center`).
+    pub embedded: usize,
+    /// The history, if any.
+    pub lags: Option<Lags>,
+}
+
+impl FeatureMap {
+    /// Number of features.
+    pub fn len(&self) -> usize {
+        let v = self.center.len();
+        let quadratic = 1 + v + v * (v + 1) / 2;
+        let history = self.lags.map_or(0, |l| l.dim.saturating_sub(1) * self.embedded);
+        2 * quadratic + history * (2 + v)
+    }
+
+    /// Whether there are no features (never: the constant is always one).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn normalise(&self, index: usize, value: f64) -> f64 {
+        ((value - self.center[index]) / self.scale[index]).clamp(-CLIP, CLIP)
+    }
+
+    /// Writes the features into `out` (cleared first). `present` holds the present
+    /// variables, `locus` the corrected quantity, `lagged` the embedded variables at each
+    /// lag `1..dim` (lag-major), as raw values.
+    pub fn features(&self, present: &[f64], locus: f64, lagged: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        let v: Vec<f64> = (present.iter().enumerate())
+            .map(|(j, &x)| self.normalise(j, x))
+            .collect();
+        let l = (locus / self.locus_scale).clamp(-2.0 * CLIP, 2.0 * CLIP);
+        out.push(1.0);
+        out.extend_from_slice(&v);
+        for j in 0..v.len() {
+            for k in j..v.len() {
+                out.push(v[j] * v[k]);
+            }
+        }
+        let quadratic = out.len();
+        for q in 0..quadratic {
+            out.push(l * out[q]);
+        }
+        if self.lags.is_some() {
+            for (index, &raw) in lagged.iter().enumerate() {
+                let w = self.normalise(index % self.embedded.max(1), raw);
+                out.push(w);
+                out.push(l * w);
+                out.extend(v.iter().map(|x| x * w));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn features_are_the_documented_monomials() {
+        let map = FeatureMap {
+            center: vec![1.0, 0.0],
+            scale: vec![2.0, 1.0],
+            locus_scale: 0.5,
+            embedded: 1,
+            lags: Some(Lags { delay: 3, dim: 2 }),
+        };
+        let mut out = Vec::new();
+        // v = [(3 - 1) / 2, -1] = [1, -1]; l = 0.25 / 0.5 = 0.5; lagged w = (5 - 1) / 2 = 2.
+        map.features(&[3.0, -1.0], 0.25, &[5.0], &mut out);
+        let q = [1.0, 1.0, -1.0, 1.0, -1.0, 1.0];
+        let mut expected: Vec<f64> = q.to_vec();
+        expected.extend(q.iter().map(|x| 0.5 * x));
+        expected.extend([2.0, 1.0, 2.0, -2.0]);
+        assert_eq!(out, expected);
+        assert_eq!(map.len(), expected.len());
+    }
+
+    #[test]
+    fn far_values_are_clipped() {
+        let map = FeatureMap {
+            center: vec![0.0],
+            scale: vec![1.0],
+            locus_scale: 1.0,
+            embedded: 1,
+            lags: None,
+        };
+        let mut out = Vec::new();
+        map.features(&[100.0], 0.0, &[], &mut out);
+        assert_eq!(out[1], CLIP);
+        assert_eq!(out[2], CLIP * CLIP);
+    }
+}
