@@ -16,6 +16,7 @@ pub mod data;
 pub mod diagnose;
 pub mod diagnostics;
 pub mod driver;
+pub mod experiment;
 pub mod eval;
 pub mod io;
 pub mod ir;

@@ -1,0 +1,1 @@
+//! Experiments: grids of training runs, results, figures (`gbc experiment`, `gbc demo`).
