@@ -144,7 +144,7 @@ where
         for x in slopes.iter_mut() {
             let decay = (-x.abs()).exp();
             let positive_part = if *x > E::ZERO { *x } else { E::ZERO };
-            output.push(positive_part + decay.ln_1p());
+            output.push(positive_part + decay.ln_one_plus());
             let denominator = <E as Real>::ONE + decay;
             *x = if *x >= E::ZERO {
                 <E as Real>::ONE / denominator

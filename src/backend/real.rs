@@ -45,11 +45,22 @@ pub trait Real:
     /// Whether the value is neither infinite nor NaN.
     fn is_finite(self) -> bool;
 
+    /// `ln(1 + x)` for `x >= 0` through `ln` (much faster than the libm `log1p`) with
+    /// Goldberg's correction `ln(u) * x / (u - 1)`, `u = 1 + x`, which keeps it accurate to a
+    /// few ulps however small `x` is.
+    fn ln_one_plus(self) -> Self {
+        let sum = Self::ONE + self;
+        if sum == Self::ONE {
+            self
+        } else {
+            sum.ln() * self / (sum - Self::ONE)
+        }
+    }
     /// `log(1 + e^x)`, written as `max(x, 0) + ln(1 + e^-|x|)` so that it neither overflows
     /// for large positive `x` nor loses the tail for large negative `x`.
     fn softplus(self) -> Self {
         let positive_part = if self > Self::ZERO { self } else { Self::ZERO };
-        positive_part + (-self.abs()).exp().ln_1p()
+        positive_part + (-self.abs()).exp().ln_one_plus()
     }
     /// `1 / (1 + e^-x)`, evaluated through `e^-|x|` so it never overflows; it is also the
     /// derivative of [`Real::softplus`].
@@ -132,6 +143,24 @@ mod tests {
         for x in [-20.0, -3.0, -0.5, 0.0, 0.7, 4.0, 20.0] {
             let reference = (1.0 + f64::exp(x)).ln();
             assert!((Real::softplus(x) - reference).abs() < 1e-14, "x = {x}");
+        }
+    }
+
+    #[test]
+    fn ln_one_plus_is_accurate_from_tiny_to_one() {
+        for x in [0.0, 1e-300, 1e-17, 1e-9, 3e-5, 0.01, 0.5, 1.0] {
+            let found = Real::ln_one_plus(x);
+            assert!(
+                (found - f64::ln_1p(x)).abs() <= 4.0 * f64::EPSILON * f64::ln_1p(x),
+                "{x}"
+            );
+        }
+        for x in [1e-30_f32, 1e-6, 0.2, 1.0] {
+            let found = Real::ln_one_plus(x);
+            assert!(
+                (found - f32::ln_1p(x)).abs() <= 4.0 * f32::EPSILON * f32::ln_1p(x),
+                "{x}"
+            );
         }
     }
 

@@ -244,22 +244,38 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// What a free-run refinement may change besides the params: a gain on the one-step
+/// weights and the weights of some features.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refinement {
+    /// Feature indices whose weights are fitted (see [`FeatureMap::directions`]).
+    pub directions: Vec<usize>,
+    /// The size of a unit move of those weights (a typical correction value).
+    pub reference: f64,
+}
+
 /// Refines a solution on the free run over the training rows: Levenberg–Marquardt over the
-/// params (transformed) and a gain on the correction, from the one-step solution; the
-/// result is kept only if it lowers the training gap.
+/// params (transformed), a gain on the one-step weights and the weights of the
+/// refinement's directions; the result is kept only if it lowers the training gap.
 pub fn refine(
     corrected: &Corrected,
     map: &FeatureMap,
     solution: &Solution,
-    record: &Record,
-    rows: std::ops::Range<usize>,
-    norm: &Normalisation,
+    refinement: &Refinement,
+    fitting: (&Record, std::ops::Range<usize>, &Normalisation),
 ) -> Solution {
+    let (record, rows, norm) = fitting;
     let params = solution.theta.len();
     let scale = ((rows.len() * record.states.len()).max(1) as f64).sqrt();
-    let apply = |x: &[f64]| Solution {
-        weights: solution.weights.iter().map(|w| w * x[params]).collect(),
-        theta: x[..params].to_vec(),
+    let apply = |x: &[f64]| {
+        let mut weights: Vec<f64> = solution.weights.iter().map(|w| w * x[params]).collect();
+        for (&index, extra) in refinement.directions.iter().zip(&x[params + 1..]) {
+            weights[index] += refinement.reference * extra;
+        }
+        Solution {
+            weights,
+            theta: x[..params].to_vec(),
+        }
     };
     let residuals = |x: &[f64]| -> Option<Vec<f64>> {
         let mut corrected = corrected.clone();
@@ -274,6 +290,7 @@ pub fn refine(
     };
     let mut start = solution.theta.clone();
     start.push(1.0);
+    start.extend(refinement.directions.iter().map(|_| 0.0));
     let (x, cost) = super::fit::levenberg_marquardt(&residuals, start.clone());
     let before = residuals(&start).map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum());
     if cost < before {

@@ -53,6 +53,18 @@ impl FeatureMap {
         self.len() == 0
     }
 
+    /// Indices of the features a free-run refinement adjusts: the constant and `l` alone,
+    /// and with `linear` also each present variable alone and times `l`.
+    pub fn directions(&self, linear: bool) -> Vec<usize> {
+        let v = self.center.len();
+        let quadratic = 1 + v + v * (v + 1) / 2;
+        if linear {
+            (0..=v).chain(quadratic..=quadratic + v).collect()
+        } else {
+            vec![0, quadratic]
+        }
+    }
+
     fn normalise(&self, index: usize, value: f64) -> f64 {
         ((value - self.center[index]) / self.scale[index]).clamp(-CLIP, CLIP)
     }
@@ -110,6 +122,9 @@ mod tests {
         expected.extend([2.0, 1.0, 2.0, -2.0]);
         assert_eq!(out, expected);
         assert_eq!(map.len(), expected.len());
+        // The constant, l, then v_j and l v_j.
+        assert_eq!(map.directions(false), vec![0, 6]);
+        assert_eq!(map.directions(true), vec![0, 1, 2, 6, 7, 8]);
     }
 
     #[test]

@@ -5,11 +5,15 @@
 //!
 //! Each locus is tried with *present* features (everything the model knows at `t`, see
 //! [`super::features`]) and with *history* features (plus a delay embedding of the
-//! measured record, at a short and a long delay unless one is given). At the best locus,
-//! history is needed when it leaves clearly less excess gap (above the noise floor) than
-//! the present alone: by a factor [`HISTORY_MARGIN`].
+//! measured record, at a short and a long delay unless one is given). All are fitted one
+//! step ahead and scored; the [`REFINED`] best loci are then refined on the training free
+//! run and scored again. At the best locus, history is needed when it leaves clearly less
+//! excess gap (above the noise floor) than the present alone: by a factor
+//! [`HISTORY_MARGIN`]. Loci whose held-out errors cannot be told from the best one's by a
+//! paired test over time blocks are marked as tied.
 
 use super::correction::{self, Corrected, LocusValue, Pass, Solution};
+use super::evaluate::{indistinguishable, row_errors};
 use super::features::{FeatureMap, Lags};
 use super::record::mean_std;
 use super::report::{Locus, LocusKind};
@@ -20,6 +24,10 @@ use rayon::prelude::*;
 
 /// History must leave this many times less excess gap than the present alone.
 pub const HISTORY_MARGIN: f64 = 2.0;
+/// Loci refined on the free run.
+pub const REFINED: usize = 3;
+/// Blocks of the paired test between loci.
+const TIE_BLOCKS: usize = 20;
 /// Name of the synthesised closure.
 const CLOSURE: &str = "__diagnose_closure";
 /// Name of its output.
@@ -66,56 +74,136 @@ pub fn history_lags(delay: Option<usize>, dim: usize) -> Vec<Lags> {
     }
 }
 
-/// The outcome at one locus.
-#[derive(Debug, Clone)]
-pub struct Tried {
-    /// The report entry.
-    pub locus: Locus,
-    /// The best correction's values along the training rows, with the variables they were
-    /// computed from (for the symbolic hint).
-    pub along: Option<Along>,
-}
-
-/// A fitted correction along the training rows.
+/// A fitted correction along the training rows, for the symbolic hint.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Along {
     /// Correction values per row.
     pub values: Vec<f64>,
-    /// Variable names: inputs, measured, hidden, then the corrected quantity.
+    /// Variable names: inputs, measured, hidden, then the corrected let (if a let).
     pub names: Vec<String>,
     /// Per row: the variables' values in that order.
     pub variables: Vec<Vec<f64>>,
+    /// Whether the last variable is the corrected let.
+    pub let_last: bool,
 }
 
-/// Tries every target in parallel; returns them best (smallest bound) first.
+/// The loci, best first, the memory verdict, and the best correction along the data.
+#[derive(Debug, Clone)]
+pub struct Located {
+    /// Report entries, best first.
+    pub loci: Vec<Locus>,
+    /// Whether the best locus needs history.
+    pub history_dependent: bool,
+    /// The best correction along the training rows.
+    pub along: Option<Along>,
+}
+
+/// One correction tried at one locus.
+#[derive(Debug, Clone)]
+struct Variant {
+    map: FeatureMap,
+    solution: Solution,
+    gap: f64,
+    errors: Vec<f64>,
+}
+
+/// Everything tried at one target.
+#[derive(Debug, Clone)]
+struct Trial {
+    target: Target,
+    corrected: Corrected,
+    pass: Pass,
+    present: Option<Variant>,
+    history: Option<Variant>,
+}
+
+impl Trial {
+    fn best(&self) -> Option<&Variant> {
+        [&self.present, &self.history]
+            .into_iter()
+            .flatten()
+            .min_by(|a, b| a.gap.total_cmp(&b.gap))
+    }
+
+    fn bound(&self) -> f64 {
+        self.best().map_or(f64::INFINITY, |v| v.gap)
+    }
+}
+
+/// Tries every target; `tick` is called once per target and once per refinement.
 pub fn locate(
     context: &Context,
     params: &[f64],
     lags: &[Lags],
+    noise_floor: f64,
     tick: &(dyn Fn() + Sync),
-) -> Result<Vec<Tried>, DiagnoseError> {
+) -> Result<Located, DiagnoseError> {
     let found = targets(context.model)
         .par_iter()
         .map(|target| {
-            let tried = try_target(context, target, params, lags);
+            let trial = try_target(context, target, params, lags);
             tick();
-            tried
+            trial
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let mut tried: Vec<Tried> = found.into_iter().flatten().collect();
-    tried.sort_by(|a, b| a.locus.bound_after.total_cmp(&b.locus.bound_after));
-    Ok(tried)
+    let mut trials: Vec<Trial> = found.into_iter().flatten().collect();
+    trials.par_iter_mut().for_each(|trial| {
+        let t0 = std::time::Instant::now();
+        refine(context, trial, false);
+        eprintln!("PROFILE refine {} {:?}", trial.target.name, t0.elapsed());
+        tick();
+    });
+    trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
+    let top = trials.len().min(REFINED);
+    trials[..top].par_iter_mut().for_each(|trial| {
+        let t0 = std::time::Instant::now();
+        refine(context, trial, true);
+        eprintln!("PROFILE refine linear {} {:?}", trial.target.name, t0.elapsed());
+        tick();
+    });
+    trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
+    Ok(summarise(context, &trials, noise_floor))
 }
 
-/// Whether the best locus needs history: the present leaves a significant excess that
-/// history cuts by [`HISTORY_MARGIN`].
-pub fn needs_history(best: &Locus, noise_floor: f64, significance: f64) -> bool {
-    let excess = |gap: f64| (gap - noise_floor).max(0.0);
-    best.bound_present > significance * noise_floor
-        && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
+fn summarise(context: &Context, trials: &[Trial], noise_floor: f64) -> Located {
+    let best_errors = trials.first().and_then(|t| t.best()).map(|v| v.errors.clone());
+    let loci: Vec<Locus> = trials
+        .iter()
+        .map(|trial| {
+            let gap = |v: &Option<Variant>| v.as_ref().map_or(f64::INFINITY, |v| v.gap);
+            let tied = match (&best_errors, trial.best()) {
+                (Some(best), Some(variant)) => indistinguishable(&variant.errors, best, TIE_BLOCKS),
+                _ => false,
+            };
+            Locus {
+                name: trial.target.name.clone(),
+                kind: trial.target.kind,
+                bound_after: trial.bound(),
+                bound_present: gap(&trial.present),
+                bound_history: gap(&trial.history),
+                tied,
+            }
+        })
+        .collect();
+    let significance = super::SIGNIFICANCE;
+    let history_dependent = loci.first().is_some_and(|best| {
+        let excess = |gap: f64| (gap - noise_floor).max(0.0);
+        best.bound_present > significance * noise_floor
+            && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
+    });
+    let along = trials.first().and_then(|trial| {
+        let variant = trial.best()?;
+        Some(along(context, trial, variant))
+    });
+    Located {
+        loci,
+        history_dependent,
+        along,
+    }
 }
 
-/// The model with a correction at `target`; `None` when the target reaches no balance.
+/// The model with a correction at `target` (params set); `None` when the target reaches
+/// no balance.
 pub(super) fn synthesise(context: &Context, target: &Target, params: &[f64]) -> Result<Option<Corrected>, DiagnoseError> {
     let source = format!(
         "{}\n\nclosure {CLOSURE} {{\n  outputs {OUTPUT}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
@@ -155,84 +243,85 @@ pub(super) fn synthesise(context: &Context, target: &Target, params: &[f64]) -> 
         locus,
         balance: target.kind == LocusKind::Balance,
         constraints: model.params.iter().map(|p| p.constraint).collect(),
-        joint: std::env::var("GBC_JOINT").is_ok(),
     }))
 }
 
-fn try_target(context: &Context, target: &Target, params: &[f64], lags: &[Lags]) -> Result<Option<Tried>, DiagnoseError> {
+fn try_target(context: &Context, target: &Target, params: &[f64], lags: &[Lags]) -> Result<Option<Trial>, DiagnoseError> {
     let Some(mut corrected) = synthesise(context, target, params)? else {
         return Ok(None);
     };
     let (train, end) = (&context.split.train, context.split.train_rows.end);
-    let unreachable = |kind| Tried {
-        locus: Locus {
-            name: target.name.clone(),
-            kind,
-            bound_after: f64::INFINITY,
-            bound_present: f64::INFINITY,
-            bound_history: f64::INFINITY,
-        },
-        along: None,
+    let t0 = std::time::Instant::now();
+    let Ok(pass) = correction::one_step_pass(&mut corrected, train, end) else {
+        return Ok(None);
     };
+    eprintln!("PROFILE {} pass {:?}", target.name, t0.elapsed());
     let theta = correction::theta_of(&corrected.constraints, params);
-    let Ok(pass) = correction::one_step_pass(&mut corrected, &theta, train, end) else {
-        return Ok(Some(unreachable(target.kind)));
+    let mut variant = |lags| {
+        let t0 = std::time::Instant::now();
+        let map = feature_map(context, &pass, lags);
+        let solution = correction::fit(&pass, &map, train, &context.normalisation, &theta)?;
+        let t1 = t0.elapsed();
+        let v = score(context, &mut corrected, map, solution);
+        eprintln!("PROFILE {} {:?} fit {:?} score {:?}", target.name, lags.map(|l: Lags| l.delay), t1, t0.elapsed() - t1);
+        Some(v)
     };
-    let present_map = feature_map(context, &pass, None);
-    let present = score(context, &mut corrected, &pass, &present_map);
-    let mut best = present.clone();
-    let mut history = (f64::INFINITY, None);
-    for &lag in lags {
-        let scored = score(context, &mut corrected, &pass, &feature_map(context, &pass, Some(lag)));
-        if scored.0 < history.0 {
-            history = scored;
-        }
-    }
-    if history.0 < best.0 {
-        best = history.clone();
-    }
-    let along = best.1.map(|(map, solution)| along(context, target, &pass, &map, &solution.weights));
-    Ok(Some(Tried {
-        locus: Locus {
-            name: target.name.clone(),
-            kind: target.kind,
-            bound_after: best.0,
-            bound_present: present.0,
-            bound_history: history.0,
-        },
-        along,
+    let present = variant(None);
+    let history = (lags.iter())
+        .filter_map(|&lag| variant(Some(lag)))
+        .min_by(|a, b| a.gap.total_cmp(&b.gap));
+    Ok(Some(Trial {
+        target: target.clone(),
+        corrected,
+        pass,
+        present,
+        history,
     }))
 }
 
-type Scored = (f64, Option<(FeatureMap, Solution)>);
-
-/// Fits a correction with features `map` (and the params) and returns its held-out gap
-/// (infinite when the fit or the run fails) with the fitted map and solution.
-pub(super) fn score(context: &Context, corrected: &mut Corrected, pass: &Pass, map: &FeatureMap) -> Scored {
-    let train = &context.split.train;
-    let Some(solution) = correction::fit(corrected, pass, map, train, &context.normalisation) else {
-        return (f64::INFINITY, None);
+/// Refines a trial's present variant (with `linear`, both variants and along every
+/// linear direction) on the training free run, and scores it again.
+fn refine(context: &Context, trial: &mut Trial, linear: bool) {
+    let split = &context.split;
+    let fitting = (&split.train, split.train_rows.clone(), &context.normalisation);
+    let variants = if linear {
+        vec![&mut trial.present, &mut trial.history]
+    } else {
+        vec![&mut trial.present]
     };
-    let solution = correction::refine(
-        corrected,
-        map,
-        &solution,
-        train,
-        context.split.train_rows.clone(),
-        &context.normalisation,
-    );
+    for variant in variants.into_iter().flatten() {
+        let along = correction::values_along(&trial.pass, &variant.map, &split.train, &variant.solution.weights);
+        let typical = correction::root_mean_square(&along);
+        let refinement = correction::Refinement {
+            directions: variant.map.directions(linear),
+            reference: if typical > 0.0 { typical } else { 1e-3 * variant.map.locus_scale },
+        };
+        let solution = correction::refine(&trial.corrected, &variant.map, &variant.solution, &refinement, fitting.clone());
+        let refined = score(context, &mut trial.corrected, variant.map.clone(), solution);
+        if refined.gap <= variant.gap {
+            *variant = refined;
+        }
+    }
+}
+
+/// The held-out gap (infinite when the run fails) and per-row errors of a correction.
+fn score(context: &Context, corrected: &mut Corrected, map: FeatureMap, solution: Solution) -> Variant {
     let test = &context.split.test;
     let rows = context.split.test_rows.clone();
-    let gap = match correction::corrected_run(corrected, map, &solution, test, rows.end) {
+    let (gap, errors) = match correction::corrected_run(corrected, &map, &solution, test, rows.end) {
         Ok(run) => {
-            let errors = super::evaluate::state_errors(&run, test, rows, &context.normalisation);
-            eprintln!("DEBUG {:?} lags {:?}: {errors:?}", corrected.locus, map.lags.map(|l| l.delay));
-            errors.iter().sum::<f64>() / errors.len().max(1) as f64
+            let errors = row_errors(&run, test, rows, &context.normalisation);
+            let gap = errors.iter().sum::<f64>() / (errors.len() * test.states.len()).max(1) as f64;
+            (if gap.is_finite() { gap } else { f64::INFINITY }, errors)
         }
-        Err(_) => f64::INFINITY,
+        Err(_) => (f64::INFINITY, Vec::new()),
     };
-    let gap = if gap.is_finite() { gap } else { f64::INFINITY };
-    (gap, Some((map.clone(), solution)))
+    Variant {
+        map,
+        solution,
+        gap,
+        errors,
+    }
 }
 
 /// Feature scaling from the pass: present variables z-scored over the training rows.
@@ -251,14 +340,15 @@ pub(super) fn feature_map(context: &Context, pass: &Pass, lags: Option<Lags>) ->
     }
 }
 
-fn along(context: &Context, target: &Target, pass: &Pass, map: &FeatureMap, weights: &[f64]) -> Along {
+fn along(context: &Context, trial: &Trial, variant: &Variant) -> Along {
     let model = context.model;
+    let pass = &trial.pass;
     let mut names: Vec<String> = (model.inputs.iter().map(|i| i.name.clone()))
         .chain(model.states.iter().chain(&model.hidden).map(|s| s.name.clone()))
         .collect();
-    let balance = target.kind == LocusKind::Balance;
+    let balance = trial.target.kind == LocusKind::Balance;
     if !balance {
-        names.push(target.name.clone());
+        names.push(trial.target.name.clone());
     }
     let variables = (0..pass.rows)
         .map(|row| {
@@ -270,8 +360,9 @@ fn along(context: &Context, target: &Target, pass: &Pass, map: &FeatureMap, weig
         })
         .collect();
     Along {
-        values: correction::values_along(pass, map, &context.split.train, weights),
+        values: correction::values_along(pass, &variant.map, &context.split.train, &variant.solution.weights),
         names,
         variables,
+        let_last: !balance,
     }
 }

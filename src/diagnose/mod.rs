@@ -24,8 +24,10 @@ mod linalg;
 mod locus;
 mod noise;
 mod record;
+pub mod render;
 mod report;
 mod simulate;
+mod symbolic;
 
 pub use error::DiagnoseError;
 pub use record::{Record, Split};
@@ -163,12 +165,15 @@ pub fn diagnose(
     let targets = locus::targets(context.model).len();
     progress(Progress::Stage {
         name: "locating the gap",
-        total: targets,
+        total: 2 * targets + targets.min(locus::REFINED),
     });
     let lags = locus::history_lags(delay_rows(&context)?, options.dim);
-    let tried = locus::locate(&context, &before.fitted.params, &lags, &tick)?;
-    let history_dependent = significant
-        && (tried.first()).is_some_and(|best| locus::needs_history(&best.locus, noise_floor, SIGNIFICANCE));
+    let located = locus::locate(&context, &before.fitted.params, &lags, noise_floor, &tick)?;
+    let history_dependent = significant && located.history_dependent;
+    let hints = match (&located.along, located.loci.first()) {
+        (Some(along), Some(best)) if significant => symbolic::hints(along, &correction_name(best)),
+        _ => Vec::new(),
+    };
     let series = series(&context, before.run.as_ref(), ranking.best_run.as_ref());
     let (windows, regime) = where_and_when(&context, &series);
     let mut states = states;
@@ -179,7 +184,7 @@ pub fn diagnose(
         noise_floor,
         significant,
         states,
-        locus: tried.iter().map(|t| t.locus.clone()).collect(),
+        locus: located.loci,
         history_dependent,
         windows,
         regime,
@@ -187,11 +192,19 @@ pub fn diagnose(
         credited,
         combined,
         confidence: ranking.confidence,
-        hints: Vec::new(),
+        hints,
         fitted_params: base_params,
         split: split_summary(&context),
         series,
     })
+}
+
+/// What the correction at a locus is, in words.
+fn correction_name(locus: &Locus) -> String {
+    match locus.kind {
+        LocusKind::Balance => format!("correction of d{}/dt", locus.name),
+        _ => format!("correction of {}", locus.name),
+    }
 }
 
 /// The history delay in rows, if the user gave one.

@@ -86,6 +86,9 @@ pub struct Locus {
     pub bound_present: f64,
     /// Held-out gap with a correction that also sees the measured history (dim > 1).
     pub bound_history: f64,
+    /// Whether the held-out data cannot tell this locus from the best one (paired test
+    /// over time blocks; always true for the best).
+    pub tied: bool,
 }
 
 /// A time window of the held-out part.

@@ -1,1 +1,43 @@
-//! Experiments: grids of training runs, results, figures (`gbc experiment`, `gbc demo`).
+//! Experiments: grids of training runs over training sizes and replicate seeds, their
+//! results, and the paper's figures (`gbc experiment`, `gbc demo`).
+//!
+//! A [`Study`] names models, a training record, a validation split, sizes, replicates and
+//! training settings. [`prepare`] loads and checks everything once; [`grid`] lists the runs
+//! and [`Shard`] slices them; [`execute`] trains runs in parallel, each writing its
+//! [`RunResult`] atomically under `DIR/runs/` so a re-run skips finished runs; [`merge`] joins
+//! the results of several directories (the slices of a job array); [`tables`] writes CSV and
+//! JSON; [`figures`] draws the paper's figures as SVG and [`report`] puts them into HTML.
+//!
+//! Decisions:
+//! - **Errors on one scale.** Validation errors are MSEs of states z-scored with the
+//!   validation window's statistics, so models and sizes compare on the same scale (see
+//!   [`results`]).
+//! - **Grey box or black box** is read from the model: continuous balances (`der`) are grey
+//!   boxes, discrete maps (`next`) black boxes ([`is_black_box`]).
+//! - **Representative runs** for the trajectory figures: at the study's representative size,
+//!   the replicate with the median online error (the lower middle one for an even count).
+
+mod error;
+pub mod execute;
+pub mod figures;
+pub mod grid;
+pub mod merge;
+pub mod reference;
+pub mod report;
+pub mod results;
+pub mod study;
+pub mod tables;
+
+pub use error::{ExperimentError, ExperimentFailure};
+pub use execute::{execute, prepare, LoadedModel, Prepared, Progress};
+pub use grid::{grid, RunSpec, Shard};
+pub use merge::merge;
+pub use results::{RunResult, RunStatus, StudyRecord};
+pub use study::{Study, StudyModel, Validation};
+
+use crate::ir;
+
+/// Whether a model is a black box: a discrete map (`next`) rather than balances (`der`).
+pub fn is_black_box(model: &ir::Model) -> bool {
+    model.dynamics == ir::Dynamics::Discrete
+}

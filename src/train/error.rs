@@ -152,6 +152,18 @@ pub enum TrainError {
         /// What the operating system said.
         reason: String,
     },
+    /// A record without a column the model needs.
+    #[error("expected a column `{column}` in `{file}`, found none")]
+    #[diagnostic(
+        code(gbm::E0421),
+        help("a record needs `t`, every input and every measured state of the model")
+    )]
+    MissingColumn {
+        /// The data file.
+        file: String,
+        /// The missing column.
+        column: String,
+    },
     /// The network failed.
     #[error(transparent)]
     #[diagnostic(transparent)]

@@ -403,8 +403,15 @@ fn check_options(options: &TrainOptions) -> Result<(), TrainError> {
     if options.train_points == Some(0) {
         return bad("--train-points", "a positive number of pairs", "0".into());
     }
-    if let Some(horizon) = options.online_horizon.filter(|h| !(*h > 0.0 && h.is_finite())) {
-        return bad("--online-horizon", "a positive time span", horizon.to_string());
+    if let Some(horizon) = options
+        .online_horizon
+        .filter(|h| !(*h > 0.0 && h.is_finite()))
+    {
+        return bad(
+            "--online-horizon",
+            "a positive time span",
+            horizon.to_string(),
+        );
     }
     Ok(())
 }
@@ -437,9 +444,9 @@ pub fn record_of(model: &ir::Model, data: &Dataset) -> Result<Record, TrainError
     let column = |name: &str| {
         data.column(name)
             .map(<[f64]>::to_vec)
-            .ok_or_else(|| TrainError::BadRun {
-                path: data.path.display().to_string(),
-                reason: format!("expected a column `{name}`, found none"),
+            .ok_or_else(|| TrainError::MissingColumn {
+                file: data.path.display().to_string(),
+                column: name.to_string(),
             })
     };
     Ok(Record {

@@ -47,7 +47,10 @@ fn grey_box_beats_the_black_box_map_offline() {
         let trained = train(model, &data, None, &options(15, 500), &mut quiet).unwrap();
         trained.report.metrics.offline.unwrap().overall
     };
-    let (grey, black) = (offline(&chemostat::grey_box()), offline(&chemostat::black_box()));
+    let (grey, black) = (
+        offline(&chemostat::grey_box()),
+        offline(&chemostat::black_box()),
+    );
     assert!(grey * 10.0 < black, "grey-box {grey}, black-box {black}");
 }
 
@@ -182,7 +185,10 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
         online_error(&exact, &record, &run, &setup.normalisation).overall
     };
     let unstable = free_run_error(1);
-    assert!(unstable.is_nan() || unstable > 1e3, "free run without sub-steps: {unstable}");
+    assert!(
+        unstable.is_nan() || unstable > 1e3,
+        "free run without sub-steps: {unstable}"
+    );
     let stable = free_run_error(warning.substeps_needed);
     assert!(stable < 1e-3, "free run with sub-steps: {stable}");
 }

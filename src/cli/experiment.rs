@@ -1,0 +1,391 @@
+//! `gbc experiment`: train several models over a grid of training sizes and replicate seeds
+//! in parallel, and write the results (CSV, JSON), the paper's figures (SVG) and a report.
+//!
+//! The study comes from `--preset`, `--config FILE` or the flags (`--model`, `--data`, ...);
+//! flags override a preset or config. `--shard K/N` runs one slice of the grid (a job array);
+//! `gbc experiment merge DIR...` joins slices. One progress bar on stderr; the summary on
+//! stdout. See docs/reproduction.md.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use crate::cli::train::PrecisionArg;
+use crate::cli::{CommandError, CommandResult};
+use crate::experiment::merge::{publish, weights_in, Published};
+use crate::experiment::report::{compare, number};
+use crate::experiment::results::summarise;
+use crate::experiment::study::{parse_model_argument, parse_sizes};
+use crate::experiment::{
+    execute, grid, prepare, ExperimentError, ExperimentFailure, Prepared, Progress, RunResult,
+    RunSpec, Shard, Study, Validation,
+};
+
+/// Arguments of `gbc experiment`.
+#[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct ExperimentArgs {
+    /// `merge`: join the results of several experiment directories.
+    #[command(subcommand)]
+    pub action: Option<ExperimentAction>,
+    /// The study and how to run it.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// Subcommands of `gbc experiment`.
+#[derive(Debug, clap::Subcommand)]
+pub enum ExperimentAction {
+    /// Join the runs of several directories of one study (e.g. the slices of --shard) and
+    /// write the tables, figures and report.
+    Merge(MergeArgs),
+}
+
+/// Arguments of `gbc experiment merge`.
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// Experiment directories (written by `gbc experiment --out DIR`).
+    #[arg(required = true, value_name = "DIR")]
+    pub dirs: Vec<PathBuf>,
+    /// Where to write the joined tables, figures and report (default: the first DIR).
+    #[arg(short, long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// The study and how to run it.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// A built-in study at the paper's scale.
+    #[arg(long, value_parser = Study::PRESETS)]
+    pub preset: Option<String>,
+    /// A study file (JSON, like `experiments/*.json`).
+    #[arg(long, value_name = "FILE", conflicts_with = "preset")]
+    pub config: Option<PathBuf>,
+    /// A model to train, as `LABEL=PATH` or `PATH` (labelled by its file stem); repeat.
+    #[arg(long = "model", value_name = "[LABEL=]PATH")]
+    pub models: Vec<String>,
+    /// The training record.
+    #[arg(long, value_name = "CSV")]
+    pub data: Option<PathBuf>,
+    /// A separate validation record (every row of --data may then train).
+    #[arg(long, value_name = "CSV", conflicts_with = "val_from")]
+    pub val: Option<PathBuf>,
+    /// Validate on the rows of --data from ROW on; the rows before it train.
+    #[arg(long, value_name = "ROW")]
+    pub val_from: Option<usize>,
+    /// Training sizes (training pairs), comma-separated.
+    #[arg(long, value_name = "N,N,...")]
+    pub sizes: Option<String>,
+    /// Replicates per model and size (seeds first-seed, first-seed + 1, ...).
+    #[arg(long, value_name = "R")]
+    pub replicates: Option<usize>,
+    /// Seed of the first replicate.
+    #[arg(long, value_name = "SEED")]
+    pub first_seed: Option<u64>,
+    /// Passes over the training pairs.
+    #[arg(long)]
+    pub epochs: Option<usize>,
+    /// Pairs per Adam step.
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Adam learning rate.
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Element type of training.
+    #[arg(long, value_enum)]
+    pub precision: Option<PrecisionArg>,
+    /// RK4 sub-steps per sample.
+    #[arg(long, value_name = "K")]
+    pub substeps: Option<usize>,
+    /// The mechanistic model behind the data (true rates and params for the figures).
+    #[arg(long, value_name = "GBM")]
+    pub truth: Option<PathBuf>,
+    /// A record never trained on, for free runs under other inputs; repeat.
+    #[arg(long = "generalisation", value_name = "CSV")]
+    pub generalisation: Vec<PathBuf>,
+    /// Training size shown in the trajectory, closure and param figures.
+    #[arg(long, value_name = "N")]
+    pub representative_size: Option<usize>,
+    /// Name of the study (default: the preset's, the config's, or `experiment`).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Trainings run at once (default: the number of cores).
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Run only slice K of N of the grid (1 <= K <= N), e.g. as a job array task.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
+    /// Experiment directory (default: `experiment-<name>`).
+    #[arg(short, long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Print the study as JSON (a config file) and exit.
+    #[arg(long)]
+    pub print_study: bool,
+}
+
+/// Runs `gbc experiment` or `gbc experiment merge`.
+pub fn run(args: &ExperimentArgs) -> CommandResult {
+    match &args.action {
+        Some(ExperimentAction::Merge(merge)) => run_merge(merge),
+        None => run_study(&args.run),
+    }
+}
+
+/// An experiment failure as a command error.
+pub fn failure(failure: ExperimentFailure) -> CommandError {
+    match failure {
+        ExperimentFailure::User(reports) => CommandError::User(reports),
+        ExperimentFailure::Internal(message) => CommandError::Internal(message),
+    }
+}
+
+fn user(error: ExperimentError) -> CommandError {
+    CommandError::user(error)
+}
+
+/// The study the flags describe.
+pub fn study_of(args: &RunArgs) -> Result<Study, CommandError> {
+    let mut study = match (&args.preset, &args.config) {
+        (Some(name), _) => Study::preset(name).ok_or_else(|| {
+            user(ExperimentError::BadOption {
+                option: "--preset".into(),
+                expected: format!("one of {}", Study::PRESETS.join(", ")),
+                found: name.clone(),
+            })
+        })?,
+        (None, Some(path)) => Study::load(path).map_err(user)?,
+        (None, None) => from_flags(args)?,
+    };
+    if !args.models.is_empty() {
+        study.models = (args.models.iter())
+            .map(|m| parse_model_argument(m))
+            .collect::<Result<_, _>>()
+            .map_err(user)?;
+    }
+    override_settings(&mut study, args)?;
+    study.check().map_err(user)?;
+    Ok(study)
+}
+
+fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
+    let missing = |option: &str, expected: &str| {
+        user(ExperimentError::BadOption {
+            option: option.into(),
+            expected: expected.into(),
+            found: "none (and no --preset or --config)".into(),
+        })
+    };
+    let data = args.data.clone().ok_or_else(|| missing("--data", "a training record"))?;
+    let validation = match (&args.val, args.val_from) {
+        (Some(path), _) => Validation::File(path.clone()),
+        (None, Some(row)) => Validation::FromRow(row),
+        (None, None) => return Err(missing("--val/--val-from", "a validation record or row")),
+    };
+    let sizes = args.sizes.as_deref().ok_or_else(|| missing("--sizes", "training sizes"))?;
+    Ok(Study {
+        name: "experiment".into(),
+        title: String::new(),
+        models: Vec::new(),
+        data,
+        validation,
+        sizes: parse_sizes(sizes).map_err(user)?,
+        replicates: 1,
+        first_seed: 1,
+        epochs: 100,
+        batch_size: 50,
+        learning_rate: 1e-3,
+        precision: crate::backend::Precision::F32,
+        substeps: 1,
+        truth: None,
+        generalisation: Vec::new(),
+        representative_size: None,
+    })
+}
+
+fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandError> {
+    if let Some(data) = &args.data {
+        study.data = data.clone();
+    }
+    match (&args.val, args.val_from) {
+        (Some(path), _) => study.validation = Validation::File(path.clone()),
+        (None, Some(row)) => study.validation = Validation::FromRow(row),
+        (None, None) => {}
+    }
+    if let Some(sizes) = &args.sizes {
+        study.sizes = parse_sizes(sizes).map_err(user)?;
+    }
+    let set = |target: &mut usize, value: Option<usize>| *target = value.unwrap_or(*target);
+    set(&mut study.replicates, args.replicates);
+    set(&mut study.epochs, args.epochs);
+    set(&mut study.batch_size, args.batch);
+    set(&mut study.substeps, args.substeps);
+    study.first_seed = args.first_seed.unwrap_or(study.first_seed);
+    study.learning_rate = args.lr.unwrap_or(study.learning_rate);
+    study.precision = args.precision.map_or(study.precision, Into::into);
+    if args.truth.is_some() {
+        study.truth = args.truth.clone();
+    }
+    if !args.generalisation.is_empty() {
+        study.generalisation = args.generalisation.clone();
+    }
+    study.representative_size = args.representative_size.or(study.representative_size);
+    if let Some(name) = &args.name {
+        study.name = name.clone();
+    }
+    Ok(())
+}
+
+/// Default number of parallel trainings: the number of cores.
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, usize::from)
+}
+
+fn run_study(args: &RunArgs) -> CommandResult {
+    let study = study_of(args)?;
+    if args.print_study {
+        println!("{}", study.to_json());
+        return Ok(());
+    }
+    let shard = match &args.shard {
+        Some(text) => text.parse::<Shard>().map_err(user)?,
+        None => Shard::ALL,
+    };
+    let out = (args.out.clone()).unwrap_or_else(|| PathBuf::from(format!("experiment-{}", study.name)));
+    let jobs = args.jobs.unwrap_or_else(default_jobs).max(1);
+    let prepared = prepare(&study).map_err(failure)?;
+    let runs = grid(&study);
+    let selected = shard.select(&runs);
+    let started = Instant::now();
+    let bar = ProgressBar::new(&[(&prepared, &selected, &out)]);
+    let results = execute(&prepared, &selected, &out, jobs, &|p| bar.observe(&prepared, p))
+        .map_err(failure);
+    bar.finish();
+    let results = results?;
+    let seconds = started.elapsed().as_secs_f64();
+    if !shard.is_all() {
+        println!(
+            "shard {shard}: {} runs finished in {seconds:.1} s ({} failed) in {}",
+            results.len(),
+            results.iter().filter(|r| !r.is_ok()).count(),
+            out.display()
+        );
+        println!("when every shard is done: gbc experiment merge {}", out.display());
+        return Ok(());
+    }
+    let published = publish(&prepared, &results, &out, &weights_in(&out)).map_err(failure)?;
+    print_summary(&prepared, &results, &published, seconds);
+    println!("report: {}", out.join("report.html").display());
+    Ok(())
+}
+
+fn run_merge(args: &MergeArgs) -> CommandResult {
+    let out = args.out.clone().unwrap_or_else(|| args.dirs[0].clone());
+    let merged = crate::experiment::merge(&args.dirs, &out).map_err(failure)?;
+    for path in &merged.unreadable {
+        eprintln!("warning: left out `{}`: it does not read as a run result", path.display());
+    }
+    print_summary(&merged.prepared, &merged.results, &merged.published, 0.0);
+    println!("report: {}", out.join("report.html").display());
+    Ok(())
+}
+
+/// Prints the medians per model and size, the grey-box tally and the notes.
+pub fn print_summary(prepared: &Prepared, results: &[RunResult], published: &Published, seconds: f64) {
+    let failed = results.iter().filter(|r| !r.is_ok()).count();
+    let timing = if seconds > 0.0 { format!(" in {seconds:.1} s") } else { String::new() };
+    println!(
+        "{}: {} runs{timing} ({failed} failed); validation MSE, median over replicates:",
+        prepared.study.name,
+        results.len()
+    );
+    println!("  {:<20} {:>7} {:>12} {:>12}", "model", "points", "offline", "online");
+    for row in summarise(&prepared.study, results) {
+        let median = |s: Option<crate::experiment::results::Spread>| s.map_or("-".into(), |s| number(s.median));
+        println!(
+            "  {:<20} {:>7} {:>12} {:>12}",
+            row.model,
+            row.size,
+            median(row.offline),
+            median(row.online)
+        );
+    }
+    for c in compare(prepared, results) {
+        println!(
+            "  {} below {}: online at {}/{} sizes, offline at {}/{}",
+            c.grey, c.black, c.online.0, c.online.1, c.offline.0, c.offline.1
+        );
+    }
+    for result in results.iter().filter(|r| !r.is_ok()) {
+        let message = result.error.as_deref().unwrap_or("unknown");
+        println!("  failed {}: {message}", result.id);
+    }
+    for note in &published.notes {
+        println!("  note: {note}");
+    }
+}
+
+/// One progress bar over every pending run of one or more studies, advanced per epoch.
+pub struct ProgressBar {
+    bar: indicatif::ProgressBar,
+    finished: AtomicUsize,
+    total: usize,
+    /// Pair-epochs counted so far, per run id.
+    counted: Mutex<HashMap<String, u64>>,
+}
+
+impl ProgressBar {
+    /// A bar over the runs of `studies` not yet finished in their directories.
+    pub fn new(studies: &[(&Prepared, &[&RunSpec], &PathBuf)]) -> Self {
+        let mut work = 0;
+        let mut total = 0;
+        for (prepared, runs, dir) in studies {
+            for spec in runs.iter() {
+                if crate::experiment::results::read_result(dir, &spec.id).is_none() {
+                    work += spec.cost(prepared.study.epochs);
+                    total += 1;
+                }
+            }
+        }
+        let bar = indicatif::ProgressBar::new(work);
+        let template = "{elapsed_precise} [{bar:30}] {percent:>3}% {msg} ETA {eta}";
+        if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_message(format!("0/{total} runs"));
+        if total == 0 {
+            bar.finish_and_clear();
+        }
+        ProgressBar {
+            bar,
+            finished: AtomicUsize::new(0),
+            total,
+            counted: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// Advances on an event of a study's execution.
+    pub fn observe(&self, prepared: &Prepared, progress: Progress) {
+        let mut counted = self.counted.lock().unwrap_or_else(|p| p.into_inner());
+        match progress {
+            Progress::Epoch(spec, _) => {
+                *counted.entry(spec.id.clone()).or_insert(0) += spec.size as u64;
+                self.bar.inc(spec.size as u64);
+            }
+            Progress::Finished(spec, _) => {
+                // A run that failed stopped early: count the epochs it did not train.
+                let done = counted.remove(&spec.id).unwrap_or(0);
+                self.bar.inc(spec.cost(prepared.study.epochs).saturating_sub(done));
+                let finished = self.finished.fetch_add(1, Ordering::Relaxed) + 1;
+                self.bar.set_message(format!("{finished}/{} runs", self.total));
+            }
+            Progress::Skipped(_) | Progress::Started(_) => {}
+        }
+    }
+
+    /// Clears the bar.
+    pub fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}

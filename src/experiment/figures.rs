@@ -1,0 +1,414 @@
+//! The paper's figures as SVG, from a study's results and the weights of its
+//! representative runs:
+//!
+//! | file | paper | what |
+//! |---|---|---|
+//! | `mse_offline.svg`, `mse_online.svg` | 2b, 3b | validation MSE against training points (log-log), median line and min–max band over replicates |
+//! | `trajectory_<state>.svg` | 2c, 3c | free runs over the validation window against the data |
+//! | `closure_<output>.svg` | 2c (lower), 3d | learned closure outputs (one step from the true history) against the truth's rates |
+//! | `params.svg` | 3e | trained params (median over replicates) against the truth's values |
+//! | `generalisation_<record>_<state>.svg` | 2d | free runs under a record never trained on |
+
+use std::path::{Path, PathBuf};
+
+use super::execute::{LoadedModel, Prepared};
+use super::reference::{first_predicted_row, true_params, truth_along};
+use super::results::{runs_of, summarise, RunResult, Spread};
+use crate::backend::{Network, Setup};
+use crate::data::Dataset;
+use crate::plot::{BarChart, Chart, Series, Style, PALETTE};
+use crate::train::artifacts;
+use crate::train::predict::{predict, Mode, PredictionTable};
+
+/// Figure size in pixels.
+pub const WIDTH: f64 = 640.0;
+/// Figure height in pixels.
+pub const HEIGHT: f64 = 380.0;
+/// Colour of data and truth series.
+pub const DATA_COLOR: &str = "#000000";
+/// Largest deviation (in standard deviations) of the truth from the data before the
+/// closure figures carry a warning.
+pub const TRUTH_TOLERANCE: f64 = 0.05;
+
+/// One figure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Figure {
+    /// File stem (`<name>.svg`).
+    pub name: String,
+    /// A sentence saying what it shows.
+    pub caption: String,
+    /// The SVG document.
+    pub svg: String,
+}
+
+/// Where a run's weights are, if anywhere.
+pub type WeightsLookup<'a> = &'a dyn Fn(&str) -> Option<PathBuf>;
+
+/// Draws every figure the results allow; `notes` say what was left out and why.
+pub fn draw(
+    prepared: &Prepared,
+    results: &[RunResult],
+    weights: WeightsLookup,
+) -> (Vec<Figure>, Vec<String>) {
+    let mut figures = vec![
+        mse_figure(prepared, results, Metric::Offline),
+        mse_figure(prepared, results, Metric::Online),
+    ];
+    let mut notes = Vec::new();
+    let size = prepared.study.figure_size();
+    let mut trained = Vec::new();
+    for (index, loaded) in prepared.models.iter().enumerate() {
+        match restore_representative(loaded, results, size, weights) {
+            Ok((network, setup, id)) => trained.push((index, network, setup, id)),
+            Err(note) => notes.push(note),
+        }
+    }
+    figures.extend(trajectory_figures(prepared, &trained, size, &mut notes));
+    figures.extend(closure_figures(prepared, &trained, size, &mut notes));
+    figures.extend(params_figure(prepared, results, size));
+    for data in &prepared.generalisation {
+        figures.extend(generalisation_figures(prepared, &trained, data, size, &mut notes));
+    }
+    (figures, notes)
+}
+
+/// Writes figures as `dir/<name>.svg`.
+pub fn write_figures(dir: &Path, figures: &[Figure]) -> Result<(), crate::io::IoError> {
+    for figure in figures {
+        let path = dir.join(format!("{}.svg", figure.name));
+        crate::io::write_atomic(&path, figure.svg.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Offline or online error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Metric {
+    /// One step from the true history.
+    Offline,
+    /// Free run.
+    Online,
+}
+
+fn color(index: usize) -> &'static str {
+    PALETTE[index % PALETTE.len()]
+}
+
+/// Validation MSE against training points, median and min–max band per model.
+pub fn mse_figure(prepared: &Prepared, results: &[RunResult], metric: Metric) -> Figure {
+    let rows = summarise(&prepared.study, results);
+    let (word, paper) = match metric {
+        Metric::Offline => ("offline", "one step from the true history"),
+        Metric::Online => ("online", "free run over the validation window"),
+    };
+    let mut chart = Chart::new(
+        &format!("{}: {word} validation MSE", prepared.study.name),
+        "training points",
+        "MSE (z-scored states)",
+    )
+    .log_axes(true, true);
+    for (index, model) in prepared.study.models.iter().enumerate() {
+        let cells: Vec<(usize, Spread)> = (rows.iter())
+            .filter(|r| r.model == model.label)
+            .filter_map(|r| {
+                let spread = match metric {
+                    Metric::Offline => r.offline,
+                    Metric::Online => r.online,
+                };
+                spread.map(|s| (r.size, s))
+            })
+            .collect();
+        let points = cells.iter().map(|(n, s)| (*n as f64, s.median)).collect();
+        let band = cells.iter().map(|(_, s)| (s.min, s.max)).collect();
+        let series = Series::line(&model.label, points)
+            .styled(Style::LineMarkers)
+            .with_band(band)
+            .colored(color(index));
+        chart = chart.with(series);
+    }
+    Figure {
+        name: format!("mse_{word}"),
+        caption: format!(
+            "Validation MSE ({paper}) against training points: median over replicates, band \
+             from min to max (paper Fig. 2b/3b). Points above the top of the axis diverged."
+        ),
+        svg: chart.to_svg(WIDTH, HEIGHT),
+    }
+}
+
+/// The ok run at `size` with the median online error (the lower middle for an even count).
+pub fn representative<'a>(results: &'a [RunResult], label: &str, size: usize) -> Option<&'a RunResult> {
+    let mut runs: Vec<&RunResult> = runs_of(results, label, size)
+        .into_iter()
+        .filter(|r| r.is_ok())
+        .collect();
+    runs.sort_by(|a, b| {
+        let (x, y) = (a.online().unwrap_or(f64::INFINITY), b.online().unwrap_or(f64::INFINITY));
+        x.total_cmp(&y).then(a.replicate.cmp(&b.replicate))
+    });
+    runs.get(runs.len().saturating_sub(1) / 2).copied()
+}
+
+fn restore_representative(
+    loaded: &LoadedModel,
+    results: &[RunResult],
+    size: usize,
+    weights: WeightsLookup,
+) -> Result<(Network, Setup, String), String> {
+    let run = representative(results, &loaded.label, size)
+        .ok_or_else(|| format!("no finished run of `{}` at {size} points to plot", loaded.label))?;
+    let dir = weights(&run.id)
+        .ok_or_else(|| format!("the weights of run `{}` are missing: its trajectories are left out", run.id))?;
+    let (network, setup, _) = artifacts::restore(&loaded.model, &loaded.source, &dir)
+        .map_err(|error| format!("cannot restore run `{}`: {error}", run.id))?;
+    Ok((network, setup, run.id.clone()))
+}
+
+type TrainedModel = (usize, Network, Setup, String);
+
+/// Predictions of every restored model along `data`, with the notes of those that failed.
+fn predictions<'a>(
+    prepared: &Prepared,
+    trained: impl IntoIterator<Item = &'a TrainedModel>,
+    data: &Dataset,
+    mode: Mode,
+    notes: &mut Vec<String>,
+) -> Vec<(&'a TrainedModel, PredictionTable)> {
+    let mut tables = Vec::new();
+    for entry in trained {
+        let (index, network, setup, id) = entry;
+        let model = &prepared.models[*index].model;
+        match predict(model, network, setup, data, mode) {
+            Ok(table) => tables.push((entry, table)),
+            Err(error) => notes.push(format!("cannot predict with run `{id}`: {error}")),
+        }
+    }
+    tables
+}
+
+/// A column of a prediction table by name.
+fn column<'t>(table: &'t PredictionTable, name: &str) -> Option<&'t [f64]> {
+    (table.header.iter().position(|h| h == name)).map(|i| table.columns[i].as_slice())
+}
+
+/// A state of the data against every model's free run, one chart per measured state.
+fn state_charts(
+    prepared: &Prepared,
+    tables: &[(&TrainedModel, PredictionTable)],
+    data: &Dataset,
+    title: &str,
+) -> Vec<(String, String)> {
+    let mut states: Vec<&str> = Vec::new();
+    for (entry, _) in tables {
+        for state in &prepared.models[entry.0].model.states {
+            if !states.contains(&state.name.as_str()) {
+                states.push(&state.name);
+            }
+        }
+    }
+    let mut charts = Vec::new();
+    for state in states {
+        let Some(actual) = data.column(state) else {
+            continue;
+        };
+        let first = tables.iter().map(|(_, t)| first_predicted_row(data, t)).min().unwrap_or(0);
+        let truth: Vec<(f64, f64)> = (data.times[first..].iter().copied())
+            .zip(actual[first..].iter().copied())
+            .collect();
+        let mut chart = Chart::new(&format!("{title}: {state}"), "time", state)
+            .with(Series::line("data", truth).colored(DATA_COLOR));
+        for ((index, ..), table) in tables {
+            let Some(values) = column(table, state) else {
+                continue;
+            };
+            let points = table.columns[0].iter().copied().zip(values.iter().copied()).collect();
+            let label = &prepared.models[*index].label;
+            chart = chart.with(Series::line(label, points).styled(Style::Dashed).colored(color(*index)));
+        }
+        charts.push((state.to_string(), chart.to_svg(WIDTH, HEIGHT)));
+    }
+    charts
+}
+
+fn trajectory_figures(
+    prepared: &Prepared,
+    trained: &[TrainedModel],
+    size: usize,
+    notes: &mut Vec<String>,
+) -> Vec<Figure> {
+    let Some(first) = prepared.models.first() else {
+        return Vec::new();
+    };
+    let data = &first.validation;
+    let tables = predictions(prepared, trained, data, Mode::Online, notes);
+    let title = format!("{}: free run on validation data ({size} training points)", prepared.study.name);
+    (state_charts(prepared, &tables, data, &title).into_iter())
+        .map(|(state, svg)| Figure {
+            name: format!("trajectory_{state}"),
+            caption: format!(
+                "Free runs of {state} over the validation window, driven by the inputs alone, of \
+                 the median replicate of each model trained on {size} points, against the data \
+                 (paper Fig. 2c/3c)."
+            ),
+            svg,
+        })
+        .collect()
+}
+
+fn closure_figures(
+    prepared: &Prepared,
+    trained: &[TrainedModel],
+    size: usize,
+    notes: &mut Vec<String>,
+) -> Vec<Figure> {
+    let Some(truth) = &prepared.truth else {
+        notes.push("no truth model: the closure figures are left out".into());
+        return Vec::new();
+    };
+    let source = &prepared.validation_source;
+    let checked_from = prepared.models.iter().map(|m| m.offset).min().unwrap_or(0);
+    let run = match truth_along(truth, source, checked_from) {
+        Ok(run) => run,
+        Err(_) => {
+            notes.push("the truth model cannot be simulated along the data".into());
+            return Vec::new();
+        }
+    };
+    if run.deviation > TRUTH_TOLERANCE {
+        notes.push(format!(
+            "the truth model deviates from the data by up to {:.3} standard deviations over \
+             the validation window: its rates may not be the data's",
+            run.deviation
+        ));
+    }
+    let with_closures: Vec<&TrainedModel> = (trained.iter())
+        .filter(|(index, ..)| !prepared.models[*index].model.closures.is_empty())
+        .filter(|(index, ..)| !super::is_black_box(&prepared.models[*index].model))
+        .collect();
+    let mut outputs: Vec<String> = Vec::new();
+    for (index, ..) in with_closures.iter().copied() {
+        for closure in &prepared.models[*index].model.closures {
+            for output in &closure.outputs {
+                if !outputs.contains(&output.name) && run.closure_truth(&output.name).is_some() {
+                    outputs.push(output.name.clone());
+                }
+            }
+        }
+    }
+    let mut figures = Vec::new();
+    for output in outputs {
+        let mut chart = Chart::new(
+            &format!("{}: closure output {output} ({size} training points)", prepared.study.name),
+            "time",
+            &output,
+        );
+        let mut truth_added = false;
+        for entry in with_closures.iter().copied() {
+            let loaded = &prepared.models[entry.0];
+            let data = &loaded.validation;
+            let tables = predictions(prepared, [entry], data, Mode::Offline, notes);
+            let Some((_, table)) = tables.first() else {
+                continue;
+            };
+            let Some(values) = column(table, &output) else {
+                continue;
+            };
+            let times = &table.columns[0];
+            if !truth_added {
+                if let Some(true_values) = run.closure_truth(&output) {
+                    let start = loaded.offset + first_predicted_row(&loaded.validation, table);
+                    let points = (times.iter().copied())
+                        .zip(true_values[start.min(true_values.len())..].iter().copied())
+                        .collect();
+                    chart = chart.with(Series::line("truth", points).colored(DATA_COLOR));
+                    truth_added = true;
+                }
+            }
+            let points = times.iter().copied().zip(values.iter().copied()).collect();
+            chart = chart.with(Series::line(&loaded.label, points).styled(Style::Dashed).colored(color(entry.0)));
+        }
+        figures.push(Figure {
+            name: format!("closure_{output}"),
+            caption: format!(
+                "The learned {output} along the validation window (one step from the true \
+                 history) of the median replicate trained on {size} points, against the truth \
+                 model's rate (paper Fig. 2c lower panel, 3d)."
+            ),
+            svg: chart.to_svg(WIDTH, HEIGHT),
+        });
+    }
+    figures
+}
+
+/// Trained params (median over replicates at `size`) against the truth's consts.
+fn params_figure(prepared: &Prepared, results: &[RunResult], size: usize) -> Option<Figure> {
+    let mut names: Vec<String> = Vec::new();
+    for loaded in &prepared.models {
+        for param in &loaded.model.params {
+            if !names.contains(&param.name) {
+                names.push(param.name.clone());
+            }
+        }
+    }
+    if names.is_empty() {
+        return None;
+    }
+    let mut groups = Vec::new();
+    if let Some(truth) = &prepared.truth {
+        let values: Vec<(String, f64)> = (prepared.models.iter())
+            .flat_map(|m| true_params(truth, &m.model))
+            .collect();
+        let row = names.iter().map(|n| values.iter().find(|(v, _)| v == n).map_or(f64::NAN, |v| v.1));
+        groups.push(("truth".to_string(), row.collect::<Vec<_>>()));
+    }
+    for loaded in prepared.models.iter().filter(|m| !m.model.params.is_empty()) {
+        let runs = runs_of(results, &loaded.label, size);
+        let row = (names.iter())
+            .map(|name| {
+                let values: Vec<f64> = (runs.iter().filter(|r| r.is_ok()))
+                    .filter_map(|r| RunResult::measure(&r.params, name))
+                    .collect();
+                super::results::spread(&values).map_or(f64::NAN, |s| s.median)
+            })
+            .collect();
+        groups.push((loaded.label.clone(), row));
+    }
+    let chart = BarChart {
+        title: format!("{}: trained params ({size} training points, median)", prepared.study.name),
+        y_label: "value".into(),
+        categories: names,
+        groups,
+    };
+    Some(Figure {
+        name: "params".into(),
+        caption: format!(
+            "Trained params, median over the replicates trained on {size} points, against the \
+             truth model's values (paper Fig. 3e)."
+        ),
+        svg: chart.to_svg(WIDTH, HEIGHT),
+    })
+}
+
+fn generalisation_figures(
+    prepared: &Prepared,
+    trained: &[TrainedModel],
+    data: &Dataset,
+    size: usize,
+    notes: &mut Vec<String>,
+) -> Vec<Figure> {
+    let stem = (data.path.file_stem()).map_or("record".to_string(), |s| s.to_string_lossy().into());
+    let tables = predictions(prepared, trained, data, Mode::Online, notes);
+    let title = format!("{}: free run on {stem} (never trained on)", prepared.study.name);
+    (state_charts(prepared, &tables, data, &title).into_iter())
+        .map(|(state, svg)| Figure {
+            name: format!("generalisation_{stem}_{state}"),
+            caption: format!(
+                "Free runs of {state} under the inputs of `{}`, a record never used in training, \
+                 of the median replicate of each model trained on {size} points, against the \
+                 data (paper Fig. 2d).",
+                data.path.display()
+            ),
+            svg,
+        })
+        .collect()
+}

@@ -1,0 +1,151 @@
+//! What trained models are compared with: free-run errors on a record, and the truth
+//! model's rates along a record (the true values of the closures, paper Fig. 3d).
+
+use crate::backend::{Network, Setup};
+use crate::data::Dataset;
+use crate::ir;
+use crate::signal::Signal;
+use crate::sim::{SimOptions, Tolerances};
+use crate::train::predict::{predict, Mode, PredictionTable};
+use crate::train::TrainError;
+
+use super::ExperimentFailure;
+
+/// Population standard deviation of `values`; 1 when it is zero or not finite (a constant
+/// column keeps its errors in its own units, as in training).
+pub fn state_std(values: &[f64]) -> f64 {
+    let count = values.len().max(1) as f64;
+    let mean = values.iter().sum::<f64>() / count;
+    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
+    let std = variance.sqrt();
+    if std > 0.0 && std.is_finite() {
+        std
+    } else {
+        1.0
+    }
+}
+
+/// The rows of a record a prediction table covers: it starts at the first row with a full
+/// embedding history and runs to the end.
+pub fn first_predicted_row(data: &Dataset, table: &PredictionTable) -> usize {
+    data.len() - table.columns.first().map_or(0, Vec::len)
+}
+
+/// Online error of a free run over a whole record: driven by its inputs from its first
+/// full history, the MSE of every later row's measured states, z-scored with the record's
+/// own standard deviation, averaged over states (infinite when the run diverged).
+pub fn free_run_error(
+    model: &ir::Model,
+    network: &Network,
+    setup: &Setup,
+    data: &Dataset,
+) -> Result<f64, TrainError> {
+    let table = predict(model, network, setup, data, Mode::Online)?;
+    let first = first_predicted_row(data, &table);
+    let mut total = 0.0;
+    for (index, state) in model.states.iter().enumerate() {
+        let Some(actual) = data.column(&state.name) else {
+            continue;
+        };
+        let predicted = &table.columns[1 + index];
+        let std = state_std(actual);
+        let squared: f64 = (predicted.iter().zip(&actual[first..]))
+            .skip(1)
+            .map(|(p, a)| ((p - a) / std).powi(2))
+            .sum();
+        total += squared / (predicted.len().saturating_sub(1)).max(1) as f64;
+    }
+    let mean = total / model.states.len().max(1) as f64;
+    Ok(if mean.is_nan() { f64::INFINITY } else { mean })
+}
+
+/// The truth model simulated along a record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthRun {
+    /// Sample times (the record's).
+    pub times: Vec<f64>,
+    /// Every output and let of the truth, by name, one value per time.
+    pub values: Vec<(String, Vec<f64>)>,
+    /// Largest deviation of the truth's measured states from the record over the rows
+    /// from `checked_from`, in units of each state's standard deviation: near zero when the
+    /// truth reproduces the data.
+    pub deviation: f64,
+}
+
+impl TruthRun {
+    /// The true value of closure output `name`: the truth's output `<name>_true`, else its
+    /// let `<name>`.
+    pub fn closure_truth(&self, name: &str) -> Option<&[f64]> {
+        let find = |wanted: &str| {
+            (self.values.iter())
+                .find(|(n, _)| n == wanted)
+                .map(|(_, v)| v.as_slice())
+        };
+        find(&format!("{name}_true")).or_else(|| find(name))
+    }
+}
+
+/// Simulates `truth` along `data`: driven by the record's inputs (held between samples),
+/// from the record's first measured states and the truth's declared hidden states, sampled
+/// at the record's times. `checked_from` is the first row the deviation is measured over
+/// (hidden states start from a guess, so early rows may differ).
+pub fn truth_along(
+    truth: &ir::Model,
+    data: &Dataset,
+    checked_from: usize,
+) -> Result<TruthRun, ExperimentFailure> {
+    let mut signals = Vec::new();
+    for input in &truth.inputs {
+        let values = data.column(&input.name).unwrap_or_default().to_vec();
+        let signal = Signal::new(data.times.clone(), values)
+            .map_err(|error| ExperimentFailure::Internal(format!("truth input: {error}")))?;
+        signals.push(signal);
+    }
+    let first_time = data.times.first().copied().unwrap_or(0.0);
+    let last_time = data.times.last().copied().unwrap_or(0.0);
+    let options = SimOptions {
+        t_start: first_time,
+        t_end: last_time + 0.5 * data.step,
+        dt: data.step,
+        warmup: 0.0,
+        tolerances: Tolerances::default(),
+        max_steps: 10_000_000,
+        initial: (truth.states.iter())
+            .map(|s| data.column(&s.name).and_then(|c| c.first().copied()))
+            .collect(),
+    };
+    let run = crate::sim::simulate(truth, &signals, &options)?;
+    let rows = run.len().min(data.len());
+    let mut deviation: f64 = 0.0;
+    for (index, state) in truth.states.iter().enumerate() {
+        if let Some(actual) = data.column(&state.name) {
+            let std = state_std(actual);
+            for row in checked_from.min(rows)..rows {
+                deviation = deviation.max((run.states[index][row] - actual[row]).abs() / std);
+            }
+        }
+    }
+    let named = |definitions: &[ir::Definition], columns: &[Vec<f64>]| {
+        (definitions.iter().zip(columns))
+            .map(|(d, c)| (d.name.clone(), c[..rows].to_vec()))
+            .collect::<Vec<_>>()
+    };
+    let mut values = named(&truth.outputs, &run.outputs);
+    values.extend(named(&truth.lets, &run.lets));
+    Ok(TruthRun {
+        times: run.times[..rows].to_vec(),
+        values,
+        deviation: if deviation.is_nan() { f64::INFINITY } else { deviation },
+    })
+}
+
+/// The true values of the truth's consts named like the params of `model`: `(name, value)`.
+pub fn true_params(truth: &ir::Model, model: &ir::Model) -> Vec<(String, f64)> {
+    (model.params.iter())
+        .filter_map(|param| {
+            (truth.consts.iter())
+                .find(|c| c.name == param.name)
+                .map(|c| (c.name.clone(), c.value))
+        })
+        .collect()
+}

@@ -1,0 +1,258 @@
+//! An HTML report of one or more studies: settings, the grey-box against black-box tally,
+//! the summary and param tables, and every figure inline (no external files).
+
+use std::fmt::Write;
+
+use super::execute::Prepared;
+use super::figures::{representative, Figure};
+use super::results::{runs_of, spread, summarise, RunResult, Spread, SummaryRow};
+use super::{is_black_box, Study, Validation};
+use crate::plot::escape;
+
+/// How often a grey-box model's median error is below a black-box model's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Comparison {
+    /// The grey-box model.
+    pub grey: String,
+    /// The black-box model.
+    pub black: String,
+    /// Online: sizes where the grey box's median is lower, and sizes compared.
+    pub online: (usize, usize),
+    /// Offline: the same.
+    pub offline: (usize, usize),
+}
+
+/// Every grey-box model against every black-box model (see [`is_black_box`]).
+pub fn compare(prepared: &Prepared, results: &[RunResult]) -> Vec<Comparison> {
+    let rows = summarise(&prepared.study, results);
+    let median = |label: &str, size: usize, pick: fn(&SummaryRow) -> Option<Spread>| {
+        (rows.iter())
+            .find(|r| r.model == label && r.size == size)
+            .and_then(pick)
+            .map(|s| s.median)
+    };
+    let tally = |grey: &str, black: &str, pick: fn(&SummaryRow) -> Option<Spread>| {
+        let mut wins = 0;
+        let mut compared = 0;
+        for size in prepared.study.sorted_sizes() {
+            if let (Some(g), Some(b)) = (median(grey, size, pick), median(black, size, pick)) {
+                compared += 1;
+                wins += usize::from(g < b);
+            }
+        }
+        (wins, compared)
+    };
+    let (blacks, greys): (Vec<_>, Vec<_>) =
+        prepared.models.iter().partition(|m| is_black_box(&m.model));
+    let mut comparisons = Vec::new();
+    for grey in &greys {
+        for black in &blacks {
+            comparisons.push(Comparison {
+                grey: grey.label.clone(),
+                black: black.label.clone(),
+                online: tally(&grey.label, &black.label, |r| r.online),
+                offline: tally(&grey.label, &black.label, |r| r.offline),
+            });
+        }
+    }
+    comparisons
+}
+
+/// A number for a table: 3 significant digits, `diverged` for infinity.
+pub fn number(value: f64) -> String {
+    if value.is_infinite() {
+        "diverged".into()
+    } else if value.is_nan() {
+        "–".into()
+    } else if value != 0.0 && !(1e-3..1e4).contains(&value.abs()) {
+        format!("{value:.2e}")
+    } else {
+        format!("{value:.3}")
+    }
+}
+
+fn spread_cell(spread: Option<Spread>) -> String {
+    spread.map_or("–".into(), |s| {
+        format!("{} <small>[{} – {}]</small>", number(s.median), number(s.min), number(s.max))
+    })
+}
+
+/// The settings of a study in one paragraph.
+pub fn describe(study: &Study) -> String {
+    let models: Vec<String> = (study.models.iter())
+        .map(|m| format!("<code>{}</code> ({})", escape(&m.label), escape(&m.path.display().to_string())))
+        .collect();
+    let validation = match &study.validation {
+        Validation::FromRow(row) => format!("rows from {row} on validate; the rows before train"),
+        Validation::File(path) => format!("<code>{}</code> validates", escape(&path.display().to_string())),
+    };
+    format!(
+        "<p>Models {}. Data <code>{}</code>: {validation}. Sizes {:?} training pairs, {} \
+         replicates (seeds {}..), {} epochs, batch {}, learning rate {}, {:?}.</p>",
+        models.join(", "),
+        escape(&study.data.display().to_string()),
+        study.sorted_sizes(),
+        study.replicates,
+        study.first_seed,
+        study.epochs,
+        study.batch_size,
+        study.learning_rate,
+        study.precision,
+    )
+}
+
+/// The HTML section of one study.
+pub fn section(
+    prepared: &Prepared,
+    results: &[RunResult],
+    figures: &[Figure],
+    notes: &[String],
+) -> String {
+    let study = &prepared.study;
+    let mut html = String::new();
+    let _ = writeln!(html, "<section id=\"{}\">", escape(&study.name));
+    let _ = writeln!(html, "<h2>{}</h2>", escape(if study.title.is_empty() { &study.name } else { &study.title }));
+    html.push_str(&describe(study));
+    let ok = results.iter().filter(|r| r.is_ok()).count();
+    let seconds: f64 = results.iter().map(|r| r.wall_seconds).sum();
+    let _ = writeln!(
+        html,
+        "<p>{} runs ({ok} trained, {} failed); {:.0} s of training in all (summed over runs).</p>",
+        results.len(),
+        results.len() - ok,
+        seconds
+    );
+    html.push_str(&comparison_list(&compare(prepared, results)));
+    html.push_str(&summary_table(&summarise(study, results)));
+    html.push_str(&params_table(prepared, results));
+    for figure in figures {
+        let _ = writeln!(
+            html,
+            "<figure>{}<figcaption>{}</figcaption></figure>",
+            figure.svg,
+            escape(&figure.caption)
+        );
+    }
+    if !notes.is_empty() {
+        html.push_str("<ul class=\"notes\">\n");
+        for note in notes {
+            let _ = writeln!(html, "<li>{}</li>", escape(note));
+        }
+        html.push_str("</ul>\n");
+    }
+    html.push_str("</section>\n");
+    html
+}
+
+fn comparison_list(comparisons: &[Comparison]) -> String {
+    if comparisons.is_empty() {
+        return String::new();
+    }
+    let mut html = String::from("<ul>\n");
+    for c in comparisons {
+        let _ = writeln!(
+            html,
+            "<li><b>{}</b> below <b>{}</b> (median): online at {} of {} sizes, offline at {} of {}.</li>",
+            escape(&c.grey),
+            escape(&c.black),
+            c.online.0,
+            c.online.1,
+            c.offline.0,
+            c.offline.1
+        );
+    }
+    html.push_str("</ul>\n");
+    html
+}
+
+fn summary_table(rows: &[SummaryRow]) -> String {
+    let mut html = String::from(
+        "<table><tr><th>model</th><th>points</th><th>ok / failed</th><th>offline MSE \
+         [min – max]</th><th>online MSE [min – max]</th>",
+    );
+    let generalisation: Vec<String> = (rows.first())
+        .map(|r| r.generalisation.iter().map(|(name, _)| name.clone()).collect())
+        .unwrap_or_default();
+    for name in &generalisation {
+        let _ = write!(html, "<th>free run on {}</th>", escape(name));
+    }
+    html.push_str("<th>time [s]</th></tr>\n");
+    for row in rows {
+        let _ = write!(
+            html,
+            "<tr><td>{}</td><td>{}</td><td>{} / {}</td><td>{}</td><td>{}</td>",
+            escape(&row.model),
+            row.size,
+            row.ok,
+            row.failed,
+            spread_cell(row.offline),
+            spread_cell(row.online)
+        );
+        for (_, spread) in &row.generalisation {
+            let _ = write!(html, "<td>{}</td>", spread_cell(*spread));
+        }
+        let time = row.wall_seconds.map_or("–".into(), |s| format!("{s:.1}"));
+        let _ = writeln!(html, "<td>{time}</td></tr>");
+    }
+    html.push_str("</table>\n");
+    html
+}
+
+fn params_table(prepared: &Prepared, results: &[RunResult]) -> String {
+    let size = prepared.study.figure_size();
+    let mut html = String::new();
+    for loaded in prepared.models.iter().filter(|m| !m.model.params.is_empty()) {
+        let runs: Vec<&RunResult> = runs_of(results, &loaded.label, size)
+            .into_iter()
+            .filter(|r| r.is_ok())
+            .collect();
+        if runs.is_empty() {
+            continue;
+        }
+        let truth = prepared.truth.as_ref().map(|t| super::reference::true_params(t, &loaded.model));
+        let _ = writeln!(
+            html,
+            "<p>Trained params of <code>{}</code> at {size} points, over {} replicates (median \
+             [min – max]):</p><table><tr><th>param</th><th>trained</th><th>truth</th></tr>",
+            escape(&loaded.label),
+            runs.len()
+        );
+        for param in &loaded.model.params {
+            let values: Vec<f64> = runs.iter().filter_map(|r| RunResult::measure(&r.params, &param.name)).collect();
+            let true_value = (truth.iter().flatten())
+                .find(|(name, _)| name == &param.name)
+                .map_or("–".into(), |(_, v)| number(*v));
+            let _ = writeln!(
+                html,
+                "<tr><td>{}</td><td>{}</td><td>{true_value}</td></tr>",
+                escape(&param.name),
+                spread_cell(spread(&values))
+            );
+        }
+        html.push_str("</table>\n");
+        if let Some(run) = representative(results, &loaded.label, size) {
+            let _ = writeln!(html, "<p><small>Figures use run <code>{}</code>.</small></p>", escape(&run.id));
+        }
+    }
+    html
+}
+
+/// A whole HTML page around study sections.
+pub fn page(title: &str, intro: &str, sections: &[String]) -> String {
+    let mut html = String::new();
+    let _ = writeln!(
+        html,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n\
+         <style>body{{font-family:sans-serif;max-width:1340px;margin:2em auto;padding:0 1em;color:#222}}\
+         table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
+         th{{background:#f3f3f3}}figure{{display:inline-block;margin:0.5em;vertical-align:top;width:640px}}\
+         figcaption{{font-size:0.85em;color:#444}}.notes{{color:#8a4b00}}</style></head><body>",
+        escape(title)
+    );
+    let _ = writeln!(html, "<h1>{}</h1>\n{intro}", escape(title));
+    for section in sections {
+        html.push_str(section);
+    }
+    html.push_str("</body></html>\n");
+    html
+}
