@@ -125,13 +125,14 @@ pub fn softplus(x: f64) -> f64 {
     x.max(0.0) + (-x.abs()).exp().ln_1p()
 }
 
-/// `1 / (1 + exp(-x))`, stable for large |x|.
+/// `1 / (1 + exp(-x))`, evaluated through `exp(-|x|)` so neither tail overflows and the
+/// negative tail keeps full relative accuracy.
 pub fn sigmoid(x: f64) -> f64 {
+    let decay = (-x.abs()).exp();
     if x >= 0.0 {
-        1.0 / (1.0 + (-x).exp())
+        1.0 / (1.0 + decay)
     } else {
-        let e = x.exp();
-        e / (1.0 + e)
+        decay / (1.0 + decay)
     }
 }
 
