@@ -34,6 +34,8 @@ impl Element for f64 {}
 pub type Matrix<E> = Tensor<(usize, usize), E, Cpu>;
 /// A vector.
 pub type Vector<E> = Tensor<(usize,), E, Cpu>;
+/// A scalar (the loss).
+pub type Scalar<E> = Tensor<(), E, Cpu>;
 
 /// The buffer dfdx keeps a gradient in.
 pub type GradientBuffer<E> = <Cpu as Storage<E>>::Vec;
@@ -268,7 +270,7 @@ where
         prediction: &Matrix<E>,
         targets: &[E],
         inverse_std: &[E],
-    ) -> Result<Tensor<(), E, Cpu>, BackendError> {
+    ) -> Result<Scalar<E>, BackendError> {
         let (rows, width) = *prediction.shape();
         let measured = inverse_std.len();
         let values = prediction.as_vec();
@@ -302,7 +304,7 @@ where
     }
 
     /// Runs the reverse pass from `loss` through everything recorded.
-    pub fn backward(self, loss: Tensor<(), E, Cpu>) -> Result<Gradients<E, Cpu>, BackendError> {
+    pub fn backward(self, loss: Scalar<E>) -> Result<Gradients<E, Cpu>, BackendError> {
         Ok(loss.put_tape(self.tape).try_backward()?)
     }
 }

@@ -1,6 +1,6 @@
 //! The trainable grey-box network (the only module that names `dfdx`).
 //!
-//! [`Network::build`] lowers a compiled [`ir::Model`](crate::ir::Model) and a [`Setup`] (step
+//! [`Network::build`] lowers a compiled [`ir::Model`] and a [`Setup`] (step
 //! size, normalisation, closure scales, seed) into the recurrent network of the paper
 //! (Lovelett et al. 2020, eq. 4-7): for each batch row the closure networks are evaluated on
 //! the delay embedding at the RK4 stage times `t`, `t + h/2`, `t + h` with the stage state

@@ -10,7 +10,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::adam::Adam;
-use super::graph::{gradient_of, Element, GradientBuffer, Graph, Matrix, StateColumns, Vector};
+use super::graph::{
+    gradient_of, Element, GradientBuffer, Graph, Matrix, Scalar, StateColumns, Vector,
+};
 use super::program::{state_index, Program};
 use super::real::{inverse_softplus, logit};
 use super::{BackendError, Batch, NamedTensor, Prediction, Setup};
@@ -75,6 +77,7 @@ where
 {
     /// Builds the network and initialises its weights from `setup.seed`.
     pub fn build(model: &ir::Model, setup: &Setup) -> Result<Self, BackendError> {
+        check_setup(model, setup)?;
         let program = Program::compile(model, &setup.scales)?;
         let balances = Arc::new(program.balances.clone());
         let mut rng = ChaCha8Rng::seed_from_u64(setup.seed);
@@ -140,11 +143,29 @@ where
     /// The loss of a batch.
     pub fn loss(&self, batch: &Batch) -> Result<f64, BackendError> {
         let mut graph = Graph::new(&self.device);
-        let tensors = self.tensors(&graph);
-        let prepared = self.prepare(&graph, batch)?;
-        let (next, _) = self.step(&mut graph, &tensors, &prepared)?;
-        let loss = graph.normalised_mse(&next, &prepared.targets, &self.inverse_std)?;
+        let (_, loss) = self.record_loss(&mut graph, batch)?;
         Ok(loss.as_vec()[0].to_double())
+    }
+
+    /// Records the forward pass and the loss of a batch on `graph`.
+    fn record_loss(
+        &self,
+        graph: &mut Graph<E>,
+        batch: &Batch,
+    ) -> Result<(Tensors<E>, Scalar<E>), BackendError> {
+        let measured = self.inverse_std.len();
+        if batch.targets.len() != batch.rows * measured {
+            return Err(BackendError::internal(format!(
+                "batch targets have {} values, expected {}",
+                batch.targets.len(),
+                batch.rows * measured
+            )));
+        }
+        let tensors = self.tensors(graph);
+        let prepared = self.prepare(graph, batch)?;
+        let (next, _) = self.step(graph, &tensors, &prepared)?;
+        let loss = graph.normalised_mse(&next, &prepared.targets, &self.inverse_std)?;
+        Ok((tensors, loss))
     }
 
     /// The loss and its gradient per weight tensor, as `f64`.
@@ -158,10 +179,7 @@ where
 
     fn loss_and_gradient(&self, batch: &Batch) -> Result<(f64, Vec<Vec<E>>), BackendError> {
         let mut graph = Graph::new(&self.device);
-        let tensors = self.tensors(&graph);
-        let prepared = self.prepare(&graph, batch)?;
-        let (next, _) = self.step(&mut graph, &tensors, &prepared)?;
-        let loss = graph.normalised_mse(&next, &prepared.targets, &self.inverse_std)?;
+        let (tensors, loss) = self.record_loss(&mut graph, batch)?;
         let value = loss.as_vec()[0].to_double();
         let mut grads = graph.backward(loss)?;
         let mut gradients = Vec::with_capacity(self.weights.len());
@@ -217,7 +235,8 @@ where
             )));
         }
         for ((tensor, name), shape) in weights.iter().zip(&self.names).zip(&self.shapes) {
-            if &tensor.name != name || &tensor.shape != shape {
+            let length: usize = shape.iter().product();
+            if &tensor.name != name || &tensor.shape != shape || tensor.values.len() != length {
                 return Err(BackendError::WeightsMismatch(format!(
                     "`{}` {:?} where the model has `{name}` {shape:?}",
                     tensor.name, tensor.shape
@@ -446,6 +465,25 @@ fn closure_layout(
         first_tensor,
         layers: closure.network.hidden.len() + 1,
     })
+}
+
+/// Checks that the setup's vectors fit the model.
+fn check_setup(model: &ir::Model, setup: &Setup) -> Result<(), BackendError> {
+    let norm = &setup.normalisation;
+    let fits = norm.state_mean.len() == model.states.len()
+        && norm.state_std.len() == model.states.len()
+        && norm.input_mean.len() == model.inputs.len()
+        && norm.input_std.len() == model.inputs.len()
+        && setup.scales.len() == model.closures.len()
+        && (setup.scales.iter().zip(&model.closures)).all(|(s, c)| s.len() == c.outputs.len());
+    if fits && setup.step > 0.0 && setup.step.is_finite() {
+        Ok(())
+    } else {
+        Err(BackendError::internal(format!(
+            "the setup does not fit model `{}` (normalisation, scales or step)",
+            model.name
+        )))
+    }
 }
 
 /// The unconstrained starting value of a param, so that its transform gives the guess.

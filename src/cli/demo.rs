@@ -78,12 +78,19 @@ pub fn run(args: &DemoArgs) -> CommandResult {
          are in <code>docs/reproduction.md</code>.</p>",
         crate::plot::escape(&args.out.display().to_string())
     );
-    let page = report::page("gbc demo: the paper's two studies, scaled down", &intro, &sections);
+    let page = report::page(
+        "gbc demo: the paper's two studies, scaled down",
+        &intro,
+        &sections,
+    );
     let path = args.out.join(REPORT_FILE);
     crate::io::write_atomic(&path, page.as_bytes()).map_err(CommandError::user)?;
     for ((prepared, results), outcome) in prepared.iter().zip(&all_results).zip(&published) {
         print_summary(prepared, results, outcome, 0.0);
     }
-    println!("demo finished in {seconds:.1} s; report: {}", path.display());
+    println!(
+        "demo finished in {seconds:.1} s; report: {}",
+        path.display()
+    );
     Ok(())
 }

@@ -177,13 +177,19 @@ fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
             found: "none (and no --preset or --config)".into(),
         })
     };
-    let data = args.data.clone().ok_or_else(|| missing("--data", "a training record"))?;
+    let data = args
+        .data
+        .clone()
+        .ok_or_else(|| missing("--data", "a training record"))?;
     let validation = match (&args.val, args.val_from) {
         (Some(path), _) => Validation::File(path.clone()),
         (None, Some(row)) => Validation::FromRow(row),
         (None, None) => return Err(missing("--val/--val-from", "a validation record or row")),
     };
-    let sizes = args.sizes.as_deref().ok_or_else(|| missing("--sizes", "training sizes"))?;
+    let sizes = args
+        .sizes
+        .as_deref()
+        .ok_or_else(|| missing("--sizes", "training sizes"))?;
     Ok(Study {
         name: "experiment".into(),
         title: String::new(),
@@ -252,15 +258,18 @@ fn run_study(args: &RunArgs) -> CommandResult {
         Some(text) => text.parse::<Shard>().map_err(user)?,
         None => Shard::ALL,
     };
-    let out = (args.out.clone()).unwrap_or_else(|| PathBuf::from(format!("experiment-{}", study.name)));
+    let out =
+        (args.out.clone()).unwrap_or_else(|| PathBuf::from(format!("experiment-{}", study.name)));
     let jobs = args.jobs.unwrap_or_else(default_jobs).max(1);
     let prepared = prepare(&study).map_err(failure)?;
     let runs = grid(&study);
     let selected = shard.select(&runs);
     let started = Instant::now();
     let bar = ProgressBar::new(&[(&prepared, &selected, &out)]);
-    let results = execute(&prepared, &selected, &out, jobs, &|p| bar.observe(&prepared, p))
-        .map_err(failure);
+    let results = execute(&prepared, &selected, &out, jobs, &|p| {
+        bar.observe(&prepared, p)
+    })
+    .map_err(failure);
     bar.finish();
     let results = results?;
     let seconds = started.elapsed().as_secs_f64();
@@ -271,7 +280,10 @@ fn run_study(args: &RunArgs) -> CommandResult {
             results.iter().filter(|r| !r.is_ok()).count(),
             out.display()
         );
-        println!("when every shard is done: gbc experiment merge {}", out.display());
+        println!(
+            "when every shard is done: gbc experiment merge {}",
+            out.display()
+        );
         return Ok(());
     }
     let published = publish(&prepared, &results, &out, &weights_in(&out)).map_err(failure)?;
@@ -284,7 +296,10 @@ fn run_merge(args: &MergeArgs) -> CommandResult {
     let out = args.out.clone().unwrap_or_else(|| args.dirs[0].clone());
     let merged = crate::experiment::merge(&args.dirs, &out).map_err(failure)?;
     for path in &merged.unreadable {
-        eprintln!("warning: left out `{}`: it does not read as a run result", path.display());
+        eprintln!(
+            "warning: left out `{}`: it does not read as a run result",
+            path.display()
+        );
     }
     print_summary(&merged.prepared, &merged.results, &merged.published, 0.0);
     println!("report: {}", out.join("report.html").display());
@@ -292,17 +307,31 @@ fn run_merge(args: &MergeArgs) -> CommandResult {
 }
 
 /// Prints the medians per model and size, the grey-box tally and the notes.
-pub fn print_summary(prepared: &Prepared, results: &[RunResult], published: &Published, seconds: f64) {
+pub fn print_summary(
+    prepared: &Prepared,
+    results: &[RunResult],
+    published: &Published,
+    seconds: f64,
+) {
     let failed = results.iter().filter(|r| !r.is_ok()).count();
-    let timing = if seconds > 0.0 { format!(" in {seconds:.1} s") } else { String::new() };
+    let timing = if seconds > 0.0 {
+        format!(" in {seconds:.1} s")
+    } else {
+        String::new()
+    };
     println!(
         "{}: {} runs{timing} ({failed} failed); validation MSE, median over replicates:",
         prepared.study.name,
         results.len()
     );
-    println!("  {:<20} {:>7} {:>12} {:>12}", "model", "points", "offline", "online");
+    println!(
+        "  {:<20} {:>7} {:>12} {:>12}",
+        "model", "points", "offline", "online"
+    );
     for row in summarise(&prepared.study, results) {
-        let median = |s: Option<crate::experiment::results::Spread>| s.map_or("-".into(), |s| number(s.median));
+        let median = |s: Option<crate::experiment::results::Spread>| {
+            s.map_or("-".into(), |s| number(s.median))
+        };
         println!(
             "  {:<20} {:>7} {:>12} {:>12}",
             row.model,
@@ -376,9 +405,11 @@ impl ProgressBar {
             Progress::Finished(spec, _) => {
                 // A run that failed stopped early: count the epochs it did not train.
                 let done = counted.remove(&spec.id).unwrap_or(0);
-                self.bar.inc(spec.cost(prepared.study.epochs).saturating_sub(done));
+                self.bar
+                    .inc(spec.cost(prepared.study.epochs).saturating_sub(done));
                 let finished = self.finished.fetch_add(1, Ordering::Relaxed) + 1;
-                self.bar.set_message(format!("{finished}/{} runs", self.total));
+                self.bar
+                    .set_message(format!("{finished}/{} runs", self.total));
             }
             Progress::Skipped(_) | Progress::Started(_) => {}
         }

@@ -293,7 +293,7 @@ fn refine(context: &Context, trial: &mut Trial, linear: bool) {
         let along = correction::values_along(&trial.pass, &variant.map, &split.train, &variant.solution.weights);
         let typical = correction::root_mean_square(&along);
         let refinement = correction::Refinement {
-            directions: variant.map.directions(linear),
+            directions: variant.map.directions(false),
             reference: if typical > 0.0 { typical } else { 1e-3 * variant.map.locus_scale },
         };
         let solution = correction::refine(&trial.corrected, &variant.map, &variant.solution, &refinement, fitting.clone());

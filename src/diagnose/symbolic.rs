@@ -10,8 +10,8 @@
 //! for each threshold of a sweep, least squares is solved, coefficients below the threshold
 //! (relative to the largest) are dropped and the rest refitted until the support settles.
 //! Each support found is refitted in physical units and scored by its R^2 on the training
-//! rows; the best formula of each size up to [`MAX_TERMS`] is kept when it beats the
-//! smaller ones by a clear margin.
+//! rows; the best formula of each size up to [`MAX_TERMS`] is kept when it leaves at most
+//! half the unexplained variance of the smaller ones.
 
 use super::linalg::Normal;
 use super::locus::Along;
@@ -21,8 +21,9 @@ use super::report::Formula;
 pub const MAX_TERMS: usize = 4;
 /// Thresholds of the sweep (relative to the largest scaled coefficient).
 const THRESHOLDS: [f64; 8] = [0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7];
-/// A larger formula must raise R^2 by this much to be listed.
-const MIN_GAIN: f64 = 0.01;
+/// A larger formula must leave at most this fraction of the smaller one's unexplained
+/// variance to be listed.
+const MIN_GAIN: f64 = 0.5;
 /// Multiples of a variable's median used as `K`.
 const K_MULTIPLES: [f64; 5] = [0.1, 0.3, 1.0, 3.0, 10.0];
 
@@ -54,7 +55,7 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     let mut formulas = Vec::new();
     let mut previous = f64::NEG_INFINITY;
     for (r2, support, coefficients) in best.into_iter().flatten() {
-        if r2 > previous + MIN_GAIN {
+        if 1.0 - r2 < MIN_GAIN * (1.0 - previous) {
             formulas.push(Formula {
                 target: target.to_string(),
                 text: format_formula(&library, &support, &coefficients),

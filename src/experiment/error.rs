@@ -15,7 +15,9 @@ pub enum ExperimentError {
     #[error("cannot read study `{path}`: {reason}")]
     #[diagnostic(
         code(gbm::E0901),
-        help("a study is a JSON object like the files in `experiments/`; see docs/reproduction.md")
+        help(
+            "a study is a JSON object like the files in `experiments/`; see docs/reproduction.md"
+        )
     )]
     BadStudy {
         /// The file.

@@ -145,7 +145,12 @@ pub fn prepare(study: &Study) -> Result<Prepared, ExperimentFailure> {
 fn required_columns(models: &[ir::Model], truth: Option<&ir::Model>) -> Vec<String> {
     let mut required: Vec<String> = Vec::new();
     let names = (models.iter())
-        .flat_map(|m| m.inputs.iter().map(|i| &i.name).chain(m.states.iter().map(|s| &s.name)))
+        .flat_map(|m| {
+            m.inputs
+                .iter()
+                .map(|i| &i.name)
+                .chain(m.states.iter().map(|s| &s.name))
+        })
         .chain(truth.into_iter().flat_map(|t| {
             (t.inputs.iter().map(|i| &i.name)).chain(t.states.iter().map(|s| &s.name))
         }));
@@ -159,7 +164,11 @@ fn required_columns(models: &[ir::Model], truth: Option<&ir::Model>) -> Vec<Stri
 
 fn read_record(path: &Path, required: &[String]) -> Result<Dataset, ExperimentFailure> {
     let names: Vec<&str> = required.iter().map(String::as_str).collect();
-    Ok(crate::data::read(path, &names, MinRows::new(2, "one step needs two rows"))?)
+    Ok(crate::data::read(
+        path,
+        &names,
+        MinRows::new(2, "one step needs two rows"),
+    )?)
 }
 
 /// The training rows and where validation comes from.
@@ -180,7 +189,10 @@ impl Split {
                 if *row + 2 > data.len() {
                     return Err(ExperimentError::BadOption {
                         option: "--val-from".into(),
-                        expected: format!("a row below {} (the record's rows less one)", data.len() - 1),
+                        expected: format!(
+                            "a row below {} (the record's rows less one)",
+                            data.len() - 1
+                        ),
                         found: row.to_string(),
                     }
                     .into());
@@ -210,7 +222,9 @@ impl Split {
     ) -> Result<(Dataset, usize, usize), ExperimentFailure> {
         let too_short = |what: &str| ExperimentError::BadOption {
             option: "--val-from".into(),
-            expected: format!("room for the {history} rows of embedding history of `{label}` {what}"),
+            expected: format!(
+                "room for the {history} rows of embedding history of `{label}` {what}"
+            ),
             found: format!("{} rows", self.training.len()),
         };
         let available = (self.training.len())
@@ -223,8 +237,15 @@ impl Split {
             }
             return Ok((self.source.clone(), available, 0));
         }
-        let first = self.start.checked_sub(history).ok_or_else(|| too_short("before it"))?;
-        Ok((slice(&self.source, first..self.source.len()), available, first))
+        let first = self
+            .start
+            .checked_sub(history)
+            .ok_or_else(|| too_short("before it"))?;
+        Ok((
+            slice(&self.source, first..self.source.len()),
+            available,
+            first,
+        ))
     }
 
     /// Std of each measured state over the validation window.
@@ -274,7 +295,10 @@ fn study_record(study: &Study) -> Result<StudyRecord, ExperimentFailure> {
                 source_code: None,
                 span: None,
             })?;
-            let sha256 = Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect();
+            let sha256 = Sha256::digest(&bytes)
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect();
             Ok(Fingerprint {
                 path: path.display().to_string(),
                 sha256,
@@ -372,12 +396,16 @@ pub fn execute(
     if let Some(failure) = lock(&failures).drain(..).next() {
         return Err(failure);
     }
-    let slots = slots.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let slots = slots
+        .into_inner()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
     Ok(slots.into_iter().flatten().collect())
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 /// The training options of a run.
@@ -417,7 +445,13 @@ fn run_one(
     );
     let result = match trained.and_then(|trained| {
         let result = evaluate(prepared, loaded, spec, &trained, started)?;
-        save_weights(prepared, loaded, &options, &trained, &results::weights_dir(dir, &spec.id))?;
+        save_weights(
+            prepared,
+            loaded,
+            &options,
+            &trained,
+            &results::weights_dir(dir, &spec.id),
+        )?;
         Ok(result)
     }) {
         Ok(result) => result,
@@ -450,14 +484,23 @@ fn evaluate(
         };
         let per_state: Vec<Measure> = (set.per_state.iter().enumerate())
             .map(|(index, (name, mse))| {
-                let own = trained.setup.normalisation.state_std.get(index).copied().unwrap_or(1.0);
+                let own = trained
+                    .setup
+                    .normalisation
+                    .state_std
+                    .get(index)
+                    .copied()
+                    .unwrap_or(1.0);
                 let reference = (prepared.reference_scale.iter())
                     .find(|(n, _)| n == name)
                     .map_or(own, |(_, s)| *s);
                 Measure::new(name, mse * (own / reference).powi(2))
             })
             .collect();
-        let values: Vec<f64> = per_state.iter().map(|m| m.value.unwrap_or(f64::INFINITY)).collect();
+        let values: Vec<f64> = per_state
+            .iter()
+            .map(|m| m.value.unwrap_or(f64::INFINITY))
+            .collect();
         let mean = values.iter().sum::<f64>() / values.len().max(1) as f64;
         (results::finite(mean), per_state)
     };
@@ -482,7 +525,11 @@ fn evaluate(
         offline_per_state,
         online_per_state,
         generalisation,
-        params: report.params.iter().map(|(name, value)| Measure::new(name, *value)).collect(),
+        params: report
+            .params
+            .iter()
+            .map(|(name, value)| Measure::new(name, *value))
+            .collect(),
         final_loss: report.losses.last().copied().and_then(results::finite),
         train_pairs: report.train_pairs,
         validation_pairs: report.validation_pairs,

@@ -67,7 +67,9 @@ pub fn draw(
     figures.extend(closure_figures(prepared, &trained, size, &mut notes));
     figures.extend(params_figure(prepared, results, size));
     for data in &prepared.generalisation {
-        figures.extend(generalisation_figures(prepared, &trained, data, size, &mut notes));
+        figures.extend(generalisation_figures(
+            prepared, &trained, data, size, &mut notes,
+        ));
     }
     (figures, notes)
 }
@@ -137,13 +139,20 @@ pub fn mse_figure(prepared: &Prepared, results: &[RunResult], metric: Metric) ->
 }
 
 /// The ok run at `size` with the median online error (the lower middle for an even count).
-pub fn representative<'a>(results: &'a [RunResult], label: &str, size: usize) -> Option<&'a RunResult> {
+pub fn representative<'a>(
+    results: &'a [RunResult],
+    label: &str,
+    size: usize,
+) -> Option<&'a RunResult> {
     let mut runs: Vec<&RunResult> = runs_of(results, label, size)
         .into_iter()
         .filter(|r| r.is_ok())
         .collect();
     runs.sort_by(|a, b| {
-        let (x, y) = (a.online().unwrap_or(f64::INFINITY), b.online().unwrap_or(f64::INFINITY));
+        let (x, y) = (
+            a.online().unwrap_or(f64::INFINITY),
+            b.online().unwrap_or(f64::INFINITY),
+        );
         x.total_cmp(&y).then(a.replicate.cmp(&b.replicate))
     });
     runs.get(runs.len().saturating_sub(1) / 2).copied()
@@ -155,10 +164,18 @@ fn restore_representative(
     size: usize,
     weights: WeightsLookup,
 ) -> Result<(Network, Setup, String), String> {
-    let run = representative(results, &loaded.label, size)
-        .ok_or_else(|| format!("no finished run of `{}` at {size} points to plot", loaded.label))?;
-    let dir = weights(&run.id)
-        .ok_or_else(|| format!("the weights of run `{}` are missing: its trajectories are left out", run.id))?;
+    let run = representative(results, &loaded.label, size).ok_or_else(|| {
+        format!(
+            "no finished run of `{}` at {size} points to plot",
+            loaded.label
+        )
+    })?;
+    let dir = weights(&run.id).ok_or_else(|| {
+        format!(
+            "the weights of run `{}` are missing: its trajectories are left out",
+            run.id
+        )
+    })?;
     let (network, setup, _) = artifacts::restore(&loaded.model, &loaded.source, &dir)
         .map_err(|error| format!("cannot restore run `{}`: {error}", run.id))?;
     Ok((network, setup, run.id.clone()))
@@ -211,23 +228,70 @@ fn state_charts(
         let Some(actual) = data.column(state) else {
             continue;
         };
-        let first = tables.iter().map(|(_, t)| first_predicted_row(data, t)).min().unwrap_or(0);
+        let first = tables
+            .iter()
+            .map(|(_, t)| first_predicted_row(data, t))
+            .min()
+            .unwrap_or(0);
         let truth: Vec<(f64, f64)> = (data.times[first..].iter().copied())
             .zip(actual[first..].iter().copied())
             .collect();
+        let range = widened_range(&actual[first..]);
         let mut chart = Chart::new(&format!("{title}: {state}"), "time", state)
             .with(Series::line("data", truth).colored(DATA_COLOR));
         for ((index, ..), table) in tables {
             let Some(values) = column(table, state) else {
                 continue;
             };
-            let points = table.columns[0].iter().copied().zip(values.iter().copied()).collect();
-            let label = &prepared.models[*index].label;
-            chart = chart.with(Series::line(label, points).styled(Style::Dashed).colored(color(*index)));
+            let points = table.columns[0].iter().copied().zip(values.iter().copied());
+            let (label, points) = clip(&prepared.models[*index].label, points, range);
+            chart = chart.with(
+                Series::line(&label, points)
+                    .styled(Style::Dashed)
+                    .colored(color(*index)),
+            );
         }
         charts.push((state.to_string(), chart.to_svg(WIDTH, HEIGHT)));
     }
     charts
+}
+
+/// The range of `values` widened by half its span on each side: the visible window of a
+/// trajectory chart.
+pub fn widened_range(values: &[f64]) -> (f64, f64) {
+    let finite = values.iter().copied().filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    });
+    let pad = if hi > lo {
+        0.5 * (hi - lo)
+    } else {
+        lo.abs().max(1.0) * 0.5
+    };
+    (lo - pad, hi + pad)
+}
+
+/// A model's trajectory clamped to `range` (so that one free run that runs away does not
+/// flatten the others); the name says `(clipped)` when any point was moved.
+pub fn clip(
+    name: &str,
+    points: impl Iterator<Item = (f64, f64)>,
+    (lo, hi): (f64, f64),
+) -> (String, Vec<(f64, f64)>) {
+    let mut clipped = false;
+    let points = (points.filter(|(_, y)| !y.is_nan()))
+        .map(|(x, y)| {
+            let inside = y.clamp(lo, hi);
+            clipped |= inside != y;
+            (x, inside)
+        })
+        .collect();
+    let name = if clipped {
+        format!("{name} (clipped)")
+    } else {
+        name.to_string()
+    };
+    (name, points)
 }
 
 fn trajectory_figures(
@@ -241,7 +305,10 @@ fn trajectory_figures(
     };
     let data = &first.validation;
     let tables = predictions(prepared, trained, data, Mode::Online, notes);
-    let title = format!("{}: free run on validation data ({size} training points)", prepared.study.name);
+    let title = format!(
+        "{}: free run on validation data ({size} training points)",
+        prepared.study.name
+    );
     (state_charts(prepared, &tables, data, &title).into_iter())
         .map(|(state, svg)| Figure {
             name: format!("trajectory_{state}"),
@@ -298,7 +365,10 @@ fn closure_figures(
     let mut figures = Vec::new();
     for output in outputs {
         let mut chart = Chart::new(
-            &format!("{}: closure output {output} ({size} training points)", prepared.study.name),
+            &format!(
+                "{}: closure output {output} ({size} training points)",
+                prepared.study.name
+            ),
             "time",
             &output,
         );
@@ -325,7 +395,11 @@ fn closure_figures(
                 }
             }
             let points = times.iter().copied().zip(values.iter().copied()).collect();
-            chart = chart.with(Series::line(&loaded.label, points).styled(Style::Dashed).colored(color(entry.0)));
+            chart = chart.with(
+                Series::line(&loaded.label, points)
+                    .styled(Style::Dashed)
+                    .colored(color(entry.0)),
+            );
         }
         figures.push(Figure {
             name: format!("closure_{output}"),
@@ -358,10 +432,19 @@ fn params_figure(prepared: &Prepared, results: &[RunResult], size: usize) -> Opt
         let values: Vec<(String, f64)> = (prepared.models.iter())
             .flat_map(|m| true_params(truth, &m.model))
             .collect();
-        let row = names.iter().map(|n| values.iter().find(|(v, _)| v == n).map_or(f64::NAN, |v| v.1));
+        let row = names.iter().map(|n| {
+            values
+                .iter()
+                .find(|(v, _)| v == n)
+                .map_or(f64::NAN, |v| v.1)
+        });
         groups.push(("truth".to_string(), row.collect::<Vec<_>>()));
     }
-    for loaded in prepared.models.iter().filter(|m| !m.model.params.is_empty()) {
+    for loaded in prepared
+        .models
+        .iter()
+        .filter(|m| !m.model.params.is_empty())
+    {
         let runs = runs_of(results, &loaded.label, size);
         let row = (names.iter())
             .map(|name| {
@@ -374,7 +457,10 @@ fn params_figure(prepared: &Prepared, results: &[RunResult], size: usize) -> Opt
         groups.push((loaded.label.clone(), row));
     }
     let chart = BarChart {
-        title: format!("{}: trained params ({size} training points, median)", prepared.study.name),
+        title: format!(
+            "{}: trained params ({size} training points, median)",
+            prepared.study.name
+        ),
         y_label: "value".into(),
         categories: names,
         groups,
@@ -398,7 +484,10 @@ fn generalisation_figures(
 ) -> Vec<Figure> {
     let stem = (data.path.file_stem()).map_or("record".to_string(), |s| s.to_string_lossy().into());
     let tables = predictions(prepared, trained, data, Mode::Online, notes);
-    let title = format!("{}: free run on {stem} (never trained on)", prepared.study.name);
+    let title = format!(
+        "{}: free run on {stem} (never trained on)",
+        prepared.study.name
+    );
     (state_charts(prepared, &tables, data, &title).into_iter())
         .map(|(state, svg)| Figure {
             name: format!("generalisation_{stem}_{state}"),

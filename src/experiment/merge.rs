@@ -75,9 +75,10 @@ pub struct Merged {
 pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<Merged, ExperimentFailure> {
     let mut records = Vec::new();
     for dir in dirs {
-        let record = results::read_study_record(dir)?.ok_or_else(|| ExperimentError::NotAnExperiment {
-            dir: dir.display().to_string(),
-        })?;
+        let record =
+            results::read_study_record(dir)?.ok_or_else(|| ExperimentError::NotAnExperiment {
+                dir: dir.display().to_string(),
+            })?;
         records.push(record);
     }
     let Some(first) = records.first() else {
@@ -115,11 +116,14 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<Merged, ExperimentFailure> 
         let (found, bad) = results::read_all(dir);
         unreadable.extend(bad);
         for result in found {
-            by_id.entry(result.id.clone()).or_insert((result, dir.clone()));
+            by_id
+                .entry(result.id.clone())
+                .or_insert((result, dir.clone()));
         }
     }
-    let homes: BTreeMap<String, PathBuf> =
-        (by_id.iter()).map(|(id, (_, dir))| (id.clone(), dir.clone())).collect();
+    let homes: BTreeMap<String, PathBuf> = (by_id.iter())
+        .map(|(id, (_, dir))| (id.clone(), dir.clone()))
+        .collect();
     let results: Vec<RunResult> = by_id.into_values().map(|(result, _)| result).collect();
     claim_directory(out, &prepared.record)?;
     let lookup = |id: &str| {

@@ -27,6 +27,10 @@ pub mod report;
 pub mod results;
 pub mod study;
 pub mod tables;
+#[cfg(test)]
+mod tests;
+#[cfg(test)]
+mod tests_run;
 
 pub use error::{ExperimentError, ExperimentFailure};
 pub use execute::{execute, prepare, LoadedModel, Prepared, Progress};

@@ -135,7 +135,11 @@ pub fn truth_along(
     Ok(TruthRun {
         times: run.times[..rows].to_vec(),
         values,
-        deviation: if deviation.is_nan() { f64::INFINITY } else { deviation },
+        deviation: if deviation.is_nan() {
+            f64::INFINITY
+        } else {
+            deviation
+        },
     })
 }
 

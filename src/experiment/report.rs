@@ -73,18 +73,32 @@ pub fn number(value: f64) -> String {
 
 fn spread_cell(spread: Option<Spread>) -> String {
     spread.map_or("–".into(), |s| {
-        format!("{} <small>[{} – {}]</small>", number(s.median), number(s.min), number(s.max))
+        format!(
+            "{} <small>[{} – {}]</small>",
+            number(s.median),
+            number(s.min),
+            number(s.max)
+        )
     })
 }
 
 /// The settings of a study in one paragraph.
 pub fn describe(study: &Study) -> String {
     let models: Vec<String> = (study.models.iter())
-        .map(|m| format!("<code>{}</code> ({})", escape(&m.label), escape(&m.path.display().to_string())))
+        .map(|m| {
+            format!(
+                "<code>{}</code> ({})",
+                escape(&m.label),
+                escape(&m.path.display().to_string())
+            )
+        })
         .collect();
     let validation = match &study.validation {
         Validation::FromRow(row) => format!("rows from {row} on validate; the rows before train"),
-        Validation::File(path) => format!("<code>{}</code> validates", escape(&path.display().to_string())),
+        Validation::File(path) => format!(
+            "<code>{}</code> validates",
+            escape(&path.display().to_string())
+        ),
     };
     format!(
         "<p>Models {}. Data <code>{}</code>: {validation}. Sizes {:?} training pairs, {} \
@@ -111,7 +125,15 @@ pub fn section(
     let study = &prepared.study;
     let mut html = String::new();
     let _ = writeln!(html, "<section id=\"{}\">", escape(&study.name));
-    let _ = writeln!(html, "<h2>{}</h2>", escape(if study.title.is_empty() { &study.name } else { &study.title }));
+    let _ = writeln!(
+        html,
+        "<h2>{}</h2>",
+        escape(if study.title.is_empty() {
+            &study.name
+        } else {
+            &study.title
+        })
+    );
     html.push_str(&describe(study));
     let ok = results.iter().filter(|r| r.is_ok()).count();
     let seconds: f64 = results.iter().map(|r| r.wall_seconds).sum();
@@ -171,7 +193,12 @@ fn summary_table(rows: &[SummaryRow]) -> String {
          [min – max]</th><th>online MSE [min – max]</th>",
     );
     let generalisation: Vec<String> = (rows.first())
-        .map(|r| r.generalisation.iter().map(|(name, _)| name.clone()).collect())
+        .map(|r| {
+            r.generalisation
+                .iter()
+                .map(|(name, _)| name.clone())
+                .collect()
+        })
         .unwrap_or_default();
     for name in &generalisation {
         let _ = write!(html, "<th>free run on {}</th>", escape(name));
@@ -201,7 +228,11 @@ fn summary_table(rows: &[SummaryRow]) -> String {
 fn params_table(prepared: &Prepared, results: &[RunResult]) -> String {
     let size = prepared.study.figure_size();
     let mut html = String::new();
-    for loaded in prepared.models.iter().filter(|m| !m.model.params.is_empty()) {
+    for loaded in prepared
+        .models
+        .iter()
+        .filter(|m| !m.model.params.is_empty())
+    {
         let runs: Vec<&RunResult> = runs_of(results, &loaded.label, size)
             .into_iter()
             .filter(|r| r.is_ok())
@@ -209,7 +240,10 @@ fn params_table(prepared: &Prepared, results: &[RunResult]) -> String {
         if runs.is_empty() {
             continue;
         }
-        let truth = prepared.truth.as_ref().map(|t| super::reference::true_params(t, &loaded.model));
+        let truth = prepared
+            .truth
+            .as_ref()
+            .map(|t| super::reference::true_params(t, &loaded.model));
         let _ = writeln!(
             html,
             "<p>Trained params of <code>{}</code> at {size} points, over {} replicates (median \
@@ -218,7 +252,10 @@ fn params_table(prepared: &Prepared, results: &[RunResult]) -> String {
             runs.len()
         );
         for param in &loaded.model.params {
-            let values: Vec<f64> = runs.iter().filter_map(|r| RunResult::measure(&r.params, &param.name)).collect();
+            let values: Vec<f64> = runs
+                .iter()
+                .filter_map(|r| RunResult::measure(&r.params, &param.name))
+                .collect();
             let true_value = (truth.iter().flatten())
                 .find(|(name, _)| name == &param.name)
                 .map_or("–".into(), |(_, v)| number(*v));
@@ -231,7 +268,11 @@ fn params_table(prepared: &Prepared, results: &[RunResult]) -> String {
         }
         html.push_str("</table>\n");
         if let Some(run) = representative(results, &loaded.label, size) {
-            let _ = writeln!(html, "<p><small>Figures use run <code>{}</code>.</small></p>", escape(&run.id));
+            let _ = writeln!(
+                html,
+                "<p><small>Figures use run <code>{}</code>.</small></p>",
+                escape(&run.id)
+            );
         }
     }
     html

@@ -167,12 +167,14 @@ impl RunResult {
 
     /// The offline error of an ok run, infinite when it was not finite.
     pub fn offline(&self) -> Option<f64> {
-        self.is_ok().then(|| self.offline_mse.unwrap_or(f64::INFINITY))
+        self.is_ok()
+            .then(|| self.offline_mse.unwrap_or(f64::INFINITY))
     }
 
     /// The online error of an ok run, infinite when it diverged.
     pub fn online(&self) -> Option<f64> {
-        self.is_ok().then(|| self.online_mse.unwrap_or(f64::INFINITY))
+        self.is_ok()
+            .then(|| self.online_mse.unwrap_or(f64::INFINITY))
     }
 
     /// The value of a named measure of an ok run, infinite when not finite.

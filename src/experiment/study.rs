@@ -246,7 +246,11 @@ impl Study {
             }
         }
         if self.sizes.is_empty() || self.sizes.contains(&0) {
-            return bad("--sizes", "positive training sizes", format!("{:?}", self.sizes));
+            return bad(
+                "--sizes",
+                "positive training sizes",
+                format!("{:?}", self.sizes),
+            );
         }
         if self.replicates == 0 {
             return bad("--replicates", "at least one replicate", "0".into());
@@ -258,7 +262,11 @@ impl Study {
             return bad("--batch/--substeps", "positive values", "0".into());
         }
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return bad("--lr", "a positive learning rate", self.learning_rate.to_string());
+            return bad(
+                "--lr",
+                "a positive learning rate",
+                self.learning_rate.to_string(),
+            );
         }
         if let Validation::FromRow(0) = self.validation {
             return bad("--val-from", "a row after the first", "0".into());
@@ -269,11 +277,15 @@ impl Study {
     /// The size the trajectory, closure and param figures show: the representative size if
     /// it is in the grid, else the grid's size closest to it (by ratio).
     pub fn figure_size(&self) -> usize {
-        let wanted = self.representative_size.unwrap_or(PAPER_REPRESENTATIVE_SIZE) as f64;
+        let wanted = self
+            .representative_size
+            .unwrap_or(PAPER_REPRESENTATIVE_SIZE) as f64;
         let distance = |size: &&usize| ((**size as f64) / wanted).ln().abs();
         let mut sizes: Vec<&usize> = self.sizes.iter().collect();
         sizes.sort_by(|a, b| distance(a).total_cmp(&distance(b)).then(a.cmp(b)));
-        sizes.first().map_or(PAPER_REPRESENTATIVE_SIZE, |size| **size)
+        sizes
+            .first()
+            .map_or(PAPER_REPRESENTATIVE_SIZE, |size| **size)
     }
 
     /// Sizes in increasing order without repeats.
@@ -310,8 +322,7 @@ fn models(dir: &Path, names: &[&str]) -> Vec<StudyModel> {
 
 /// Whether a label is safe inside file names and run ids.
 pub fn valid_label(label: &str) -> bool {
-    !label.is_empty()
-        && (label.chars()).all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    !label.is_empty() && (label.chars()).all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
 /// Byte offset of a 1-based line and column in `text` (clamped to its length).

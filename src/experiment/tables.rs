@@ -15,7 +15,11 @@ pub const RESULTS_JSON: &str = "results.json";
 pub const SUMMARY_CSV: &str = "summary.csv";
 
 /// Writes `results.csv`, `results.json` and `summary.csv` into `dir`.
-pub fn write_tables(dir: &Path, study: &Study, results: &[RunResult]) -> Result<(), ExperimentFailure> {
+pub fn write_tables(
+    dir: &Path,
+    study: &Study,
+    results: &[RunResult],
+) -> Result<(), ExperimentFailure> {
     let write = |name: &str, text: String| {
         crate::io::write_atomic(&dir.join(name), text.as_bytes()).map_err(ExperimentFailure::from)
     };
@@ -44,8 +48,9 @@ fn error_cell(result: &RunResult, value: Option<f64>) -> String {
 /// generalisation record and per param (the union over models, empty where a model has
 /// none), final loss, pair counts, wall time, error message.
 pub fn results_csv(study: &Study, results: &[RunResult]) -> Result<String, ExperimentFailure> {
-    let generalisation: Vec<String> =
-        (study.generalisation.iter()).map(|p| p.display().to_string()).collect();
+    let generalisation: Vec<String> = (study.generalisation.iter())
+        .map(|p| p.display().to_string())
+        .collect();
     let mut params: Vec<String> = Vec::new();
     for measure in results.iter().flat_map(|r| &r.params) {
         if !params.contains(&measure.name) {
@@ -56,11 +61,21 @@ pub fn results_csv(study: &Study, results: &[RunResult]) -> Result<String, Exper
         .map(String::from)
         .to_vec();
     header.extend(["offline_mse", "online_mse"].map(String::from));
-    header.extend(generalisation.iter().map(|g| format!("generalisation_mse:{g}")));
+    header.extend(
+        generalisation
+            .iter()
+            .map(|g| format!("generalisation_mse:{g}")),
+    );
     header.extend(params.iter().map(|p| format!("param:{p}")));
     header.extend(
-        ["final_loss", "train_pairs", "validation_pairs", "wall_seconds", "error"]
-            .map(String::from),
+        [
+            "final_loss",
+            "train_pairs",
+            "validation_pairs",
+            "wall_seconds",
+            "error",
+        ]
+        .map(String::from),
     );
     let mut writer = csv::Writer::from_writer(Vec::new());
     let csv_error = |error: csv::Error| ExperimentFailure::Internal(format!("csv: {error}"));
@@ -105,9 +120,18 @@ pub fn summary_csv(rows: &[SummaryRow]) -> Result<String, ExperimentFailure> {
         header.extend(["median", "min", "max"].map(|s| format!("{metric}_{s}")));
     }
     let generalisation: Vec<String> = (rows.first())
-        .map(|r| r.generalisation.iter().map(|(name, _)| name.clone()).collect())
+        .map(|r| {
+            r.generalisation
+                .iter()
+                .map(|(name, _)| name.clone())
+                .collect()
+        })
         .unwrap_or_default();
-    header.extend(generalisation.iter().map(|g| format!("generalisation_median:{g}")));
+    header.extend(
+        generalisation
+            .iter()
+            .map(|g| format!("generalisation_median:{g}")),
+    );
     header.push("wall_seconds_median".into());
     writer.write_record(&header).map_err(csv_error)?;
     for row in rows {
@@ -123,7 +147,10 @@ pub fn summary_csv(rows: &[SummaryRow]) -> Result<String, ExperimentFailure> {
         for (_, spread) in &row.generalisation {
             record.push(cell(spread.map(|s| s.median).filter(|v| !v.is_nan())));
         }
-        record.push(row.wall_seconds.map_or(String::new(), |s| format!("{s:.3}")));
+        record.push(
+            row.wall_seconds
+                .map_or(String::new(), |s| format!("{s:.3}")),
+        );
         writer.write_record(&record).map_err(csv_error)?;
     }
     finish(writer)

@@ -265,6 +265,7 @@ pub fn restore(
             found,
         });
     }
+    check_fits(model, &info, directory)?;
     let setup = Setup {
         step: info.step,
         substeps: info.substeps,
@@ -285,6 +286,28 @@ pub fn restore(
     });
     network.set_weights(&weights)?;
     Ok((network, setup, info))
+}
+
+/// Refuses a `run.json` whose vectors do not fit the model (an edited file).
+fn check_fits(model: &ir::Model, info: &RunInfo, directory: &Path) -> Result<(), TrainError> {
+    let norm = &info.normalisation;
+    let fits = norm.state_mean.len() == model.states.len()
+        && norm.state_std.len() == model.states.len()
+        && norm.input_mean.len() == model.inputs.len()
+        && norm.input_std.len() == model.inputs.len()
+        && info.closures.len() == model.closures.len()
+        && (info.closures.iter().zip(&model.closures))
+            .all(|(saved, closure)| saved.scales.len() == closure.outputs.len())
+        && info.step > 0.0
+        && info.step.is_finite();
+    if fits {
+        Ok(())
+    } else {
+        Err(bad_run(
+            &directory.join(RUN_FILE),
+            "expected normalisation, closures and step that fit the model, found others",
+        ))
+    }
 }
 
 fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {

@@ -3,7 +3,8 @@
 //! [`train`] turns a record into one-step pairs ([`pairs`]), normalises with the training
 //! split, resolves closure magnitudes and warns about stiff balances ([`analysis`]), then
 //! runs Adam on shuffled mini-batches of the backend network and reports the paper's two
-//! validation errors ([`evaluate`]). [`artifacts`] saves and reloads a trained network.
+//! validation errors ([`evaluate`]). [`artifacts`] saves and reloads a trained network,
+//! [`predict`] runs it along a record, [`mod@bench`] times its training steps.
 //!
 //! Decisions this module makes:
 //! - **Split**: the first `--train-points` pairs train; the remaining pairs of the same record

@@ -191,6 +191,18 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
     );
     let stable = free_run_error(warning.substeps_needed);
     assert!(stable < 1e-3, "free run with sub-steps: {stable}");
+    // `train` tells its caller before the first epoch.
+    let mut heard = Vec::new();
+    let trained = train(&model, &stiff, None, &options(1, 200), &mut |event| {
+        if let Event::Warning(warning) = event {
+            heard.push(warning.to_string());
+        }
+    })
+    .unwrap();
+    assert_eq!(trained.report.warnings.len(), 1);
+    assert_eq!(heard.len(), 1);
+    assert!(heard[0].contains("balance of `S` is stiff"), "{}", heard[0]);
+    assert!(heard[0].contains(&format!("--substeps {}", warning.substeps_needed)));
 }
 
 /// A fresh directory under the system's temporary directory.
