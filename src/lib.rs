@@ -17,6 +17,7 @@ pub mod diagnose;
 pub mod diagnostics;
 pub mod driver;
 pub mod experiment;
+pub mod fused;
 pub mod eval;
 pub mod io;
 pub mod ir;

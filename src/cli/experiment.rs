@@ -30,9 +30,9 @@ pub struct ExperimentArgs {
     /// `merge`: join the results of several experiment directories.
     #[command(subcommand)]
     pub action: Option<ExperimentAction>,
-    /// The study and how to run it.
+    /// The study and how to run it (boxed: the flags are many).
     #[command(flatten)]
-    pub run: RunArgs,
+    pub run: Box<RunArgs>,
 }
 
 /// Subcommands of `gbc experiment`.

@@ -53,16 +53,11 @@ impl FeatureMap {
         self.len() == 0
     }
 
-    /// Indices of the features a free-run refinement adjusts: the constant and `l` alone,
-    /// and with `linear` also each present variable alone and times `l`.
-    pub fn directions(&self, linear: bool) -> Vec<usize> {
+    /// Indices of the features a free-run refinement adjusts: the constant and `l` alone
+    /// (a constant offset and a term proportional to the corrected quantity).
+    pub fn directions(&self) -> Vec<usize> {
         let v = self.center.len();
-        let quadratic = 1 + v + v * (v + 1) / 2;
-        if linear {
-            (0..=v).chain(quadratic..=quadratic + v).collect()
-        } else {
-            vec![0, quadratic]
-        }
+        vec![0, 1 + v + v * (v + 1) / 2]
     }
 
     fn normalise(&self, index: usize, value: f64) -> f64 {
@@ -122,9 +117,8 @@ mod tests {
         expected.extend([2.0, 1.0, 2.0, -2.0]);
         assert_eq!(out, expected);
         assert_eq!(map.len(), expected.len());
-        // The constant, l, then v_j and l v_j.
-        assert_eq!(map.directions(false), vec![0, 6]);
-        assert_eq!(map.directions(true), vec![0, 1, 2, 6, 7, 8]);
+        // The constant and l alone.
+        assert_eq!(map.directions(), vec![0, 6]);
     }
 
     #[test]

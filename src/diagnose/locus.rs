@@ -6,8 +6,9 @@
 //! Each locus is tried with *present* features (everything the model knows at `t`, see
 //! [`super::features`]) and with *history* features (plus a delay embedding of the
 //! measured record, at a short and a long delay unless one is given). All are fitted one
-//! step ahead and scored; the [`REFINED`] best loci are then refined on the training free
-//! run and scored again. At the best locus, history is needed when it leaves clearly less
+//! step ahead; every present correction, and the history corrections of the [`REFINED`]
+//! best loci, are then refined on the training free run (params, gain, constant and
+//! proportional terms) and scored. At the best locus, history is needed when it leaves clearly less
 //! excess gap (above the noise floor) than the present alone: by a factor
 //! [`HISTORY_MARGIN`]. Loci whose held-out errors cannot be told from the best one's by a
 //! paired test over time blocks are marked as tied.
@@ -26,8 +27,9 @@ use rayon::prelude::*;
 pub const HISTORY_MARGIN: f64 = 2.0;
 /// Loci refined on the free run.
 pub const REFINED: usize = 3;
-/// Blocks of the paired test between loci.
-const TIE_BLOCKS: usize = 20;
+/// Blocks of the paired test between loci (few and long: free-run errors are correlated
+/// in time).
+const TIE_BLOCKS: usize = 8;
 /// Name of the synthesised closure.
 const CLOSURE: &str = "__diagnose_closure";
 /// Name of its output.
@@ -148,17 +150,13 @@ pub fn locate(
         .collect::<Result<Vec<_>, _>>()?;
     let mut trials: Vec<Trial> = found.into_iter().flatten().collect();
     trials.par_iter_mut().for_each(|trial| {
-        let t0 = std::time::Instant::now();
         refine(context, trial, false);
-        eprintln!("PROFILE refine {} {:?}", trial.target.name, t0.elapsed());
         tick();
     });
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
     let top = trials.len().min(REFINED);
     trials[..top].par_iter_mut().for_each(|trial| {
-        let t0 = std::time::Instant::now();
         refine(context, trial, true);
-        eprintln!("PROFILE refine linear {} {:?}", trial.target.name, t0.elapsed());
         tick();
     });
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
@@ -251,20 +249,14 @@ fn try_target(context: &Context, target: &Target, params: &[f64], lags: &[Lags])
         return Ok(None);
     };
     let (train, end) = (&context.split.train, context.split.train_rows.end);
-    let t0 = std::time::Instant::now();
     let Ok(pass) = correction::one_step_pass(&mut corrected, train, end) else {
         return Ok(None);
     };
-    eprintln!("PROFILE {} pass {:?}", target.name, t0.elapsed());
     let theta = correction::theta_of(&corrected.constraints, params);
     let mut variant = |lags| {
-        let t0 = std::time::Instant::now();
         let map = feature_map(context, &pass, lags);
         let solution = correction::fit(&pass, &map, train, &context.normalisation, &theta)?;
-        let t1 = t0.elapsed();
-        let v = score(context, &mut corrected, map, solution);
-        eprintln!("PROFILE {} {:?} fit {:?} score {:?}", target.name, lags.map(|l: Lags| l.delay), t1, t0.elapsed() - t1);
-        Some(v)
+        Some(score(context, &mut corrected, map, solution))
     };
     let present = variant(None);
     let history = (lags.iter())
@@ -279,13 +271,13 @@ fn try_target(context: &Context, target: &Target, params: &[f64], lags: &[Lags])
     }))
 }
 
-/// Refines a trial's present variant (with `linear`, both variants and along every
-/// linear direction) on the training free run, and scores it again.
-fn refine(context: &Context, trial: &mut Trial, linear: bool) {
+/// Refines a trial's present correction (with `history`, its history correction) on the
+/// training free run, and scores it again.
+fn refine(context: &Context, trial: &mut Trial, history: bool) {
     let split = &context.split;
     let fitting = (&split.train, split.train_rows.clone(), &context.normalisation);
-    let variants = if linear {
-        vec![&mut trial.present, &mut trial.history]
+    let variants = if history {
+        vec![&mut trial.history]
     } else {
         vec![&mut trial.present]
     };
@@ -293,14 +285,11 @@ fn refine(context: &Context, trial: &mut Trial, linear: bool) {
         let along = correction::values_along(&trial.pass, &variant.map, &split.train, &variant.solution.weights);
         let typical = correction::root_mean_square(&along);
         let refinement = correction::Refinement {
-            directions: variant.map.directions(false),
+            directions: variant.map.directions(),
             reference: if typical > 0.0 { typical } else { 1e-3 * variant.map.locus_scale },
         };
         let solution = correction::refine(&trial.corrected, &variant.map, &variant.solution, &refinement, fitting.clone());
-        let refined = score(context, &mut trial.corrected, variant.map.clone(), solution);
-        if refined.gap <= variant.gap {
-            *variant = refined;
-        }
+        *variant = score(context, &mut trial.corrected, variant.map.clone(), solution);
     }
 }
 

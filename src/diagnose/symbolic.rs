@@ -13,7 +13,7 @@
 //! rows; the best formula of each size up to [`MAX_TERMS`] is kept when it leaves at most
 //! half the unexplained variance of the smaller ones.
 
-use super::linalg::Normal;
+use super::linalg::{solve_spd, Normal};
 use super::locus::Along;
 use super::report::Formula;
 
@@ -41,11 +41,12 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     if library.is_empty() || y.len() < 2 * MAX_TERMS {
         return Vec::new();
     }
-    let mut supports: Vec<Vec<usize>> = (0..library.len()).map(|j| vec![j]).collect();
-    supports.extend(THRESHOLDS.iter().filter_map(|&t| stlsq(&library, y, t)));
+    let gram = Gram::new(&library, y);
+    let mut supports = best_subsets(&gram);
+    supports.extend(THRESHOLDS.iter().filter_map(|&t| stlsq(&gram, t)));
     let mut best: Vec<Option<(f64, Vec<usize>, Vec<f64>)>> = vec![None; MAX_TERMS + 1];
     for support in supports.into_iter().filter(|s| !s.is_empty() && s.len() <= MAX_TERMS) {
-        if let Some((r2, coefficients)) = refit(&library, y, &support) {
+        if let Some((r2, coefficients)) = gram.fit(&support) {
             let slot = &mut best[support.len()];
             if slot.as_ref().map_or(true, |(b, _, _)| r2 > *b) {
                 *slot = Some((r2, support, coefficients));
@@ -67,6 +68,93 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     }
     formulas
 }
+
+/// Cross products of the unit-scaled library columns and the target.
+struct Gram {
+    size: usize,
+    /// `X^T X` of the scaled columns, row-major.
+    xx: Vec<f64>,
+    /// `X^T y`.
+    xy: Vec<f64>,
+    /// Column scales (root mean squares).
+    scales: Vec<f64>,
+    /// `y^T y` and the total sum of squares about the mean.
+    yy: f64,
+    total: f64,
+}
+
+impl Gram {
+    fn new(library: &[Term], y: &[f64]) -> Gram {
+        let size = library.len();
+        let scales: Vec<f64> = library.iter().map(|t| rms(&t.values).max(1e-300)).collect();
+        let mut normal = Normal::new(size);
+        let mut row = vec![0.0; size];
+        for (i, &target) in y.iter().enumerate() {
+            for (slot, (term, scale)) in row.iter_mut().zip(library.iter().zip(&scales)) {
+                *slot = term.values[i] / scale;
+            }
+            normal.add(&row, target, 1.0);
+        }
+        normal.finish();
+        let mean = y.iter().sum::<f64>() / y.len() as f64;
+        Gram {
+            size,
+            xx: normal.a,
+            xy: normal.b,
+            scales,
+            yy: y.iter().map(|v| v * v).sum(),
+            total: y.iter().map(|v| (v - mean).powi(2)).sum(),
+        }
+    }
+
+    /// Least squares on `support` with a relative ridge: scaled coefficients and the
+    /// residual sum of squares.
+    fn solve(&self, support: &[usize], ridge: f64) -> Option<(Vec<f64>, f64)> {
+        let n = support.len();
+        let mut a = vec![0.0; n * n];
+        for (r, &i) in support.iter().enumerate() {
+            for (c, &j) in support.iter().enumerate() {
+                a[r * n + c] = self.xx[i * self.size + j];
+            }
+            a[r * n + r] *= 1.0 + ridge;
+        }
+        let b: Vec<f64> = support.iter().map(|&i| self.xy[i]).collect();
+        let x = solve_spd(&a, &b)?;
+        let explained: f64 = x.iter().zip(&b).map(|(p, q)| p * q).sum();
+        Some((x, (self.yy - explained).max(0.0)))
+    }
+
+    /// `(R^2, coefficients in physical units)` of `support`.
+    fn fit(&self, support: &[usize]) -> Option<(f64, Vec<f64>)> {
+        let (x, residual) = self.solve(support, 1e-12)?;
+        let coefficients = x.iter().zip(support).map(|(c, &j)| c / self.scales[j]).collect();
+        (self.total > 0.0).then(|| (1.0 - residual / self.total, coefficients))
+    }
+}
+
+/// The best single terms, pairs and (for libraries up to [`EXHAUSTIVE`] terms) triples,
+/// by exhaustive search.
+fn best_subsets(gram: &Gram) -> Vec<Vec<usize>> {
+    let n = gram.size;
+    let mut found = Vec::new();
+    let mut keep_best = |candidates: &mut dyn Iterator<Item = Vec<usize>>| {
+        let best = candidates
+            .filter_map(|s| gram.solve(&s, 1e-12).map(|(_, rss)| (rss, s)))
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((_, support)) = best {
+            found.push(support);
+        }
+    };
+    keep_best(&mut (0..n).map(|i| vec![i]));
+    keep_best(&mut (0..n).flat_map(|i| (i + 1..n).map(move |j| vec![i, j])));
+    if n <= EXHAUSTIVE {
+        keep_best(&mut (0..n).flat_map(|i| (i + 1..n).flat_map(move |j| (j + 1..n).map(move |k| vec![i, j, k]))));
+    }
+    found
+}
+
+/// Libraries up to this size get an exhaustive search of triples.
+const EXHAUSTIVE: usize = 200;
 
 fn library(along: &Along) -> Vec<Term> {
     let rows = along.values.len();
@@ -141,11 +229,10 @@ fn variable_terms(name: &str, x: &[f64]) -> Vec<Term> {
 }
 
 /// Sequentially thresholded least squares on unit-scaled columns; the final support.
-fn stlsq(library: &[Term], y: &[f64], threshold: f64) -> Option<Vec<usize>> {
-    let scales: Vec<f64> = library.iter().map(|t| rms(&t.values).max(1e-300)).collect();
-    let mut support: Vec<usize> = (0..library.len()).collect();
+fn stlsq(gram: &Gram, threshold: f64) -> Option<Vec<usize>> {
+    let mut support: Vec<usize> = (0..gram.size).collect();
     for _ in 0..10 {
-        let coefficients = least_squares(library, y, &support, &scales, 1e-8)?;
+        let (coefficients, _) = gram.solve(&support, 1e-8)?;
         let largest = coefficients.iter().fold(0.0f64, |m, c| m.max(c.abs()));
         let kept: Vec<usize> = (support.iter().zip(&coefficients))
             .filter(|(_, c)| c.abs() >= threshold * largest)
@@ -157,36 +244,6 @@ fn stlsq(library: &[Term], y: &[f64], threshold: f64) -> Option<Vec<usize>> {
         support = kept;
     }
     Some(support)
-}
-
-/// Least squares of `y` on the columns `support` (each divided by `scales`), with a small
-/// relative ridge; the scaled coefficients.
-fn least_squares(library: &[Term], y: &[f64], support: &[usize], scales: &[f64], ridge: f64) -> Option<Vec<f64>> {
-    let mut normal = Normal::new(support.len());
-    let mut row = vec![0.0; support.len()];
-    for (i, &target) in y.iter().enumerate() {
-        for (slot, &j) in row.iter_mut().zip(support) {
-            *slot = library[j].values[i] / scales[j];
-        }
-        normal.add(&row, target, 1.0);
-    }
-    normal.finish();
-    normal.solve(ridge, support.len())
-}
-
-/// Refits `support` in physical units; `(R^2, coefficients)`.
-fn refit(library: &[Term], y: &[f64], support: &[usize]) -> Option<(f64, Vec<f64>)> {
-    let ones = vec![1.0; library.len()];
-    let coefficients = least_squares(library, y, support, &ones, 1e-12)?;
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let total: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-    let residual: f64 = (0..y.len())
-        .map(|i| {
-            let fitted: f64 = support.iter().zip(&coefficients).map(|(&j, c)| c * library[j].values[i]).sum();
-            (y[i] - fitted).powi(2)
-        })
-        .sum();
-    (total > 0.0).then(|| (1.0 - residual / total, coefficients))
 }
 
 fn format_formula(library: &[Term], support: &[usize], coefficients: &[f64]) -> String {
@@ -246,7 +303,10 @@ mod tests {
         let found = hints(&along, "correction of mu");
         let best = found.last().unwrap();
         assert!(best.r2 > 0.999, "{found:?}");
-        assert!(found.iter().any(|f| f.text.contains("mu * exp(-E/0.2)") && f.r2 > 0.999), "{found:?}");
+        // The exact two-term law: -0.5 mu + 0.5 mu exp(-E/0.2).
+        let exact = found.iter().find(|f| f.terms == 2).unwrap();
+        assert!(exact.r2 > 1.0 - 1e-9, "{found:?}");
+        assert_eq!(exact.text, "-0.5 * mu + 0.5 * mu * exp(-E/0.2)");
     }
 
     #[test]

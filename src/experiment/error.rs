@@ -1,5 +1,7 @@
 //! Why an experiment could not run.
 
+use std::sync::Arc;
+
 use miette::{Diagnostic, NamedSource, SourceSpan};
 use thiserror::Error;
 
@@ -26,7 +28,7 @@ pub enum ExperimentError {
         reason: String,
         /// The file's text, where it was read.
         #[source_code]
-        source_code: Option<NamedSource<String>>,
+        source_code: Option<Arc<NamedSource<String>>>,
         /// Where in the file.
         #[label("here")]
         span: Option<SourceSpan>,

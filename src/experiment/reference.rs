@@ -120,8 +120,10 @@ pub fn truth_along(
     for (index, state) in truth.states.iter().enumerate() {
         if let Some(actual) = data.column(&state.name) {
             let std = state_std(actual);
-            for row in checked_from.min(rows)..rows {
-                deviation = deviation.max((run.states[index][row] - actual[row]).abs() / std);
+            let start = checked_from.min(rows);
+            let pairs = run.states[index][start..rows].iter().zip(&actual[start..rows]);
+            for (simulated, measured) in pairs {
+                deviation = deviation.max((simulated - measured).abs() / std);
             }
         }
     }

@@ -271,13 +271,9 @@ pub fn spread(values: &[f64]) -> Option<Spread> {
     }
     sorted.sort_by(f64::total_cmp);
     let middle = sorted.len() / 2;
-    let median = if sorted.len() % 2 == 1 {
-        sorted[middle]
-    } else if sorted[middle - 1] == sorted[middle] {
-        sorted[middle]
-    } else {
-        (sorted[middle - 1] + sorted[middle]) / 2.0
-    };
+    // Two equal middle values (infinities included) are the median as they are.
+    let (low, high) = (sorted[(sorted.len() - 1) / 2], sorted[middle]);
+    let median = if low == high { high } else { (low + high) / 2.0 };
     Some(Spread {
         median,
         min: sorted[0],

@@ -4,6 +4,7 @@
 //! studies are built in ([`Study::chemostat`], [`Study::bioreactor`]).
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use miette::{NamedSource, SourceSpan};
 
@@ -209,7 +210,7 @@ impl Study {
             ExperimentError::BadStudy {
                 path: name.to_string(),
                 reason: error.to_string(),
-                source_code: Some(NamedSource::new(name, text.to_string())),
+                source_code: Some(Arc::new(NamedSource::new(name, text.to_string()))),
                 span: Some(SourceSpan::from((offset, 0))),
             }
         })?;

@@ -1,0 +1,1 @@
+//! A hand-fused training step (performance study, issue 8).
