@@ -26,16 +26,18 @@ impl<E: Real> Adam<E> {
         }
     }
 
-    /// One bias-corrected update of `weights` along `gradients`.
-    pub fn update(&mut self, weights: &mut [Vec<E>], gradients: &[Vec<E>], learning_rate: f64) {
+    /// One bias-corrected update of `weights` along `gradients`, tensor `i` at learning
+    /// rate `learning_rates[i]`.
+    pub fn update(&mut self, weights: &mut [Vec<E>], gradients: &[Vec<E>], learning_rates: &[f64]) {
         self.steps += 1;
         let correction1 = 1.0 - BETA1.powi(self.steps);
         let correction2 = 1.0 - BETA2.powi(self.steps);
-        let step = E::from_double(learning_rate * correction2.sqrt() / correction1);
         let epsilon = E::from_double(EPSILON * correction2.sqrt());
         let (beta1, beta2) = (E::from_double(BETA1), E::from_double(BETA2));
         let (keep1, keep2) = (E::from_double(1.0 - BETA1), E::from_double(1.0 - BETA2));
         for (tensor, gradient) in gradients.iter().enumerate() {
+            let rate = learning_rates.get(tensor).copied().unwrap_or(0.0);
+            let step = E::from_double(rate * correction2.sqrt() / correction1);
             let first = &mut self.first[tensor];
             let second = &mut self.second[tensor];
             for (index, &g) in gradient.iter().enumerate() {
@@ -71,14 +73,14 @@ mod tests {
         let mut adam = Adam::<f64>::new([1].into_iter());
         let mut weights = vec![vec![1.0]];
         for &g in &gradients {
-            adam.update(&mut weights, &[vec![g]], 0.01);
+            adam.update(&mut weights, &[vec![g]], &[0.01]);
         }
         let expected = reference_steps(&gradients, 0.01);
         assert!((weights[0][0] - expected).abs() < 1e-12);
         // The first step moves by about the learning rate whatever the gradient's size.
         let mut fresh = Adam::<f64>::new([1].into_iter());
         let mut weight = vec![vec![0.0]];
-        fresh.update(&mut weight, &[vec![1e-4]], 0.01);
+        fresh.update(&mut weight, &[vec![1e-4]], &[0.01]);
         assert!((weight[0][0] + 0.01).abs() < 1e-6);
     }
 }

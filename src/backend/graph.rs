@@ -48,12 +48,27 @@ pub struct Graph<E: Element> {
     tape: OwnedTape<E, Cpu>,
 }
 
-/// The lag-0 state entries of a closure's network input: column `column` takes state-vector
-/// entry `state`, normalised by `1 / std`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StateColumns {
-    /// `(column, state index, 1 / std)` triples.
-    pub entries: Vec<(usize, usize, f64)>,
+/// One state-fed entry of a closure's network input: column `column` gains
+/// `factor * sources[source][state]` (the factor folds in `1 / std` and an interpolation
+/// weight).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmbedEntry {
+    /// Network input column.
+    pub column: usize,
+    /// Which source matrix: 0 the stage estimate, `j >= 1` the state predicted `j` steps
+    /// into a rollout.
+    pub source: usize,
+    /// Entry of the source's state vector.
+    pub state: usize,
+    /// Multiplier.
+    pub factor: f64,
+}
+
+/// The state-fed entries of a closure's network input.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EmbedColumns {
+    /// Entries, in any order.
+    pub entries: Vec<EmbedEntry>,
 }
 
 impl<E: Element> Graph<E>
@@ -167,35 +182,55 @@ where
         Ok(result)
     }
 
-    /// A closure's network input: the constant embedding part (lags >= 1, inputs, already
-    /// normalised, lag-0 state entries holding `-mean/std`) plus the current state estimate
-    /// scaled into the lag-0 state entries.
+    /// A closure's network input: the constant embedding part (inputs and data-valued
+    /// lags, already normalised; entries fed by a state holding `-mean/std` or the
+    /// normalised data share of an interpolation) plus `factor * sources[source][state]`
+    /// for each entry of `columns`. Source 0 is the stage estimate of the current state;
+    /// sources 1.. are states predicted earlier in a rollout.
     pub fn embed(
         &mut self,
         constant: &Matrix<E>,
-        states: &Matrix<E>,
-        columns: &Arc<StateColumns>,
+        sources: &[&Matrix<E>],
+        columns: &Arc<EmbedColumns>,
     ) -> Result<Matrix<E>, BackendError> {
         let (rows, width) = *constant.shape();
-        let state_width = states.shape().1;
-        let state_values = states.as_vec();
         let mut values = constant.as_vec();
-        for row in 0..rows {
-            for &(column, state, inverse_std) in &columns.entries {
-                values[row * width + column] +=
-                    state_values[row * state_width + state] * E::from_double(inverse_std);
+        let mut source_values = Vec::with_capacity(sources.len());
+        for source in sources {
+            if source.shape().0 != rows {
+                return Err(BackendError::internal("embedding sources differ in rows"));
+            }
+            source_values.push((source.shape().1, source.as_vec()));
+        }
+        for entry in &columns.entries {
+            let (state_width, state_values) = (source_values.get(entry.source))
+                .filter(|(width, _)| entry.state < *width)
+                .ok_or_else(|| BackendError::internal("embedding entry without a source"))?;
+            let factor = E::from_double(entry.factor);
+            for row in 0..rows {
+                values[row * width + entry.column] +=
+                    state_values[row * state_width + entry.state] * factor;
             }
         }
         let result = self.device.try_tensor_from_vec(values, (rows, width))?;
-        let (states_ghost, result_ghost) = (states.ghost(), result.ghost());
+        let result_ghost = result.ghost();
+        let ghosts: Vec<_> = sources.iter().map(|s| (s.ghost(), s.shape().1)).collect();
         let columns = Arc::clone(columns);
         self.tape.add_backward_op(move |grads| {
             let upstream = grads.get_or_alloc_mut(&result_ghost)?.to_vec();
-            let target = grads.get_or_alloc_mut(&states_ghost)?;
-            for row in 0..rows {
-                for &(column, state, inverse_std) in &columns.entries {
-                    target[row * state_width + state] +=
-                        upstream[row * width + column] * E::from_double(inverse_std);
+            for (source, (ghost, state_width)) in ghosts.iter().enumerate() {
+                let entries = columns.entries.iter().filter(|e| e.source == source);
+                let mut entries = entries.peekable();
+                if entries.peek().is_none() {
+                    continue;
+                }
+                let target = grads.get_or_alloc_mut(ghost)?;
+                for entry in entries {
+                    let factor = E::from_double(entry.factor);
+                    for row in 0..rows {
+                        target[row * state_width + entry.state] +=
+                            upstream[row * width + entry.column] * factor;
+                    }
                 }
             }
             Ok(())
@@ -263,39 +298,55 @@ where
         Ok((result, values))
     }
 
-    /// Mean over rows and measured states of `((prediction - target) * inverse_std)^2`;
-    /// measured states are the first `inverse_std.len()` columns of `prediction`.
+    /// Mean over steps, rows and measured states of
+    /// `((prediction - target) * inverse_std)^2`: `predictions[k]` is compared with
+    /// `targets[k]` (`rows x measured`); measured states are the first `inverse_std.len()`
+    /// columns of each prediction.
     pub fn normalised_mse(
         &mut self,
-        prediction: &Matrix<E>,
-        targets: &[E],
+        predictions: &[Matrix<E>],
+        targets: &[&[E]],
         inverse_std: &[E],
     ) -> Result<Scalar<E>, BackendError> {
-        let (rows, width) = *prediction.shape();
+        if predictions.len() != targets.len() || predictions.is_empty() {
+            return Err(BackendError::internal("loss needs one target block per step"));
+        }
+        let (rows, width) = *predictions[0].shape();
         let measured = inverse_std.len();
-        let values = prediction.as_vec();
-        let count = E::from_double((rows * measured).max(1) as f64);
-        let mut residuals = vec![E::ZERO; rows * measured];
+        let count = E::from_double((predictions.len() * rows * measured).max(1) as f64);
+        let mut residuals = Vec::with_capacity(predictions.len());
         let mut total = E::ZERO;
-        for row in 0..rows {
-            for state in 0..measured {
-                let scaled = (values[row * width + state] - targets[row * measured + state])
-                    * inverse_std[state];
-                residuals[row * measured + state] = scaled;
-                total += scaled * scaled;
+        for (prediction, target) in predictions.iter().zip(targets) {
+            let values = prediction.as_vec();
+            if values.len() != rows * width || target.len() != rows * measured {
+                return Err(BackendError::internal("loss blocks differ in size"));
             }
+            let mut scaled_residuals = vec![E::ZERO; rows * measured];
+            for row in 0..rows {
+                for state in 0..measured {
+                    let scaled = (values[row * width + state] - target[row * measured + state])
+                        * inverse_std[state];
+                    scaled_residuals[row * measured + state] = scaled;
+                    total += scaled * scaled;
+                }
+            }
+            residuals.push(scaled_residuals);
         }
         let loss = self.device.try_tensor_from_vec(vec![total / count], ())?;
-        let (loss_ghost, prediction_ghost) = (loss.ghost(), prediction.ghost());
+        let loss_ghost = loss.ghost();
+        let ghosts: Vec<_> = predictions.iter().map(|p| p.ghost()).collect();
         let inverse_std = inverse_std.to_vec();
         self.tape.add_backward_op(move |grads| {
             let upstream = grads.get_or_alloc_mut(&loss_ghost)?[0];
-            let target = grads.get_or_alloc_mut(&prediction_ghost)?;
             let factor = upstream * E::from_double(2.0) / count;
-            for row in 0..rows {
-                for state in 0..measured {
-                    target[row * width + state] +=
-                        factor * residuals[row * measured + state] * inverse_std[state];
+            for (ghost, step_residuals) in ghosts.iter().zip(&residuals) {
+                let target = grads.get_or_alloc_mut(ghost)?;
+                for row in 0..rows {
+                    for state in 0..measured {
+                        target[row * width + state] += factor
+                            * step_residuals[row * measured + state]
+                            * inverse_std[state];
+                    }
                 }
             }
             Ok(())

@@ -24,12 +24,15 @@
 mod adam;
 mod elementwise;
 mod graph;
+mod layout;
 mod net;
 pub mod program;
 pub mod real;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_rollout;
 
 use crate::ir;
 
@@ -41,7 +44,7 @@ pub fn initial_raw_params(model: &ir::Model) -> Vec<f64> {
     model
         .params
         .iter()
-        .map(net::raw_initial_value::<f64>)
+        .map(layout::raw_initial_value::<f64>)
         .collect()
 }
 
@@ -57,7 +60,7 @@ pub enum Precision {
 }
 
 /// Per-column normalisation from the training split (spec sections 3 and 4).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Normalisation {
     /// Mean of each measured state.
     pub state_mean: Vec<f64>,
@@ -67,6 +70,13 @@ pub struct Normalisation {
     pub input_mean: Vec<f64>,
     /// Standard deviation of each input (never zero).
     pub input_std: Vec<f64>,
+    /// Smallest value of each measured state over the training split (empty when
+    /// unknown, as in runs saved before it was recorded).
+    #[serde(default)]
+    pub state_min: Vec<f64>,
+    /// Largest value of each measured state over the training split (empty when unknown).
+    #[serde(default)]
+    pub state_max: Vec<f64>,
 }
 
 /// Everything besides the model that fixes the network.
@@ -112,6 +122,67 @@ pub struct Batch {
     pub embeddings: Vec<Vec<Vec<f64>>>,
     /// `rows x measured` states at `t + h` (may be empty when only predicting).
     pub targets: Vec<f64>,
+}
+
+/// A predicted state fed back into a later step's embedding: at a rollout step, network
+/// input `column` of a closure gains `weight` times state `state` as predicted `sample`
+/// steps into the window (linear interpolation between predicted samples; `sample >= 1`,
+/// sample 0 being the data the window starts from).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Feedback {
+    /// Network input column of the closure.
+    pub column: usize,
+    /// Steps into the window of the predicted state (at least 1).
+    pub sample: usize,
+    /// Index of the measured state.
+    pub state: usize,
+    /// Interpolation weight (physical units; the backend normalises).
+    pub weight: f64,
+}
+
+/// A batch of free-run windows of `steps` steps, row-major per step: each window starts
+/// at measured (and hidden-state) values and is stepped `steps` times, the network fed its
+/// own predictions through the state and, by [`Feedback`], through the delay embedding.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RolloutBatch {
+    /// Number of windows.
+    pub rows: usize,
+    /// Steps per window.
+    pub steps: usize,
+    /// `rows x (measured + hidden)` states at the window start.
+    pub states: Vec<f64>,
+    /// `inputs[step]`: `rows x inputs` held over that step.
+    pub inputs: Vec<Vec<f64>>,
+    /// `embeddings[step][closure][offset]`: `rows x width` raw embedding values from the
+    /// data, with every share that a [`Feedback`] supplies left at zero (lag-0 state
+    /// entries are ignored, as in [`Batch`]).
+    pub embeddings: Vec<Vec<Vec<Vec<f64>>>>,
+    /// `feedback[step][closure][offset]`: the predicted shares, the same for every row.
+    pub feedback: Vec<Vec<Vec<Vec<Feedback>>>>,
+    /// `targets[step]`: `rows x measured` states after that step (empty when predicting).
+    pub targets: Vec<Vec<f64>>,
+}
+
+/// How one optimiser step is taken.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepSettings {
+    /// Adam learning rate of the network weights.
+    pub learning_rate: f64,
+    /// Adam learning rate of the raw params.
+    pub param_learning_rate: f64,
+    /// Rescale the whole gradient to at most this Euclidean norm (none: no clipping).
+    pub max_gradient_norm: Option<f64>,
+}
+
+impl StepSettings {
+    /// One learning rate for everything, no clipping.
+    pub fn plain(learning_rate: f64) -> Self {
+        StepSettings {
+            learning_rate,
+            param_learning_rate: learning_rate,
+            max_gradient_norm: None,
+        }
+    }
 }
 
 /// One-step predictions for a batch.
@@ -196,7 +267,47 @@ impl Network {
 
     /// One Adam step on the batch's loss; returns the loss before the step.
     pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
-        dispatch!(mut self, net => net.train_step(batch, learning_rate))
+        self.train_step_with(batch, &StepSettings::plain(learning_rate))
+    }
+
+    /// One Adam step on the batch's loss with separate param learning rate and optional
+    /// gradient clipping; returns the loss before the step.
+    pub fn train_step_with(
+        &mut self,
+        batch: &Batch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        dispatch!(mut self, net => net.train_step(batch, settings))
+    }
+
+    /// One Adam step on the mean normalised squared error over every step of every
+    /// window of a rollout batch (gradients through the whole rollout); returns the loss
+    /// before the step.
+    pub fn rollout_step(
+        &mut self,
+        batch: &RolloutBatch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        dispatch!(mut self, net => net.rollout_step(batch, settings))
+    }
+
+    /// The rollout loss of a batch (see [`Network::rollout_step`]).
+    pub fn rollout_loss(&self, batch: &RolloutBatch) -> Result<f64, BackendError> {
+        dispatch!(self, net => net.rollout_loss(batch))
+    }
+
+    /// The rollout loss and its gradient with respect to every tensor of
+    /// [`Network::weights`].
+    pub fn rollout_gradient(
+        &self,
+        batch: &RolloutBatch,
+    ) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
+        dispatch!(self, net => net.rollout_gradient(batch))
+    }
+
+    /// The states after each step of each window: `[step]` of `rows x (measured + hidden)`.
+    pub fn rollout_predict(&self, batch: &RolloutBatch) -> Result<Vec<Vec<f64>>, BackendError> {
+        dispatch!(self, net => net.rollout_predict(batch))
     }
 
     /// The normalised one-step loss of a batch.

@@ -1,5 +1,6 @@
 //! The grey-box network in one element type: closure MLPs with runtime sizes, the physics
-//! program, and the RK4 (or discrete) step of the paper, recorded on a [`Graph`].
+//! program, and the RK4 (or discrete) step of the paper, recorded on a [`Graph`] once per
+//! step of a batch (one step for one-step pairs, `K` for a rollout window).
 
 use std::ops::DerefMut;
 use std::sync::Arc;
@@ -10,34 +11,18 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::adam::Adam;
-use super::graph::{
-    gradient_of, Element, GradientBuffer, Graph, Matrix, Scalar, StateColumns, Vector,
+use super::graph::{gradient_of, Element, GradientBuffer, Graph, Matrix, Scalar, Vector};
+use super::layout::{
+    check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout,
+    Prepared, PreparedStep,
 };
-use super::program::{state_index, Program};
-use super::real::{inverse_softplus, logit};
-use super::{BackendError, Batch, NamedTensor, Prediction, Setup};
-use crate::ir::{self, Activation, Constraint, Dynamics, Var};
+use super::program::Program;
+use super::{BackendError, Batch, NamedTensor, Prediction, RolloutBatch, Setup, StepSettings};
+use crate::ir::{self, Dynamics};
 
 /// Scale of the last layer's initial weights relative to Glorot's: small, so that a model
 /// starts as its priors (spec section 3).
 pub const INIT_LAST_LAYER: f64 = 1e-2;
-
-/// The network-side description of one closure.
-struct ClosureLayout {
-    /// Network input width.
-    width: usize,
-    /// Where the stage estimate enters the input.
-    state_columns: Arc<StateColumns>,
-    /// Per input column: mean and std used for normalisation.
-    column_mean: Vec<f64>,
-    column_std: Vec<f64>,
-    /// Which columns are lag-0 states (their constant part is `-mean/std`).
-    is_stage_state: Vec<bool>,
-    activation: Activation,
-    /// Index of its first tensor in the weight list, and its number of affine layers.
-    first_tensor: usize,
-    layers: usize,
-}
 
 /// The trainable grey-box network in element type `E`.
 pub struct GreyBox<E: Element> {
@@ -61,13 +46,11 @@ struct Tensors<E: Element> {
     params: Option<Vector<E>>,
 }
 
-/// A batch converted to the element type.
-struct Prepared<E: Element> {
-    rows: usize,
-    states: Matrix<E>,
-    inputs: Arc<Vec<E>>,
-    constants: Vec<Vec<Matrix<E>>>,
-    targets: Vec<E>,
+/// What a batch's forward pass yields: the predicted states after each step and the
+/// register values of the first stage of the first step.
+struct Forward<E: Element> {
+    predictions: Vec<Matrix<E>>,
+    first_values: Arc<Vec<E>>,
 }
 
 impl<E: Element> GreyBox<E>
@@ -132,54 +115,121 @@ where
         })
     }
 
-    /// One Adam step; returns the loss before it.
-    pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
-        let (loss, gradients) = self.loss_and_gradient(batch)?;
-        self.adam
-            .update(&mut self.weights, &gradients, learning_rate);
+    /// One Adam step on a one-step batch; returns the loss before it.
+    pub fn train_step(
+        &mut self,
+        batch: &Batch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        let (loss, gradients) = self.loss_and_gradient(|graph, this| this.prepare(graph, batch))?;
+        self.update(gradients, settings);
         Ok(loss)
     }
 
-    /// The loss of a batch.
+    /// One Adam step on a rollout batch; returns the loss before it.
+    pub fn rollout_step(
+        &mut self,
+        batch: &RolloutBatch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        let (loss, gradients) =
+            self.loss_and_gradient(|graph, this| this.prepare_rollout(graph, batch))?;
+        self.update(gradients, settings);
+        Ok(loss)
+    }
+
+    /// Clips the gradient's global norm (when asked) and takes the Adam step, params at
+    /// their own learning rate.
+    fn update(&mut self, mut gradients: Vec<Vec<E>>, settings: &StepSettings) {
+        if let Some(limit) = settings.max_gradient_norm {
+            let norm = (gradients.iter().flatten())
+                .map(|g| g.to_double().powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if norm > limit && norm.is_finite() {
+                let factor = E::from_double(limit / norm);
+                gradients.iter_mut().flatten().for_each(|g| *g = *g * factor);
+            }
+        }
+        let has_params = self.names.last().is_some_and(|n| n == "params");
+        let rates: Vec<f64> = (0..self.weights.len())
+            .map(|index| {
+                if has_params && index + 1 == self.weights.len() {
+                    settings.param_learning_rate
+                } else {
+                    settings.learning_rate
+                }
+            })
+            .collect();
+        self.adam.update(&mut self.weights, &gradients, &rates);
+    }
+
+    /// The loss of a one-step batch.
     pub fn loss(&self, batch: &Batch) -> Result<f64, BackendError> {
+        self.value_of(|graph, this| this.prepare(graph, batch))
+    }
+
+    /// The loss of a rollout batch.
+    pub fn rollout_loss(&self, batch: &RolloutBatch) -> Result<f64, BackendError> {
+        self.value_of(|graph, this| this.prepare_rollout(graph, batch))
+    }
+
+    fn value_of(
+        &self,
+        prepare: impl FnOnce(&Graph<E>, &Self) -> Result<Prepared<E>, BackendError>,
+    ) -> Result<f64, BackendError> {
         let mut graph = Graph::new(&self.device);
-        let (_, loss) = self.record_loss(&mut graph, batch)?;
+        let prepared = prepare(&graph, self)?;
+        let (_, loss) = self.record_loss(&mut graph, &prepared)?;
         Ok(loss.as_vec()[0].to_double())
     }
 
-    /// Records the forward pass and the loss of a batch on `graph`.
+    /// Records the forward pass and the loss of a prepared batch on `graph`.
     fn record_loss(
         &self,
         graph: &mut Graph<E>,
-        batch: &Batch,
+        prepared: &Prepared<E>,
     ) -> Result<(Tensors<E>, Scalar<E>), BackendError> {
         let measured = self.inverse_std.len();
-        if batch.targets.len() != batch.rows * measured {
-            return Err(BackendError::internal(format!(
-                "batch targets have {} values, expected {}",
-                batch.targets.len(),
-                batch.rows * measured
-            )));
+        for step in &prepared.steps {
+            if step.targets.len() != prepared.rows * measured {
+                return Err(BackendError::internal(format!(
+                    "batch targets have {} values, expected {}",
+                    step.targets.len(),
+                    prepared.rows * measured
+                )));
+            }
         }
         let tensors = self.tensors(graph);
-        let prepared = self.prepare(graph, batch)?;
-        let (next, _) = self.step(graph, &tensors, &prepared)?;
-        let loss = graph.normalised_mse(&next, &prepared.targets, &self.inverse_std)?;
+        let forward = self.forward(graph, &tensors, prepared)?;
+        let targets: Vec<&[E]> = prepared.steps.iter().map(|s| s.targets.as_slice()).collect();
+        let loss = graph.normalised_mse(&forward.predictions, &targets, &self.inverse_std)?;
         Ok((tensors, loss))
     }
 
-    /// The loss and its gradient per weight tensor, as `f64`.
+    /// The loss of a one-step batch and its gradient per weight tensor, as `f64`.
     pub fn gradient(&self, batch: &Batch) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
-        let (loss, gradients) = self.loss_and_gradient(batch)?;
-        let gradients = (gradients.iter())
-            .map(|g| g.iter().map(|v| v.to_double()).collect())
-            .collect();
-        Ok((loss, gradients))
+        let (loss, gradients) = self.loss_and_gradient(|graph, this| this.prepare(graph, batch))?;
+        Ok((loss, to_double(gradients)))
     }
 
-    fn loss_and_gradient(&self, batch: &Batch) -> Result<(f64, Vec<Vec<E>>), BackendError> {
+    /// The loss of a rollout batch and its gradient per weight tensor, as `f64`.
+    pub fn rollout_gradient(
+        &self,
+        batch: &RolloutBatch,
+    ) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
+        let (loss, gradients) =
+            self.loss_and_gradient(|graph, this| this.prepare_rollout(graph, batch))?;
+        Ok((loss, to_double(gradients)))
+    }
+
+    fn loss_and_gradient(
+        &self,
+        prepare: impl FnOnce(&Graph<E>, &Self) -> Result<Prepared<E>, BackendError>,
+    ) -> Result<(f64, Vec<Vec<E>>), BackendError> {
         let mut graph = Graph::new(&self.device);
-        let (tensors, loss) = self.record_loss(&mut graph, batch)?;
+        let prepared = prepare(&graph, self)?;
+        let (tensors, loss) = self.record_loss(&mut graph, &prepared)?;
         let value = loss.as_vec()[0].to_double();
         let mut grads = graph.backward(loss)?;
         let mut gradients = Vec::with_capacity(self.weights.len());
@@ -200,18 +250,32 @@ where
         let mut graph = Graph::new(&self.device);
         let tensors = self.tensors(&graph);
         let prepared = self.prepare(&graph, batch)?;
-        let (next, values) = self.step(&mut graph, &tensors, &prepared)?;
-        let to_double = |block: Vec<E>| block.into_iter().map(|v| v.to_double()).collect();
+        let forward = self.forward(&mut graph, &tensors, &prepared)?;
         let rows = prepared.rows;
+        let values = &forward.first_values;
+        let next = (forward.predictions.first())
+            .ok_or_else(|| BackendError::internal("a one-step batch without a step"))?;
         Ok(Prediction {
-            next_states: to_double(next.as_vec()),
-            closure_outputs: to_double(self.program.read(
-                &values,
+            next_states: block_to_double(next.as_vec()),
+            closure_outputs: block_to_double(self.program.read(
+                values,
                 rows,
                 &self.program.closure_outputs,
             )),
-            outputs: to_double(self.program.read(&values, rows, &self.program.outputs)),
+            outputs: block_to_double(self.program.read(values, rows, &self.program.outputs)),
         })
+    }
+
+    /// The states predicted after each step of a rollout batch, `[step]` of
+    /// `rows x (measured + hidden)`.
+    pub fn rollout_predict(&self, batch: &RolloutBatch) -> Result<Vec<Vec<f64>>, BackendError> {
+        let mut graph = Graph::new(&self.device);
+        let tensors = self.tensors(&graph);
+        let prepared = self.prepare_rollout(&graph, batch)?;
+        let forward = self.forward(&mut graph, &tensors, &prepared)?;
+        Ok((forward.predictions.into_iter())
+            .map(|p| block_to_double(p.as_vec()))
+            .collect())
     }
 
     /// The trainable tensors as named `f64` arrays.
@@ -296,69 +360,68 @@ where
     }
 
     fn prepare(&self, graph: &Graph<E>, batch: &Batch) -> Result<Prepared<E>, BackendError> {
-        let rows = batch.rows;
-        let shape = self.program.shape();
-        let expect = |what: &str, actual: usize, expected: usize| {
-            if actual == expected {
-                Ok(())
-            } else {
-                Err(BackendError::internal(format!(
-                    "batch {what} has {actual} values, expected {expected}"
-                )))
-            }
-        };
-        expect("states", batch.states.len(), rows * shape.states)?;
-        expect("inputs", batch.inputs.len(), rows * shape.inputs)?;
-        expect("closures", batch.embeddings.len(), self.closures.len())?;
-        let convert = |values: &[f64]| {
-            values
-                .iter()
-                .map(|&v| E::from_double(v))
-                .collect::<Vec<E>>()
-        };
-        let mut constants = Vec::with_capacity(self.closures.len());
-        for (closure, offsets) in self.closures.iter().zip(&batch.embeddings) {
-            let mut per_offset = Vec::with_capacity(offsets.len());
-            for raw in offsets {
-                expect("embedding", raw.len(), rows * closure.width)?;
-                per_offset.push(graph.matrix(rows, closure.width, closure.normalise(raw)));
-            }
-            constants.push(per_offset);
+        prepare(graph, &self.closures, self.program.shape(), batch)
+    }
+
+    fn prepare_rollout(
+        &self,
+        graph: &Graph<E>,
+        batch: &RolloutBatch,
+    ) -> Result<Prepared<E>, BackendError> {
+        prepare_rollout(graph, &self.closures, self.program.shape(), batch)
+    }
+
+    /// Runs every step of a prepared batch, each from the previous step's prediction.
+    fn forward(
+        &self,
+        graph: &mut Graph<E>,
+        tensors: &Tensors<E>,
+        prepared: &Prepared<E>,
+    ) -> Result<Forward<E>, BackendError> {
+        let mut history = vec![prepared.states.clone()];
+        let mut first_values = None;
+        for step in &prepared.steps {
+            let (next, values) = self.step(graph, tensors, step, &history)?;
+            first_values.get_or_insert(values);
+            history.push(next);
         }
-        Ok(Prepared {
-            rows,
-            states: graph.matrix(rows, shape.states, convert(&batch.states)),
-            inputs: Arc::new(convert(&batch.inputs)),
-            constants,
-            targets: convert(&batch.targets),
+        let first_values = first_values.unwrap_or_else(|| Arc::new(Vec::new()));
+        history.remove(0);
+        Ok(Forward {
+            predictions: history,
+            first_values,
         })
     }
 
-    /// `x(t + h)` for every row, and the register values of the first stage (at `t`).
+    /// `x(t + h)` for every row from the last state of `history`, and the register values
+    /// of the first stage (at `t`).
     fn step(
         &self,
         graph: &mut Graph<E>,
         tensors: &Tensors<E>,
-        batch: &Prepared<E>,
+        batch: &PreparedStep<E>,
+        history: &[Matrix<E>],
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
-        let (first, values) = self.stage(graph, tensors, batch, &batch.states, 0)?;
+        let start = (history.last())
+            .ok_or_else(|| BackendError::internal("a step without a start state"))?;
+        let (first, values) = self.stage(graph, tensors, batch, (start, history), 0)?;
         if self.dynamics == Dynamics::Discrete {
             return Ok((first, values));
         }
         let dt = self.step / self.substeps as f64;
-        let mut state = batch.states.clone();
+        let mut state = start.clone();
         let mut k1 = first;
         for substep in 0..self.substeps {
-            let start = 2 * substep;
+            let offset = 2 * substep;
             if substep > 0 {
-                k1 = self.stage(graph, tensors, batch, &state, start)?.0;
+                k1 = self.stage(graph, tensors, batch, (&state, history), offset)?.0;
             }
             let x2 = graph.axpy(&state, dt / 2.0, &k1)?;
-            let k2 = self.stage(graph, tensors, batch, &x2, start + 1)?.0;
+            let k2 = self.stage(graph, tensors, batch, (&x2, history), offset + 1)?.0;
             let x3 = graph.axpy(&state, dt / 2.0, &k2)?;
-            let k3 = self.stage(graph, tensors, batch, &x3, start + 1)?.0;
+            let k3 = self.stage(graph, tensors, batch, (&x3, history), offset + 1)?.0;
             let x4 = graph.axpy(&state, dt, &k3)?;
-            let k4 = self.stage(graph, tensors, batch, &x4, start + 2)?.0;
+            let k4 = self.stage(graph, tensors, batch, (&x4, history), offset + 2)?.0;
             let sum = graph.axpy(&k1, 2.0, &k2)?;
             let sum = graph.axpy(&sum, 2.0, &k3)?;
             let sum = graph.axpy(&sum, 1.0, &k4)?;
@@ -367,22 +430,24 @@ where
         Ok((state, values))
     }
 
-    /// The balances at one stage: every closure's network on its embedding (with `state`
-    /// as the lag-0 states), then the physics program.
+    /// The balances at one stage: every closure's network on its embedding (the stage
+    /// estimate `state` in the lag-0 state columns, earlier predictions of `history` where
+    /// the batch feeds them back), then the physics program.
     fn stage(
         &self,
         graph: &mut Graph<E>,
         tensors: &Tensors<E>,
-        batch: &Prepared<E>,
-        state: &Matrix<E>,
+        batch: &PreparedStep<E>,
+        (state, history): (&Matrix<E>, &[Matrix<E>]),
         offset: usize,
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
+        let sources: Vec<&Matrix<E>> = std::iter::once(state).chain(history.iter().skip(1)).collect();
         let mut nets = Vec::with_capacity(self.closures.len());
         for (index, closure) in self.closures.iter().enumerate() {
-            let constant = (batch.constants[index].get(offset)).ok_or_else(|| {
-                BackendError::internal(format!("no embedding at offset {offset}"))
-            })?;
-            let mut hidden = graph.embed(constant, state, &closure.state_columns)?;
+            let missing = || BackendError::internal(format!("no embedding at offset {offset}"));
+            let constant = (batch.constants[index].get(offset)).ok_or_else(missing)?;
+            let columns = (batch.columns[index].get(offset)).ok_or_else(missing)?;
+            let mut hidden = graph.embed(constant, &sources, columns)?;
             let layers = &tensors.layers[index];
             for (layer, (weight, bias)) in layers.iter().enumerate() {
                 hidden = graph.affine(&hidden, weight, bias)?;
@@ -403,98 +468,10 @@ where
     }
 }
 
-impl ClosureLayout {
-    /// Normalises raw embedding rows; lag-0 state columns get `-mean/std` so that adding
-    /// `state / std` in [`Graph::embed`] completes the z-score.
-    fn normalise<E: Element>(&self, raw: &[f64]) -> Vec<E> {
-        let mut values = Vec::with_capacity(raw.len());
-        for (index, &value) in raw.iter().enumerate() {
-            let column = index % self.width;
-            let (mean, std) = (self.column_mean[column], self.column_std[column]);
-            let source = if self.is_stage_state[column] {
-                0.0
-            } else {
-                value
-            };
-            values.push(E::from_double((source - mean) / std));
-        }
-        values
-    }
+fn to_double<E: Element>(gradients: Vec<Vec<E>>) -> Vec<Vec<f64>> {
+    gradients.into_iter().map(block_to_double).collect()
 }
 
-fn closure_layout(
-    model: &ir::Model,
-    closure: &ir::Closure,
-    setup: &Setup,
-    first_tensor: usize,
-) -> Result<ClosureLayout, BackendError> {
-    let norm = &setup.normalisation;
-    let layout = closure.embedding.layout();
-    let (mut column_mean, mut column_std) = (Vec::new(), Vec::new());
-    let (mut entries, mut is_stage_state) = (Vec::new(), Vec::new());
-    for (column, &(var, lag)) in layout.iter().enumerate() {
-        let (mean, std) = match var {
-            Var::Input(i) => (norm.input_mean.get(i), norm.input_std.get(i)),
-            Var::State(i) => (norm.state_mean.get(i), norm.state_std.get(i)),
-            other => {
-                return Err(BackendError::internal(format!(
-                    "closure `{}` observes {other:?}, which is not measured",
-                    closure.name
-                )))
-            }
-        };
-        let (mean, std) = mean
-            .zip(std)
-            .map(|(m, s)| (*m, *s))
-            .ok_or_else(|| BackendError::internal(format!("no normalisation for {var:?}")))?;
-        column_mean.push(mean);
-        column_std.push(std);
-        let stage_state = matches!(var, Var::State(_)) && lag == 0;
-        if stage_state {
-            entries.push((column, state_index(model, var)?, 1.0 / std));
-        }
-        is_stage_state.push(stage_state);
-    }
-    Ok(ClosureLayout {
-        width: layout.len(),
-        state_columns: Arc::new(StateColumns { entries }),
-        column_mean,
-        column_std,
-        is_stage_state,
-        activation: closure.network.activation,
-        first_tensor,
-        layers: closure.network.hidden.len() + 1,
-    })
-}
-
-/// Checks that the setup's vectors fit the model.
-fn check_setup(model: &ir::Model, setup: &Setup) -> Result<(), BackendError> {
-    let norm = &setup.normalisation;
-    let fits = norm.state_mean.len() == model.states.len()
-        && norm.state_std.len() == model.states.len()
-        && norm.input_mean.len() == model.inputs.len()
-        && norm.input_std.len() == model.inputs.len()
-        && setup.scales.len() == model.closures.len()
-        && (setup.scales.iter().zip(&model.closures)).all(|(s, c)| s.len() == c.outputs.len());
-    if fits && setup.step > 0.0 && setup.step.is_finite() {
-        Ok(())
-    } else {
-        Err(BackendError::internal(format!(
-            "the setup does not fit model `{}` (normalisation, scales or step)",
-            model.name
-        )))
-    }
-}
-
-/// The unconstrained starting value of a param, so that its transform gives the guess.
-pub fn raw_initial_value<E: Element>(param: &ir::Param) -> E {
-    let raw = match param.constraint {
-        Constraint::Free => param.init,
-        Constraint::Positive => inverse_softplus(param.init.max(1e-12)),
-        Constraint::Bounds(lo, hi) => {
-            let fraction = ((param.init - lo) / (hi - lo)).clamp(1e-6, 1.0 - 1e-6);
-            logit(fraction)
-        }
-    };
-    E::from_double(raw)
+fn block_to_double<E: Element>(block: Vec<E>) -> Vec<f64> {
+    block.into_iter().map(|v| v.to_double()).collect()
 }

@@ -63,6 +63,7 @@ fn setup(precision: Precision, step: f64, substeps: usize, scales: Vec<Vec<f64>>
             state_std: vec![0.5, 0.8],
             input_mean: vec![0.5],
             input_std: vec![0.3],
+            ..Normalisation::default()
         },
         scales,
     }
@@ -224,7 +225,9 @@ fn softplus_activation_is_safe_in_value_and_gradient() {
     // loss = mean(y^2): d loss / dx = 2 y sigmoid(x) / n.
     let zeros = vec![0.0; inputs.len()];
     let ones = vec![1.0; inputs.len()];
-    let loss = graph.normalised_mse(&y, &zeros, &ones).unwrap();
+    let loss = graph
+        .normalised_mse(std::slice::from_ref(&y), &[zeros.as_slice()], &ones)
+        .unwrap();
     let mut grads = graph.backward(loss).unwrap();
     let gradient = super::graph::gradient_of(&mut grads, &x).unwrap();
     for ((g, &x), &y) in gradient.iter().zip(&inputs).zip(&values) {
@@ -278,6 +281,7 @@ fn chemostat_setup(step: f64, substeps: usize, scales: Vec<Vec<f64>>) -> Setup {
             state_std: vec![0.005],
             input_mean: vec![0.01],
             input_std: vec![0.005],
+            ..Normalisation::default()
         },
         scales,
     }

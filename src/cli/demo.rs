@@ -86,7 +86,7 @@ pub fn run(args: &DemoArgs) -> CommandResult {
     let path = args.out.join(REPORT_FILE);
     crate::io::write_atomic(&path, page.as_bytes()).map_err(CommandError::user)?;
     for ((prepared, results), outcome) in prepared.iter().zip(&all_results).zip(&published) {
-        print_summary(prepared, results, outcome, 0.0);
+        print_summary(prepared, results, outcome, (0.0, 0));
     }
     println!(
         "demo finished in {seconds:.1} s; report: {}",

@@ -275,8 +275,9 @@ fn run_study(args: &RunArgs) -> CommandResult {
     let seconds = started.elapsed().as_secs_f64();
     if !shard.is_all() {
         println!(
-            "shard {shard}: {} runs finished in {seconds:.1} s ({} failed) in {}",
+            "shard {shard}: {} runs finished in {seconds:.1} s ({} reused, {} failed) in {}",
             results.len(),
+            bar.reused(),
             results.iter().filter(|r| !r.is_ok()).count(),
             out.display()
         );
@@ -287,7 +288,7 @@ fn run_study(args: &RunArgs) -> CommandResult {
         return Ok(());
     }
     let published = publish(&prepared, &results, &out, &weights_in(&out)).map_err(failure)?;
-    print_summary(&prepared, &results, &published, seconds);
+    print_summary(&prepared, &results, &published, (seconds, bar.reused()));
     println!("report: {}", out.join("report.html").display());
     Ok(())
 }
@@ -301,23 +302,24 @@ fn run_merge(args: &MergeArgs) -> CommandResult {
             path.display()
         );
     }
-    print_summary(&merged.prepared, &merged.results, &merged.published, 0.0);
+    print_summary(&merged.prepared, &merged.results, &merged.published, (0.0, 0));
     println!("report: {}", out.join("report.html").display());
     Ok(())
 }
 
-/// Prints the medians per model and size, the grey-box tally and the notes.
+/// Prints the medians per model and size, the grey-box tally and the notes; `timing` is the
+/// wall time and the number of runs reused (zeros leave them out).
 pub fn print_summary(
     prepared: &Prepared,
     results: &[RunResult],
     published: &Published,
-    seconds: f64,
+    (seconds, reused): (f64, usize),
 ) {
     let failed = results.iter().filter(|r| !r.is_ok()).count();
-    let timing = if seconds > 0.0 {
-        format!(" in {seconds:.1} s")
-    } else {
-        String::new()
+    let timing = match (seconds > 0.0, reused > 0) {
+        (true, true) => format!(" in {seconds:.1} s, {reused} reused from earlier runs"),
+        (true, false) => format!(" in {seconds:.1} s"),
+        _ => String::new(),
     };
     println!(
         "{}: {} runs{timing} ({failed} failed); validation MSE, median over replicates:",
@@ -359,6 +361,7 @@ pub fn print_summary(
 pub struct ProgressBar {
     bar: indicatif::ProgressBar,
     finished: AtomicUsize,
+    skipped: AtomicUsize,
     total: usize,
     /// Pair-epochs counted so far, per run id.
     counted: Mutex<HashMap<String, u64>>,
@@ -389,6 +392,7 @@ impl ProgressBar {
         ProgressBar {
             bar,
             finished: AtomicUsize::new(0),
+            skipped: AtomicUsize::new(0),
             total,
             counted: Mutex::new(HashMap::new()),
         }
@@ -411,8 +415,14 @@ impl ProgressBar {
                 self.bar
                     .set_message(format!("{finished}/{} runs", self.total));
             }
-            Progress::Skipped(_) | Progress::Started(_) => {}
+            Progress::Skipped(_) => _ = self.skipped.fetch_add(1, Ordering::Relaxed),
+            Progress::Started(_) => {}
         }
+    }
+
+    /// Runs found finished (and reused) so far.
+    pub fn reused(&self) -> usize {
+        self.skipped.load(Ordering::Relaxed)
     }
 
     /// Clears the bar.

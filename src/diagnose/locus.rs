@@ -10,8 +10,9 @@
 //! best loci, are then refined on the training free run (params, gain, constant and
 //! proportional terms) and scored. At the best locus, history is needed when it leaves clearly less
 //! excess gap (above the noise floor) than the present alone: by a factor
-//! [`HISTORY_MARGIN`]. Loci whose held-out errors cannot be told from the best one's by a
-//! paired test over time blocks are marked as tied.
+//! [`HISTORY_MARGIN`]. A locus is *tied* with the best when its bound is within
+//! [`TIE_FACTOR`] of the best's and a paired test of their per-row held-out errors over
+//! time blocks cannot tell them apart.
 
 use super::correction::{self, Corrected, LocusValue, Pass, Solution};
 use super::evaluate::{indistinguishable, row_errors};
@@ -30,6 +31,8 @@ pub const REFINED: usize = 3;
 /// Blocks of the paired test between loci (few and long: free-run errors are correlated
 /// in time).
 const TIE_BLOCKS: usize = 8;
+/// A locus is tied with the best only if its bound is within this factor of the best's.
+pub const TIE_FACTOR: f64 = 3.0;
 /// Name of the synthesised closure.
 const CLOSURE: &str = "__diagnose_closure";
 /// Name of its output.
@@ -164,13 +167,15 @@ pub fn locate(
 }
 
 fn summarise(context: &Context, trials: &[Trial], noise_floor: f64) -> Located {
-    let best_errors = trials.first().and_then(|t| t.best()).map(|v| v.errors.clone());
+    let best = trials.first().and_then(|t| t.best()).map(|v| (v.gap, v.errors.clone()));
     let loci: Vec<Locus> = trials
         .iter()
         .map(|trial| {
             let gap = |v: &Option<Variant>| v.as_ref().map_or(f64::INFINITY, |v| v.gap);
-            let tied = match (&best_errors, trial.best()) {
-                (Some(best), Some(variant)) => indistinguishable(&variant.errors, best, TIE_BLOCKS),
+            let tied = match (&best, trial.best()) {
+                (Some((gap, errors)), Some(variant)) => {
+                    variant.gap <= TIE_FACTOR * gap && indistinguishable(&variant.errors, errors, TIE_BLOCKS)
+                }
                 _ => false,
             };
             Locus {

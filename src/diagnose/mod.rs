@@ -20,6 +20,7 @@ mod error;
 mod evaluate;
 mod features;
 mod fit;
+pub mod html;
 mod linalg;
 mod locus;
 mod noise;
@@ -30,7 +31,7 @@ mod simulate;
 mod symbolic;
 
 pub use error::DiagnoseError;
-pub use record::{Record, Split};
+pub use record::{Record, Split, MIN_ROWS};
 pub use report::*;
 
 use crate::check::Checked;
@@ -368,3 +369,7 @@ fn split_summary(context: &Context) -> SplitSummary {
 
 #[cfg(test)]
 mod tests;
+// TEMPORARY compile check of the CLI file until it is wired into src/cli/mod.rs.
+#[cfg(test)]
+#[path = "../cli/diagnose.rs"]
+mod cli_check;

@@ -132,7 +132,7 @@ pub fn mse_figure(prepared: &Prepared, results: &[RunResult], metric: Metric) ->
         name: format!("mse_{word}"),
         caption: format!(
             "Validation MSE ({paper}) against training points: median over replicates, band \
-             from min to max (paper Fig. 2b/3b). Points above the top of the axis diverged."
+             from min to max (paper Fig. 2b/3b); a median or max that diverged is left out."
         ),
         svg: chart.to_svg(WIDTH, HEIGHT),
     }

@@ -148,10 +148,9 @@ impl Study {
         }
     }
 
-    /// The chemostat study scaled down for `gbc demo`: fewer sizes and replicates.
+    /// The chemostat study scaled down for `gbc demo`: 3 replicates instead of 20.
     pub fn chemostat_demo() -> Study {
         Study {
-            sizes: vec![100, 300, 1000],
             replicates: 3,
             ..Study::chemostat()
         }

@@ -1,5 +1,11 @@
 //! Running a trained network along a record: one-step (offline) predictions, free runs
 //! (online), the run-in of hidden states, and the paper's two errors in normalised units.
+//!
+//! A free run given a [`PhysicalRange`] stops at the first predicted measured state that
+//! leaves it or is not finite, and records where ([`Divergence`]); its online error is then
+//! infinite, never a finite error over the rows before the stop.
+
+use std::fmt;
 
 use crate::backend::{BackendError, Batch, Network, Normalisation};
 use crate::ir;
@@ -16,8 +22,87 @@ pub struct ErrorSet {
     pub per_state: Vec<(String, f64)>,
     /// Mean over states.
     pub overall: f64,
-    /// Number of predicted rows the errors average over.
+    /// Number of predicted rows the errors average over (up to the stop of a diverged run).
     pub rows: usize,
+    /// Where a free run left the physical range (its errors are then infinite).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub divergence: Option<Divergence>,
+}
+
+/// The range each measured state of a free run must stay in.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhysicalRange {
+    /// Lower bound per measured state.
+    pub lower: Vec<f64>,
+    /// Upper bound per measured state.
+    pub upper: Vec<f64>,
+}
+
+impl PhysicalRange {
+    /// From the training split's extremes: `[0, factor * max]` for a state never negative
+    /// in training, else `[-factor * max|x|, factor * max|x|]`. `None` when the
+    /// normalisation has no extremes (runs saved before they were recorded).
+    pub fn new(normalisation: &Normalisation, factor: f64) -> Option<PhysicalRange> {
+        let (min, max) = (&normalisation.state_min, &normalisation.state_max);
+        if min.is_empty() || min.len() != max.len() {
+            return None;
+        }
+        let (lower, upper) = (min.iter().zip(max))
+            .map(|(&lo, &hi)| {
+                let largest = lo.abs().max(hi.abs());
+                if lo >= 0.0 {
+                    (0.0, factor * hi)
+                } else {
+                    (-factor * largest, factor * largest)
+                }
+            })
+            .unzip();
+        Some(PhysicalRange { lower, upper })
+    }
+
+    /// The first measured state of `state` outside the range or not finite.
+    fn violation(&self, state: &[f64]) -> Option<usize> {
+        (0..self.lower.len()).find(|&i| {
+            let value = state.get(i).copied().unwrap_or(f64::NAN);
+            let slack = 1e-9 * self.upper[i].abs().max(self.lower[i].abs());
+            !value.is_finite() || value < self.lower[i] - slack || value > self.upper[i] + slack
+        })
+    }
+}
+
+/// Where and why a free run stopped.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Divergence {
+    /// Record row of the offending state.
+    pub row: usize,
+    /// Its time.
+    pub time: f64,
+    /// The measured state.
+    pub state: String,
+    /// Its predicted value (non-finite values are written as they are).
+    pub value: f64,
+    /// The range it had to stay in.
+    pub range: (f64, f64),
+}
+
+impl fmt::Display for Divergence {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (lo, hi) = self.range;
+        if self.value.is_finite() {
+            write!(
+                formatter,
+                "the free run left the physical range at t = {} (row {}): {} = {:.4e}, outside \
+                 [{lo:.4e}, {hi:.4e}]",
+                self.time, self.row, self.state, self.value
+            )
+        } else {
+            write!(
+                formatter,
+                "the free run became non-finite at t = {} (row {}): {} = {}",
+                self.time, self.row, self.state, self.value
+            )
+        }
+    }
 }
 
 /// How measured states evolve along a simulated trajectory.
@@ -43,20 +128,23 @@ pub struct Trajectory {
     pub closure_outputs: Vec<Vec<f64>>,
     /// Per row: the model's outputs at that row.
     pub outputs: Vec<Vec<f64>>,
+    /// Where the run stopped early, if it left the physical range.
+    pub divergence: Option<Divergence>,
 }
 
 /// Simulates rows `start..=end` of `record` step by step, starting from the measured states
-/// of row `start` and the hidden states `hidden_start`, inputs taken from the data.
+/// of row `start` and the hidden states `hidden_start`, inputs taken from the data. With
+/// `Feed::Own` and a physical range, stops after the first prediction outside it.
 pub fn simulate(
     network: &Network,
     model: &ir::Model,
     record: &Record,
     fractions: &[f64],
-    range: (usize, usize),
+    rows: (usize, usize),
     hidden_start: &[f64],
-    feed: Feed,
+    (feed, range): (Feed, Option<&PhysicalRange>),
 ) -> Result<Trajectory, BackendError> {
-    let (start, end) = range;
+    let (start, end) = rows;
     let measured = model.states.len();
     let mut history = record.clone();
     let mut state: Vec<f64> = record.states.iter().map(|s| s[start]).collect();
@@ -67,6 +155,7 @@ pub fn simulate(
         next_states: Vec::new(),
         closure_outputs: Vec::new(),
         outputs: Vec::new(),
+        divergence: None,
     };
     for row in start..=end {
         let batch = Batch {
@@ -87,6 +176,19 @@ pub fn simulate(
         trajectory.closure_outputs.push(prediction.closure_outputs);
         trajectory.outputs.push(prediction.outputs);
         let next = prediction.next_states;
+        if let Some(range) = range.filter(|_| feed == Feed::Own) {
+            if let Some(state) = range.violation(&next) {
+                trajectory.divergence = Some(Divergence {
+                    row: row + 1,
+                    time: record.times.get(row + 1).copied().unwrap_or(f64::NAN),
+                    state: model.states[state].name.clone(),
+                    value: next[state],
+                    range: (range.lower[state], range.upper[state]),
+                });
+                trajectory.next_states.push(next);
+                break;
+            }
+        }
         if row + 1 < record.len() {
             state = match feed {
                 Feed::Own => {
@@ -128,7 +230,7 @@ pub fn run_in_hidden(
         fractions,
         (0, last),
         initial,
-        Feed::Data,
+        (Feed::Data, None),
     )?;
     let measured = model.states.len();
     Ok(run
@@ -163,7 +265,8 @@ pub fn offline_error(
     Ok(error_set(model, squared, table.len()))
 }
 
-/// Online error of a free run against the record, over the rows after its start.
+/// Online error of a free run against the record, over the rows after its start; infinite
+/// for every state when the run diverged.
 pub fn online_error(
     model: &ir::Model,
     record: &Record,
@@ -171,6 +274,12 @@ pub fn online_error(
     normalisation: &Normalisation,
 ) -> ErrorSet {
     let measured = model.states.len();
+    if let Some(divergence) = &run.divergence {
+        let mut set = error_set(model, vec![f64::INFINITY; measured], 1);
+        set.rows = run.next_states.len();
+        set.divergence = Some(divergence.clone());
+        return set;
+    }
     let mut squared = vec![0.0; measured];
     let mut rows = 0;
     for (offset, next) in run.next_states.iter().enumerate() {
@@ -197,5 +306,6 @@ fn error_set(model: &ir::Model, squared: Vec<f64>, rows: usize) -> ErrorSet {
         per_state,
         overall,
         rows,
+        divergence: None,
     }
 }

@@ -26,6 +26,7 @@ mod error;
 pub mod evaluate;
 pub mod pairs;
 pub mod predict;
+pub mod windows;
 #[cfg(test)]
 mod tests;
 
@@ -490,7 +491,8 @@ fn train_pair_count(
     }
 }
 
-/// Mean and std of every input and measured state over the first `rows` rows.
+/// Mean and std of every input and measured state, and the range of every measured state,
+/// over the first `rows` rows.
 pub fn normalise(record: &Record, rows: usize) -> Normalisation {
     let stats = |series: &Vec<Vec<f64>>| -> (Vec<f64>, Vec<f64>) {
         series
@@ -512,11 +514,18 @@ pub fn normalise(record: &Record, rows: usize) -> Normalisation {
     };
     let (state_mean, state_std) = stats(&record.states);
     let (input_mean, input_std) = stats(&record.inputs);
+    let extreme = |pick: fn(f64, f64) -> f64, start: f64| -> Vec<f64> {
+        (record.states.iter())
+            .map(|values| values[..rows.min(values.len())].iter().copied().fold(start, pick))
+            .collect()
+    };
     Normalisation {
         state_mean,
         state_std,
         input_mean,
         input_std,
+        state_min: extreme(f64::min, f64::INFINITY),
+        state_max: extreme(f64::max, f64::NEG_INFINITY),
     }
 }
 

@@ -74,7 +74,8 @@ pub fn hold(values: &[f64], position: f64, left_limit: bool) -> f64 {
     values[index.clamp(0.0, last) as usize]
 }
 
-fn snap(position: f64) -> f64 {
+/// A fractional sample position, snapped onto the nearest sample when within rounding of it.
+pub fn snap(position: f64) -> f64 {
     let nearest = position.round();
     if (position - nearest).abs() < SNAP {
         nearest

@@ -1,0 +1,292 @@
+//! How batches become network inputs: each closure's column layout and normalisation, and
+//! the conversion of one-step [`Batch`]es and multi-step [`RolloutBatch`]es into graph
+//! constants plus the state-fed embedding entries of every step and stage.
+
+use std::ops::DerefMut;
+use std::sync::Arc;
+
+use dfdx::tensor::Cpu;
+use dfdx::tensor_ops::Device;
+
+use super::graph::{EmbedColumns, EmbedEntry, Element, GradientBuffer, Graph, Matrix};
+use super::program::state_index;
+use super::real::{inverse_softplus, logit};
+use super::{BackendError, Batch, RolloutBatch, Setup};
+use crate::ir::{self, Activation, Constraint, Var};
+
+/// The network-side description of one closure.
+pub struct ClosureLayout {
+    /// Network input width.
+    pub width: usize,
+    /// Where the stage estimate enters the input (source 0 of every entry).
+    pub state_columns: Arc<EmbedColumns>,
+    /// Per input column: mean and std used for normalisation.
+    column_mean: Vec<f64>,
+    column_std: Vec<f64>,
+    /// Which columns are lag-0 states (their constant part is `-mean/std`).
+    is_stage_state: Vec<bool>,
+    /// Hidden-layer activation.
+    pub activation: Activation,
+    /// Index of its first tensor in the weight list.
+    pub first_tensor: usize,
+    /// Number of affine layers.
+    pub layers: usize,
+}
+
+/// A batch converted to the element type: the start states and one block per step.
+pub struct Prepared<E: Element> {
+    /// Batch rows.
+    pub rows: usize,
+    /// `rows x states` at the start.
+    pub states: Matrix<E>,
+    /// The steps, in order.
+    pub steps: Vec<PreparedStep<E>>,
+}
+
+/// One step of a prepared batch.
+pub struct PreparedStep<E: Element> {
+    /// `rows x inputs`, held over the step.
+    pub inputs: Arc<Vec<E>>,
+    /// `constants[closure][offset]`: the normalised constant part of the network input.
+    pub constants: Vec<Vec<Matrix<E>>>,
+    /// `columns[closure][offset]`: the state-fed entries.
+    pub columns: Vec<Vec<Arc<EmbedColumns>>>,
+    /// `rows x measured` targets (empty when predicting).
+    pub targets: Vec<E>,
+}
+
+impl ClosureLayout {
+    /// Normalises raw embedding rows; lag-0 state columns get `-mean/std` so that adding
+    /// `state / std` in [`Graph::embed`] completes the z-score.
+    pub fn normalise<E: Element>(&self, raw: &[f64]) -> Vec<E> {
+        let mut values = Vec::with_capacity(raw.len());
+        for (index, &value) in raw.iter().enumerate() {
+            let column = index % self.width;
+            let (mean, std) = (self.column_mean[column], self.column_std[column]);
+            let source = if self.is_stage_state[column] {
+                0.0
+            } else {
+                value
+            };
+            values.push(E::from_double((source - mean) / std));
+        }
+        values
+    }
+
+    /// The stage-estimate entries plus a rollout's feedback entries, each scaled by its
+    /// column's `1 / std`.
+    fn with_feedback(&self, feedback: &[super::Feedback]) -> Result<EmbedColumns, BackendError> {
+        let mut columns = (*self.state_columns).clone();
+        for entry in feedback {
+            let std = (self.column_std.get(entry.column))
+                .filter(|_| entry.sample >= 1)
+                .ok_or_else(|| BackendError::internal("feedback outside the embedding"))?;
+            columns.entries.push(EmbedEntry {
+                column: entry.column,
+                source: entry.sample,
+                state: entry.state,
+                factor: entry.weight / std,
+            });
+        }
+        Ok(columns)
+    }
+}
+
+fn expect(what: &str, actual: usize, expected: usize) -> Result<(), BackendError> {
+    if actual == expected {
+        Ok(())
+    } else {
+        Err(BackendError::internal(format!(
+            "batch {what} has {actual} values, expected {expected}"
+        )))
+    }
+}
+
+fn convert<E: Element>(values: &[f64]) -> Vec<E> {
+    values.iter().map(|&v| E::from_double(v)).collect()
+}
+
+/// Normalised constant matrices of one step, `[closure][offset]`.
+fn constants<E: Element>(
+    graph: &Graph<E>,
+    closures: &[ClosureLayout],
+    rows: usize,
+    embeddings: &[Vec<Vec<f64>>],
+) -> Result<Vec<Vec<Matrix<E>>>, BackendError>
+where
+    Cpu: Device<E>,
+    GradientBuffer<E>: DerefMut<Target = Vec<E>>,
+{
+    expect("closures", embeddings.len(), closures.len())?;
+    let mut constants = Vec::with_capacity(closures.len());
+    for (closure, offsets) in closures.iter().zip(embeddings) {
+        let mut per_offset = Vec::with_capacity(offsets.len());
+        for raw in offsets {
+            expect("embedding", raw.len(), rows * closure.width)?;
+            per_offset.push(graph.matrix(rows, closure.width, closure.normalise(raw)));
+        }
+        constants.push(per_offset);
+    }
+    Ok(constants)
+}
+
+/// A one-step batch as a prepared batch of one step.
+pub fn prepare<E: Element>(
+    graph: &Graph<E>,
+    closures: &[ClosureLayout],
+    shape: &super::program::ProgramShape,
+    batch: &Batch,
+) -> Result<Prepared<E>, BackendError>
+where
+    Cpu: Device<E>,
+    GradientBuffer<E>: DerefMut<Target = Vec<E>>,
+{
+    let rows = batch.rows;
+    expect("states", batch.states.len(), rows * shape.states)?;
+    expect("inputs", batch.inputs.len(), rows * shape.inputs)?;
+    let constants = constants(graph, closures, rows, &batch.embeddings)?;
+    let columns = (closures.iter().zip(&constants))
+        .map(|(closure, offsets)| vec![Arc::clone(&closure.state_columns); offsets.len()])
+        .collect();
+    Ok(Prepared {
+        rows,
+        states: graph.matrix(rows, shape.states, convert(&batch.states)),
+        steps: vec![PreparedStep {
+            inputs: Arc::new(convert(&batch.inputs)),
+            constants,
+            columns,
+            targets: convert(&batch.targets),
+        }],
+    })
+}
+
+/// A rollout batch as a prepared batch of `batch.steps` steps.
+pub fn prepare_rollout<E: Element>(
+    graph: &Graph<E>,
+    closures: &[ClosureLayout],
+    shape: &super::program::ProgramShape,
+    batch: &RolloutBatch,
+) -> Result<Prepared<E>, BackendError>
+where
+    Cpu: Device<E>,
+    GradientBuffer<E>: DerefMut<Target = Vec<E>>,
+{
+    let rows = batch.rows;
+    expect("states", batch.states.len(), rows * shape.states)?;
+    expect("input steps", batch.inputs.len(), batch.steps)?;
+    expect("embedding steps", batch.embeddings.len(), batch.steps)?;
+    expect("feedback steps", batch.feedback.len(), batch.steps)?;
+    if !batch.targets.is_empty() {
+        expect("target steps", batch.targets.len(), batch.steps)?;
+    }
+    let mut steps = Vec::with_capacity(batch.steps);
+    for step in 0..batch.steps {
+        expect("inputs", batch.inputs[step].len(), rows * shape.inputs)?;
+        let constants = constants(graph, closures, rows, &batch.embeddings[step])?;
+        let feedback = &batch.feedback[step];
+        expect("feedback closures", feedback.len(), closures.len())?;
+        let mut columns = Vec::with_capacity(closures.len());
+        for ((closure, offsets), per_offset) in closures.iter().zip(feedback).zip(&constants) {
+            expect("feedback offsets", offsets.len(), per_offset.len())?;
+            let built = (offsets.iter())
+                .map(|entries| closure.with_feedback(entries).map(Arc::new))
+                .collect::<Result<Vec<_>, _>>()?;
+            columns.push(built);
+        }
+        let targets = batch.targets.get(step).map_or(Vec::new(), |t| convert(t));
+        steps.push(PreparedStep {
+            inputs: Arc::new(convert(&batch.inputs[step])),
+            constants,
+            columns,
+            targets,
+        });
+    }
+    Ok(Prepared {
+        rows,
+        states: graph.matrix(rows, shape.states, convert(&batch.states)),
+        steps,
+    })
+}
+
+/// The layout of `closure`, whose tensors start at `first_tensor`.
+pub fn closure_layout(
+    model: &ir::Model,
+    closure: &ir::Closure,
+    setup: &Setup,
+    first_tensor: usize,
+) -> Result<ClosureLayout, BackendError> {
+    let norm = &setup.normalisation;
+    let layout = closure.embedding.layout();
+    let (mut column_mean, mut column_std) = (Vec::new(), Vec::new());
+    let (mut entries, mut is_stage_state) = (Vec::new(), Vec::new());
+    for (column, &(var, lag)) in layout.iter().enumerate() {
+        let (mean, std) = match var {
+            Var::Input(i) => (norm.input_mean.get(i), norm.input_std.get(i)),
+            Var::State(i) => (norm.state_mean.get(i), norm.state_std.get(i)),
+            other => {
+                return Err(BackendError::internal(format!(
+                    "closure `{}` observes {other:?}, which is not measured",
+                    closure.name
+                )))
+            }
+        };
+        let (mean, std) = mean
+            .zip(std)
+            .map(|(m, s)| (*m, *s))
+            .ok_or_else(|| BackendError::internal(format!("no normalisation for {var:?}")))?;
+        column_mean.push(mean);
+        column_std.push(std);
+        let stage_state = matches!(var, Var::State(_)) && lag == 0;
+        if stage_state {
+            entries.push(EmbedEntry {
+                column,
+                source: 0,
+                state: state_index(model, var)?,
+                factor: 1.0 / std,
+            });
+        }
+        is_stage_state.push(stage_state);
+    }
+    Ok(ClosureLayout {
+        width: layout.len(),
+        state_columns: Arc::new(EmbedColumns { entries }),
+        column_mean,
+        column_std,
+        is_stage_state,
+        activation: closure.network.activation,
+        first_tensor,
+        layers: closure.network.hidden.len() + 1,
+    })
+}
+
+/// Checks that the setup's vectors fit the model.
+pub fn check_setup(model: &ir::Model, setup: &Setup) -> Result<(), BackendError> {
+    let norm = &setup.normalisation;
+    let fits = norm.state_mean.len() == model.states.len()
+        && norm.state_std.len() == model.states.len()
+        && norm.input_mean.len() == model.inputs.len()
+        && norm.input_std.len() == model.inputs.len()
+        && setup.scales.len() == model.closures.len()
+        && (setup.scales.iter().zip(&model.closures)).all(|(s, c)| s.len() == c.outputs.len());
+    if fits && setup.step > 0.0 && setup.step.is_finite() {
+        Ok(())
+    } else {
+        Err(BackendError::internal(format!(
+            "the setup does not fit model `{}` (normalisation, scales or step)",
+            model.name
+        )))
+    }
+}
+
+/// The unconstrained starting value of a param, so that its transform gives the guess.
+pub fn raw_initial_value<E: Element>(param: &ir::Param) -> E {
+    let raw = match param.constraint {
+        Constraint::Free => param.init,
+        Constraint::Positive => inverse_softplus(param.init.max(1e-12)),
+        Constraint::Bounds(lo, hi) => {
+            let fraction = ((param.init - lo) / (hi - lo)).clamp(1e-6, 1.0 - 1e-6);
+            logit(fraction)
+        }
+    };
+    E::from_double(raw)
+}

@@ -1,0 +1,145 @@
+//! How a model is trained beyond the basic options: the objective (the paper's one-step
+//! loss or free-run rollouts with a curriculum), the params' own learning rate, gradient
+//! clipping, the final polish of the params and the range a free run must stay in.
+//!
+//! **Multi-step objective** (the default): the first `warmup_share` of the epochs train on
+//! one-step pairs as in the paper; then each epoch cuts the training pairs into
+//! consecutive windows of `K` steps (multiple shooting: every window starts from the
+//! data, the phase of the cut drawn anew each epoch) and minimises the mean squared
+//! normalised error of the free runs over every window ([`super::windows`]), gradients
+//! through the whole rollout. `K` grows linearly from 2 to `horizon` over the next
+//! `ramp_share` of the epochs (the curriculum) and stays there. An epoch predicts each
+//! training pair once whatever `K` is, so an epoch costs about as much as a one-step one
+//! when a batch holds as many windows as a one-step batch holds pairs.
+//!
+//! **One-step objective** ([`Recipe::paper`]): every epoch on one-step pairs, one learning
+//! rate, no polish: Lovelett et al. (2020), section 2.
+
+use crate::ir;
+
+/// The loss training minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Objective {
+    /// The paper's: the mean squared normalised error of one-step predictions.
+    OneStep,
+    /// Free-run rollouts of up to `horizon` steps after a one-step warm-up.
+    #[default]
+    MultiStep,
+}
+
+impl Objective {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Objective::OneStep => "one-step",
+            Objective::MultiStep => "multi-step",
+        }
+    }
+}
+
+/// Default longest rollout, in steps.
+pub const DEFAULT_HORIZON: usize = 20;
+/// Default share of epochs trained one-step before rollouts start.
+pub const DEFAULT_WARMUP_SHARE: f64 = 0.5;
+/// Default share of epochs over which the rollout grows to its full horizon.
+pub const DEFAULT_RAMP_SHARE: f64 = 0.25;
+/// Default factor of the physical range a free run must stay in (see [`Recipe`]).
+pub const DEFAULT_RANGE_FACTOR: f64 = 10.0;
+
+/// Training choices beyond [`super::TrainOptions`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Recipe {
+    /// The loss.
+    pub objective: Objective,
+    /// Longest rollout in steps (multi-step objective).
+    pub horizon: usize,
+    /// Share of the epochs trained one-step first (multi-step objective).
+    pub warmup_share: f64,
+    /// Share of the epochs over which the rollout grows from 2 steps to `horizon`.
+    pub ramp_share: f64,
+    /// Windows per Adam step (multi-step objective); `None`: the batch size.
+    pub windows_per_batch: Option<usize>,
+    /// Adam learning rate of the params; `None`: the network's.
+    pub param_learning_rate: Option<f64>,
+    /// Clip the gradient to this Euclidean norm; `None`: no clipping.
+    pub max_gradient_norm: Option<f64>,
+    /// After training, fit the params by Levenberg-Marquardt with the network frozen
+    /// ([`super::polish`]); `None`: on for the multi-step objective, off for one-step.
+    pub polish: Option<bool>,
+    /// A free run stops when a measured state leaves `[0, factor * max]` (states never
+    /// negative in training) or `[-factor * max|x|, factor * max|x|]`, the extremes taken
+    /// over the training split, or becomes non-finite.
+    pub range_factor: f64,
+}
+
+impl Default for Recipe {
+    fn default() -> Self {
+        Recipe {
+            objective: Objective::MultiStep,
+            horizon: DEFAULT_HORIZON,
+            warmup_share: DEFAULT_WARMUP_SHARE,
+            ramp_share: DEFAULT_RAMP_SHARE,
+            windows_per_batch: None,
+            param_learning_rate: None,
+            max_gradient_norm: None,
+            polish: None,
+            range_factor: DEFAULT_RANGE_FACTOR,
+        }
+    }
+}
+
+impl Recipe {
+    /// The paper's recipe: one-step loss, one learning rate, no polish.
+    pub fn paper() -> Recipe {
+        Recipe {
+            objective: Objective::OneStep,
+            polish: Some(false),
+            ..Recipe::default()
+        }
+    }
+
+    /// Whether the params are polished after training.
+    pub fn polishes(&self, model: &ir::Model) -> bool {
+        !model.params.is_empty()
+            && self
+                .polish
+                .unwrap_or(self.objective == Objective::MultiStep)
+    }
+
+    /// The rollout length of 1-based `epoch` out of `epochs` (1: one-step pairs).
+    pub fn horizon_at(&self, epoch: usize, epochs: usize) -> usize {
+        if self.objective == Objective::OneStep || self.horizon <= 1 {
+            return 1;
+        }
+        let progress = (epoch - 1) as f64 / epochs.max(1) as f64;
+        if progress < self.warmup_share {
+            return 1;
+        }
+        let ramp = ((progress - self.warmup_share) / self.ramp_share.max(1e-12)).min(1.0);
+        let grown = 2.0 + ramp * (self.horizon as f64 - 2.0);
+        (grown.floor() as usize).clamp(2, self.horizon)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_curriculum_warms_up_one_step_then_grows_to_the_horizon() {
+        let recipe = Recipe {
+            horizon: 10,
+            warmup_share: 0.5,
+            ramp_share: 0.25,
+            ..Recipe::default()
+        };
+        let schedule: Vec<usize> = (1..=100).map(|e| recipe.horizon_at(e, 100)).collect();
+        assert!(schedule[..50].iter().all(|&k| k == 1));
+        assert_eq!(schedule[50], 2);
+        assert!(schedule.windows(2).all(|w| w[0] <= w[1]));
+        assert_eq!(schedule[62], 5);
+        assert!(schedule[75..].iter().all(|&k| k == 10));
+        assert!((1..=100).all(|e| Recipe::paper().horizon_at(e, 100) == 1));
+    }
+}

@@ -1,0 +1,273 @@
+//! Free-run windows for the multi-step objective: batches of `K`-step rollouts in which the
+//! network is fed its own predictions, through the state and through the delay embedding.
+//!
+//! A window starts at row `r` from the measured states there (and the hidden-state
+//! estimates), holds the data's inputs over each step, and is compared with the measured
+//! states of rows `r + 1 ..= r + K`. At step `k` and stage fraction `f`, a delayed state
+//! sits `q = k + f - lag * delay / h` samples after the window start ([`super::pairs`]
+//! explains positions). Where `q <= 0` the value is read from the data as in a one-step
+//! pair; where `q > 0` it interpolates between samples `floor(q)` and `floor(q) + 1`, and
+//! each of those with index `j >= 1` is the state predicted `j` steps into the window: the
+//! backend adds it with its interpolation weight ([`Feedback`]) and gradients flow through
+//! it. Sample 0 is the window's measured start. With one step and no `q > 0` a window is
+//! exactly a one-step pair.
+
+use crate::backend::{Feedback, RolloutBatch};
+use crate::ir::{self, Var};
+
+use super::pairs::{hold, interpolate, snap, Record};
+
+/// A closure's raw embedding at step `step` (fraction `fraction`) of the window starting at
+/// `start`, with predicted shares left at zero, and those shares as feedback entries.
+pub fn window_embedding(
+    closure: &ir::Closure,
+    record: &Record,
+    start: usize,
+    (step, fraction): (usize, f64),
+) -> (Vec<f64>, Vec<Feedback>) {
+    let embedding = &closure.embedding;
+    let lag_in_samples = embedding.delay / record.step;
+    let layout = embedding.layout();
+    let mut raw = Vec::with_capacity(layout.len());
+    let mut feedback = Vec::new();
+    for (column, (var, lag)) in layout.into_iter().enumerate() {
+        let offset = step as f64 + fraction - lag as f64 * lag_in_samples;
+        let value = match var {
+            Var::Input(i) => hold(&record.inputs[i], start as f64 + offset, fraction >= 1.0),
+            Var::State(_) if lag == 0 => 0.0,
+            Var::State(i) => {
+                let position = snap(offset);
+                if position <= 0.0 {
+                    interpolate(&record.states[i], start as f64 + position)
+                } else {
+                    let below = position.floor();
+                    let weight_above = position - below;
+                    let below = below as usize;
+                    let mut data_share = 0.0;
+                    for (sample, weight) in [(below, 1.0 - weight_above), (below + 1, weight_above)]
+                    {
+                        if weight == 0.0 {
+                            continue;
+                        }
+                        if sample == 0 {
+                            data_share += weight * record.states[i][start];
+                        } else {
+                            feedback.push(Feedback {
+                                column,
+                                sample,
+                                state: i,
+                                weight,
+                            });
+                        }
+                    }
+                    data_share
+                }
+            }
+            _ => f64::NAN,
+        };
+        raw.push(value);
+    }
+    (raw, feedback)
+}
+
+/// A batch of `steps`-step windows starting at `starts` (every `start + steps` must be a
+/// row of `record`); `hidden[row]` holds the hidden-state estimates.
+pub fn rollout_batch(
+    model: &ir::Model,
+    record: &Record,
+    hidden: &[Vec<f64>],
+    starts: &[usize],
+    steps: usize,
+    fractions: &[f64],
+) -> RolloutBatch {
+    let closures = model.closures.len();
+    let mut batch = RolloutBatch {
+        rows: starts.len(),
+        steps,
+        states: Vec::new(),
+        inputs: vec![Vec::new(); steps],
+        embeddings: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
+        feedback: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
+        targets: vec![Vec::new(); steps],
+    };
+    for (window, &start) in starts.iter().enumerate() {
+        batch.states.extend(record.states.iter().map(|s| s[start]));
+        batch.states.extend(hidden.get(start).into_iter().flatten());
+        for step in 0..steps {
+            let row = start + step;
+            batch.inputs[step].extend(record.inputs.iter().map(|u| u[row]));
+            batch.targets[step].extend(record.states.iter().map(|s| s[row + 1]));
+            for (closure_index, closure) in model.closures.iter().enumerate() {
+                for (offset, &fraction) in fractions.iter().enumerate() {
+                    let (raw, feedback) =
+                        window_embedding(closure, record, start, (step, fraction));
+                    batch.embeddings[step][closure_index][offset].extend(raw);
+                    if window == 0 {
+                        batch.feedback[step][closure_index][offset] = feedback;
+                    }
+                }
+            }
+        }
+    }
+    batch
+}
+
+/// Window starts for one pass of multiple shooting over the pairs starting at rows
+/// `first..first + pairs`: consecutive non-overlapping windows of `steps` steps from
+/// `first + phase`, each ending inside the training pairs.
+pub fn shooting_starts(first: usize, pairs: usize, steps: usize, phase: usize) -> Vec<usize> {
+    let steps = steps.max(1);
+    if pairs < steps {
+        return Vec::new();
+    }
+    let phase = phase % steps;
+    (0..)
+        .map(|window| first + phase + window * steps)
+        .take_while(|start| start + steps <= first + pairs)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::{Network, Normalisation, Precision, Setup};
+    use crate::ir::Activation;
+    use crate::train::evaluate::{simulate, Feed};
+    use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
+    use crate::train::pairs::{embedding_row, first_pair_row, stage_fractions, PairTable};
+
+    /// A model whose closure looks back 1.5 samples, so that stage times fall between
+    /// samples and every window step past the first mixes data and predictions.
+    fn model() -> ir::Model {
+        ModelBuilder::new("m")
+            .input("u")
+            .state("x")
+            .closure(ClosureSpec {
+                name: "c",
+                outputs: vec![OutputSpec {
+                    name: "o",
+                    scale: Some(0.5),
+                    prior: None,
+                }],
+                observe: &["x", "u"],
+                delay: 3.0,
+                dim: 3,
+                hidden: vec![4],
+                activation: Activation::Tanh,
+            })
+            .der("x", "o - 0.1 * x")
+            .build()
+    }
+
+    fn record() -> Record {
+        Record {
+            step: 2.0,
+            times: (0..12).map(|i| 2.0 * i as f64).collect(),
+            inputs: vec![(0..12).map(|i| (i % 3) as f64).collect()],
+            states: vec![(0..12).map(|i| 1.0 + 0.1 * i as f64).collect()],
+        }
+    }
+
+    /// Recombining data share and feedback with the data in place of predictions gives
+    /// the one-step embedding read from the data.
+    #[test]
+    fn data_share_plus_feedback_is_the_interpolated_embedding() {
+        let model = model();
+        let record = record();
+        let closure = &model.closures[0];
+        for step in 0..4 {
+            for fraction in [0.0, 0.5, 1.0] {
+                let (mut raw, feedback) = window_embedding(closure, &record, 4, (step, fraction));
+                for entry in &feedback {
+                    raw[entry.column] += entry.weight * record.states[entry.state][4 + entry.sample];
+                }
+                let expected = embedding_row(closure, &record, 4 + step, fraction);
+                for (column, (found, wanted)) in raw.iter().zip(&expected).enumerate() {
+                    if column == 0 {
+                        continue; // lag-0 state: the stage estimate
+                    }
+                    assert!((found - wanted).abs() < 1e-12, "step {step} f {fraction}");
+                }
+            }
+        }
+        // Step 0 never feeds back; at step 1, f = 0.5 the lag-1 state (1.5 samples back)
+        // sits at q = 0: data only; at step 2, f = 1 it sits at q = 1.5: half sample 1,
+        // half sample 2.
+        assert!(window_embedding(closure, &record, 4, (0, 1.0)).1.is_empty());
+        let (_, feedback) = window_embedding(closure, &record, 4, (2, 1.0));
+        let lag_one: Vec<_> = feedback.iter().filter(|f| f.column == 2).collect();
+        assert_eq!(lag_one.len(), 2);
+        assert_eq!((lag_one[0].sample, lag_one[0].weight), (1, 0.5));
+        assert_eq!((lag_one[1].sample, lag_one[1].weight), (2, 0.5));
+    }
+
+    fn network(model: &ir::Model, record: &Record) -> Network {
+        let setup = Setup {
+            step: record.step,
+            substeps: 1,
+            precision: Precision::F64,
+            seed: 3,
+            normalisation: Normalisation {
+                state_mean: vec![1.5],
+                state_std: vec![0.4],
+                input_mean: vec![1.0],
+                input_std: vec![0.8],
+                ..Normalisation::default()
+            },
+            scales: vec![vec![0.5]],
+        };
+        let mut network = Network::build(model, &setup).unwrap();
+        let mut weights = network.weights();
+        for (index, value) in weights.iter_mut().flat_map(|t| &mut t.values).enumerate() {
+            *value = ((index * 7 % 11) as f64 - 5.0) / 6.0;
+        }
+        network.set_weights(&weights).unwrap();
+        network
+    }
+
+    /// A rollout batch reproduces the step-by-step free run of the evaluator, which feeds
+    /// predictions back by rewriting the record.
+    #[test]
+    fn a_rollout_is_the_free_run_of_the_evaluator() {
+        let model = model();
+        let record = record();
+        let network = network(&model, &record);
+        let fractions = stage_fractions(model.dynamics, 1);
+        let start = first_pair_row(&model, record.step);
+        let steps = 5;
+        let batch = rollout_batch(&model, &record, &[], &[start], steps, &fractions);
+        let rolled = network.rollout_predict(&batch).unwrap();
+        let run = simulate(
+            &network,
+            &model,
+            &record,
+            &fractions,
+            (start, start + steps - 1),
+            &[],
+            Feed::Own,
+        )
+        .unwrap();
+        for (step, predicted) in rolled.iter().enumerate() {
+            let expected = run.next_states[step][0];
+            assert!(
+                (predicted[0] - expected).abs() < 1e-12,
+                "step {step}: {} vs {expected}",
+                predicted[0]
+            );
+        }
+        // One step: the rollout loss is the one-step loss of the same pair.
+        let single = rollout_batch(&model, &record, &[], &[start, start + 2], 1, &fractions);
+        let table = PairTable::build(&model, &record, &[start, start + 2], &[], &fractions);
+        let one_step = network.loss(&table.batch(&[0, 1])).unwrap();
+        assert!((network.rollout_loss(&single).unwrap() - one_step).abs() < 1e-14);
+    }
+
+    #[test]
+    fn shooting_windows_tile_the_training_pairs() {
+        assert_eq!(shooting_starts(3, 10, 4, 0), vec![3, 7]);
+        assert_eq!(shooting_starts(3, 10, 4, 2), vec![5, 9]);
+        assert_eq!(shooting_starts(3, 10, 4, 6), vec![5, 9]);
+        assert_eq!(shooting_starts(0, 3, 4, 0), Vec::<usize>::new());
+        assert_eq!(shooting_starts(0, 5, 1, 0), vec![0, 1, 2, 3, 4]);
+    }
+}
