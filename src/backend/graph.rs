@@ -309,7 +309,9 @@ where
         inverse_std: &[E],
     ) -> Result<Scalar<E>, BackendError> {
         if predictions.len() != targets.len() || predictions.is_empty() {
-            return Err(BackendError::internal("loss needs one target block per step"));
+            return Err(BackendError::internal(
+                "loss needs one target block per step",
+            ));
         }
         let (rows, width) = *predictions[0].shape();
         let measured = inverse_std.len();
@@ -343,9 +345,8 @@ where
                 let target = grads.get_or_alloc_mut(ghost)?;
                 for row in 0..rows {
                     for state in 0..measured {
-                        target[row * width + state] += factor
-                            * step_residuals[row * measured + state]
-                            * inverse_std[state];
+                        target[row * width + state] +=
+                            factor * step_residuals[row * measured + state] * inverse_std[state];
                     }
                 }
             }

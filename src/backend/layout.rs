@@ -8,7 +8,7 @@ use std::sync::Arc;
 use dfdx::tensor::Cpu;
 use dfdx::tensor_ops::Device;
 
-use super::graph::{EmbedColumns, EmbedEntry, Element, GradientBuffer, Graph, Matrix};
+use super::graph::{Element, EmbedColumns, EmbedEntry, GradientBuffer, Graph, Matrix};
 use super::program::state_index;
 use super::real::{inverse_softplus, logit};
 use super::{BackendError, Batch, RolloutBatch, Setup};

@@ -148,7 +148,7 @@ where
                 .sqrt();
             if norm > limit && norm.is_finite() {
                 let factor = E::from_double(limit / norm);
-                gradients.iter_mut().flatten().for_each(|g| *g = *g * factor);
+                gradients.iter_mut().flatten().for_each(|g| *g *= factor);
             }
         }
         let has_params = self.names.last().is_some_and(|n| n == "params");
@@ -202,7 +202,11 @@ where
         }
         let tensors = self.tensors(graph);
         let forward = self.forward(graph, &tensors, prepared)?;
-        let targets: Vec<&[E]> = prepared.steps.iter().map(|s| s.targets.as_slice()).collect();
+        let targets: Vec<&[E]> = prepared
+            .steps
+            .iter()
+            .map(|s| s.targets.as_slice())
+            .collect();
         let loss = graph.normalised_mse(&forward.predictions, &targets, &self.inverse_std)?;
         Ok((tensors, loss))
     }
@@ -414,14 +418,22 @@ where
         for substep in 0..self.substeps {
             let offset = 2 * substep;
             if substep > 0 {
-                k1 = self.stage(graph, tensors, batch, (&state, history), offset)?.0;
+                k1 = self
+                    .stage(graph, tensors, batch, (&state, history), offset)?
+                    .0;
             }
             let x2 = graph.axpy(&state, dt / 2.0, &k1)?;
-            let k2 = self.stage(graph, tensors, batch, (&x2, history), offset + 1)?.0;
+            let k2 = self
+                .stage(graph, tensors, batch, (&x2, history), offset + 1)?
+                .0;
             let x3 = graph.axpy(&state, dt / 2.0, &k2)?;
-            let k3 = self.stage(graph, tensors, batch, (&x3, history), offset + 1)?.0;
+            let k3 = self
+                .stage(graph, tensors, batch, (&x3, history), offset + 1)?
+                .0;
             let x4 = graph.axpy(&state, dt, &k3)?;
-            let k4 = self.stage(graph, tensors, batch, (&x4, history), offset + 2)?.0;
+            let k4 = self
+                .stage(graph, tensors, batch, (&x4, history), offset + 2)?
+                .0;
             let sum = graph.axpy(&k1, 2.0, &k2)?;
             let sum = graph.axpy(&sum, 2.0, &k3)?;
             let sum = graph.axpy(&sum, 1.0, &k4)?;
@@ -441,7 +453,9 @@ where
         (state, history): (&Matrix<E>, &[Matrix<E>]),
         offset: usize,
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
-        let sources: Vec<&Matrix<E>> = std::iter::once(state).chain(history.iter().skip(1)).collect();
+        let sources: Vec<&Matrix<E>> = std::iter::once(state)
+            .chain(history.iter().skip(1))
+            .collect();
         let mut nets = Vec::with_capacity(self.closures.len());
         for (index, closure) in self.closures.iter().enumerate() {
             let missing = || BackendError::internal(format!("no embedding at offset {offset}"));

@@ -83,7 +83,12 @@ fn assert_rollout_gradient_matches(substeps: usize) {
     let network = network(&model, substeps);
     let fractions = stage_fractions(model.dynamics, substeps);
     let batch = rollout_batch(&model, &record, &[], &[3, 5], 6, &fractions);
-    assert!(batch.feedback.iter().flatten().flatten().any(|f| !f.is_empty()));
+    assert!(batch
+        .feedback
+        .iter()
+        .flatten()
+        .flatten()
+        .any(|f| !f.is_empty()));
     let (loss, gradient) = network.rollout_gradient(&batch).unwrap();
     assert!((loss - network.rollout_loss(&batch).unwrap()).abs() < 1e-14);
     let weights = network.weights();
@@ -147,5 +152,8 @@ fn params_train_at_their_own_rate() {
         assert_eq!(moved, old.name == "params", "{}", old.name);
     }
     let change = after.last().unwrap().values[0] - before.last().unwrap().values[0];
-    assert!((change.abs() - 0.01).abs() < 1e-4, "param moved by {change}");
+    assert!(
+        (change.abs() - 0.01).abs() < 1e-4,
+        "param moved by {change}"
+    );
 }

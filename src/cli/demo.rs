@@ -69,8 +69,8 @@ pub fn run(args: &DemoArgs) -> CommandResult {
         published.push(outcome);
     }
     let intro = format!(
-        "<p>Both studies of Lovelett, Avalos &amp; Kevrekidis (2020), scaled down (fewer \
-         training sizes and replicates, and 200 instead of 1000 epochs for the bioreactor), \
+        "<p>Both studies of Lovelett, Avalos &amp; Kevrekidis (2020), scaled down (3 \
+         replicates instead of 20 and 10, and 300 instead of 1000 epochs for the bioreactor), \
          trained with {jobs} parallel jobs in {seconds:.0} s. Each study's runs, tables \
          (<code>results.csv</code>, <code>results.json</code>, <code>summary.csv</code>) and \
          SVG figures are in <code>{}/&lt;study&gt;/</code>. Errors are MSEs of states z-scored \

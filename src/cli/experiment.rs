@@ -17,11 +17,30 @@ use crate::cli::{CommandError, CommandResult};
 use crate::experiment::merge::{publish, weights_in, Published};
 use crate::experiment::report::{compare, number};
 use crate::experiment::results::summarise;
+use crate::experiment::study::Training;
 use crate::experiment::study::{parse_model_argument, parse_sizes};
 use crate::experiment::{
     execute, grid, prepare, ExperimentError, ExperimentFailure, Prepared, Progress, RunResult,
     RunSpec, Shard, Study, Validation,
 };
+
+/// How every run trains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TrainingArg {
+    /// The paper's: one-step loss every epoch, no polish of the params.
+    Paper,
+    /// gbc's default: one-step epochs, then free-run rollouts of growing length, params polished.
+    MultiStep,
+}
+
+impl From<TrainingArg> for Training {
+    fn from(training: TrainingArg) -> Self {
+        match training {
+            TrainingArg::Paper => Training::Paper,
+            TrainingArg::MultiStep => Training::MultiStep,
+        }
+    }
+}
 
 /// Arguments of `gbc experiment`.
 #[derive(Debug, clap::Args)]
@@ -99,6 +118,9 @@ pub struct RunArgs {
     /// RK4 sub-steps per sample.
     #[arg(long, value_name = "K")]
     pub substeps: Option<usize>,
+    /// Training recipe: the paper's one-step loss, or gbc's multi-step rollouts.
+    #[arg(long, value_enum)]
+    pub training: Option<TrainingArg>,
     /// The mechanistic model behind the data (true rates and params for the figures).
     #[arg(long, value_name = "GBM")]
     pub truth: Option<PathBuf>,
@@ -204,6 +226,7 @@ fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
         learning_rate: 1e-3,
         precision: crate::backend::Precision::F32,
         substeps: 1,
+        training: Training::Paper,
         truth: None,
         generalisation: Vec::new(),
         representative_size: None,
@@ -230,6 +253,7 @@ fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandErr
     study.first_seed = args.first_seed.unwrap_or(study.first_seed);
     study.learning_rate = args.lr.unwrap_or(study.learning_rate);
     study.precision = args.precision.map_or(study.precision, Into::into);
+    study.training = args.training.map_or(study.training, Into::into);
     if args.truth.is_some() {
         study.truth = args.truth.clone();
     }
@@ -302,7 +326,12 @@ fn run_merge(args: &MergeArgs) -> CommandResult {
             path.display()
         );
     }
-    print_summary(&merged.prepared, &merged.results, &merged.published, (0.0, 0));
+    print_summary(
+        &merged.prepared,
+        &merged.results,
+        &merged.published,
+        (0.0, 0),
+    );
     println!("report: {}", out.join("report.html").display());
     Ok(())
 }
@@ -327,19 +356,20 @@ pub fn print_summary(
         results.len()
     );
     println!(
-        "  {:<20} {:>7} {:>12} {:>12}",
-        "model", "points", "offline", "online"
+        "  {:<20} {:>7} {:>12} {:>12} {:>10}",
+        "model", "points", "offline", "online", "blown up"
     );
     for row in summarise(&prepared.study, results) {
         let median = |s: Option<crate::experiment::results::Spread>| {
             s.map_or("-".into(), |s| number(s.median))
         };
         println!(
-            "  {:<20} {:>7} {:>12} {:>12}",
+            "  {:<20} {:>7} {:>12} {:>12} {:>10}",
             row.model,
             row.size,
             median(row.offline),
-            median(row.online)
+            median(row.online),
+            format!("{}/{}", row.blown_up, row.ok)
         );
     }
     for c in compare(prepared, results) {

@@ -3,13 +3,16 @@
 //!
 //! Columns: `t`, the states (measured, then hidden), the closure outputs, the model's
 //! outputs. Offline rows are one-step predictions from the true history; online rows come
-//! from one free run driven by the data's inputs (see `gbc::train::predict`).
+//! from one free run driven by the data's inputs (see `gbc::train::predict`). A free run
+//! that leaves the physical range of the training data (the run's `--range-factor`) stops:
+//! the file ends at the offending row and a warning on stderr says where and why.
 
 use std::path::PathBuf;
 
 use super::train::{read_data, read_source, train_error};
 use super::{CommandError, CommandResult};
-use crate::train::{artifacts, predict};
+use crate::train::recipe::DEFAULT_RANGE_FACTOR;
+use crate::train::{artifacts, predict, PhysicalRange};
 
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -44,14 +47,27 @@ pub fn run(args: &PredictArgs) -> CommandResult {
         .map_err(CommandError::user)?;
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
-    let (network, setup, _) =
+    let (network, setup, info) =
         artifacts::restore(&model, &source, &args.weights).map_err(train_error)?;
     let data = read_data(&model, &args.data)?;
     let mode = match args.mode {
         ModeArg::Offline => predict::Mode::Offline,
         ModeArg::Online => predict::Mode::Online,
     };
-    let table = predict::predict(&model, &network, &setup, &data, mode).map_err(train_error)?;
+    let factor = info.recipe.map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
+    let range = PhysicalRange::new(&setup.normalisation, factor);
+    let mut table =
+        predict::predict_in_range(&model, &network, &setup, &data, (mode, range.as_ref()))
+            .map_err(train_error)?;
+    if let Some(divergence) = &table.divergence {
+        eprintln!("warning: {divergence}; the predictions stop there");
+        let rows = (table.columns.first()).map_or(0, |times| {
+            times.iter().take_while(|t| **t <= divergence.time).count()
+        });
+        for column in &mut table.columns {
+            column.truncate(rows);
+        }
+    }
     crate::data::write_csv(&args.output, &table.header, &table.columns)
         .map_err(CommandError::user)?;
     Ok(())

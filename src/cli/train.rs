@@ -1,9 +1,13 @@
 //! `gbc train MODEL DATA.csv`: fit a grey-box (or black-box) model's networks and params to
 //! a record with Adam, report the validation errors and trained params, and write the run.
 //!
-//! Stiffness warnings and a progress bar (epoch, loss, ETA) go to stderr; the summary goes
-//! to stdout. `-o DIR` writes `weights.safetensors` and `run.json`; `--json FILE` writes the
-//! same metadata (metrics, params, warnings, normalisation, ...) to FILE.
+//! The default recipe is multi-step (free-run rollouts with a curriculum, then a polish of
+//! the params); `--objective one-step` is the paper's (see `docs/training.md`). Stiffness
+//! warnings and a progress bar (epoch, rollout length, loss, ETA) go to stderr; the summary
+//! goes to stdout: errors per validation set, where a free run left the physical range,
+//! and each param with its standard error. `-o DIR` writes `weights.safetensors` and
+//! `run.json`; `--json FILE` writes the same metadata (metrics, params, warnings,
+//! normalisation, ...) to FILE.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -12,7 +16,33 @@ use super::{CommandError, CommandResult};
 use crate::backend::Precision;
 use crate::data::MinRows;
 use crate::ir::Model;
-use crate::train::{self, artifacts, Event, TrainError, TrainOptions, Trained};
+use crate::train::recipe::{
+    DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
+};
+use crate::train::{
+    self, artifacts, ErrorSet, Event, Objective, Recipe, TrainError, TrainOptions, Trained,
+    Validation,
+};
+
+/// The loss training minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObjectiveArg {
+    /// The paper's: one-step predictions, every epoch (with `--polish off` by default).
+    OneStep,
+    /// Free-run rollouts growing to --horizon steps after one-step warm-up epochs.
+    MultiStep,
+}
+
+/// Whether the params are polished after training.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PolishArg {
+    /// On for the multi-step objective, off for one-step.
+    Auto,
+    /// Always.
+    On,
+    /// Never.
+    Off,
+}
 
 /// Element type of training.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -39,9 +69,10 @@ pub struct TrainArgs {
     pub model: PathBuf,
     /// The training record (CSV with `t`, the inputs and the measured states).
     pub data: PathBuf,
-    /// A separate validation record (default: the pairs after --train-points).
-    #[arg(long)]
-    pub val: Option<PathBuf>,
+    /// A validation record (repeatable). The pairs after --train-points validate too, first
+    /// (without --val and --train-points, the last 30 % of DATA validate).
+    #[arg(long, value_name = "FILE")]
+    pub val: Vec<PathBuf>,
     /// Passes over the training pairs.
     #[arg(long, default_value_t = 100)]
     pub epochs: usize,
@@ -66,6 +97,34 @@ pub struct TrainArgs {
     /// Length (model time) of the online free run (default: to the end of the validation data).
     #[arg(long, value_name = "T")]
     pub online_horizon: Option<f64>,
+    /// Training loss: free-run rollouts (multi-step) or the paper's one-step loss.
+    #[arg(long, value_enum, default_value_t = ObjectiveArg::MultiStep)]
+    pub objective: ObjectiveArg,
+    /// Longest rollout of the multi-step objective, in sampling steps.
+    #[arg(long, default_value_t = DEFAULT_HORIZON, value_name = "K")]
+    pub horizon: usize,
+    /// Share of the epochs trained one-step before rollouts start.
+    #[arg(long, default_value_t = DEFAULT_WARMUP_SHARE, value_name = "SHARE")]
+    pub warmup: f64,
+    /// Share of the epochs over which rollouts grow from 2 steps to --horizon.
+    #[arg(long, default_value_t = DEFAULT_RAMP_SHARE, value_name = "SHARE")]
+    pub ramp: f64,
+    /// Rollout windows per Adam step (default: --batch).
+    #[arg(long, value_name = "N")]
+    pub windows: Option<usize>,
+    /// Adam learning rate of the params (default: --lr).
+    #[arg(long, value_name = "LR")]
+    pub param_lr: Option<f64>,
+    /// Clip each gradient to this Euclidean norm.
+    #[arg(long, value_name = "NORM")]
+    pub clip: Option<f64>,
+    /// Fit the params by Levenberg-Marquardt with the network frozen after training.
+    #[arg(long, value_enum, default_value_t = PolishArg::Auto)]
+    pub polish: PolishArg,
+    /// A free run stops when a state leaves [0, F x max] of the training data ([-F x max|x|,
+    /// F x max|x|] for a state that was negative).
+    #[arg(long, default_value_t = DEFAULT_RANGE_FACTOR, value_name = "F")]
+    pub range_factor: f64,
     /// Directory to write the weights and run.json into.
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
@@ -79,11 +138,14 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
     let data = read_data(&model, &args.data)?;
-    let validation = args
-        .val
-        .as_deref()
+    let files = (args.val.iter())
         .map(|path| read_data(&model, path))
-        .transpose()?;
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut validations = Vec::new();
+    if args.train_points.is_some() || files.is_empty() {
+        validations.push(Validation::Rest);
+    }
+    validations.extend(files.iter().map(Validation::File));
     let options = TrainOptions {
         epochs: args.epochs,
         batch_size: args.batch,
@@ -96,9 +158,15 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     };
     let started = Instant::now();
     let mut progress = Progress::default();
-    let outcome = train::train(&model, &data, validation.as_ref(), &options, &mut |event| {
-        progress.observe(event, options.epochs)
-    });
+    let recipe = recipe_of(args);
+    let outcome = train::train_with(
+        &model,
+        &data,
+        &validations,
+        &options,
+        &recipe,
+        &mut |event| progress.observe(event, options.epochs),
+    );
     progress.finish();
     let trained = outcome.map_err(train_error)?;
     let model_path = args.model.display().to_string();
@@ -120,6 +188,28 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     }
     print_summary(&model, &trained, started.elapsed().as_secs_f64(), args);
     Ok(())
+}
+
+/// The recipe the flags ask for.
+pub fn recipe_of(args: &TrainArgs) -> Recipe {
+    Recipe {
+        objective: match args.objective {
+            ObjectiveArg::OneStep => Objective::OneStep,
+            ObjectiveArg::MultiStep => Objective::MultiStep,
+        },
+        horizon: args.horizon,
+        warmup_share: args.warmup,
+        ramp_share: args.ramp,
+        windows_per_batch: args.windows,
+        param_learning_rate: args.param_lr,
+        max_gradient_norm: args.clip,
+        polish: match args.polish {
+            PolishArg::Auto => None,
+            PolishArg::On => Some(true),
+            PolishArg::Off => Some(false),
+        },
+        range_factor: args.range_factor,
+    }
 }
 
 /// Reads a model file's text (for its hash).
@@ -166,7 +256,7 @@ impl Progress {
                 ..
             } => {
                 let bar = indicatif::ProgressBar::new(epochs as u64);
-                let template = "epoch {pos}/{len} [{bar:30}] loss {msg} ETA {eta}";
+                let template = "epoch {pos}/{len} [{bar:30}] {msg} ETA {eta}";
                 if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
                     bar.set_style(style.progress_chars("=> "));
                 }
@@ -175,9 +265,13 @@ impl Progress {
                 ));
                 self.bar = Some(bar);
             }
-            Event::Epoch { epoch, loss } => {
+            Event::Epoch {
+                epoch,
+                loss,
+                horizon,
+            } => {
                 if let Some(bar) = &self.bar {
-                    bar.set_message(format!("{loss:.3e}"));
+                    bar.set_message(format!("{horizon} step loss {loss:.3e}"));
                     bar.set_position(epoch as u64);
                 }
             }
@@ -194,42 +288,70 @@ impl Progress {
 fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArgs) {
     let report = &trained.report;
     println!(
-        "trained `{}` on {} pairs for {} epochs in {seconds:.1} s (final loss {})",
+        "trained `{}` on {} pairs for {} epochs ({}) in {seconds:.1} s (final loss {})",
         model.name,
         report.train_pairs,
         args.epochs,
+        report.recipe.objective.name(),
         report
             .losses
             .last()
             .map_or("-".into(), |l| format!("{l:.4e}"))
     );
-    let metrics = &report.metrics;
-    match (&metrics.offline, &metrics.online) {
-        (Some(offline), Some(online)) => {
-            println!(
-                "validation error on {} pairs (MSE of z-scored states):",
-                report.validation_pairs
-            );
-            println!("  {:<16} {:>12} {:>12}", "state", "offline", "online");
-            for ((name, off), (_, on)) in offline.per_state.iter().zip(&online.per_state) {
-                println!("  {name:<16} {:>12} {:>12}", error(*off), error(*on));
-            }
-            let overall = (error(offline.overall), error(online.overall));
-            println!("  {:<16} {:>12} {:>12}", "overall", overall.0, overall.1);
-            if !online.overall.is_finite() {
-                println!("the free run diverged (see the stiffness warnings, or train longer)");
-            }
-        }
-        _ => println!("no validation pairs: pass --val FILE or a smaller --train-points"),
+    let validations = &report.metrics.validations;
+    if validations.is_empty() {
+        println!("no validation pairs: pass --val FILE or a smaller --train-points");
     }
-    if !report.params.is_empty() {
-        println!("params:");
-        for (name, value) in &report.params {
-            println!("  {name} = {value:.6}");
-        }
+    for set in validations {
+        println!(
+            "validation on {} ({} pairs; MSE of z-scored states):",
+            set.name, set.pairs
+        );
+        print_errors(&set.offline, &set.online);
     }
+    print_params(trained);
     if let Some(directory) = &args.output {
         println!("weights written to {}", directory.display());
+    }
+}
+
+fn print_errors(offline: &ErrorSet, online: &ErrorSet) {
+    println!("  {:<16} {:>12} {:>12}", "state", "offline", "online");
+    for ((name, off), (_, on)) in offline.per_state.iter().zip(&online.per_state) {
+        println!("  {name:<16} {:>12} {:>12}", error(*off), error(*on));
+    }
+    let overall = (error(offline.overall), error(online.overall));
+    println!("  {:<16} {:>12} {:>12}", "overall", overall.0, overall.1);
+    if let Some(divergence) = &online.divergence {
+        println!("  {divergence}");
+    }
+}
+
+fn print_params(trained: &Trained) {
+    let report = &trained.report;
+    if report.params.is_empty() {
+        return;
+    }
+    match &report.polish {
+        Some(polish) => println!(
+            "params (polished in {} steps, one-step loss {:.4e} -> {:.4e}; +- standard error):",
+            polish.steps, polish.loss_before, polish.loss_after
+        ),
+        None => println!("params (+- standard error):"),
+    }
+    for estimate in &report.estimates {
+        let flag = if estimate.well_identified {
+            ""
+        } else {
+            "  poorly identified"
+        };
+        println!(
+            "  {} = {:.6} +- {:.2e} ({:.1} %){flag}",
+            estimate.name,
+            estimate.value,
+            estimate.std_error,
+            100.0 * estimate.relative_error
+        );
     }
 }
 

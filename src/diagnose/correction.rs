@@ -79,7 +79,7 @@ pub fn one_step_pass(corrected: &mut Corrected, record: &Record, end: usize) -> 
     let measured = record.states.len();
     corrected.simulator.set_correction(0.0);
     let (starts, predictions) = corrected.simulator.one_step(record, end)?;
-    let rows = starts.len();
+    let rows = starts.rows();
     let mut pass = Pass {
         rows,
         present: Vec::with_capacity(rows),
@@ -109,7 +109,7 @@ fn sensitivities(
     size: f64,
 ) -> Result<Vec<Vec<f64>>, IntegrationError> {
     let measured = record.states.len();
-    (0..starts.len())
+    (0..starts.rows())
         .map(|row| {
             let mut state = starts.row(row).to_vec();
             simulator.step(record, row, &mut state)?;
@@ -171,7 +171,7 @@ pub struct Solution {
 /// Fits the weights of a correction with features `map` to the pass (params `theta`, as
 /// the pass ran); `None` if the normal equations are singular at every ridge.
 pub fn fit(pass: &Pass, map: &FeatureMap, record: &Record, norm: &Normalisation, theta: &[f64]) -> Option<Solution> {
-    let n = map.len();
+    let n = map.width();
     let folds = normal_equations(pass, map, record, norm);
     let ridge = choose_ridge(&folds, n)?;
     let mut all = Normal::new(n);
@@ -184,7 +184,7 @@ pub fn fit(pass: &Pass, map: &FeatureMap, record: &Record, norm: &Normalisation,
 
 /// The normal equations, one set per fold, with each fold's constant `sum r^2 / std^2`.
 fn normal_equations(pass: &Pass, map: &FeatureMap, record: &Record, norm: &Normalisation) -> Vec<(Normal, f64)> {
-    let n = map.len();
+    let n = map.width();
     let mut folds: Vec<(Normal, f64)> = (0..FOLDS).map(|_| (Normal::new(n), 0.0)).collect();
     let (mut phi, mut lag) = (Vec::new(), Vec::new());
     let data = |row: usize, k: usize| record.states[k][row];
@@ -220,7 +220,7 @@ fn choose_ridge(folds: &[(Normal, f64)], penalised: usize) -> Option<f64> {
                 None => loss = f64::INFINITY,
             }
         }
-        if loss.is_finite() && best.map_or(true, |(_, l)| loss < l) {
+        if loss.is_finite() && best.is_none_or(|(_, l)| loss < l) {
             best = Some((ridge, loss));
         }
     }

@@ -202,7 +202,7 @@ pub fn combine(
 
 /// The model with the named effects applied.
 pub fn lower(context: &Context, effects: &[&str]) -> Result<Model, DiagnoseError> {
-    ir::lower(&context.checked, effects).map_err(|error| DiagnoseError::Unsimulable {
+    ir::lower(context.checked, effects).map_err(|error| DiagnoseError::Unsimulable {
         reason: format!("effect {}: {error}", effects.join(" + ")),
     })
 }

@@ -115,7 +115,8 @@ fn best_bin(name: &str, values: &[f64], errors: &[f64], total: f64) -> Option<(f
     let mut order: Vec<usize> = (0..values.len()).collect();
     order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
     let (lowest, highest) = (values[*order.first()?], values[*order.last()?]);
-    if !(highest - lowest > 1e-12 * highest.abs().max(lowest.abs()).max(1e-300)) {
+    let spread = highest - lowest;
+    if spread.is_nan() || spread <= 1e-12 * highest.abs().max(lowest.abs()).max(1e-300) {
         return None;
     }
     let mut best: Option<(f64, Regime)> = None;
@@ -133,7 +134,7 @@ fn best_bin(name: &str, values: &[f64], errors: &[f64], total: f64) -> Option<(f
         let share = members.iter().map(|&i| errors[i]).sum::<f64>() / total;
         let lift = share / (members.len() as f64 / order.len() as f64);
         let range = [values[members[0]], values[members[members.len() - 1]]];
-        if best.as_ref().map_or(true, |(b, _)| lift > *b) {
+        if best.as_ref().is_none_or(|(b, _)| lift > *b) {
             let regime = Regime {
                 variable: name.to_string(),
                 range,

@@ -41,16 +41,11 @@ pub struct FeatureMap {
 
 impl FeatureMap {
     /// Number of features.
-    pub fn len(&self) -> usize {
+    pub fn width(&self) -> usize {
         let v = self.center.len();
         let quadratic = 1 + v + v * (v + 1) / 2;
         let history = self.lags.map_or(0, |l| l.dim.saturating_sub(1) * self.embedded);
         2 * quadratic + history * (2 + v)
-    }
-
-    /// Whether there are no features (never: the constant is always one).
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 
     /// Indices of the features a free-run refinement adjusts: the constant and `l` alone
@@ -116,7 +111,7 @@ mod tests {
         expected.extend(q.iter().map(|x| 0.5 * x));
         expected.extend([2.0, 1.0, 2.0, -2.0]);
         assert_eq!(out, expected);
-        assert_eq!(map.len(), expected.len());
+        assert_eq!(map.width(), expected.len());
         // The constant and l alone.
         assert_eq!(map.directions(), vec![0, 6]);
     }

@@ -101,7 +101,7 @@ pub fn fit(
                 .iter()
                 .map(|&t| {
                     let noise: f64 = StandardNormal.sample(&mut rng);
-                    t + RESTART_SPREAD * noise * t.abs().max(1.0).min(3.0)
+                    t + RESTART_SPREAD * noise * t.abs().clamp(1.0, 3.0)
                 })
                 .collect(),
         );

@@ -70,7 +70,7 @@ impl Frame {
         };
         let x = range(&mut xs.iter().copied());
         let mut y = range(&mut ys.iter().flat_map(|c| c.iter().copied()));
-        if !(y.1 > y.0) {
+        if y.1.is_nan() || y.0.is_nan() || y.1 <= y.0 {
             y = (y.0 - 1.0, y.0 + 1.0);
         }
         if !y.0.is_finite() {

@@ -20,7 +20,7 @@ use super::features::{FeatureMap, Lags};
 use super::record::mean_std;
 use super::report::{Locus, LocusKind};
 use super::simulate::{tolerances, Simulator};
-use super::{Context, DiagnoseError};
+use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Model, Var};
 use rayon::prelude::*;
 
@@ -135,32 +135,41 @@ impl Trial {
     }
 }
 
-/// Tries every target; `tick` is called once per target and once per refinement.
+/// Tries every target, reporting progress in two stages.
 pub fn locate(
     context: &Context,
     params: &[f64],
     lags: &[Lags],
     noise_floor: f64,
-    tick: &(dyn Fn() + Sync),
+    progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Located, DiagnoseError> {
-    let found = targets(context.model)
+    let targets = targets(context.model);
+    progress(Progress::Stage {
+        name: "fitting corrections",
+        total: targets.len(),
+    });
+    let found = targets
         .par_iter()
         .map(|target| {
             let trial = try_target(context, target, params, lags);
-            tick();
+            progress(Progress::Item);
             trial
         })
         .collect::<Result<Vec<_>, _>>()?;
     let mut trials: Vec<Trial> = found.into_iter().flatten().collect();
+    let top = trials.len().min(REFINED);
+    progress(Progress::Stage {
+        name: "refining corrections",
+        total: trials.len() + top,
+    });
     trials.par_iter_mut().for_each(|trial| {
         refine(context, trial, false);
-        tick();
+        progress(Progress::Item);
     });
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
-    let top = trials.len().min(REFINED);
     trials[..top].par_iter_mut().for_each(|trial| {
         refine(context, trial, true);
-        tick();
+        progress(Progress::Item);
     });
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
     Ok(summarise(context, &trials, noise_floor))

@@ -163,13 +163,8 @@ pub fn diagnose(
         .first()
         .filter(|best| significant && gap_before - best.gap_after >= CREDIT * (gap_before - noise_floor))
         .map(|best| best.name.clone());
-    let targets = locus::targets(context.model).len();
-    progress(Progress::Stage {
-        name: "locating the gap",
-        total: 2 * targets + targets.min(locus::REFINED),
-    });
     let lags = locus::history_lags(delay_rows(&context)?, options.dim);
-    let located = locus::locate(&context, &before.fitted.params, &lags, noise_floor, &tick)?;
+    let located = locus::locate(&context, &before.fitted.params, &lags, noise_floor, progress)?;
     let history_dependent = significant && located.history_dependent;
     let hints = match (&located.along, located.loci.first()) {
         (Some(along), Some(best)) if significant => symbolic::hints(along, &correction_name(best)),
@@ -318,7 +313,7 @@ fn series(context: &Context, before: Option<&simulate::Run>, after: Option<&simu
     let measured = context.model.states.len();
     let columns = |run: &simulate::Run| -> Vec<Vec<f64>> {
         (0..measured)
-            .map(|k| (0..run.len()).map(|row| run.row(row)[k]).collect())
+            .map(|k| (0..run.rows()).map(|row| run.row(row)[k]).collect())
             .collect()
     };
     Series {

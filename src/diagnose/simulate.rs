@@ -35,13 +35,8 @@ impl Run {
     }
 
     /// Number of rows.
-    pub fn len(&self) -> usize {
+    pub fn rows(&self) -> usize {
         self.values.len() / self.dim.max(1)
-    }
-
-    /// Whether the run has no rows.
-    pub fn is_empty(&self) -> bool {
-        self.values.is_empty()
     }
 }
 
@@ -85,11 +80,6 @@ impl Simulator {
             system,
             scratch: Vec::new(),
         })
-    }
-
-    /// Number of states (measured, then hidden).
-    pub fn dim(&self) -> usize {
-        self.system.dim()
     }
 
     /// Compiles an expression of this model (e.g. a let's value) against its slots.

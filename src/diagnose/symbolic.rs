@@ -44,11 +44,11 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     let gram = Gram::new(&library, y);
     let mut supports = best_subsets(&gram);
     supports.extend(THRESHOLDS.iter().filter_map(|&t| stlsq(&gram, t)));
-    let mut best: Vec<Option<(f64, Vec<usize>, Vec<f64>)>> = vec![None; MAX_TERMS + 1];
+    let mut best: Vec<Option<Candidate>> = vec![None; MAX_TERMS + 1];
     for support in supports.into_iter().filter(|s| !s.is_empty() && s.len() <= MAX_TERMS) {
         if let Some((r2, coefficients)) = gram.fit(&support) {
             let slot = &mut best[support.len()];
-            if slot.as_ref().map_or(true, |(b, _, _)| r2 > *b) {
+            if slot.as_ref().is_none_or(|(b, _, _)| r2 > *b) {
                 *slot = Some((r2, support, coefficients));
             }
         }
@@ -68,6 +68,9 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     }
     formulas
 }
+
+/// A formula found: its R^2, support and coefficients.
+type Candidate = (f64, Vec<usize>, Vec<f64>);
 
 /// Cross products of the unit-scaled library columns and the target.
 struct Gram {

@@ -233,3 +233,51 @@ fn models_with_closures_or_too_little_data_are_refused() {
     let refused = try_run("models/diagnose/chemostat/model.gbm", &short);
     assert!(matches!(refused, Err(DiagnoseError::TooFewRows { rows: 15, .. })));
 }
+
+#[test]
+fn the_json_has_the_spec_fields_and_the_html_its_plots() {
+    let simulated = chemostat("truth_decay.gbm");
+    let report = run("models/diagnose/chemostat/model.gbm", &simulated.data);
+    let json = serde_json::to_value(&report).unwrap();
+    for key in ["gap_before", "noise_floor", "significant", "states", "locus", "history_dependent"] {
+        assert!(json.get(key).is_some(), "{key}");
+    }
+    for key in ["windows", "regime", "effects", "credited"] {
+        assert!(json.get(key).is_some(), "{key}");
+    }
+    assert_eq!(json["credited"], "product_decay");
+    assert_eq!(json["locus"][0]["kind"], "balance");
+    assert!(json["locus"][0]["bound_after"].as_f64().is_some());
+    assert!(json["effects"][0]["params"]["k_P"].as_f64().is_some());
+    assert_eq!(json["regime"][0]["range"].as_array().map(Vec::len), Some(2));
+    let shares: f64 = (json["states"].as_array().unwrap().iter())
+        .map(|s| s["share"].as_f64().unwrap())
+        .sum();
+    assert!((shares - 1.0).abs() < 1e-9);
+    let page = html::page(&report);
+    // One plot per measured state, the error over time and the bars.
+    assert_eq!(page.matches("<svg").count(), 2 + 2);
+    assert!(page.contains("after product_decay") && page.contains("</html>"));
+}
+
+#[test]
+fn zz_worked_example() {
+    let Ok(model) = std::env::var("GBC_EXAMPLE_MODEL") else { return };
+    let data = std::env::var("GBC_EXAMPLE_DATA").unwrap();
+    let out = std::env::var("GBC_EXAMPLE_OUT").unwrap();
+    let args = cli_check::DiagnoseArgs {
+        model: model.into(),
+        data: data.into(),
+        test: None,
+        holdout: 0.3,
+        seed: 0,
+        restarts: 2,
+        delay: None,
+        dim: 6,
+        json: Some(format!("{out}.json").into()),
+        html: Some(format!("{out}.html").into()),
+    };
+    let start = std::time::Instant::now();
+    cli_check::run(&args).unwrap();
+    eprintln!("ELAPSED {:.1?}", start.elapsed());
+}

@@ -418,7 +418,8 @@ pub fn options_of(study: &Study, spec: &RunSpec) -> TrainOptions {
         seed: spec.seed,
         precision: study.precision,
         substeps: study.substeps,
-        online_horizon: None,
+        // The free run covers the whole validation window (the default).
+        ..TrainOptions::default()
     }
 }
 
@@ -432,11 +433,12 @@ fn run_one(
     let loaded = &prepared.models[spec.model];
     let options = options_of(&prepared.study, spec);
     let started = Instant::now();
-    let trained = train::train(
+    let trained = train::train_with(
         &loaded.model,
         &prepared.training,
-        Some(&loaded.validation),
+        &[train::Validation::File(&loaded.validation)],
         &options,
+        &prepared.study.training.recipe(),
         &mut |event| {
             if let Event::Epoch { epoch, .. } = event {
                 on_progress(Progress::Epoch(spec, epoch));
@@ -547,12 +549,18 @@ fn save_weights(
 ) -> Result<(), train::TrainError> {
     let model_path = loaded.path.display().to_string();
     let data_path = prepared.study.data.display().to_string();
-    let info = artifacts::run_info(
+    let mut info = artifacts::run_info(
         &loaded.model,
         (&model_path, &loaded.source),
         &data_path,
         options,
         trained,
     );
+    // JSON has no infinity: a diverged free run's errors would be written as `null` and the
+    // run could not be restored. Its errors are in the run's result file; leave them out.
+    let json = serde_json::to_string(&info).unwrap_or_default();
+    if serde_json::from_str::<artifacts::RunInfo>(&json).is_err() {
+        info.metrics = train::Metrics::default();
+    }
     artifacts::save(directory, &info, &trained.network)
 }

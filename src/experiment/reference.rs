@@ -121,7 +121,9 @@ pub fn truth_along(
         if let Some(actual) = data.column(&state.name) {
             let std = state_std(actual);
             let start = checked_from.min(rows);
-            let pairs = run.states[index][start..rows].iter().zip(&actual[start..rows]);
+            let pairs = run.states[index][start..rows]
+                .iter()
+                .zip(&actual[start..rows]);
             for (simulated, measured) in pairs {
                 deviation = deviation.max((simulated - measured).abs() / std);
             }

@@ -102,7 +102,8 @@ pub fn describe(study: &Study) -> String {
     };
     format!(
         "<p>Models {}. Data <code>{}</code>: {validation}. Sizes {:?} training pairs, {} \
-         replicates (seeds {}..), {} epochs, batch {}, learning rate {}, {:?}.</p>",
+         replicates (seeds {}..), {} epochs, batch {}, learning rate {}, {:?}, training \
+         recipe <code>{}</code>.</p>",
         models.join(", "),
         escape(&study.data.display().to_string()),
         study.sorted_sizes(),
@@ -112,6 +113,7 @@ pub fn describe(study: &Study) -> String {
         study.batch_size,
         study.learning_rate,
         study.precision,
+        study.training.name(),
     )
 }
 
@@ -190,7 +192,7 @@ fn comparison_list(comparisons: &[Comparison]) -> String {
 fn summary_table(rows: &[SummaryRow]) -> String {
     let mut html = String::from(
         "<table><tr><th>model</th><th>points</th><th>ok / failed</th><th>offline MSE \
-         [min – max]</th><th>online MSE [min – max]</th>",
+         [min – max]</th><th>online MSE [min – max]</th><th>free runs blown up</th>",
     );
     let generalisation: Vec<String> = (rows.first())
         .map(|r| {
@@ -207,13 +209,14 @@ fn summary_table(rows: &[SummaryRow]) -> String {
     for row in rows {
         let _ = write!(
             html,
-            "<tr><td>{}</td><td>{}</td><td>{} / {}</td><td>{}</td><td>{}</td>",
+            "<tr><td>{}</td><td>{}</td><td>{} / {}</td><td>{}</td><td>{}</td><td>{}</td>",
             escape(&row.model),
             row.size,
             row.ok,
             row.failed,
             spread_cell(row.offline),
-            spread_cell(row.online)
+            spread_cell(row.online),
+            row.blown_up
         );
         for (_, spread) in &row.generalisation {
             let _ = write!(html, "<td>{}</td>", spread_cell(*spread));

@@ -252,6 +252,10 @@ pub fn read_study_record(dir: &Path) -> Result<Option<StudyRecord>, ExperimentEr
         })
 }
 
+/// An online MSE above this (a free run ending a thousand standard deviations away, or not
+/// finite) counts as a free run that blew up in the summaries.
+pub const BLOWN_UP_MSE: f64 = 1e6;
+
 /// Median, minimum and maximum of replicate values.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Spread {
@@ -273,7 +277,11 @@ pub fn spread(values: &[f64]) -> Option<Spread> {
     let middle = sorted.len() / 2;
     // Two equal middle values (infinities included) are the median as they are.
     let (low, high) = (sorted[(sorted.len() - 1) / 2], sorted[middle]);
-    let median = if low == high { high } else { (low + high) / 2.0 };
+    let median = if low == high {
+        high
+    } else {
+        (low + high) / 2.0
+    };
     Some(Spread {
         median,
         min: sorted[0],
@@ -292,6 +300,9 @@ pub struct SummaryRow {
     pub ok: usize,
     /// Runs that failed.
     pub failed: usize,
+    /// Runs whose free run over the validation window blew up (online MSE above
+    /// [`BLOWN_UP_MSE`] or not finite).
+    pub blown_up: usize,
     /// Offline MSE.
     pub offline: Option<Spread>,
     /// Online MSE.
@@ -334,6 +345,9 @@ pub fn summarise(study: &Study, results: &[RunResult]) -> Vec<SummaryRow> {
                 size,
                 ok: ok.len(),
                 failed: runs.len() - ok.len(),
+                blown_up: (ok.iter())
+                    .filter(|r| r.online().is_some_and(|e| e > BLOWN_UP_MSE))
+                    .count(),
                 offline: values(&RunResult::offline),
                 online: values(&RunResult::online),
                 generalisation,

@@ -10,6 +10,7 @@ use miette::{NamedSource, SourceSpan};
 
 use super::ExperimentError;
 use crate::backend::Precision;
+use crate::train::Recipe;
 
 /// One model of a study.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -30,6 +31,37 @@ pub enum Validation {
     FromRow(usize),
     /// Every row of the training file may train; this whole file validates.
     File(PathBuf),
+}
+
+/// How every run of a study trains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Training {
+    /// The paper's: the one-step loss every epoch, one learning rate, no polish of the params
+    /// ([`Recipe::paper`]).
+    #[default]
+    Paper,
+    /// gbc's default recipe: one-step epochs, then free-run rollouts of growing length, the
+    /// params polished at the end ([`Recipe::default`]).
+    MultiStep,
+}
+
+impl Training {
+    /// The training recipe.
+    pub fn recipe(self) -> Recipe {
+        match self {
+            Training::Paper => Recipe::paper(),
+            Training::MultiStep => Recipe::default(),
+        }
+    }
+
+    /// The name in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Training::Paper => "paper",
+            Training::MultiStep => "multi-step",
+        }
+    }
 }
 
 /// A grid of training runs: every model x training size x replicate.
@@ -68,6 +100,9 @@ pub struct Study {
     /// RK4 sub-steps per sample.
     #[serde(default = "default_substeps")]
     pub substeps: usize,
+    /// The training recipe (default: the paper's).
+    #[serde(default)]
+    pub training: Training,
     /// The mechanistic model that made the data: true closure values (its outputs named
     /// `<output>_true` or its lets named `<output>`) and true param values (its consts).
     #[serde(default)]
@@ -117,6 +152,7 @@ impl Study {
             learning_rate: 1e-3,
             precision: Precision::F32,
             substeps: 1,
+            training: Training::Paper,
             truth: Some(dir.join("truth.gbm")),
             generalisation: vec![dir.join("data/chirp.csv")],
             representative_size: Some(PAPER_REPRESENTATIVE_SIZE),
@@ -142,6 +178,7 @@ impl Study {
             learning_rate: 1e-3,
             precision: Precision::F32,
             substeps: 1,
+            training: Training::Paper,
             truth: Some(dir.join("truth.gbm")),
             generalisation: vec![dir.join("data/steps_seed2.csv")],
             representative_size: Some(PAPER_REPRESENTATIVE_SIZE),
@@ -156,12 +193,12 @@ impl Study {
         }
     }
 
-    /// The bioreactor study scaled down for `gbc demo`: fewer sizes, replicates and epochs.
+    /// The bioreactor study scaled down for `gbc demo`: 3 replicates instead of 10 and 300
+    /// epochs instead of 1000.
     pub fn bioreactor_demo() -> Study {
         Study {
-            sizes: vec![100, 500, 2000],
-            replicates: 2,
-            epochs: 200,
+            replicates: 3,
+            epochs: 300,
             ..Study::bioreactor()
         }
     }

@@ -115,7 +115,9 @@ pub fn results_csv(study: &Study, results: &[RunResult]) -> Result<String, Exper
 pub fn summary_csv(rows: &[SummaryRow]) -> Result<String, ExperimentFailure> {
     let mut writer = csv::Writer::from_writer(Vec::new());
     let csv_error = |error: csv::Error| ExperimentFailure::Internal(format!("csv: {error}"));
-    let mut header: Vec<String> = ["model", "size", "ok", "failed"].map(String::from).to_vec();
+    let mut header: Vec<String> = ["model", "size", "ok", "failed", "online_blown_up"]
+        .map(String::from)
+        .to_vec();
     for metric in ["offline", "online"] {
         header.extend(["median", "min", "max"].map(|s| format!("{metric}_{s}")));
     }
@@ -140,6 +142,7 @@ pub fn summary_csv(rows: &[SummaryRow]) -> Result<String, ExperimentFailure> {
             row.size.to_string(),
             row.ok.to_string(),
             row.failed.to_string(),
+            row.blown_up.to_string(),
         ];
         for spread in [row.offline, row.online] {
             record.extend(spread_cells(spread));

@@ -209,7 +209,7 @@ fn summaries_take_the_median_over_replicates_and_count_failures() {
     let rows = summarise(&study, &results);
     assert_eq!(rows.len(), 1);
     let row = &rows[0];
-    assert_eq!((row.ok, row.failed), (3, 1));
+    assert_eq!((row.ok, row.failed, row.blown_up), (3, 1, 1));
     let online = row.online.map(|s| (s.median, s.min, s.max));
     assert_eq!(online, Some((0.3, 0.1, f64::INFINITY)));
     assert_eq!(row.generalisation[0].1.map(|s| s.median), Some(0.5));
@@ -305,6 +305,11 @@ fn identity_ignores_the_grid_extent_but_not_training_settings() {
         ..study.clone()
     };
     assert_ne!(study.identity(), longer.identity());
+    let retrained = Study {
+        training: super::study::Training::MultiStep,
+        ..study.clone()
+    };
+    assert_ne!(study.identity(), retrained.identity());
     let reseeded = Study {
         first_seed: 2,
         ..study.clone()

@@ -1,1 +1,155 @@
-//! A hand-fused training step (performance study, issue 8).
+//! A hand-fused training step (performance study, issue 8): the same one-step loss, gradient
+//! and Adam update as [`crate::backend::Network`], written as plain loops over buffers that
+//! live from step to step instead of a recorded dfdx graph.
+//!
+//! It measures how far the graph backend is from what the step costs when nothing but its
+//! arithmetic is done (see `docs/performance.md`). It is driven by the compiled
+//! [`ir::Model`] like the backend: any number of closures of any sizes and activations,
+//! `der` models (RK4 with `K` sub-steps, networks at every stage on the delay embedding
+//! completed by the stage estimate) and `next` models, hidden states, and the physics,
+//! priors and param transforms through the backend's own [`Program`]. What it saves:
+//!
+//! - no tape: the reverse pass is written out (RK4 adjoint, then per stage the physics
+//!   program's reverse sweep and each network's layers), so there is no per-operation
+//!   allocation, boxing or tape merging;
+//! - one matrix kernel ([`dense::multiply_add`]) that keeps output strips in registers, for
+//!   the layers, their input gradients and their weight gradients;
+//! - softplus value and slope from one exponential, in `f32` through vectorisable
+//!   polynomials ([`activation`]);
+//! - buffers for activations, slopes and embeddings reused across steps, and one flat
+//!   weight vector with a single Adam loop.
+//!
+//! Its loss and gradients agree with the graph backend's to rounding (tested in both
+//! precisions); it starts from the same weights as [`crate::backend::Network::build`] and
+//! reads and writes the same [`NamedTensor`] lists.
+//!
+//! [`Program`]: crate::backend::program::Program
+
+pub mod activation;
+pub mod dense;
+mod kernel;
+mod plan;
+
+#[cfg(test)]
+mod tests;
+
+use crate::backend::real::Real;
+use crate::backend::{BackendError, Batch, NamedTensor, Network, Precision, Setup};
+use crate::ir;
+
+use kernel::Kernel;
+use plan::Plan;
+
+/// The fused training step in the precision of its [`Setup`].
+pub struct FusedNetwork {
+    inner: Inner,
+}
+
+enum Inner {
+    Single(Kernel<f32>),
+    Double(Kernel<f64>),
+}
+
+macro_rules! dispatch {
+    ($self:expr, $kernel:ident => $body:expr) => {
+        match &$self.inner {
+            Inner::Single($kernel) => $body,
+            Inner::Double($kernel) => $body,
+        }
+    };
+    (mut $self:expr, $kernel:ident => $body:expr) => {
+        match &mut $self.inner {
+            Inner::Single($kernel) => $body,
+            Inner::Double($kernel) => $body,
+        }
+    };
+}
+
+impl FusedNetwork {
+    /// Builds the step for `model` with the initial weights [`Network::build`] gives for the
+    /// same setup.
+    pub fn build(model: &ir::Model, setup: &Setup) -> Result<FusedNetwork, BackendError> {
+        let template = Network::build(model, setup)?.weights();
+        let plan = Plan::build(model, setup, &template)?;
+        let flat: Vec<f64> = template.iter().flat_map(|t| t.values.clone()).collect();
+        let inner = match setup.precision {
+            Precision::F32 => Inner::Single(Kernel::new(model, setup, plan, &flat)?),
+            Precision::F64 => Inner::Double(Kernel::new(model, setup, plan, &flat)?),
+        };
+        Ok(FusedNetwork { inner })
+    }
+
+    /// One Adam step on the batch's loss; returns the loss before the step.
+    pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
+        dispatch!(mut self, kernel => kernel.train_step(batch, learning_rate))
+    }
+
+    /// The loss and its gradient with respect to every tensor of
+    /// [`FusedNetwork::weights`].
+    pub fn gradient(&mut self, batch: &Batch) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
+        dispatch!(mut self, kernel => {
+            let loss = kernel.loss_and_gradient(batch)?;
+            Ok((loss, split(kernel.plan(), &kernel.gradient)))
+        })
+    }
+
+    /// The trainable tensors, named and shaped as [`Network::weights`].
+    pub fn weights(&self) -> Vec<NamedTensor> {
+        dispatch!(self, kernel => {
+            let plan = kernel.plan();
+            (plan.names.iter().zip(split(plan, &kernel.weights)))
+                .map(|((name, shape), values)| NamedTensor {
+                    name: name.clone(),
+                    shape: shape.clone(),
+                    values,
+                })
+                .collect()
+        })
+    }
+
+    /// Replaces the trainable tensors (names and shapes must match
+    /// [`FusedNetwork::weights`]).
+    pub fn set_weights(&mut self, weights: &[NamedTensor]) -> Result<(), BackendError> {
+        dispatch!(mut self, kernel => {
+            let plan = kernel.plan();
+            check_weights(plan, weights)?;
+            let flat = weights.iter().flat_map(|t| t.values.iter());
+            for (slot, &value) in kernel.weights.iter_mut().zip(flat) {
+                *slot = Real::from_double(value);
+            }
+            Ok(())
+        })
+    }
+}
+
+/// The flat vector cut into the plan's tensors, as `f64`.
+fn split<E: Real>(plan: &Plan, flat: &[E]) -> Vec<Vec<f64>> {
+    (plan.tensors.iter())
+        .map(|&(start, length)| {
+            flat[start..start + length]
+                .iter()
+                .map(|v| v.to_double())
+                .collect()
+        })
+        .collect()
+}
+
+fn check_weights(plan: &Plan, weights: &[NamedTensor]) -> Result<(), BackendError> {
+    if weights.len() != plan.names.len() {
+        return Err(BackendError::WeightsMismatch(format!(
+            "{} tensors where the model has {}",
+            weights.len(),
+            plan.names.len()
+        )));
+    }
+    for (tensor, (name, shape)) in weights.iter().zip(&plan.names) {
+        let length: usize = shape.iter().product();
+        if &tensor.name != name || &tensor.shape != shape || tensor.values.len() != length {
+            return Err(BackendError::WeightsMismatch(format!(
+                "`{}` {:?} where the model has `{name}` {shape:?}",
+                tensor.name, tensor.shape
+            )));
+        }
+    }
+    Ok(())
+}

@@ -10,7 +10,10 @@ use sha2::{Digest, Sha256};
 use crate::backend::{NamedTensor, Network, Normalisation, Precision, Setup};
 use crate::ir;
 
-use super::{Metrics, StiffnessWarning, TrainError, TrainOptions, Trained};
+use super::{
+    Metrics, ParamEstimate, PolishSummary, Recipe, StiffnessWarning, TrainError, TrainOptions,
+    Trained,
+};
 
 /// File name of the weights inside a run directory.
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
@@ -48,6 +51,15 @@ pub struct RunInfo {
     pub params: Vec<NamedValue>,
     /// Training options.
     pub training: TrainingInfo,
+    /// The recipe (absent in runs saved before recipes existed).
+    #[serde(default)]
+    pub recipe: Option<Recipe>,
+    /// Each param with its standard error.
+    #[serde(default)]
+    pub estimates: Vec<ParamEstimate>,
+    /// What the final polish of the params did, when it ran.
+    #[serde(default)]
+    pub polish: Option<PolishSummary>,
     /// Validation errors.
     pub metrics: Metrics,
     /// Stiffness warnings issued.
@@ -184,6 +196,9 @@ pub fn run_info(
             validation_pairs: report.validation_pairs,
             final_loss: report.losses.last().copied(),
         },
+        recipe: Some(report.recipe.clone()),
+        estimates: report.estimates.clone(),
+        polish: report.polish.clone(),
         metrics: report.metrics.clone(),
         warnings: report.warnings.clone(),
         weights: WEIGHTS_FILE.to_string(),

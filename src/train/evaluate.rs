@@ -15,12 +15,15 @@ use super::pairs::{embedding_row, PairTable, Record};
 /// Rows per prediction batch when evaluating many pairs at once.
 const EVALUATION_CHUNK: usize = 512;
 
-/// Mean squared errors of z-scored measured states.
+/// Mean squared errors of z-scored measured states. Infinite errors (a diverged free run)
+/// are written to JSON as `null` and read back as infinite.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorSet {
     /// Per measured state, in model order: `(name, mse)`.
+    #[serde(deserialize_with = "lenient::per_state")]
     pub per_state: Vec<(String, f64)>,
     /// Mean over states.
+    #[serde(deserialize_with = "lenient::number")]
     pub overall: f64,
     /// Number of predicted rows the errors average over (up to the stop of a diverged run).
     pub rows: usize,
@@ -79,7 +82,8 @@ pub struct Divergence {
     pub time: f64,
     /// The measured state.
     pub state: String,
-    /// Its predicted value (non-finite values are written as they are).
+    /// Its predicted value (a non-finite one is written as `null`, read back as NaN).
+    #[serde(deserialize_with = "lenient::not_a_number")]
     pub value: f64,
     /// The range it had to stay in.
     pub range: (f64, f64),
@@ -263,6 +267,31 @@ pub fn offline_error(
         }
     }
     Ok(error_set(model, squared, table.len()))
+}
+
+/// JSON has no infinity or NaN: `serde_json` writes them as `null`; read `null` back.
+mod lenient {
+    use serde::{Deserialize, Deserializer};
+
+    /// A number, `null` read as infinity.
+    pub fn number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::INFINITY))
+    }
+
+    /// A number, `null` read as NaN.
+    pub fn not_a_number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::NAN))
+    }
+
+    /// `(name, number)` pairs, `null` read as infinity.
+    pub fn per_state<'de, D: Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<Vec<(String, f64)>, D::Error> {
+        let pairs = Vec::<(String, Option<f64>)>::deserialize(deserializer)?;
+        Ok((pairs.into_iter())
+            .map(|(name, value)| (name, value.unwrap_or(f64::INFINITY)))
+            .collect())
+    }
 }
 
 /// Online error of a free run against the record, over the rows after its start; infinite

@@ -24,18 +24,20 @@ pub mod artifacts;
 pub mod bench;
 mod error;
 pub mod evaluate;
+mod fit;
 pub mod pairs;
+pub mod polish;
 pub mod predict;
-pub mod windows;
+pub mod recipe;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_recipe;
+mod validation;
+pub mod windows;
 
 #[cfg(test)]
 pub(crate) mod fixtures;
-
-use rand::seq::SliceRandom;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 
 use crate::backend::{Network, Normalisation, Precision, Setup};
 use crate::data::Dataset;
@@ -43,9 +45,13 @@ use crate::ir;
 
 pub use analysis::StiffnessWarning;
 pub use error::TrainError;
-pub use evaluate::ErrorSet;
-use evaluate::{offline_error, online_error, run_in_hidden, simulate, Feed};
+use evaluate::run_in_hidden;
+pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 use pairs::{first_pair_row, stage_fractions, PairTable, Record};
+pub use polish::{ParamEstimate, PolishSummary};
+pub use recipe::{Objective, Recipe};
+pub use validation::Validation;
+use validation::{refresh_hidden, validate, validation_splits, Split};
 
 /// Share of the pairs that train when neither `--train-points` nor `--val` is given.
 pub const DEFAULT_TRAIN_SHARE: f64 = 0.7;
@@ -104,12 +110,16 @@ pub enum Event<'a> {
     Epoch {
         /// 1-based epoch.
         epoch: usize,
-        /// Mean training loss over the epoch (normalised units).
+        /// Mean training loss over the epoch (normalised units; over every rollout step
+        /// for a multi-step epoch).
         loss: f64,
+        /// Steps per window (1: one-step pairs).
+        horizon: usize,
     },
 }
 
-/// Validation errors in normalised units (the paper's two errors).
+/// Validation errors in normalised units (the paper's two errors): of the first
+/// validation set, and of every validation set.
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Metrics {
     /// Offline validation error of the untrained network.
@@ -120,6 +130,22 @@ pub struct Metrics {
     pub offline: Option<ErrorSet>,
     /// Online validation error (free run).
     pub online: Option<ErrorSet>,
+    /// Both errors of every validation set, the first being the one above.
+    #[serde(default)]
+    pub validations: Vec<ValidationErrors>,
+}
+
+/// The errors of one validation set.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ValidationErrors {
+    /// The record (a file, or the rest of the training record).
+    pub name: String,
+    /// Its pairs.
+    pub pairs: usize,
+    /// Offline error.
+    pub offline: ErrorSet,
+    /// Online error (with the divergence, if the free run left the physical range).
+    pub online: ErrorSet,
 }
 
 /// What a training run reports.
@@ -135,8 +161,14 @@ pub struct TrainReport {
     pub losses: Vec<f64>,
     /// Number of training pairs.
     pub train_pairs: usize,
-    /// Number of validation pairs.
+    /// Number of validation pairs (of the first validation set).
     pub validation_pairs: usize,
+    /// The recipe trained with.
+    pub recipe: Recipe,
+    /// Each param with its standard error (see [`polish`]).
+    pub estimates: Vec<ParamEstimate>,
+    /// What the final polish of the params did, when it ran.
+    pub polish: Option<PolishSummary>,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -149,15 +181,9 @@ pub struct Trained {
     pub report: TrainReport,
 }
 
-/// A record turned into pairs, with hidden-state estimates.
-struct Split {
-    record: Record,
-    table: PairTable,
-    hidden: Vec<Vec<f64>>,
-}
-
-/// Trains `model` on `data` (validating on `validation` when given); `on_event` hears of
-/// warnings and of every epoch.
+/// Trains `model` on `data` with the default [`Recipe`], validating on `validation` when
+/// given, else on the pairs after the training pairs; `on_event` hears of warnings and of
+/// every epoch.
 pub fn train(
     model: &ir::Model,
     data: &Dataset,
@@ -165,13 +191,38 @@ pub fn train(
     options: &TrainOptions,
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
-    check_options(options)?;
+    let validations = match validation {
+        Some(file) => vec![Validation::File(file)],
+        None => vec![Validation::Rest],
+    };
+    train_with(
+        model,
+        data,
+        &validations,
+        options,
+        &Recipe::default(),
+        on_event,
+    )
+}
+
+/// Trains `model` on `data` with `recipe`, validating on each of `validations` (the
+/// report's headline errors are those of the first that has pairs).
+pub fn train_with(
+    model: &ir::Model,
+    data: &Dataset,
+    validations: &[Validation],
+    options: &TrainOptions,
+    recipe: &Recipe,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Trained, TrainError> {
+    check_options(options, recipe)?;
     check_trainable(model)?;
     let record = record_of(model, data)?;
     check_delays(model, record.step)?;
     let first = first_pair_row(model, record.step);
     let available = pair_count(data, &record, first)?;
-    let train_count = train_pair_count(options, validation.is_some(), available)?;
+    let has_file = validations.iter().any(|v| matches!(v, Validation::File(_)));
+    let train_count = train_pair_count(options, has_file, available)?;
     let train_rows: Vec<usize> = (first..first + train_count).collect();
     let normalisation = normalise(&record, first + train_count + 1);
     let hidden_init = hidden_initial_values(model)?;
@@ -200,47 +251,59 @@ pub fn train(
     let hidden = run_in_hidden(&network, model, &record, &fractions, &hidden_init)?;
     let table = PairTable::build(model, &record, &train_rows, &hidden, &fractions);
     let mut training = Split {
+        name: data.path.display().to_string(),
         record,
         table,
         hidden,
     };
-    let mut validating = validation_split(
+    let mut validating = validation_splits(
         model,
         &training,
-        validation,
+        validations,
         (first, &fractions),
         &hidden_init,
     )?;
-    let validation_pairs = validating.as_ref().map_or(0, |v| v.table.len());
+    let validation_pairs = validating.first().map_or(0, |v| v.table.len());
     on_event(Event::Started {
         epochs: options.epochs,
         train_pairs: train_count,
         validation_pairs,
     });
+    let range = PhysicalRange::new(&setup.normalisation, recipe.range_factor);
+    let context = (&setup, options, range.as_ref());
     let mut metrics = Metrics::default();
-    if let Some(split) = validating.as_mut() {
-        refresh_hidden(&network, model, split, &fractions, &hidden_init)?;
-        let offline = offline_error(&network, model, &split.table, &setup.normalisation)?;
+    if let Some(split) = validating.first_mut() {
+        let (offline, online) = validate(&network, model, split, context, &hidden_init)?;
         metrics.initial_offline = Some(offline);
-        metrics.initial_online = Some(online(&network, model, split, &setup, options)?);
+        metrics.initial_online = Some(online);
     }
-    let losses = fit(
+    let fit = fit::Fit {
+        model,
+        options,
+        recipe,
+        hidden_init: &hidden_init,
+    };
+    let losses = fit.run(&mut network, &mut training, on_event)?;
+    refresh_hidden(&network, model, &mut training, &fractions, &hidden_init)?;
+    let (polish, estimates) = polish::polish_and_estimate(
         &mut network,
         model,
-        &mut training,
-        options,
-        &hidden_init,
-        on_event,
+        &training.table,
+        &setup,
+        recipe.polishes(model),
     )?;
-    if let Some(split) = validating.as_mut() {
-        refresh_hidden(&network, model, split, &fractions, &hidden_init)?;
-        metrics.offline = Some(offline_error(
-            &network,
-            model,
-            &split.table,
-            &setup.normalisation,
-        )?);
-        metrics.online = Some(online(&network, model, split, &setup, options)?);
+    for split in &mut validating {
+        let (offline, online) = validate(&network, model, split, context, &hidden_init)?;
+        metrics.validations.push(ValidationErrors {
+            name: split.name.clone(),
+            pairs: split.table.len(),
+            offline,
+            online,
+        });
+    }
+    if let Some(headline) = metrics.validations.first() {
+        metrics.offline = Some(headline.offline.clone());
+        metrics.online = Some(headline.online.clone());
     }
     let params = (model.params.iter().zip(network.param_values()))
         .map(|(p, v)| (p.name.clone(), v))
@@ -252,6 +315,9 @@ pub fn train(
         losses,
         train_pairs: train_count,
         validation_pairs,
+        recipe: recipe.clone(),
+        estimates,
+        polish,
     };
     Ok(Trained {
         network,
@@ -260,128 +326,7 @@ pub fn train(
     })
 }
 
-/// The epochs: seeded shuffles, Adam steps, divergence checks. Returns per-epoch losses.
-fn fit(
-    network: &mut Network,
-    model: &ir::Model,
-    training: &mut Split,
-    options: &TrainOptions,
-    hidden_init: &[f64],
-    on_event: &mut dyn FnMut(Event),
-) -> Result<Vec<f64>, TrainError> {
-    let fractions = stage_fractions(model.dynamics, options.substeps);
-    let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
-    let mut order: Vec<usize> = (0..training.table.len()).collect();
-    let mut losses = Vec::with_capacity(options.epochs);
-    for epoch in 1..=options.epochs {
-        if epoch > 1 {
-            refresh_hidden(network, model, training, &fractions, hidden_init)?;
-        }
-        order.shuffle(&mut rng);
-        let mut total = 0.0;
-        for chunk in order.chunks(options.batch_size) {
-            let loss = network.train_step(&training.table.batch(chunk), options.learning_rate)?;
-            if !loss.is_finite() {
-                return Err(TrainError::Diverged { epoch, loss });
-            }
-            total += loss * chunk.len() as f64;
-        }
-        let loss = total / order.len().max(1) as f64;
-        losses.push(loss);
-        on_event(Event::Epoch { epoch, loss });
-    }
-    Ok(losses)
-}
-
-/// Re-runs the hidden states along a split's record with the current network.
-fn refresh_hidden(
-    network: &Network,
-    model: &ir::Model,
-    split: &mut Split,
-    fractions: &[f64],
-    hidden_init: &[f64],
-) -> Result<(), TrainError> {
-    if model.hidden.is_empty() {
-        return Ok(());
-    }
-    split.hidden = run_in_hidden(network, model, &split.record, fractions, hidden_init)?;
-    split.table.set_hidden(&split.hidden);
-    Ok(())
-}
-
-/// The validation pairs: the rest of the training record, or all pairs of `validation`.
-fn validation_split(
-    model: &ir::Model,
-    training: &Split,
-    validation: Option<&Dataset>,
-    (first, fractions): (usize, &[f64]),
-    hidden_init: &[f64],
-) -> Result<Option<Split>, TrainError> {
-    let (record, rows) = match validation {
-        Some(data) => {
-            let record = record_of(model, data)?;
-            if (record.step - training.record.step).abs() > 1e-9 * training.record.step {
-                return Err(TrainError::StepMismatch {
-                    file: data.path.display().to_string(),
-                    expected: training.record.step,
-                    found: record.step,
-                });
-            }
-            let count = pair_count(data, &record, first)?;
-            (record, (first..first + count).collect::<Vec<_>>())
-        }
-        None => {
-            let start = first + training.table.len();
-            let end = training.record.len().saturating_sub(1);
-            (training.record.clone(), (start..end).collect())
-        }
-    };
-    if rows.is_empty() {
-        return Ok(None);
-    }
-    let hidden = vec![hidden_init.to_vec(); record.len()];
-    let table = PairTable::build(model, &record, &rows, &hidden, fractions);
-    Ok(Some(Split {
-        record,
-        table,
-        hidden,
-    }))
-}
-
-/// Online error: free run from the first validation pair.
-fn online(
-    network: &Network,
-    model: &ir::Model,
-    split: &Split,
-    setup: &Setup,
-    options: &TrainOptions,
-) -> Result<ErrorSet, TrainError> {
-    let fractions = stage_fractions(model.dynamics, setup.substeps);
-    let start = split.table.rows[0];
-    let last = split.record.len() - 1;
-    let end = match options.online_horizon {
-        Some(horizon) => (start + (horizon / setup.step).round() as usize).min(last),
-        None => last,
-    };
-    let hidden = split.hidden.get(start).cloned().unwrap_or_default();
-    let run = simulate(
-        network,
-        model,
-        &split.record,
-        &fractions,
-        (start, end.saturating_sub(1).max(start)),
-        &hidden,
-        Feed::Own,
-    )?;
-    Ok(online_error(
-        model,
-        &split.record,
-        &run,
-        &setup.normalisation,
-    ))
-}
-
-fn check_options(options: &TrainOptions) -> Result<(), TrainError> {
+fn check_options(options: &TrainOptions, recipe: &Recipe) -> Result<(), TrainError> {
     let bad = |option: &str, expected: &str, found: String| {
         Err(TrainError::BadOption {
             option: option.into(),
@@ -400,6 +345,34 @@ fn check_options(options: &TrainOptions) -> Result<(), TrainError> {
             "--lr",
             "a positive learning rate",
             options.learning_rate.to_string(),
+        );
+    }
+    let rate = recipe.param_learning_rate.unwrap_or(1.0);
+    if !(rate > 0.0 && rate.is_finite()) {
+        return bad("--param-lr", "a positive learning rate", rate.to_string());
+    }
+    if recipe.horizon == 0 {
+        return bad("--horizon", "a positive number of steps", "0".into());
+    }
+    if !(recipe.range_factor >= 1.0 && recipe.range_factor.is_finite()) {
+        return bad(
+            "--range-factor",
+            "a factor of at least 1",
+            recipe.range_factor.to_string(),
+        );
+    }
+    if let Some(norm) = recipe
+        .max_gradient_norm
+        .filter(|n| !(*n > 0.0 && n.is_finite()))
+    {
+        return bad("--clip", "a positive gradient norm", norm.to_string());
+    }
+    let shares = [recipe.warmup_share, recipe.ramp_share];
+    if let Some(share) = shares.into_iter().find(|s| !(0.0..=1.0).contains(s)) {
+        return bad(
+            "--warmup/--ramp",
+            "a share between 0 and 1",
+            share.to_string(),
         );
     }
     if options.train_points == Some(0) {
@@ -463,7 +436,11 @@ pub fn record_of(model: &ir::Model, data: &Dataset) -> Result<Record, TrainError
     })
 }
 
-fn pair_count(data: &Dataset, record: &Record, first: usize) -> Result<usize, TrainError> {
+pub(crate) fn pair_count(
+    data: &Dataset,
+    record: &Record,
+    first: usize,
+) -> Result<usize, TrainError> {
     if record.len() < first + 2 {
         return Err(TrainError::TooFewRows {
             file: data.path.display().to_string(),
@@ -516,7 +493,12 @@ pub fn normalise(record: &Record, rows: usize) -> Normalisation {
     let (input_mean, input_std) = stats(&record.inputs);
     let extreme = |pick: fn(f64, f64) -> f64, start: f64| -> Vec<f64> {
         (record.states.iter())
-            .map(|values| values[..rows.min(values.len())].iter().copied().fold(start, pick))
+            .map(|values| {
+                values[..rows.min(values.len())]
+                    .iter()
+                    .copied()
+                    .fold(start, pick)
+            })
             .collect()
     };
     Normalisation {

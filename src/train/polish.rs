@@ -125,7 +125,12 @@ impl<'a> Probe<'a> {
             coordinates,
             params,
             table,
-            inverse_std: setup.normalisation.state_std.iter().map(|s| 1.0 / s).collect(),
+            inverse_std: setup
+                .normalisation
+                .state_std
+                .iter()
+                .map(|s| 1.0 / s)
+                .collect(),
             measured: model.states.len(),
             state_width: model.states.len() + model.hidden.len(),
         })

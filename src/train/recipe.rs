@@ -118,7 +118,7 @@ impl Recipe {
         }
         let ramp = ((progress - self.warmup_share) / self.ramp_share.max(1e-12)).min(1.0);
         let grown = 2.0 + ramp * (self.horizon as f64 - 2.0);
-        (grown.floor() as usize).clamp(2, self.horizon)
+        ((grown + 1e-9).floor() as usize).clamp(2, self.horizon)
     }
 }
 

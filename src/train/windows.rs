@@ -179,7 +179,8 @@ mod tests {
             for fraction in [0.0, 0.5, 1.0] {
                 let (mut raw, feedback) = window_embedding(closure, &record, 4, (step, fraction));
                 for entry in &feedback {
-                    raw[entry.column] += entry.weight * record.states[entry.state][4 + entry.sample];
+                    raw[entry.column] +=
+                        entry.weight * record.states[entry.state][4 + entry.sample];
                 }
                 let expected = embedding_row(closure, &record, 4 + step, fraction);
                 for (column, (found, wanted)) in raw.iter().zip(&expected).enumerate() {
@@ -244,7 +245,7 @@ mod tests {
             &fractions,
             (start, start + steps - 1),
             &[],
-            Feed::Own,
+            (Feed::Own, None),
         )
         .unwrap();
         for (step, predicted) in rolled.iter().enumerate() {

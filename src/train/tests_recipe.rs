@@ -1,0 +1,237 @@
+//! Tests of the recipes: the multi-step curriculum, free runs that stop where they leave
+//! the physical range, the polish of params and their standard errors, and validation on
+//! several records.
+
+use super::fixtures::{chemostat, dataset, ModelBuilder};
+use super::*;
+use crate::ir::Constraint;
+
+fn options(epochs: usize, train_points: usize) -> TrainOptions {
+    TrainOptions {
+        epochs,
+        train_points: Some(train_points),
+        seed: 3,
+        ..TrainOptions::default()
+    }
+}
+
+fn quiet(_: Event) {}
+
+#[test]
+fn multi_step_training_warms_up_then_rolls_out_and_improves_the_free_run() {
+    let (data, _) = chemostat::data(500, (0.002, 0.02), 1);
+    let recipe = Recipe {
+        horizon: 8,
+        ..Recipe::default()
+    };
+    let mut horizons = Vec::new();
+    let trained = train_with(
+        &chemostat::grey_box(),
+        &data,
+        &[Validation::Rest],
+        &options(12, 350),
+        &recipe,
+        &mut |event| {
+            if let Event::Epoch { horizon, .. } = event {
+                horizons.push(horizon);
+            }
+        },
+    )
+    .unwrap();
+    assert_eq!(horizons, vec![1, 1, 1, 1, 1, 1, 2, 4, 6, 8, 8, 8]);
+    let metrics = &trained.report.metrics;
+    let before = metrics.initial_online.as_ref().unwrap().overall;
+    let after = metrics.online.as_ref().unwrap().overall;
+    assert!(after < before / 2.0, "online error {before} -> {after}");
+    assert!(trained.report.losses.iter().all(|l| l.is_finite()));
+    assert_eq!(trained.report.recipe, recipe);
+}
+
+#[test]
+fn the_paper_recipe_trains_one_step_and_does_not_polish() {
+    let (data, _) = chemostat::data(300, (0.002, 0.02), 2);
+    let mut horizons = Vec::new();
+    let model = chemostat::exact_law(chemostat::KCAT / 2.0);
+    let trained = train_with(
+        &model,
+        &data,
+        &[Validation::Rest],
+        &options(3, 200),
+        &Recipe::paper(),
+        &mut |event| {
+            if let Event::Epoch { horizon, .. } = event {
+                horizons.push(horizon);
+            }
+        },
+    )
+    .unwrap();
+    assert_eq!(horizons, vec![1, 1, 1]);
+    assert!(trained.report.polish.is_none());
+    assert_eq!(trained.report.estimates.len(), 1);
+}
+
+/// `dx/dt = a x` from x = 1 with a = 0.2: RK4 multiplies by g = 1 + z + z^2/2 + z^3/6 +
+/// z^4/24 (z = 0.2) each step, so x first exceeds 10 x the training maximum (1) at
+/// step 12 (g^11 = 9.02, g^12 = 11.02).
+#[test]
+fn an_exploding_free_run_stops_where_it_leaves_the_physical_range() {
+    let model = ModelBuilder::new("growth")
+        .state("x")
+        .param("a", 0.2, Constraint::Positive)
+        .der("x", "a * x")
+        .build();
+    let data = dataset(1.0, vec![("x", vec![1.0; 60])]);
+    let recipe = Recipe {
+        polish: Some(false),
+        ..Recipe::default()
+    };
+    let trained = train_with(
+        &model,
+        &data,
+        &[Validation::File(&data)],
+        &options(0, 59),
+        &recipe,
+        &mut quiet,
+    )
+    .unwrap();
+    let z: f64 = 0.2;
+    let growth = 1.0 + z + z * z / 2.0 + z.powi(3) / 6.0 + z.powi(4) / 24.0;
+    let online = trained.report.metrics.online.unwrap();
+    let divergence = online.divergence.clone().unwrap();
+    assert_eq!((divergence.row, divergence.state.as_str()), (12, "x"));
+    assert!((divergence.value / growth.powi(12) - 1.0).abs() < 1e-5);
+    assert_eq!(divergence.range, (0.0, 10.0));
+    assert!(online.overall.is_infinite());
+    assert!(divergence.to_string().contains("t = 12"), "{divergence}");
+    let table = predict::predict(
+        &model,
+        &trained.network,
+        &trained.setup,
+        &data,
+        predict::Mode::Online,
+    )
+    .unwrap();
+    let x = &table.columns[1];
+    assert_eq!(x.len(), 60);
+    assert!((x[11] / growth.powi(11) - 1.0).abs() < 1e-5);
+    assert_eq!(x[12], divergence.value);
+    assert!(x[13..].iter().all(|v| v.is_nan()));
+    assert_eq!(table.divergence, Some(divergence));
+}
+
+#[test]
+fn the_polish_recovers_a_rate_constant_and_flags_an_unidentifiable_pair() {
+    let (data, _) = chemostat::data(300, (0.002, 0.02), 4);
+    let recipe = Recipe {
+        polish: Some(true),
+        ..Recipe::default()
+    };
+    let options = TrainOptions {
+        precision: Precision::F64,
+        ..options(0, 250)
+    };
+    let fit = |model: &ir::Model| {
+        train_with(model, &data, &[], &options, &recipe, &mut quiet)
+            .unwrap()
+            .report
+    };
+    // The truth starts at the steady state of the first inlet level; so does E here.
+    let inlet = data.column("E0").unwrap()[0];
+    let law = |builder: ModelBuilder| {
+        builder
+            .input("E0")
+            .state("S")
+            .hidden("E", inlet)
+            .constant("S0", chemostat::S0)
+            .constant("theta", chemostat::THETA)
+            .constant("K_M", chemostat::K_M)
+    };
+    let exact = law(ModelBuilder::new("exact"))
+        .param("kcat", chemostat::KCAT / 2.0, Constraint::Positive)
+        .define("r", "kcat * E * S / (K_M + S)")
+        .der("S", "(S0 - S) / theta - r")
+        .der("E", "(E0 - E) / theta")
+        .build();
+    let report = fit(&exact);
+    let kcat = &report.estimates[0];
+    assert!(
+        (kcat.value / chemostat::KCAT - 1.0).abs() < 1e-3,
+        "{kcat:?}"
+    );
+    assert!(kcat.well_identified && kcat.std_error < 1e-3 * kcat.value);
+    let polish = report.polish.unwrap();
+    assert!(polish.loss_after < polish.loss_before / 100.0);
+    assert!((polish.params_before[0] / (chemostat::KCAT / 2.0) - 1.0).abs() < 1e-12);
+    // Only the product a * b enters the balance: neither is determined.
+    let product = law(ModelBuilder::new("product"))
+        .param("a", 0.1, Constraint::Positive)
+        .param("b", 0.7, Constraint::Positive)
+        .define("r", "a * b * E * S / (K_M + S)")
+        .der("S", "(S0 - S) / theta - r")
+        .der("E", "(E0 - E) / theta")
+        .build();
+    let report = fit(&product);
+    let values: Vec<f64> = report.estimates.iter().map(|e| e.value).collect();
+    assert!((values[0] * values[1] / chemostat::KCAT - 1.0).abs() < 1e-3);
+    assert!(report.estimates.iter().all(|e| !e.well_identified));
+}
+
+#[test]
+fn every_validation_set_is_reported_and_the_first_is_the_headline() {
+    let (data, _) = chemostat::data(300, (0.002, 0.02), 5);
+    let (other, _) = chemostat::data(200, (0.002, 0.02), 6);
+    let trained = train_with(
+        &chemostat::grey_box(),
+        &data,
+        &[Validation::Rest, Validation::File(&other)],
+        &options(2, 200),
+        &Recipe::default(),
+        &mut quiet,
+    )
+    .unwrap();
+    let metrics = &trained.report.metrics;
+    assert_eq!(metrics.validations.len(), 2);
+    assert_eq!(metrics.validations[0].pairs, 300 - 1 - 40 - 200);
+    assert_eq!(metrics.validations[1].pairs, 200 - 1 - 40);
+    assert_eq!(
+        metrics.online.as_ref(),
+        Some(&metrics.validations[0].online)
+    );
+    assert_ne!(metrics.validations[0].online, metrics.validations[1].online);
+    assert_eq!(
+        trained.report.validation_pairs,
+        metrics.validations[0].pairs
+    );
+}
+
+#[test]
+fn bad_recipe_values_are_refused_naming_the_flag() {
+    let (data, _) = chemostat::data(120, (0.002, 0.02), 7);
+    let refused = |recipe: Recipe| match train_with(
+        &chemostat::grey_box(),
+        &data,
+        &[],
+        &options(1, 60),
+        &recipe,
+        &mut quiet,
+    ) {
+        Err(TrainError::BadOption { option, .. }) => option,
+        Err(other) => panic!("expected a bad option, found {other}"),
+        Ok(_) => panic!("expected a bad option, found a trained network"),
+    };
+    let horizon = Recipe {
+        horizon: 0,
+        ..Recipe::default()
+    };
+    assert_eq!(refused(horizon), "--horizon");
+    let factor = Recipe {
+        range_factor: 0.5,
+        ..Recipe::default()
+    };
+    assert_eq!(refused(factor), "--range-factor");
+    let rate = Recipe {
+        param_learning_rate: Some(-1.0),
+        ..Recipe::default()
+    };
+    assert_eq!(refused(rate), "--param-lr");
+}
