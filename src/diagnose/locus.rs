@@ -8,9 +8,10 @@
 //! measured record, at a short and a long delay unless one is given). All are fitted one
 //! step ahead; every present correction, and the history corrections of the [`REFINED`]
 //! best loci, are then refined on the training free run (params, gain, constant and
-//! proportional terms) and scored. At the best locus, history is needed when it leaves clearly less
-//! excess gap (above the noise floor) than the present alone: by a factor
-//! [`HISTORY_MARGIN`]. A locus is *tied* with the best when its bound is within
+//! proportional terms) and scored. At the best locus, history is needed when the present
+//! alone leaves more than [`PRESENT_RESIDUAL`] of the excess gap (the gap before, above the
+//! noise floor) and history at most 1 / [`HISTORY_MARGIN`] of what the present leaves;
+//! with much data, history features also win a little by their mere number. A locus is *tied* with the best when its bound is within
 //! [`TIE_FACTOR`] of the best's and a paired test of their per-row held-out errors over
 //! time blocks cannot tell them apart.
 
@@ -26,6 +27,9 @@ use rayon::prelude::*;
 
 /// History must leave this many times less excess gap than the present alone.
 pub const HISTORY_MARGIN: f64 = 2.0;
+/// History is only needed when the present alone leaves more than this fraction of the
+/// excess gap (the gap before, above the noise floor).
+pub const PRESENT_RESIDUAL: f64 = 0.05;
 /// Loci refined on the free run.
 pub const REFINED: usize = 3;
 /// Blocks of the paired test between loci (few and long: free-run errors are correlated
@@ -99,7 +103,7 @@ pub struct Located {
     pub loci: Vec<Locus>,
     /// Whether the best locus needs history.
     pub history_dependent: bool,
-    /// The best correction along the training rows.
+    /// The best locus's present-only correction along the training rows.
     pub along: Option<Along>,
 }
 
@@ -140,7 +144,7 @@ pub fn locate(
     context: &Context,
     params: &[f64],
     lags: &[Lags],
-    noise_floor: f64,
+    gaps: (f64, f64),
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Located, DiagnoseError> {
     let targets = targets(context.model);
@@ -172,10 +176,10 @@ pub fn locate(
         progress(Progress::Item);
     });
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
-    Ok(summarise(context, &trials, noise_floor))
+    Ok(summarise(context, &trials, gaps))
 }
 
-fn summarise(context: &Context, trials: &[Trial], noise_floor: f64) -> Located {
+fn summarise(context: &Context, trials: &[Trial], (gap_before, noise_floor): (f64, f64)) -> Located {
     let best = trials.first().and_then(|t| t.best()).map(|v| (v.gap, v.errors.clone()));
     let loci: Vec<Locus> = trials
         .iter()
@@ -197,14 +201,13 @@ fn summarise(context: &Context, trials: &[Trial], noise_floor: f64) -> Located {
             }
         })
         .collect();
-    let significance = super::SIGNIFICANCE;
     let history_dependent = loci.first().is_some_and(|best| {
         let excess = |gap: f64| (gap - noise_floor).max(0.0);
-        best.bound_present > significance * noise_floor
+        excess(best.bound_present) > PRESENT_RESIDUAL * excess(gap_before)
             && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
     });
     let along = trials.first().and_then(|trial| {
-        let variant = trial.best()?;
+        let variant = trial.present.as_ref().filter(|v| v.gap.is_finite())?;
         Some(along(context, trial, variant))
     });
     Located {

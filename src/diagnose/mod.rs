@@ -164,7 +164,8 @@ pub fn diagnose(
         .filter(|best| significant && gap_before - best.gap_after >= CREDIT * (gap_before - noise_floor))
         .map(|best| best.name.clone());
     let lags = locus::history_lags(delay_rows(&context)?, options.dim);
-    let located = locus::locate(&context, &before.fitted.params, &lags, noise_floor, progress)?;
+    let gaps = (gap_before, noise_floor);
+    let located = locus::locate(&context, &before.fitted.params, &lags, gaps, progress)?;
     let history_dependent = significant && located.history_dependent;
     let hints = match (&located.along, located.loci.first()) {
         (Some(along), Some(best)) if significant => symbolic::hints(along, &correction_name(best)),

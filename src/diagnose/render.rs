@@ -178,7 +178,7 @@ fn how_far_section(out: &mut String, report: &Report) {
         let shrink = 1.0 - gap / report.gap_before;
         let _ = writeln!(out, "   {label:<36} {:>10}  {:>9}", num(gap), percent(-shrink));
     };
-    row(out, "before", report.gap_before);
+    let _ = writeln!(out, "   {:<36} {:>10}", "before", num(report.gap_before));
     if let Some(best) = report.effects.first() {
         row(out, &format!("after {}", best.name), best.gap_after);
     }

@@ -149,6 +149,7 @@ pub fn section(
     html.push_str(&comparison_list(&compare(prepared, results)));
     html.push_str(&summary_table(&summarise(study, results)));
     html.push_str(&params_table(prepared, results));
+    html.push_str(&representatives(prepared, results));
     for figure in figures {
         let _ = writeln!(
             html,
@@ -270,15 +271,25 @@ fn params_table(prepared: &Prepared, results: &[RunResult]) -> String {
             );
         }
         html.push_str("</table>\n");
-        if let Some(run) = representative(results, &loaded.label, size) {
-            let _ = writeln!(
-                html,
-                "<p><small>Figures use run <code>{}</code>.</small></p>",
-                escape(&run.id)
-            );
-        }
     }
     html
+}
+
+/// Which run of each model the trajectory, closure and param figures show.
+fn representatives(prepared: &Prepared, results: &[RunResult]) -> String {
+    let size = prepared.study.figure_size();
+    let ids: Vec<String> = (prepared.models.iter())
+        .filter_map(|m| representative(results, &m.label, size))
+        .map(|run| format!("<code>{}</code>", escape(&run.id)))
+        .collect();
+    if ids.is_empty() {
+        return String::new();
+    }
+    format!(
+        "<p>The figures below show, for each model, the replicate with the median online \
+         error at {size} training points: {}.</p>\n",
+        ids.join(", ")
+    )
 }
 
 /// A whole HTML page around study sections.

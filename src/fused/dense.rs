@@ -10,6 +10,10 @@ use crate::backend::real::Real;
 
 /// Columns of `out` accumulated in registers at once.
 const STRIP: usize = 8;
+/// Width of the strips that cover what is left after the wide ones.
+const NARROW: usize = 4;
+/// Output rows computed together, sharing each load of `rhs`.
+const BLOCK: usize = 4;
 
 /// `out[r, :] += sum_k lhs[r, k] * rhs[k, :]` for `out` of shape `rows x columns`, `lhs` of
 /// shape `rows x inner` and `rhs` of shape `inner x columns`, all row-major.
@@ -17,28 +21,65 @@ pub fn multiply_add<E: Real>(out: &mut [E], lhs: &[E], rhs: &[E], inner: usize, 
     if columns == 0 || inner == 0 {
         return;
     }
-    let full = columns / STRIP * STRIP;
-    for (out_row, lhs_row) in out.chunks_exact_mut(columns).zip(lhs.chunks_exact(inner)) {
-        let (strips, rest) = out_row.split_at_mut(full);
-        for (index, strip) in strips.chunks_exact_mut(STRIP).enumerate() {
-            let start = index * STRIP;
-            let mut acc = [E::ZERO; STRIP];
-            acc.copy_from_slice(strip);
-            for (&scale, rhs_row) in lhs_row.iter().zip(rhs.chunks_exact(columns)) {
-                let block = &rhs_row[start..start + STRIP];
-                for lane in 0..STRIP {
-                    acc[lane] += scale * block[lane];
-                }
+    let mut out_blocks = out.chunks_exact_mut(BLOCK * columns);
+    let mut lhs_blocks = lhs.chunks_exact(BLOCK * inner);
+    for (out_block, lhs_block) in (&mut out_blocks).zip(&mut lhs_blocks) {
+        row_block::<E, BLOCK>(out_block, lhs_block, rhs, inner, columns);
+    }
+    let (out_rest, lhs_rest) = (out_blocks.into_remainder(), lhs_blocks.remainder());
+    for (out_row, lhs_row) in out_rest.chunks_exact_mut(columns).zip(lhs_rest.chunks_exact(inner)) {
+        row_block::<E, 1>(out_row, lhs_row, rhs, inner, columns);
+    }
+}
+
+/// `R` consecutive rows: strips of `STRIP`, then `NARROW` columns, then single columns.
+#[inline(always)]
+fn row_block<E: Real, const R: usize>(
+    out: &mut [E],
+    lhs: &[E],
+    rhs: &[E],
+    inner: usize,
+    columns: usize,
+) {
+    let wide = columns / STRIP * STRIP;
+    let narrow = wide + (columns - wide) / NARROW * NARROW;
+    for start in (0..wide).step_by(STRIP) {
+        tile::<E, R, STRIP>(out, lhs, rhs, start, inner, columns);
+    }
+    for start in (wide..narrow).step_by(NARROW) {
+        tile::<E, R, NARROW>(out, lhs, rhs, start, inner, columns);
+    }
+    for start in narrow..columns {
+        tile::<E, R, 1>(out, lhs, rhs, start, inner, columns);
+    }
+}
+
+/// Columns `start..start + N` of `R` output rows, accumulated in registers: `R x N`
+/// independent sums hide the latency of the additions.
+#[inline(always)]
+fn tile<E: Real, const R: usize, const N: usize>(
+    out: &mut [E],
+    lhs: &[E],
+    rhs: &[E],
+    start: usize,
+    inner: usize,
+    columns: usize,
+) {
+    let mut acc = [[E::ZERO; N]; R];
+    for (row, sums) in acc.iter_mut().enumerate() {
+        sums.copy_from_slice(&out[row * columns + start..][..N]);
+    }
+    for (k, rhs_row) in rhs.chunks_exact(columns).take(inner).enumerate() {
+        let block = &rhs_row[start..start + N];
+        for (row, sums) in acc.iter_mut().enumerate() {
+            let scale = lhs[row * inner + k];
+            for lane in 0..N {
+                sums[lane] += scale * block[lane];
             }
-            strip.copy_from_slice(&acc);
         }
-        if !rest.is_empty() {
-            for (&scale, rhs_row) in lhs_row.iter().zip(rhs.chunks_exact(columns)) {
-                for (slot, &value) in rest.iter_mut().zip(&rhs_row[full..]) {
-                    *slot += scale * value;
-                }
-            }
-        }
+    }
+    for (row, sums) in acc.iter().enumerate() {
+        out[row * columns + start..][..N].copy_from_slice(sums);
     }
 }
 

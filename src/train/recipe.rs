@@ -39,11 +39,11 @@ impl Objective {
 }
 
 /// Default longest rollout, in steps.
-pub const DEFAULT_HORIZON: usize = 20;
+pub const DEFAULT_HORIZON: usize = 50;
 /// Default share of epochs trained one-step before rollouts start.
-pub const DEFAULT_WARMUP_SHARE: f64 = 0.5;
+pub const DEFAULT_WARMUP_SHARE: f64 = 0.7;
 /// Default share of epochs over which the rollout grows to its full horizon.
-pub const DEFAULT_RAMP_SHARE: f64 = 0.25;
+pub const DEFAULT_RAMP_SHARE: f64 = 0.15;
 /// Default factor of the physical range a free run must stay in (see [`Recipe`]).
 pub const DEFAULT_RANGE_FACTOR: f64 = 10.0;
 

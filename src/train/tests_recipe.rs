@@ -22,6 +22,8 @@ fn multi_step_training_warms_up_then_rolls_out_and_improves_the_free_run() {
     let (data, _) = chemostat::data(500, (0.002, 0.02), 1);
     let recipe = Recipe {
         horizon: 8,
+        warmup_share: 0.5,
+        ramp_share: 0.25,
         ..Recipe::default()
     };
     let mut horizons = Vec::new();
