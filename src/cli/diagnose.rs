@@ -58,10 +58,15 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     let columns: Vec<&str> = (model.inputs.iter().map(|i| i.name.as_str()))
         .chain(model.states.iter().map(|s| s.name.as_str()))
         .collect();
-    let minimum = crate::data::MinRows::new(2 * diagnose::MIN_ROWS, "the diagnosis fits on one part and scores on another");
+    let minimum = crate::data::MinRows::new(
+        2 * diagnose::MIN_ROWS,
+        "the diagnosis fits on one part and scores on another",
+    );
     let train = crate::data::read(&args.data, &columns, minimum).map_err(CommandError::user)?;
     let test = match &args.test {
-        Some(path) => Some(crate::data::read(path, &columns, diagnose::MIN_ROWS).map_err(CommandError::user)?),
+        Some(path) => Some(
+            crate::data::read(path, &columns, diagnose::MIN_ROWS).map_err(CommandError::user)?,
+        ),
         None => None,
     };
     let problem = Problem {
@@ -89,11 +94,14 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     })?;
     print!("{}", diagnose::render::text(&report));
     if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(&report).map_err(|e| CommandError::Internal(e.to_string()))?;
-        crate::io::write_atomic(path, format!("{json}\n").as_bytes()).map_err(CommandError::user)?;
+        let json = serde_json::to_string_pretty(&report)
+            .map_err(|e| CommandError::Internal(e.to_string()))?;
+        crate::io::write_atomic(path, format!("{json}\n").as_bytes())
+            .map_err(CommandError::user)?;
     }
     if let Some(path) = &args.html {
-        crate::io::write_atomic(path, diagnose::html::page(&report).as_bytes()).map_err(CommandError::user)?;
+        crate::io::write_atomic(path, diagnose::html::page(&report).as_bytes())
+            .map_err(CommandError::user)?;
     }
     Ok(())
 }
@@ -116,14 +124,18 @@ impl ProgressReporter {
         if !self.visible {
             return;
         }
-        let Ok(mut slot) = self.bar.lock() else { return };
+        let Ok(mut slot) = self.bar.lock() else {
+            return;
+        };
         match event {
             Progress::Stage { name, total } => {
                 if let Some(bar) = slot.take() {
                     bar.finish_and_clear();
                 }
                 let bar = ProgressBar::new(total as u64);
-                if let Ok(style) = ProgressStyle::with_template("{msg:>20} [{bar:30}] {pos}/{len} {elapsed}") {
+                if let Ok(style) =
+                    ProgressStyle::with_template("{msg:>20} [{bar:30}] {pos}/{len} {elapsed}")
+                {
                     bar.set_style(style.progress_chars("=> "));
                 }
                 bar.set_message(name);

@@ -6,6 +6,9 @@
 
 mod check;
 mod compile;
+mod demo;
+mod diagnose;
+mod experiment;
 mod predict;
 mod simulate;
 mod train;
@@ -65,6 +68,12 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Predict with trained weights: states and every closure output over time.
     Predict(predict::PredictArgs),
+    /// Diagnose the gap between a mechanistic model and data: where, which effect, how much.
+    Diagnose(diagnose::DiagnoseArgs),
+    /// Train models over a grid of training sizes and seeds, with results and figures.
+    Experiment(experiment::ExperimentArgs),
+    /// The main job: both paper studies, scaled down, with an HTML report.
+    Demo(demo::DemoArgs),
 }
 
 /// Runs one parsed command line.
@@ -75,6 +84,9 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Simulate(args) => simulate::run(args),
         Command::Train(args) => train::run(args),
         Command::Predict(args) => predict::run(args),
+        Command::Diagnose(args) => diagnose::run(args),
+        Command::Experiment(args) => experiment::run(args),
+        Command::Demo(args) => demo::run(args),
     }
 }
 

@@ -75,7 +75,11 @@ pub struct Pass {
 
 /// Steps the model (params as set) from every training row with the correction at 0 and
 /// at `delta`.
-pub fn one_step_pass(corrected: &mut Corrected, record: &Record, end: usize) -> Result<Pass, IntegrationError> {
+pub fn one_step_pass(
+    corrected: &mut Corrected,
+    record: &Record,
+    end: usize,
+) -> Result<Pass, IntegrationError> {
     let measured = record.states.len();
     corrected.simulator.set_correction(0.0);
     let (starts, predictions) = corrected.simulator.one_step(record, end)?;
@@ -89,14 +93,24 @@ pub fn one_step_pass(corrected: &mut Corrected, record: &Record, end: usize) -> 
     };
     for row in 0..rows {
         let state = starts.row(row);
-        pass.present.push(record.inputs_at(row).chain(state.iter().copied()).collect());
+        pass.present
+            .push(record.inputs_at(row).chain(state.iter().copied()).collect());
         pass.locus.push(corrected.locus_value(record, row, state));
         let predicted = predictions.row(row);
-        pass.residual.push((0..measured).map(|k| record.states[k][row + 1] - predicted[k]).collect());
+        pass.residual.push(
+            (0..measured)
+                .map(|k| record.states[k][row + 1] - predicted[k])
+                .collect(),
+        );
     }
     let delta = delta(corrected, &pass, record);
     corrected.simulator.set_correction(delta);
-    pass.sensitivity = sensitivities(&mut corrected.simulator, record, (&starts, &predictions), delta)?;
+    pass.sensitivity = sensitivities(
+        &mut corrected.simulator,
+        record,
+        (&starts, &predictions),
+        delta,
+    )?;
     corrected.simulator.set_correction(0.0);
     Ok(pass)
 }
@@ -121,19 +135,31 @@ fn sensitivities(
 
 /// The constrained params of transformed values.
 pub fn params_of(constraints: &[Constraint], theta: &[f64]) -> Vec<f64> {
-    constraints.iter().zip(theta).map(|(c, &t)| from_theta(*c, t)).collect()
+    constraints
+        .iter()
+        .zip(theta)
+        .map(|(c, &t)| from_theta(*c, t))
+        .collect()
 }
 
 /// The transformed values of constrained params.
 pub fn theta_of(constraints: &[Constraint], params: &[f64]) -> Vec<f64> {
-    constraints.iter().zip(params).map(|(c, &p)| to_theta(*c, p)).collect()
+    constraints
+        .iter()
+        .zip(params)
+        .map(|(c, &p)| to_theta(*c, p))
+        .collect()
 }
 
 /// A probe size well inside the linear range: 1e-4 of the quantity's typical size (for a
 /// balance, of its state per sampling step).
 fn delta(corrected: &Corrected, pass: &Pass, record: &Record) -> f64 {
     let typical = root_mean_square(&pass.locus);
-    let size = if corrected.balance { typical / record.step } else { typical };
+    let size = if corrected.balance {
+        typical / record.step
+    } else {
+        typical
+    };
     if size > 0.0 && size.is_finite() {
         1e-4 * size
     } else {
@@ -149,7 +175,13 @@ pub fn root_mean_square(values: &[f64]) -> f64 {
 /// The embedded variables (inputs, then measured states) at each lag `1..dim` before `row`,
 /// lag-major, from the record's inputs and the measured `history` (rows before the start
 /// repeat row 0).
-fn lagged(map: &FeatureMap, record: &Record, history: &dyn Fn(usize, usize) -> f64, row: usize, out: &mut Vec<f64>) {
+fn lagged(
+    map: &FeatureMap,
+    record: &Record,
+    history: &dyn Fn(usize, usize) -> f64,
+    row: usize,
+    out: &mut Vec<f64>,
+) {
     out.clear();
     let Some(lags) = map.lags else { return };
     for lag in 1..lags.dim {
@@ -170,7 +202,13 @@ pub struct Solution {
 
 /// Fits the weights of a correction with features `map` to the pass (params `theta`, as
 /// the pass ran); `None` if the normal equations are singular at every ridge.
-pub fn fit(pass: &Pass, map: &FeatureMap, record: &Record, norm: &Normalisation, theta: &[f64]) -> Option<Solution> {
+pub fn fit(
+    pass: &Pass,
+    map: &FeatureMap,
+    record: &Record,
+    norm: &Normalisation,
+    theta: &[f64],
+) -> Option<Solution> {
     let n = map.width();
     let folds = normal_equations(pass, map, record, norm);
     let ridge = choose_ridge(&folds, n)?;
@@ -183,7 +221,12 @@ pub fn fit(pass: &Pass, map: &FeatureMap, record: &Record, norm: &Normalisation,
 }
 
 /// The normal equations, one set per fold, with each fold's constant `sum r^2 / std^2`.
-fn normal_equations(pass: &Pass, map: &FeatureMap, record: &Record, norm: &Normalisation) -> Vec<(Normal, f64)> {
+fn normal_equations(
+    pass: &Pass,
+    map: &FeatureMap,
+    record: &Record,
+    norm: &Normalisation,
+) -> Vec<(Normal, f64)> {
     let n = map.width();
     let mut folds: Vec<(Normal, f64)> = (0..FOLDS).map(|_| (Normal::new(n), 0.0)).collect();
     let (mut phi, mut lag) = (Vec::new(), Vec::new());
@@ -324,7 +367,9 @@ pub fn corrected_run(
         present.extend_from_slice(&state);
         let locus = corrected.locus_value(record, row, &state);
         map.features(&present, locus, &lag, &mut phi);
-        corrected.simulator.set_correction(dot(&phi, &solution.weights));
+        corrected
+            .simulator
+            .set_correction(dot(&phi, &solution.weights));
         corrected.simulator.step(record, row, &mut state)?;
         values.extend_from_slice(&state);
     }

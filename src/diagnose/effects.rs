@@ -63,7 +63,13 @@ pub fn fit_and_score(
         rows: part.rows(context.split.train_rows.clone()),
         normalisation: &context.normalisation,
     };
-    let fitted = fit(&objective, &constraints, &initial, context.options.restarts, seed);
+    let fitted = fit(
+        &objective,
+        &constraints,
+        &initial,
+        context.options.restarts,
+        seed,
+    );
     let (gap, run) = held_out(context, &simulator, &fitted.params);
     Ok(Scored { fitted, gap, run })
 }
@@ -114,7 +120,12 @@ pub fn rank_effects(
     gap_before: f64,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Ranking, DiagnoseError> {
-    let names: Vec<String> = context.model.effects.iter().map(|e| e.name.clone()).collect();
+    let names: Vec<String> = context
+        .model
+        .effects
+        .iter()
+        .map(|e| e.name.clone())
+        .collect();
     let models = (names.iter())
         .map(|name| lower(context, &[name.as_str()]))
         .collect::<Result<Vec<_>, _>>()?;
@@ -126,7 +137,13 @@ pub fn rank_effects(
         .par_iter()
         .enumerate()
         .map(|(index, &(m, part))| {
-            let scored = fit_and_score(context, &models[m], base_params, part, context.seed(index as u64 + 1));
+            let scored = fit_and_score(
+                context,
+                &models[m],
+                base_params,
+                part,
+                context.seed(index as u64 + 1),
+            );
             tick();
             scored
         })

@@ -66,10 +66,7 @@ pub enum DiagnoseError {
     },
     /// The test record's step differs from the training record's.
     #[error("the test data are sampled every {test}, the training data every {train}")]
-    #[diagnostic(
-        code(gbm::E0806),
-        help("sample both records on the same step")
-    )]
+    #[diagnostic(code(gbm::E0806), help("sample both records on the same step"))]
     StepMismatch {
         /// Training step.
         train: f64,

@@ -13,7 +13,12 @@ const REGIME_BINS: usize = 5;
 const REGIME_REPORTED: usize = 3;
 
 /// Per measured state, the mean squared z-scored error of `run` against the data over `rows`.
-pub fn state_errors(run: &Run, record: &Record, rows: Range<usize>, norm: &Normalisation) -> Vec<f64> {
+pub fn state_errors(
+    run: &Run,
+    record: &Record,
+    rows: Range<usize>,
+    norm: &Normalisation,
+) -> Vec<f64> {
     (record.states.iter().enumerate())
         .map(|(k, column)| {
             let sum: f64 = rows
@@ -26,7 +31,12 @@ pub fn state_errors(run: &Run, record: &Record, rows: Range<usize>, norm: &Norma
 }
 
 /// Per row of `rows`, the squared z-scored error summed over measured states.
-pub fn row_errors(run: &Run, record: &Record, rows: Range<usize>, norm: &Normalisation) -> Vec<f64> {
+pub fn row_errors(
+    run: &Run,
+    record: &Record,
+    rows: Range<usize>,
+    norm: &Normalisation,
+) -> Vec<f64> {
     rows.map(|row| {
         (record.states.iter().enumerate())
             .map(|(k, column)| ((run.row(row)[k] - column[row]) / norm.std[k]).powi(2))
@@ -106,7 +116,11 @@ pub fn regimes(variables: &[(String, Vec<f64>)], errors: &[f64]) -> Vec<Regime> 
         .filter_map(|(name, values)| best_bin(name, values, errors, total))
         .collect();
     found.sort_by(|a, b| b.0.total_cmp(&a.0));
-    found.into_iter().take(REGIME_REPORTED).map(|(_, r)| r).collect()
+    found
+        .into_iter()
+        .take(REGIME_REPORTED)
+        .map(|(_, r)| r)
+        .collect()
 }
 
 /// The bin of `values` (quantile bins) with the highest error share per row share, with
@@ -170,7 +184,9 @@ mod tests {
     #[test]
     fn paired_test_separates_a_shift_from_noise() {
         // Alternating +-1 differences average to zero; a constant shift of 0.5 does not.
-        let a: Vec<f64> = (0..200).map(|i| 2.0 + if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        let a: Vec<f64> = (0..200)
+            .map(|i| 2.0 + if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
         let b = vec![2.0; 200];
         assert!(indistinguishable(&a, &b, 20));
         let shifted: Vec<f64> = a.iter().map(|v| v + 0.5).collect();

@@ -44,7 +44,9 @@ impl FeatureMap {
     pub fn width(&self) -> usize {
         let v = self.center.len();
         let quadratic = 1 + v + v * (v + 1) / 2;
-        let history = self.lags.map_or(0, |l| l.dim.saturating_sub(1) * self.embedded);
+        let history = self
+            .lags
+            .map_or(0, |l| l.dim.saturating_sub(1) * self.embedded);
         2 * quadratic + history * (2 + v)
     }
 

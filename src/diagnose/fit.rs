@@ -269,7 +269,10 @@ mod tests {
             (Constraint::Bounds(0.1, 10.0), 7.0),
         ] {
             let back = from_theta(constraint, to_theta(constraint, value));
-            assert!((back - value).abs() < 1e-12 * value.abs().max(1.0), "{constraint:?}");
+            assert!(
+                (back - value).abs() < 1e-12 * value.abs().max(1.0),
+                "{constraint:?}"
+            );
         }
         assert!(from_theta(Constraint::Positive, -50.0) > 0.0);
         let bounded = from_theta(Constraint::Bounds(0.1, 10.0), 40.0);

@@ -39,11 +39,24 @@ pub fn page(report: &Report) -> String {
             escape(report.effects.first().map_or("-", |e| e.name.as_str()))
         );
         for k in 0..series.names.len() {
-            let _ = writeln!(out, "<h3>{}</h3>\n{}", escape(&series.names[k]), state_plot(series, k));
+            let _ = writeln!(
+                out,
+                "<h3>{}</h3>\n{}",
+                escape(&series.names[k]),
+                state_plot(series, k)
+            );
         }
-        let _ = writeln!(out, "<h2>Error of the fitted model over time (held-out part)</h2>\n{}", error_plot(report));
+        let _ = writeln!(
+            out,
+            "<h2>Error of the fitted model over time (held-out part)</h2>\n{}",
+            error_plot(report)
+        );
     }
-    let _ = writeln!(out, "<h2>Report</h2>\n<pre>{}</pre>\n</body>\n</html>", escape(&super::render::text(report)));
+    let _ = writeln!(
+        out,
+        "<h2>Report</h2>\n<pre>{}</pre>\n</body>\n</html>",
+        escape(&super::render::text(report))
+    );
     out
 }
 
@@ -66,7 +79,9 @@ impl Frame {
         let range = |values: &mut dyn Iterator<Item = f64>| {
             values
                 .filter(|v| v.is_finite())
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(v), hi.max(v))
+                })
         };
         let x = range(&mut xs.iter().copied());
         let mut y = range(&mut ys.iter().flat_map(|c| c.iter().copied()));
@@ -86,7 +101,9 @@ impl Frame {
 
     fn py(&self, y: f64) -> f64 {
         let clamped = y.clamp(self.y.0, self.y.1);
-        HEIGHT - MARGIN.3 - (clamped - self.y.0) / (self.y.1 - self.y.0) * (HEIGHT - MARGIN.2 - MARGIN.3)
+        HEIGHT
+            - MARGIN.3
+            - (clamped - self.y.0) / (self.y.1 - self.y.0) * (HEIGHT - MARGIN.2 - MARGIN.3)
     }
 
     fn axes(&self, out: &mut String) {
@@ -99,7 +116,12 @@ impl Frame {
             WIDTH - MARGIN.1
         );
         for (value, anchor) in [(self.y.0, bottom), (self.y.1, MARGIN.2 + 8.0)] {
-            let _ = write!(out, "<text x=\"{}\" y=\"{anchor}\" font-size=\"10\" text-anchor=\"end\">{}</text>", left - 4.0, num(value));
+            let _ = write!(
+                out,
+                "<text x=\"{}\" y=\"{anchor}\" font-size=\"10\" text-anchor=\"end\">{}</text>",
+                left - 4.0,
+                num(value)
+            );
         }
         for (value, anchor) in [(self.x.0, "start"), (self.x.1, "end")] {
             let _ = write!(
@@ -119,13 +141,22 @@ impl Frame {
             .filter(|&i| ys[i].is_finite())
             .map(|i| format!("{:.1},{:.1}", self.px(xs[i]), self.py(ys[i])))
             .collect();
-        let _ = write!(out, "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.2\" points=\"{}\"/>", points.join(" "));
+        let _ = write!(
+            out,
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.2\" points=\"{}\"/>",
+            points.join(" ")
+        );
     }
 
     fn dots(&self, out: &mut String, xs: &[f64], ys: &[f64]) {
         let stride = (xs.len() / MAX_POINTS).max(1);
         for i in (0..xs.len().min(ys.len())).step_by(stride) {
-            let _ = write!(out, "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"1.1\" fill=\"#999\"/>", self.px(xs[i]), self.py(ys[i]));
+            let _ = write!(
+                out,
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"1.1\" fill=\"#999\"/>",
+                self.px(xs[i]),
+                self.py(ys[i])
+            );
         }
     }
 }
@@ -185,21 +216,45 @@ fn bars(report: &Report) -> String {
         rows.push((format!("after {}", best.name), best.gap_after));
     }
     if let Some(combined) = &report.combined {
-        rows.push((format!("after {}", combined.names.join(" + ")), combined.gap_after));
+        rows.push((
+            format!("after {}", combined.names.join(" + ")),
+            combined.gap_after,
+        ));
     }
     if let Some(locus) = report.locus.first() {
-        rows.push((format!("free correction at {}", locus.name), locus.bound_after));
+        rows.push((
+            format!("free correction at {}", locus.name),
+            locus.bound_after,
+        ));
     }
     rows.push(("noise floor".into(), report.noise_floor));
-    let finite: Vec<f64> = rows.iter().map(|r| r.1).filter(|v| v.is_finite() && *v > 0.0).collect();
-    let lo = finite.iter().fold(f64::INFINITY, |m, v| m.min(*v)).log10().floor() - 0.5;
-    let hi = finite.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v)).log10().ceil();
+    let finite: Vec<f64> = rows
+        .iter()
+        .map(|r| r.1)
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    let lo = finite
+        .iter()
+        .fold(f64::INFINITY, |m, v| m.min(*v))
+        .log10()
+        .floor()
+        - 0.5;
+    let hi = finite
+        .iter()
+        .fold(f64::NEG_INFINITY, |m, v| m.max(*v))
+        .log10()
+        .ceil();
     let (label_width, bar_height) = (260.0, 22.0);
     let height = rows.len() as f64 * bar_height + 10.0;
-    let mut out = format!("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{WIDTH}\" height=\"{height}\">");
+    let mut out =
+        format!("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{WIDTH}\" height=\"{height}\">");
     for (index, (label, gap)) in rows.iter().enumerate() {
         let y = 5.0 + index as f64 * bar_height;
-        let fraction = if gap.is_finite() && *gap > 0.0 && hi > lo { ((gap.log10() - lo) / (hi - lo)).clamp(0.0, 1.0) } else { 1.0 };
+        let fraction = if gap.is_finite() && *gap > 0.0 && hi > lo {
+            ((gap.log10() - lo) / (hi - lo)).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
         let length = fraction * (WIDTH - label_width - 90.0);
         let shrink = 1.0 - gap / report.gap_before;
         let _ = write!(
@@ -215,7 +270,11 @@ fn bars(report: &Report) -> String {
             label_width + length + 4.0,
             y + 14.0,
             num(*gap),
-            if index == 0 { "log scale".to_string() } else { percent(-shrink) }
+            if index == 0 {
+                "log scale".to_string()
+            } else {
+                percent(-shrink)
+            }
         );
     }
     out.push_str("</svg>");

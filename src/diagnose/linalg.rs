@@ -95,10 +95,15 @@ impl Normal {
     pub fn solve(&self, ridge: f64, penalised: usize) -> Option<Vec<f64>> {
         let n = self.n;
         let penalised = penalised.min(n);
-        let scale = (0..penalised).map(|i| self.a[i * n + i]).sum::<f64>() / penalised.max(1) as f64;
+        let scale =
+            (0..penalised).map(|i| self.a[i * n + i]).sum::<f64>() / penalised.max(1) as f64;
         let mut a = self.a.clone();
         for i in 0..n {
-            let ridge = if i < penalised { ridge * scale.max(f64::MIN_POSITIVE) } else { 0.0 };
+            let ridge = if i < penalised {
+                ridge * scale.max(f64::MIN_POSITIVE)
+            } else {
+                0.0
+            };
             a[i * n + i] += ridge + 1e-12 * self.a[i * n + i];
         }
         solve_spd(&a, &self.b)

@@ -179,15 +179,23 @@ pub fn locate(
     Ok(summarise(context, &trials, gaps))
 }
 
-fn summarise(context: &Context, trials: &[Trial], (gap_before, noise_floor): (f64, f64)) -> Located {
-    let best = trials.first().and_then(|t| t.best()).map(|v| (v.gap, v.errors.clone()));
+fn summarise(
+    context: &Context,
+    trials: &[Trial],
+    (gap_before, noise_floor): (f64, f64),
+) -> Located {
+    let best = trials
+        .first()
+        .and_then(|t| t.best())
+        .map(|v| (v.gap, v.errors.clone()));
     let loci: Vec<Locus> = trials
         .iter()
         .map(|trial| {
             let gap = |v: &Option<Variant>| v.as_ref().map_or(f64::INFINITY, |v| v.gap);
             let tied = match (&best, trial.best()) {
                 (Some((gap, errors)), Some(variant)) => {
-                    variant.gap <= TIE_FACTOR * gap && indistinguishable(&variant.errors, errors, TIE_BLOCKS)
+                    variant.gap <= TIE_FACTOR * gap
+                        && indistinguishable(&variant.errors, errors, TIE_BLOCKS)
                 }
                 _ => false,
             };
@@ -219,19 +227,30 @@ fn summarise(context: &Context, trials: &[Trial], (gap_before, noise_floor): (f6
 
 /// The model with a correction at `target` (params set); `None` when the target reaches
 /// no balance.
-pub(super) fn synthesise(context: &Context, target: &Target, params: &[f64]) -> Result<Option<Corrected>, DiagnoseError> {
+pub(super) fn synthesise(
+    context: &Context,
+    target: &Target,
+    params: &[f64],
+) -> Result<Option<Corrected>, DiagnoseError> {
     let source = format!(
         "{}\n\nclosure {CLOSURE} {{\n  outputs {OUTPUT}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
         context.problem.source,
         target.patch()
     );
-    let compiled = crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
-        let messages: Vec<String> = reports.iter().map(|r| r.to_string()).collect();
-        DiagnoseError::Internal(format!("correction at `{}` does not compile: {}", target.name, messages.join("; ")))
-    })?;
+    let compiled =
+        crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
+            let messages: Vec<String> = reports.iter().map(|r| r.to_string()).collect();
+            DiagnoseError::Internal(format!(
+                "correction at `{}` does not compile: {}",
+                target.name,
+                messages.join("; ")
+            ))
+        })?;
     let model = compiled.model;
     let Some(closure) = model.closures.iter().position(|c| c.name == CLOSURE) else {
-        return Err(DiagnoseError::Internal("synthesised closure missing".into()));
+        return Err(DiagnoseError::Internal(
+            "synthesised closure missing".into(),
+        ));
     };
     if !model.balances.iter().any(|b| ir::uses_closure(&b.expr)) {
         return Ok(None);
@@ -261,7 +280,12 @@ pub(super) fn synthesise(context: &Context, target: &Target, params: &[f64]) -> 
     }))
 }
 
-fn try_target(context: &Context, target: &Target, params: &[f64], lags: &[Lags]) -> Result<Option<Trial>, DiagnoseError> {
+fn try_target(
+    context: &Context,
+    target: &Target,
+    params: &[f64],
+    lags: &[Lags],
+) -> Result<Option<Trial>, DiagnoseError> {
     let Some(mut corrected) = synthesise(context, target, params)? else {
         return Ok(None);
     };
@@ -292,29 +316,54 @@ fn try_target(context: &Context, target: &Target, params: &[f64], lags: &[Lags])
 /// training free run, and scores it again.
 fn refine(context: &Context, trial: &mut Trial, history: bool) {
     let split = &context.split;
-    let fitting = (&split.train, split.train_rows.clone(), &context.normalisation);
+    let fitting = (
+        &split.train,
+        split.train_rows.clone(),
+        &context.normalisation,
+    );
     let variants = if history {
         vec![&mut trial.history]
     } else {
         vec![&mut trial.present]
     };
     for variant in variants.into_iter().flatten() {
-        let along = correction::values_along(&trial.pass, &variant.map, &split.train, &variant.solution.weights);
+        let along = correction::values_along(
+            &trial.pass,
+            &variant.map,
+            &split.train,
+            &variant.solution.weights,
+        );
         let typical = correction::root_mean_square(&along);
         let refinement = correction::Refinement {
             directions: variant.map.directions(),
-            reference: if typical > 0.0 { typical } else { 1e-3 * variant.map.locus_scale },
+            reference: if typical > 0.0 {
+                typical
+            } else {
+                1e-3 * variant.map.locus_scale
+            },
         };
-        let solution = correction::refine(&trial.corrected, &variant.map, &variant.solution, &refinement, fitting.clone());
+        let solution = correction::refine(
+            &trial.corrected,
+            &variant.map,
+            &variant.solution,
+            &refinement,
+            fitting.clone(),
+        );
         *variant = score(context, &mut trial.corrected, variant.map.clone(), solution);
     }
 }
 
 /// The held-out gap (infinite when the run fails) and per-row errors of a correction.
-fn score(context: &Context, corrected: &mut Corrected, map: FeatureMap, solution: Solution) -> Variant {
+fn score(
+    context: &Context,
+    corrected: &mut Corrected,
+    map: FeatureMap,
+    solution: Solution,
+) -> Variant {
     let test = &context.split.test;
     let rows = context.split.test_rows.clone();
-    let (gap, errors) = match correction::corrected_run(corrected, &map, &solution, test, rows.end) {
+    let (gap, errors) = match correction::corrected_run(corrected, &map, &solution, test, rows.end)
+    {
         Ok(run) => {
             let errors = row_errors(&run, test, rows, &context.normalisation);
             let gap = errors.iter().sum::<f64>() / (errors.len() * test.states.len()).max(1) as f64;
@@ -350,7 +399,13 @@ fn along(context: &Context, trial: &Trial, variant: &Variant) -> Along {
     let model = context.model;
     let pass = &trial.pass;
     let mut names: Vec<String> = (model.inputs.iter().map(|i| i.name.clone()))
-        .chain(model.states.iter().chain(&model.hidden).map(|s| s.name.clone()))
+        .chain(
+            model
+                .states
+                .iter()
+                .chain(&model.hidden)
+                .map(|s| s.name.clone()),
+        )
         .collect();
     let balance = trial.target.kind == LocusKind::Balance;
     if !balance {
@@ -366,7 +421,12 @@ fn along(context: &Context, trial: &Trial, variant: &Variant) -> Along {
         })
         .collect();
     Along {
-        values: correction::values_along(pass, &variant.map, &context.split.train, &variant.solution.weights),
+        values: correction::values_along(
+            pass,
+            &variant.map,
+            &context.split.train,
+            &variant.solution.weights,
+        ),
         names,
         variables,
         let_last: !balance,

@@ -142,7 +142,13 @@ pub fn diagnose(
         total: 1,
     });
     let declared = effects::named(context.model, &[]);
-    let before = effects::fit_and_score(&context, context.model, &declared, effects::Part::Full, context.seed(0))?;
+    let before = effects::fit_and_score(
+        &context,
+        context.model,
+        &declared,
+        effects::Part::Full,
+        context.seed(0),
+    )?;
     progress(Progress::Item);
     let base_params = effects::named(context.model, &before.fitted.params);
     let gap_before = before.gap;
@@ -161,7 +167,9 @@ pub fn diagnose(
     let credited = ranking
         .scores
         .first()
-        .filter(|best| significant && gap_before - best.gap_after >= CREDIT * (gap_before - noise_floor))
+        .filter(|best| {
+            significant && gap_before - best.gap_after >= CREDIT * (gap_before - noise_floor)
+        })
         .map(|best| best.name.clone());
     let lags = locus::history_lags(delay_rows(&context)?, options.dim);
     let gaps = (gap_before, noise_floor);
@@ -289,13 +297,22 @@ fn state_gaps(
     fitted: &mut Simulator,
     run: Option<&simulate::Run>,
 ) -> Result<Vec<StateGap>, DiagnoseError> {
-    let (test, rows, norm) = (&context.split.test, context.split.test_rows.clone(), &context.normalisation);
+    let (test, rows, norm) = (
+        &context.split.test,
+        context.split.test_rows.clone(),
+        &context.normalisation,
+    );
     let online = match run {
         Some(run) => evaluate::state_errors(run, test, rows.clone(), norm),
         None => vec![f64::INFINITY; context.model.states.len()],
     };
-    let offline = evaluate::offline_errors(fitted, test, rows, norm).unwrap_or_else(|_| vec![f64::INFINITY; online.len()]);
-    let noise = noise::noise_floors(&context.split.train.states, context.split.train_rows.clone(), norm);
+    let offline = evaluate::offline_errors(fitted, test, rows, norm)
+        .unwrap_or_else(|_| vec![f64::INFINITY; online.len()]);
+    let noise = noise::noise_floors(
+        &context.split.train.states,
+        context.split.train_rows.clone(),
+        norm,
+    );
     let total: f64 = online.iter().sum();
     Ok((context.model.states.iter().enumerate())
         .map(|(k, state)| StateGap {
@@ -308,7 +325,11 @@ fn state_gaps(
         .collect())
 }
 
-fn series(context: &Context, before: Option<&simulate::Run>, after: Option<&simulate::Run>) -> Series {
+fn series(
+    context: &Context,
+    before: Option<&simulate::Run>,
+    after: Option<&simulate::Run>,
+) -> Series {
     let test = &context.split.test;
     let rows = context.split.test_rows.clone();
     let measured = context.model.states.len();
@@ -320,7 +341,12 @@ fn series(context: &Context, before: Option<&simulate::Run>, after: Option<&simu
     Series {
         times: test.times[..rows.end].to_vec(),
         first_scored: rows.start,
-        names: context.model.states.iter().map(|s| s.name.clone()).collect(),
+        names: context
+            .model
+            .states
+            .iter()
+            .map(|s| s.name.clone())
+            .collect(),
         data: test.states.iter().map(|c| c[..rows.end].to_vec()).collect(),
         before: before.map(columns).unwrap_or_default(),
         after: after.map(columns),
@@ -336,7 +362,12 @@ fn where_and_when(context: &Context, series: &Series) -> (Vec<Window>, Vec<Regim
     }
     let rows = context.split.test_rows.clone();
     let test = &context.split.test;
-    let mut found = evaluate::windows(&test.times, rows.clone(), &series.errors, context.options.windows);
+    let mut found = evaluate::windows(
+        &test.times,
+        rows.clone(),
+        &series.errors,
+        context.options.windows,
+    );
     let mut covered = 0.0;
     found.retain(|w| {
         let keep = covered < 0.5;
@@ -345,7 +376,14 @@ fn where_and_when(context: &Context, series: &Series) -> (Vec<Window>, Vec<Regim
     });
     let variables: Vec<(String, Vec<f64>)> = (context.model.inputs.iter().map(|i| &i.name))
         .zip(&test.inputs)
-        .chain(context.model.states.iter().map(|s| &s.name).zip(&test.states))
+        .chain(
+            context
+                .model
+                .states
+                .iter()
+                .map(|s| &s.name)
+                .zip(&test.states),
+        )
         .map(|(name, column)| (name.clone(), column[rows.clone()].to_vec()))
         .collect();
     (found, evaluate::regimes(&variables, &series.errors))

@@ -32,7 +32,11 @@ pub fn noise_variance(column: &[f64]) -> f64 {
 }
 
 /// Per measured state, the noise variance in normalised units.
-pub fn noise_floors(states: &[Vec<f64>], rows: std::ops::Range<usize>, norm: &Normalisation) -> Vec<f64> {
+pub fn noise_floors(
+    states: &[Vec<f64>],
+    rows: std::ops::Range<usize>,
+    norm: &Normalisation,
+) -> Vec<f64> {
     states
         .iter()
         .zip(&norm.std)

@@ -153,7 +153,14 @@ pub fn mean_std(values: &[f64]) -> (f64, f64) {
     let mean = values.iter().sum::<f64>() / count;
     let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
     let std = variance.sqrt();
-    (mean, if std > 0.0 && std.is_finite() { std } else { 1.0 })
+    (
+        mean,
+        if std > 0.0 && std.is_finite() {
+            std
+        } else {
+            1.0
+        },
+    )
 }
 
 #[cfg(test)]

@@ -16,13 +16,21 @@ pub fn text(report: &Report) -> String {
 /// A number with 3 significant digits, in plain or scientific notation.
 pub fn num(value: f64) -> String {
     if !value.is_finite() {
-        return if value.is_nan() { "n/a".into() } else { "diverges".into() };
+        return if value.is_nan() {
+            "n/a".into()
+        } else {
+            "diverges".into()
+        };
     }
     let magnitude = value.abs();
     if magnitude != 0.0 && !(1e-3..1e5).contains(&magnitude) {
         format!("{value:.2e}")
     } else {
-        let decimals = if magnitude == 0.0 { 0 } else { (2 - magnitude.log10().floor() as i32).max(0) as usize };
+        let decimals = if magnitude == 0.0 {
+            0
+        } else {
+            (2 - magnitude.log10().floor() as i32).max(0) as usize
+        };
         format!("{value:.decimals$}")
     }
 }
@@ -38,7 +46,11 @@ pub fn percent(value: f64) -> String {
 
 fn header(out: &mut String, report: &Report) {
     let split = &report.split;
-    let held = if split.separate_test { "test file" } else { "held-out tail" };
+    let held = if split.separate_test {
+        "test file"
+    } else {
+        "held-out tail"
+    };
     let _ = writeln!(
         out,
         "model {}: fitted on {} rows, scored on {} rows ({held}, t = {} to {})\n",
@@ -53,7 +65,11 @@ fn header(out: &mut String, report: &Report) {
 fn where_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "1. Where the gap lies");
     let ratio = report.gap_before / report.noise_floor;
-    let verdict = if report.significant { "significant" } else { "not significant: the model explains the data to the noise level" };
+    let verdict = if report.significant {
+        "significant"
+    } else {
+        "not significant: the model explains the data to the noise level"
+    };
     let _ = writeln!(
         out,
         "   gap before {} (held-out free run, normalised MSE); noise floor {} ({}x): {verdict}",
@@ -61,11 +77,19 @@ fn where_section(out: &mut String, report: &Report) {
         num(report.noise_floor),
         num(ratio)
     );
-    let params: Vec<String> = report.fitted_params.iter().map(|(k, v)| format!("{k} = {}", num(*v))).collect();
+    let params: Vec<String> = report
+        .fitted_params
+        .iter()
+        .map(|(k, v)| format!("{k} = {}", num(*v)))
+        .collect();
     if !params.is_empty() {
         let _ = writeln!(out, "   fitted params: {}", params.join(", "));
     }
-    let _ = writeln!(out, "   {:<12} {:>8} {:>10} {:>10} {:>10}", "state", "share", "online", "offline", "noise");
+    let _ = writeln!(
+        out,
+        "   {:<12} {:>8} {:>10} {:>10} {:>10}",
+        "state", "share", "online", "offline", "noise"
+    );
     for state in &report.states {
         let _ = writeln!(
             out,
@@ -83,7 +107,13 @@ fn where_section(out: &mut String, report: &Report) {
     }
     loci(out, report);
     for window in report.windows.iter().take(3) {
-        let _ = writeln!(out, "   window t = {} to {}: {} of the error", num(window.t_start), num(window.t_end), percent(window.share));
+        let _ = writeln!(
+            out,
+            "   window t = {} to {}: {} of the error",
+            num(window.t_start),
+            num(window.t_end),
+            percent(window.share)
+        );
     }
     for regime in &report.regime {
         let _ = writeln!(
@@ -95,13 +125,20 @@ fn where_section(out: &mut String, report: &Report) {
         );
     }
     for hint in &report.hints {
-        let _ = writeln!(out, "   hint ({}, R^2 {:.3}): {}", hint.target, hint.r2, hint.text);
+        let _ = writeln!(
+            out,
+            "   hint ({}, R^2 {:.3}): {}",
+            hint.target, hint.r2, hint.text
+        );
     }
     let _ = writeln!(out);
 }
 
 fn loci(out: &mut String, report: &Report) {
-    let _ = writeln!(out, "   free correction at each rate and balance (held-out gap it leaves):");
+    let _ = writeln!(
+        out,
+        "   free correction at each rate and balance (held-out gap it leaves):"
+    );
     for locus in report.locus.iter().take(6) {
         let kind = match locus.kind {
             LocusKind::Balance => "balance",
@@ -109,7 +146,11 @@ fn loci(out: &mut String, report: &Report) {
             LocusKind::Output => "output",
             LocusKind::Closure => "closure",
         };
-        let tied = if locus.tied { "  <- best or tied with it" } else { "" };
+        let tied = if locus.tied {
+            "  <- best or tied with it"
+        } else {
+            ""
+        };
         let _ = writeln!(
             out,
             "     {:<12} {:<8} {:>10}  (present only {}, with history {}){tied}",
@@ -120,7 +161,12 @@ fn loci(out: &mut String, report: &Report) {
             num(locus.bound_history)
         );
     }
-    let tied: Vec<&str> = report.locus.iter().filter(|l| l.tied).map(|l| l.name.as_str()).collect();
+    let tied: Vec<&str> = report
+        .locus
+        .iter()
+        .filter(|l| l.tied)
+        .map(|l| l.name.as_str())
+        .collect();
     if tied.len() > 1 {
         let _ = writeln!(out, "   the data cannot tell apart: {}", tied.join(", "));
     }
@@ -148,9 +194,17 @@ fn which_section(out: &mut String, report: &Report) {
         let _ = writeln!(out, "   the model declares no effect\n");
         return;
     }
-    let _ = writeln!(out, "   {:<4} {:<24} {:>10} {:>9}  params", "rank", "effect", "gap after", "shrink");
+    let _ = writeln!(
+        out,
+        "   {:<4} {:<24} {:>10} {:>9}  params",
+        "rank", "effect", "gap after", "shrink"
+    );
     for (rank, effect) in report.effects.iter().enumerate() {
-        let params: Vec<String> = effect.params.iter().map(|(k, v)| format!("{k} = {}", num(*v))).collect();
+        let params: Vec<String> = effect
+            .params
+            .iter()
+            .map(|(k, v)| format!("{k} = {}", num(*v)))
+            .collect();
         let _ = writeln!(
             out,
             "   {:<4} {:<24} {:>10} {:>9}  {}",
@@ -162,8 +216,16 @@ fn which_section(out: &mut String, report: &Report) {
         );
     }
     let confidence = &report.confidence;
-    let halves: Vec<&str> = confidence.best_by_half.iter().map(|b| b.as_deref().unwrap_or("-")).collect();
-    let stability = if confidence.stable { "stable" } else { "not stable" };
+    let halves: Vec<&str> = confidence
+        .best_by_half
+        .iter()
+        .map(|b| b.as_deref().unwrap_or("-"))
+        .collect();
+    let stability = if confidence.stable {
+        "stable"
+    } else {
+        "not stable"
+    };
     let _ = writeln!(
         out,
         "   ranking {stability} over the halves of the training part (best: {}); margin to the second: {} of the gap\n",
@@ -176,17 +238,30 @@ fn how_far_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "3. How far it shrinks");
     let row = |out: &mut String, label: &str, gap: f64| {
         let shrink = 1.0 - gap / report.gap_before;
-        let _ = writeln!(out, "   {label:<36} {:>10}  {:>9}", num(gap), percent(-shrink));
+        let _ = writeln!(
+            out,
+            "   {label:<36} {:>10}  {:>9}",
+            num(gap),
+            percent(-shrink)
+        );
     };
     let _ = writeln!(out, "   {:<36} {:>10}", "before", num(report.gap_before));
     if let Some(best) = report.effects.first() {
         row(out, &format!("after {}", best.name), best.gap_after);
     }
     if let Some(combined) = &report.combined {
-        row(out, &format!("after {}", combined.names.join(" + ")), combined.gap_after);
+        row(
+            out,
+            &format!("after {}", combined.names.join(" + ")),
+            combined.gap_after,
+        );
     }
     if let Some(locus) = report.locus.first() {
-        row(out, &format!("free correction at {}", locus.name), locus.bound_after);
+        row(
+            out,
+            &format!("free correction at {}", locus.name),
+            locus.bound_after,
+        );
     }
     row(out, "noise floor", report.noise_floor);
     match &report.credited {

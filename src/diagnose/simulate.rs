@@ -113,7 +113,13 @@ impl Simulator {
 
     /// Evaluates `program` (compiled against this model's layout) at `state` with the
     /// inputs of `row`.
-    pub fn evaluate(&mut self, program: &Program, record: &Record, row: usize, state: &[f64]) -> f64 {
+    pub fn evaluate(
+        &mut self,
+        program: &Program,
+        record: &Record,
+        row: usize,
+        state: &[f64],
+    ) -> f64 {
         self.load(record, row, state);
         program.eval(self.system.slots_mut(), &mut self.scratch)
     }
@@ -197,7 +203,11 @@ impl Simulator {
     /// One-step predictions along rows `0..end - 1`: from row `i`'s measured data (and the
     /// hidden states carried along this way from row 0), the state at row `i + 1`.
     /// Returns the states each step starts from and the predictions.
-    pub fn one_step(&mut self, record: &Record, end: usize) -> Result<(Run, Run), IntegrationError> {
+    pub fn one_step(
+        &mut self,
+        record: &Record,
+        end: usize,
+    ) -> Result<(Run, Run), IntegrationError> {
         let mut state = self.start_state(record, 0);
         let dim = state.len();
         let (mut starts, mut predictions) = (Vec::new(), Vec::new());

@@ -45,7 +45,10 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     let mut supports = best_subsets(&gram);
     supports.extend(THRESHOLDS.iter().filter_map(|&t| stlsq(&gram, t)));
     let mut best: Vec<Option<Candidate>> = vec![None; MAX_TERMS + 1];
-    for support in supports.into_iter().filter(|s| !s.is_empty() && s.len() <= MAX_TERMS) {
+    for support in supports
+        .into_iter()
+        .filter(|s| !s.is_empty() && s.len() <= MAX_TERMS)
+    {
         if let Some((r2, coefficients)) = gram.fit(&support) {
             let slot = &mut best[support.len()];
             if slot.as_ref().is_none_or(|(b, _, _)| r2 > *b) {
@@ -130,7 +133,11 @@ impl Gram {
     /// `(R^2, coefficients in physical units)` of `support`.
     fn fit(&self, support: &[usize]) -> Option<(f64, Vec<f64>)> {
         let (x, residual) = self.solve(support, 1e-12)?;
-        let coefficients = x.iter().zip(support).map(|(c, &j)| c / self.scales[j]).collect();
+        let coefficients = x
+            .iter()
+            .zip(support)
+            .map(|(c, &j)| c / self.scales[j])
+            .collect();
         (self.total > 0.0).then(|| (1.0 - residual / self.total, coefficients))
     }
 }
@@ -151,7 +158,10 @@ fn best_subsets(gram: &Gram) -> Vec<Vec<usize>> {
     keep_best(&mut (0..n).map(|i| vec![i]));
     keep_best(&mut (0..n).flat_map(|i| (i + 1..n).map(move |j| vec![i, j])));
     if n <= EXHAUSTIVE {
-        keep_best(&mut (0..n).flat_map(|i| (i + 1..n).flat_map(move |j| (j + 1..n).map(move |k| vec![i, j, k]))));
+        keep_best(
+            &mut (0..n)
+                .flat_map(|i| (i + 1..n).flat_map(move |j| (j + 1..n).map(move |k| vec![i, j, k]))),
+        );
     }
     found
 }
@@ -163,14 +173,22 @@ fn library(along: &Along) -> Vec<Term> {
     let rows = along.values.len();
     let column = |j: usize| -> Vec<f64> { along.variables.iter().map(|v| v[j]).collect() };
     let varies = |values: &[f64]| {
-        let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let (lo, hi) = values
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
         hi - lo > 1e-9 * hi.abs().max(lo.abs())
     };
     let names = &along.names;
     let mut per_variable: Vec<Vec<Term>> = Vec::new();
     for (j, name) in names.iter().enumerate() {
         let x = column(j);
-        per_variable.push(if varies(&x) { variable_terms(name, &x) } else { Vec::new() });
+        per_variable.push(if varies(&x) {
+            variable_terms(name, &x)
+        } else {
+            Vec::new()
+        });
     }
     let mut terms = vec![Term {
         text: "1".into(),
@@ -180,12 +198,18 @@ fn library(along: &Along) -> Vec<Term> {
         text: t.text.clone(),
         values: t.values.clone(),
     }));
-    let plain: Vec<usize> = (0..names.len()).filter(|&j| !per_variable[j].is_empty()).collect();
+    let plain: Vec<usize> = (0..names.len())
+        .filter(|&j| !per_variable[j].is_empty())
+        .collect();
     for (a, &i) in plain.iter().enumerate() {
         for &j in &plain[a..] {
             let (xi, xj) = (column(i), column(j));
             terms.push(Term {
-                text: if i == j { format!("{}^2", names[i]) } else { format!("{} * {}", names[i], names[j]) },
+                text: if i == j {
+                    format!("{}^2", names[i])
+                } else {
+                    format!("{} * {}", names[i], names[j])
+                },
                 values: xi.iter().zip(&xj).map(|(p, q)| p * q).collect(),
             });
         }
@@ -193,7 +217,11 @@ fn library(along: &Along) -> Vec<Term> {
     let last = names.len().saturating_sub(1);
     if along.let_last && !per_variable[last].is_empty() {
         let l = column(last);
-        for term in per_variable[..last].iter().flatten().filter(|t| !t.text.contains('*') && t.text != names[last]) {
+        for term in per_variable[..last]
+            .iter()
+            .flatten()
+            .filter(|t| !t.text.contains('*') && t.text != names[last])
+        {
             if term.text.contains('/') || term.text.starts_with("exp") {
                 terms.push(Term {
                     text: format!("{} * {}", names[last], term.text),
@@ -223,8 +251,12 @@ fn variable_terms(name: &str, x: &[f64]) -> Vec<Term> {
         if median > 0.0 {
             for multiple in K_MULTIPLES {
                 let k = round_significant(multiple * median, 2);
-                terms.push(map(format!("{name}/({} + {name})", number(k)), &|v| v / (k + v)));
-                terms.push(map(format!("exp(-{name}/{})", number(k)), &|v| (-v / k).exp()));
+                terms.push(map(format!("{name}/({} + {name})", number(k)), &|v| {
+                    v / (k + v)
+                }));
+                terms.push(map(format!("exp(-{name}/{})", number(k)), &|v| {
+                    (-v / k).exp()
+                }));
             }
         }
     }
@@ -253,7 +285,11 @@ fn format_formula(library: &[Term], support: &[usize], coefficients: &[f64]) -> 
     let mut text = String::new();
     for (k, (&j, &c)) in support.iter().zip(coefficients).enumerate() {
         let magnitude = number(round_significant(c.abs(), 3));
-        let term = if library[j].text == "1" { magnitude } else { format!("{magnitude} * {}", library[j].text) };
+        let term = if library[j].text == "1" {
+            magnitude
+        } else {
+            format!("{magnitude} * {}", library[j].text)
+        };
         match (k, c < 0.0) {
             (0, true) => text.push_str(&format!("-{term}")),
             (0, false) => text.push_str(&term),

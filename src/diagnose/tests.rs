@@ -29,7 +29,9 @@ impl Simulated {
         let mut total = 0.0;
         for (column, clean) in noisy.iter().zip(&self.clean) {
             let (_, std) = record::mean_std(&column.values[..first]);
-            total += (first..rows).map(|i| ((column.values[i] - clean[i]) / std).powi(2)).sum::<f64>()
+            total += (first..rows)
+                .map(|i| ((column.values[i] - clean[i]) / std).powi(2))
+                .sum::<f64>()
                 / (rows - first) as f64;
         }
         total / self.clean.len() as f64
@@ -39,7 +41,9 @@ impl Simulated {
 /// The truth model `truth` under one input program per input, measured states perturbed
 /// by `y (1 + noise z)`, `z` standard normal (as `gbc simulate --noise`).
 fn simulate(truth: &str, program: &str, t_end: f64, dt: f64, seed: u64) -> Simulated {
-    let model = crate::driver::compile_file(&root().join(truth), &[]).unwrap().model;
+    let model = crate::driver::compile_file(&root().join(truth), &[])
+        .unwrap()
+        .model;
     let signals: Vec<_> = (model.inputs.iter())
         .map(|input| {
             let program = crate::signal::parse_program(program).unwrap();
@@ -85,7 +89,13 @@ fn root() -> PathBuf {
 }
 
 fn chemostat(truth: &str) -> Simulated {
-    simulate(&format!("models/diagnose/chemostat/{truth}"), "steps(hold=10..60, seed=4)", 1200.0, 1.0, 7)
+    simulate(
+        &format!("models/diagnose/chemostat/{truth}"),
+        "steps(hold=10..60, seed=4)",
+        1200.0,
+        1.0,
+        7,
+    )
 }
 
 fn bioreactor(truth: &str) -> Simulated {
@@ -125,10 +135,17 @@ fn check_credited(report: &Report, simulated: &Simulated, effect: &str) {
     assert_eq!(report.credited.as_deref(), Some(effect));
     assert!(report.confidence.stable);
     let after = report.effects[0].gap_after;
-    assert!((after / noise - 1.0).abs() < 0.1, "gap after {after}, injected noise {noise}");
+    assert!(
+        (after / noise - 1.0).abs() < 0.1,
+        "gap after {after}, injected noise {noise}"
+    );
     let shrink = 1.0 - noise / report.gap_before;
     assert!((report.effects[0].shrink - shrink).abs() < 0.1 * (1.0 - shrink) + 1e-3);
-    assert!((report.noise_floor / noise - 1.0).abs() < 0.3, "floor {} noise {noise}", report.noise_floor);
+    assert!(
+        (report.noise_floor / noise - 1.0).abs() < 0.3,
+        "floor {} noise {noise}",
+        report.noise_floor
+    );
 }
 
 fn locus(report: &Report) -> (&str, LocusKind) {
@@ -173,7 +190,11 @@ fn a_missing_balance_term_is_found_in_its_balance() {
     assert!(!report.history_dependent);
     // The learned correction of dP/dt is proportional to -P.
     let hint = &report.hints[0];
-    assert!(hint.text.starts_with('-') && hint.text.ends_with("* P") && hint.r2 > 0.9, "{:?}", report.hints);
+    assert!(
+        hint.text.starts_with('-') && hint.text.ends_with("* P") && hint.r2 > 0.9,
+        "{:?}",
+        report.hints
+    );
 }
 
 #[test]
@@ -198,9 +219,22 @@ fn the_burden_of_enzyme_b_is_found_in_the_growth_of_x() {
     assert!((param(&report, "Y_X") / 0.435 - 1.0).abs() < 0.05);
     // The growth rate or the biomass balance it feeds; only the weakly excited substrate
     // could tell them apart, so both must be among the loci tied with the best.
-    let tied: Vec<&str> = report.locus.iter().filter(|l| l.tied).map(|l| l.name.as_str()).collect();
-    assert!(["mu", "X"].contains(&report.locus[0].name.as_str()), "{:?}", report.locus);
-    assert!(tied.contains(&"mu") && tied.contains(&"X"), "{:?}", report.locus);
+    let tied: Vec<&str> = report
+        .locus
+        .iter()
+        .filter(|l| l.tied)
+        .map(|l| l.name.as_str())
+        .collect();
+    assert!(
+        ["mu", "X"].contains(&report.locus[0].name.as_str()),
+        "{:?}",
+        report.locus
+    );
+    assert!(
+        tied.contains(&"mu") && tied.contains(&"X"),
+        "{:?}",
+        report.locus
+    );
     assert!(!report.history_dependent);
 }
 
@@ -211,7 +245,14 @@ fn cell_death_is_found_in_the_biomass_balance() {
     check_credited(&report, &simulated, "death");
     assert!((param(&report, "k_d") / 0.006 - 1.0).abs() < 0.1);
     assert_eq!(locus(&report), ("X", LocusKind::Balance));
-    assert!(report.hints.iter().any(|h| h.text.ends_with("* X") && h.terms == 1), "{:?}", report.hints);
+    assert!(
+        report
+            .hints
+            .iter()
+            .any(|h| h.text.ends_with("* X") && h.terms == 1),
+        "{:?}",
+        report.hints
+    );
 }
 
 #[test]
@@ -231,7 +272,10 @@ fn models_with_closures_or_too_little_data_are_refused() {
     short.times.truncate(15);
     short.columns.iter_mut().for_each(|c| c.values.truncate(15));
     let refused = try_run("models/diagnose/chemostat/model.gbm", &short);
-    assert!(matches!(refused, Err(DiagnoseError::TooFewRows { rows: 15, .. })));
+    assert!(matches!(
+        refused,
+        Err(DiagnoseError::TooFewRows { rows: 15, .. })
+    ));
 }
 
 #[test]
@@ -239,7 +283,14 @@ fn the_json_has_the_spec_fields_and_the_html_its_plots() {
     let simulated = chemostat("truth_decay.gbm");
     let report = run("models/diagnose/chemostat/model.gbm", &simulated.data);
     let json = serde_json::to_value(&report).unwrap();
-    for key in ["gap_before", "noise_floor", "significant", "states", "locus", "history_dependent"] {
+    for key in [
+        "gap_before",
+        "noise_floor",
+        "significant",
+        "states",
+        "locus",
+        "history_dependent",
+    ] {
         assert!(json.get(key).is_some(), "{key}");
     }
     for key in ["windows", "regime", "effects", "credited"] {
@@ -262,7 +313,9 @@ fn the_json_has_the_spec_fields_and_the_html_its_plots() {
 
 #[test]
 fn zz_worked_example() {
-    let Ok(model) = std::env::var("GBC_EXAMPLE_MODEL") else { return };
+    let Ok(model) = std::env::var("GBC_EXAMPLE_MODEL") else {
+        return;
+    };
     let data = std::env::var("GBC_EXAMPLE_DATA").unwrap();
     let out = std::env::var("GBC_EXAMPLE_OUT").unwrap();
     let args = cli_check::DiagnoseArgs {

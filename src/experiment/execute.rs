@@ -355,51 +355,61 @@ pub fn execute(
     }
     let pending: Vec<usize> = (0..runs.len()).filter(|i| finished[*i].is_none()).collect();
     let slots = Mutex::new(finished);
-    let failures = Mutex::new(Vec::new());
+    run_queue(jobs, pending.len(), &|position| {
+        let index = pending[position];
+        let spec = runs[index];
+        on_progress(Progress::Started(spec));
+        let result = run_one(prepared, spec, dir, on_progress)?;
+        on_progress(Progress::Finished(spec, &result));
+        lock(&slots)[index] = Some(result);
+        Ok(())
+    })?;
+    let slots = slots
+        .into_inner()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    Ok(slots.into_iter().flatten().collect())
+}
+
+/// Calls `work(0..count)` on a local pool of `jobs` threads, each taking the next item in
+/// order; the first failure stops the queue (items under way finish) and is returned.
+fn run_queue(
+    jobs: usize,
+    count: usize,
+    work: &(dyn Fn(usize) -> Result<(), ExperimentFailure> + Sync),
+) -> Result<(), ExperimentFailure> {
+    let jobs = jobs.clamp(1, count.max(1));
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs.max(1))
+        .num_threads(jobs)
         .build()
         .map_err(|error| ExperimentFailure::Internal(format!("cannot start threads: {error}")))?;
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
+    let failures = Mutex::new(Vec::new());
     pool.scope(|scope| {
-        for _ in 0..jobs.max(1) {
+        for _ in 0..jobs {
             scope.spawn(|_| {
                 // dfdx's matrix products use rayon's current pool: a pool of one thread
                 // keeps each training single-threaded inside the job pool.
                 let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
                 while !stop.load(Ordering::Relaxed) {
-                    let Some(&index) = pending.get(next.fetch_add(1, Ordering::Relaxed)) else {
+                    let item = next.fetch_add(1, Ordering::Relaxed);
+                    if item >= count {
                         break;
-                    };
-                    let spec = runs[index];
-                    on_progress(Progress::Started(spec));
-                    let work = || run_one(prepared, spec, dir, on_progress);
+                    }
                     let outcome = match &single {
-                        Some(single) => single.install(work),
-                        None => work(),
+                        Some(single) => single.install(|| work(item)),
+                        None => work(item),
                     };
-                    match outcome {
-                        Ok(result) => {
-                            on_progress(Progress::Finished(spec, &result));
-                            lock(&slots)[index] = Some(result);
-                        }
-                        Err(failure) => {
-                            stop.store(true, Ordering::Relaxed);
-                            lock(&failures).push(failure);
-                        }
+                    if let Err(failure) = outcome {
+                        stop.store(true, Ordering::Relaxed);
+                        lock(&failures).push(failure);
                     }
                 }
             });
         }
     });
-    if let Some(failure) = lock(&failures).drain(..).next() {
-        return Err(failure);
-    }
-    let slots = slots
-        .into_inner()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
-    Ok(slots.into_iter().flatten().collect())
+    let first = lock(&failures).drain(..).next();
+    first.map_or(Ok(()), Err)
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {

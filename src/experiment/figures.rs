@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use super::execute::{LoadedModel, Prepared};
-use super::reference::{first_predicted_row, true_params, truth_along};
+use super::reference::{first_predicted_row, true_params, truth_along, TruthRun};
 use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::backend::{Network, Setup};
 use crate::data::Dataset;
@@ -328,18 +328,44 @@ fn closure_figures(
     size: usize,
     notes: &mut Vec<String>,
 ) -> Vec<Figure> {
-    let Some(truth) = &prepared.truth else {
-        notes.push("no truth model: the closure figures are left out".into());
+    let Some(run) = truth_run(prepared, notes) else {
         return Vec::new();
     };
-    let source = &prepared.validation_source;
-    let checked_from = prepared.models.iter().map(|m| m.offset).min().unwrap_or(0);
-    let run = match truth_along(truth, source, checked_from) {
-        Ok(run) => run,
-        Err(_) => {
-            notes.push("the truth model cannot be simulated along the data".into());
-            return Vec::new();
+    let grey: Vec<&TrainedModel> = (trained.iter())
+        .filter(|(index, ..)| !prepared.models[*index].model.closures.is_empty())
+        .filter(|(index, ..)| !super::is_black_box(&prepared.models[*index].model))
+        .collect();
+    let mut tables = Vec::new();
+    for entry in &grey {
+        let data = &prepared.models[entry.0].validation;
+        tables.extend(predictions(prepared, [*entry], data, Mode::Offline, notes));
+    }
+    let mut outputs: Vec<&str> = Vec::new();
+    for (entry, _) in &tables {
+        let closures = &prepared.models[entry.0].model.closures;
+        for output in closures.iter().flat_map(|c| &c.outputs) {
+            if !outputs.contains(&output.name.as_str()) && run.closure_truth(&output.name).is_some()
+            {
+                outputs.push(&output.name);
+            }
         }
+    }
+    (outputs.into_iter())
+        .map(|output| closure_figure(prepared, &tables, &run, output, size))
+        .collect()
+}
+
+/// The truth model along the validation record, with a note when it cannot be had or
+/// does not reproduce the data.
+fn truth_run(prepared: &Prepared, notes: &mut Vec<String>) -> Option<TruthRun> {
+    let Some(truth) = &prepared.truth else {
+        notes.push("no truth model: the closure figures are left out".into());
+        return None;
+    };
+    let checked_from = prepared.models.iter().map(|m| m.offset).min().unwrap_or(0);
+    let Ok(run) = truth_along(truth, &prepared.validation_source, checked_from) else {
+        notes.push("the truth model cannot be simulated along the data".into());
+        return None;
     };
     if run.deviation > TRUTH_TOLERANCE {
         notes.push(format!(
@@ -348,70 +374,49 @@ fn closure_figures(
             run.deviation
         ));
     }
-    let with_closures: Vec<&TrainedModel> = (trained.iter())
-        .filter(|(index, ..)| !prepared.models[*index].model.closures.is_empty())
-        .filter(|(index, ..)| !super::is_black_box(&prepared.models[*index].model))
-        .collect();
-    let mut outputs: Vec<String> = Vec::new();
-    for (index, ..) in with_closures.iter().copied() {
-        for closure in &prepared.models[*index].model.closures {
-            for output in &closure.outputs {
-                if !outputs.contains(&output.name) && run.closure_truth(&output.name).is_some() {
-                    outputs.push(output.name.clone());
-                }
-            }
+    Some(run)
+}
+
+/// One closure output of every grey-box model against the truth's rate.
+fn closure_figure(
+    prepared: &Prepared,
+    tables: &[(&TrainedModel, PredictionTable)],
+    run: &TruthRun,
+    output: &str,
+    size: usize,
+) -> Figure {
+    let title = format!(
+        "{}: closure output {output} ({size} training points)",
+        prepared.study.name
+    );
+    let mut chart = Chart::new(&title, "time", output);
+    let mut truth_added = false;
+    for ((index, ..), table) in tables {
+        let Some(values) = column(table, output) else {
+            continue;
+        };
+        let loaded = &prepared.models[*index];
+        let times = &table.columns[0];
+        if let (false, Some(true_values)) = (truth_added, run.closure_truth(output)) {
+            let start = loaded.offset + first_predicted_row(&loaded.validation, table);
+            let truth = true_values[start.min(true_values.len())..].iter().copied();
+            let points = times.iter().copied().zip(truth).collect();
+            chart = chart.with(Series::line("truth", points).colored(DATA_COLOR));
+            truth_added = true;
         }
+        let points = times.iter().copied().zip(values.iter().copied()).collect();
+        let series = Series::line(&loaded.label, points).styled(Style::Dashed);
+        chart = chart.with(series.colored(color(*index)));
     }
-    let mut figures = Vec::new();
-    for output in outputs {
-        let mut chart = Chart::new(
-            &format!(
-                "{}: closure output {output} ({size} training points)",
-                prepared.study.name
-            ),
-            "time",
-            &output,
-        );
-        let mut truth_added = false;
-        for entry in with_closures.iter().copied() {
-            let loaded = &prepared.models[entry.0];
-            let data = &loaded.validation;
-            let tables = predictions(prepared, [entry], data, Mode::Offline, notes);
-            let Some((_, table)) = tables.first() else {
-                continue;
-            };
-            let Some(values) = column(table, &output) else {
-                continue;
-            };
-            let times = &table.columns[0];
-            if !truth_added {
-                if let Some(true_values) = run.closure_truth(&output) {
-                    let start = loaded.offset + first_predicted_row(&loaded.validation, table);
-                    let points = (times.iter().copied())
-                        .zip(true_values[start.min(true_values.len())..].iter().copied())
-                        .collect();
-                    chart = chart.with(Series::line("truth", points).colored(DATA_COLOR));
-                    truth_added = true;
-                }
-            }
-            let points = times.iter().copied().zip(values.iter().copied()).collect();
-            chart = chart.with(
-                Series::line(&loaded.label, points)
-                    .styled(Style::Dashed)
-                    .colored(color(entry.0)),
-            );
-        }
-        figures.push(Figure {
-            name: format!("closure_{output}"),
-            caption: format!(
-                "The learned {output} along the validation window (one step from the true \
-                 history) of the median replicate trained on {size} points, against the truth \
-                 model's rate (paper Fig. 2c lower panel, 3d)."
-            ),
-            svg: chart.to_svg(WIDTH, HEIGHT),
-        });
+    Figure {
+        name: format!("closure_{output}"),
+        caption: format!(
+            "The learned {output} along the validation window (one step from the true history) \
+             of the median replicate trained on {size} points, against the truth model's rate \
+             (paper Fig. 2c lower panel, 3d)."
+        ),
+        svg: chart.to_svg(WIDTH, HEIGHT),
     }
-    figures
 }
 
 /// Trained params (median over replicates at `size`) against the truth's consts.

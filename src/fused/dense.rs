@@ -1,95 +1,145 @@
-//! The one matrix kernel of the fused step, `out += lhs @ rhs` on small row-major blocks,
-//! written so that the compiler keeps a strip of each output row in registers.
+//! The one matrix kernel of the fused step, `out += lhs @ rhs` on small blocks, with the
+//! operands copied into packed panels first so that the inner loop has no index arithmetic
+//! or bounds checks and keeps a `4 x 8` tile of the output in registers.
 //!
-//! Every product of a training step has this shape once its operands are laid out for it:
-//! the affine layers (`z = a W + b`, `out` starting at the bias), the input gradients
-//! (`g_a = delta W^T`, with `W^T` copied once per step) and the weight gradients
-//! (`dW += a^T delta`, with `a` transposed first).
+//! Every product of a training step has this shape: the affine layers (`z = a W + b`, `out`
+//! starting at the bias), the input gradients (`g_a = delta W^T`) and the weight gradients
+//! (`dW += a^T delta`); the transposes are only strides of a [`View`], resolved by the
+//! packing.
 
 use crate::backend::real::Real;
 
+/// Output rows computed together, sharing each load of `rhs`.
+const BLOCK: usize = 4;
 /// Columns of `out` accumulated in registers at once.
 const STRIP: usize = 8;
 /// Width of the strips that cover what is left after the wide ones.
 const NARROW: usize = 4;
-/// Output rows computed together, sharing each load of `rhs`.
-const BLOCK: usize = 4;
 
-/// `out[r, :] += sum_k lhs[r, k] * rhs[k, :]` for `out` of shape `rows x columns`, `lhs` of
-/// shape `rows x inner` and `rhs` of shape `inner x columns`, all row-major.
-pub fn multiply_add<E: Real>(out: &mut [E], lhs: &[E], rhs: &[E], inner: usize, columns: usize) {
-    if columns == 0 || inner == 0 {
-        return;
+/// A read-only matrix: entry `(i, j)` is `values[i * row_stride + j * column_stride]`.
+#[derive(Debug, Clone, Copy)]
+pub struct View<'a, E> {
+    /// The backing values.
+    pub values: &'a [E],
+    /// Distance between consecutive rows.
+    pub row_stride: usize,
+    /// Distance between consecutive columns.
+    pub column_stride: usize,
+}
+
+impl<'a, E: Copy> View<'a, E> {
+    /// A row-major matrix with `columns` columns.
+    pub fn row_major(values: &'a [E], columns: usize) -> Self {
+        View {
+            values,
+            row_stride: columns,
+            column_stride: 1,
+        }
     }
-    let mut out_blocks = out.chunks_exact_mut(BLOCK * columns);
-    let mut lhs_blocks = lhs.chunks_exact(BLOCK * inner);
-    for (out_block, lhs_block) in (&mut out_blocks).zip(&mut lhs_blocks) {
-        row_block::<E, BLOCK>(out_block, lhs_block, rhs, inner, columns);
+
+    /// The transpose of a row-major matrix with `columns` columns.
+    pub fn transposed(values: &'a [E], columns: usize) -> Self {
+        View {
+            values,
+            row_stride: 1,
+            column_stride: columns,
+        }
     }
-    let (out_rest, lhs_rest) = (out_blocks.into_remainder(), lhs_blocks.remainder());
-    for (out_row, lhs_row) in out_rest.chunks_exact_mut(columns).zip(lhs_rest.chunks_exact(inner)) {
-        row_block::<E, 1>(out_row, lhs_row, rhs, inner, columns);
+
+    fn at(&self, row: usize, column: usize) -> E {
+        self.values[row * self.row_stride + column * self.column_stride]
     }
 }
 
-/// `R` consecutive rows: strips of `STRIP`, then `NARROW` columns, then single columns.
-#[inline(always)]
-fn row_block<E: Real, const R: usize>(
-    out: &mut [E],
-    lhs: &[E],
-    rhs: &[E],
-    inner: usize,
-    columns: usize,
-) {
+/// Packing buffers reused from product to product.
+#[derive(Debug, Clone, Default)]
+pub struct Gemm<E> {
+    lhs: Vec<E>,
+    rhs: Vec<E>,
+}
+
+impl<E: Real> Gemm<E> {
+    /// `out[r, :] += sum_k lhs(r, k) * rhs(k, :)` for a row-major `out` of shape
+    /// `rows x columns`; `lhs` is `rows x inner`, `rhs` is `inner x columns`.
+    pub fn multiply_add(
+        &mut self,
+        out: &mut [E],
+        (rows, columns, inner): (usize, usize, usize),
+        lhs: View<E>,
+        rhs: View<E>,
+    ) {
+        if rows == 0 || columns == 0 || inner == 0 {
+            return;
+        }
+        let strips = strips(columns);
+        self.rhs.clear();
+        for &(start, width) in &strips {
+            for k in 0..inner {
+                self.rhs
+                    .extend((start..start + width).map(|column| rhs.at(k, column)));
+            }
+        }
+        let mut row = 0;
+        while row < rows {
+            let height = if rows - row >= BLOCK { BLOCK } else { 1 };
+            self.lhs.clear();
+            for k in 0..inner {
+                self.lhs.extend((row..row + height).map(|r| lhs.at(r, k)));
+            }
+            let block = &mut out[row * columns..(row + height) * columns];
+            let mut panel_start = 0;
+            for &(start, width) in &strips {
+                let panel = &self.rhs[panel_start..panel_start + inner * width];
+                panel_start += inner * width;
+                match (height, width) {
+                    (BLOCK, STRIP) => tile::<E, BLOCK, STRIP>(block, &self.lhs, panel, start, columns),
+                    (BLOCK, NARROW) => tile::<E, BLOCK, NARROW>(block, &self.lhs, panel, start, columns),
+                    (BLOCK, _) => tile::<E, BLOCK, 1>(block, &self.lhs, panel, start, columns),
+                    (_, STRIP) => tile::<E, 1, STRIP>(block, &self.lhs, panel, start, columns),
+                    (_, NARROW) => tile::<E, 1, NARROW>(block, &self.lhs, panel, start, columns),
+                    _ => tile::<E, 1, 1>(block, &self.lhs, panel, start, columns),
+                }
+            }
+            row += height;
+        }
+    }
+}
+
+/// `(start, width)` of the column strips: wide ones, narrow ones, then single columns.
+fn strips(columns: usize) -> Vec<(usize, usize)> {
     let wide = columns / STRIP * STRIP;
     let narrow = wide + (columns - wide) / NARROW * NARROW;
-    for start in (0..wide).step_by(STRIP) {
-        tile::<E, R, STRIP>(out, lhs, rhs, start, inner, columns);
-    }
-    for start in (wide..narrow).step_by(NARROW) {
-        tile::<E, R, NARROW>(out, lhs, rhs, start, inner, columns);
-    }
-    for start in narrow..columns {
-        tile::<E, R, 1>(out, lhs, rhs, start, inner, columns);
-    }
+    (0..wide)
+        .step_by(STRIP)
+        .map(|start| (start, STRIP))
+        .chain((wide..narrow).step_by(NARROW).map(|start| (start, NARROW)))
+        .chain((narrow..columns).map(|start| (start, 1)))
+        .collect()
 }
 
-/// Columns `start..start + N` of `R` output rows, accumulated in registers: `R x N`
-/// independent sums hide the latency of the additions.
+/// Columns `start..start + N` of the `R` rows of `out`, from the packed `lhs` (`inner x R`)
+/// and the packed `panel` (`inner x N`): `R x N` independent sums in registers.
 #[inline(always)]
 fn tile<E: Real, const R: usize, const N: usize>(
     out: &mut [E],
     lhs: &[E],
-    rhs: &[E],
+    panel: &[E],
     start: usize,
-    inner: usize,
     columns: usize,
 ) {
     let mut acc = [[E::ZERO; N]; R];
     for (row, sums) in acc.iter_mut().enumerate() {
         sums.copy_from_slice(&out[row * columns + start..][..N]);
     }
-    for (k, rhs_row) in rhs.chunks_exact(columns).take(inner).enumerate() {
-        let block = &rhs_row[start..start + N];
-        for (row, sums) in acc.iter_mut().enumerate() {
-            let scale = lhs[row * inner + k];
-            for lane in 0..N {
-                sums[lane] += scale * block[lane];
+    for (scales, block) in lhs.chunks_exact(R).zip(panel.chunks_exact(N)) {
+        for (sums, &scale) in acc.iter_mut().zip(scales) {
+            for (sum, &value) in sums.iter_mut().zip(block) {
+                *sum += scale * value;
             }
         }
     }
     for (row, sums) in acc.iter().enumerate() {
         out[row * columns + start..][..N].copy_from_slice(sums);
-    }
-}
-
-/// Writes the transpose of the `rows x columns` block `matrix` into `out`
-/// (`columns x rows`).
-pub fn transpose<E: Real>(out: &mut [E], matrix: &[E], rows: usize, columns: usize) {
-    for (row, values) in matrix.chunks_exact(columns).take(rows).enumerate() {
-        for (column, &value) in values.iter().enumerate() {
-            out[column * rows + row] = value;
-        }
     }
 }
 
@@ -106,13 +156,17 @@ pub fn add_column_sums<E: Real>(out: &mut [E], matrix: &[E], columns: usize) {
 mod tests {
     use super::*;
 
-    /// The textbook triple loop.
-    fn reference(lhs: &[f64], rhs: &[f64], rows: usize, inner: usize, columns: usize) -> Vec<f64> {
+    /// The textbook triple loop on explicit `(i, j)` accessors.
+    fn reference(
+        lhs: impl Fn(usize, usize) -> f64,
+        rhs: impl Fn(usize, usize) -> f64,
+        (rows, columns, inner): (usize, usize, usize),
+    ) -> Vec<f64> {
         let mut out = vec![0.0; rows * columns];
         for r in 0..rows {
             for c in 0..columns {
                 for k in 0..inner {
-                    out[r * columns + c] += lhs[r * inner + k] * rhs[k * columns + c];
+                    out[r * columns + c] += lhs(r, k) * rhs(k, c);
                 }
             }
         }
@@ -120,27 +174,38 @@ mod tests {
     }
 
     #[test]
-    fn multiply_add_matches_the_triple_loop_for_every_strip_split() {
-        for (rows, inner, columns) in [(3, 5, 20), (1, 1, 1), (4, 7, 3), (2, 3, 8), (5, 2, 17)] {
+    fn multiply_add_matches_the_triple_loop_for_every_block_and_strip_split() {
+        let mut gemm = Gemm::default();
+        for (rows, columns, inner) in [(3, 20, 5), (1, 1, 1), (4, 3, 7), (9, 8, 3), (5, 17, 2)] {
             let lhs: Vec<f64> = (0..rows * inner).map(|i| (i as f64 * 0.37).sin()).collect();
             let rhs: Vec<f64> = (0..inner * columns).map(|i| (i as f64 * 0.11).cos()).collect();
             let start: Vec<f64> = (0..rows * columns).map(|i| i as f64).collect();
+            let shape = (rows, columns, inner);
             let mut out = start.clone();
-            multiply_add(&mut out, &lhs, &rhs, inner, columns);
-            let product = reference(&lhs, &rhs, rows, inner, columns);
+            let (a, b) = (View::row_major(&lhs, inner), View::row_major(&rhs, columns));
+            gemm.multiply_add(&mut out, shape, a, b);
+            let product = reference(|r, k| lhs[r * inner + k], |k, c| rhs[k * columns + c], shape);
             for (index, &found) in out.iter().enumerate() {
                 let expected = start[index] + product[index];
-                assert!((found - expected).abs() < 1e-12, "{rows}x{inner}x{columns}");
+                assert!((found - expected).abs() < 1e-12, "{shape:?}");
             }
+            // The same operands stored transposed give the same product.
+            let lhs_t: Vec<f64> = (0..inner * rows)
+                .map(|i| lhs[(i % rows) * inner + i / rows])
+                .collect();
+            let rhs_t: Vec<f64> = (0..columns * inner)
+                .map(|i| rhs[(i % inner) * columns + i / inner])
+                .collect();
+            let mut out_t = start.clone();
+            let (a, b) = (View::transposed(&lhs_t, rows), View::transposed(&rhs_t, inner));
+            gemm.multiply_add(&mut out_t, shape, a, b);
+            assert_eq!(out_t, out, "{shape:?} transposed");
         }
     }
 
     #[test]
-    fn transpose_and_column_sums_rearrange_and_add() {
+    fn column_sums_add_up_each_column() {
         let matrix = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-        let mut out = [0.0; 6];
-        transpose(&mut out, &matrix, 2, 3);
-        assert_eq!(out, [1.0, 4.0, 2.0, 5.0, 3.0, 6.0]);
         let mut sums = [1.0, 1.0, 1.0];
         add_column_sums(&mut sums, &matrix, 3);
         assert_eq!(sums, [6.0, 8.0, 10.0]);

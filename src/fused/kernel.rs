@@ -8,7 +8,7 @@ use crate::backend::{BackendError, Batch, Setup};
 use crate::ir::{self, Dynamics};
 
 use super::activation::{activate, Lane};
-use super::dense::{add_column_sums, multiply_add, transpose};
+use super::dense::{add_column_sums, Gemm, View};
 use super::plan::{ClosurePlan, Plan};
 
 const BETA1: f64 = 0.9;
@@ -54,7 +54,9 @@ pub struct Kernel<E: Lane> {
     /// `constants[closure][offset]`: normalised embeddings (lag-0 state entries `-mean/std`).
     constants: Vec<Vec<Vec<E>>>,
     stages: Vec<Stage<E>>,
-    scratch: Vec<E>,
+    gemm: Gemm<E>,
+    delta: Vec<E>,
+    below: Vec<E>,
 }
 
 impl<E: Lane> Kernel<E> {
@@ -92,7 +94,9 @@ impl<E: Lane> Kernel<E> {
             inputs: Vec::new(),
             constants: vec![Vec::new(); plan.closures.len()],
             stages: (0..count).map(|_| Stage::default()).collect(),
-            scratch: Vec::new(),
+            gemm: Gemm::default(),
+            delta: Vec::new(),
+            below: Vec::new(),
             plan,
         })
     }
@@ -221,7 +225,12 @@ impl<E: Lane> Kernel<E> {
                 for _ in 0..rows {
                     out.extend_from_slice(bias);
                 }
-                multiply_add(out, &before[layer], weight, inner, width);
+                self.gemm.multiply_add(
+                    out,
+                    (rows, width, inner),
+                    View::row_major(&before[layer], inner),
+                    View::row_major(weight, width),
+                );
                 if layer + 1 < closure.layers() {
                     let slope = &mut slopes[layer];
                     slope.resize(out.len(), E::ZERO);
@@ -317,21 +326,27 @@ impl<E: Lane> Kernel<E> {
         {
             *slot += value;
         }
-        for (closure_index, closure) in self.plan.closures.iter().enumerate() {
-            reverse_network(
+        for ((closure_index, closure), net_gradient) in
+            self.plan.closures.iter().enumerate().zip(physics.nets)
+        {
+            self.delta = net_gradient;
+            let mut backprop = Backprop {
+                gemm: &mut self.gemm,
+                delta: &mut self.delta,
+                below: &mut self.below,
+            };
+            backprop.network(
                 closure,
                 &stage.layers[closure_index],
                 &stage.slopes[closure_index],
-                physics.nets[closure_index].clone(),
                 &self.weights,
                 &mut self.gradient,
-                &mut self.scratch,
             );
             let first_layer = &self.weights[closure.weight_at[0]..];
             add_stage_state_gradient(
                 closure,
                 first_layer,
-                &self.scratch,
+                &self.delta,
                 self.states,
                 &mut state_gradient,
             );
@@ -360,44 +375,58 @@ impl<E: Lane> Kernel<E> {
     }
 }
 
-/// Reverse pass through one closure network at one stage: accumulates the weight and bias
-/// gradients and leaves the gradient of the first layer's pre-activation in `delta_out`.
-fn reverse_network<E: Lane>(
-    closure: &ClosurePlan,
-    layers: &[Vec<E>],
-    slopes: &[Vec<E>],
-    mut delta: Vec<E>,
-    weights: &[E],
-    gradient: &mut [E],
-    delta_out: &mut Vec<E>,
-) {
-    let rows = layers[0].len() / closure.width().max(1);
-    let mut transposed = Vec::new();
-    for layer in (0..closure.layers()).rev() {
-        let (inner, width) = (closure.widths[layer], closure.widths[layer + 1]);
-        transposed.resize(inner * rows, E::ZERO);
-        transpose(&mut transposed, &layers[layer], rows, inner);
-        let weight_gradient = &mut gradient[closure.weight_at[layer]..][..inner * width];
-        multiply_add(weight_gradient, &transposed, &delta, rows, width);
-        add_column_sums(
-            &mut gradient[closure.bias_at[layer]..][..width],
-            &delta,
-            width,
-        );
-        if layer == 0 {
-            break;
+/// The buffers of the reverse pass through one network.
+struct Backprop<'a, E> {
+    gemm: &'a mut Gemm<E>,
+    /// On entry the gradient of the network output; on exit that of the first layer's
+    /// pre-activation.
+    delta: &'a mut Vec<E>,
+    below: &'a mut Vec<E>,
+}
+
+impl<E: Lane> Backprop<'_, E> {
+    /// Reverse pass through one closure network at one stage: accumulates the weight and
+    /// bias gradients into `gradient`.
+    fn network(
+        &mut self,
+        closure: &ClosurePlan,
+        layers: &[Vec<E>],
+        slopes: &[Vec<E>],
+        weights: &[E],
+        gradient: &mut [E],
+    ) {
+        let rows = layers[0].len() / closure.width().max(1);
+        for layer in (0..closure.layers()).rev() {
+            let (inner, width) = (closure.widths[layer], closure.widths[layer + 1]);
+            self.gemm.multiply_add(
+                &mut gradient[closure.weight_at[layer]..][..inner * width],
+                (inner, width, rows),
+                View::transposed(&layers[layer], inner),
+                View::row_major(self.delta, width),
+            );
+            add_column_sums(
+                &mut gradient[closure.bias_at[layer]..][..width],
+                self.delta,
+                width,
+            );
+            if layer == 0 {
+                break;
+            }
+            let weight = &weights[closure.weight_at[layer]..][..inner * width];
+            self.below.clear();
+            self.below.resize(rows * inner, E::ZERO);
+            self.gemm.multiply_add(
+                self.below,
+                (rows, inner, width),
+                View::row_major(self.delta, width),
+                View::transposed(weight, width),
+            );
+            for (value, &slope) in self.below.iter_mut().zip(&slopes[layer - 1]) {
+                *value = *value * slope;
+            }
+            std::mem::swap(self.delta, self.below);
         }
-        let weight = &weights[closure.weight_at[layer]..][..inner * width];
-        transposed.resize(inner * width, E::ZERO);
-        transpose(&mut transposed, weight, inner, width);
-        let mut below = vec![E::ZERO; rows * inner];
-        multiply_add(&mut below, &delta, &transposed, width, inner);
-        for (value, &slope) in below.iter_mut().zip(&slopes[layer - 1]) {
-            *value = *value * slope;
-        }
-        delta = below;
     }
-    *delta_out = delta;
 }
 
 /// Normalises raw embedding rows as the graph backend does: `(raw - mean) / std`, with `0`
