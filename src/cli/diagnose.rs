@@ -3,7 +3,7 @@
 //! section 5; method in `docs/diagnose.md`). Text on stdout, optionally `--json` and
 //! `--html` reports.
 
-use crate::cli::{CommandError, CommandResult};
+use super::{CommandError, CommandResult};
 use crate::diagnose::{self, DiagnoseError, Options, Problem, Progress};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;

@@ -403,7 +403,3 @@ fn split_summary(context: &Context) -> SplitSummary {
 
 #[cfg(test)]
 mod tests;
-// TEMPORARY compile check of the CLI file until it is wired into src/cli/mod.rs.
-#[cfg(test)]
-#[path = "../cli/diagnose.rs"]
-mod cli_check;

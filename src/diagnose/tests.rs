@@ -310,27 +310,3 @@ fn the_json_has_the_spec_fields_and_the_html_its_plots() {
     assert_eq!(page.matches("<svg").count(), 2 + 2);
     assert!(page.contains("after product_decay") && page.contains("</html>"));
 }
-
-#[test]
-fn zz_worked_example() {
-    let Ok(model) = std::env::var("GBC_EXAMPLE_MODEL") else {
-        return;
-    };
-    let data = std::env::var("GBC_EXAMPLE_DATA").unwrap();
-    let out = std::env::var("GBC_EXAMPLE_OUT").unwrap();
-    let args = cli_check::DiagnoseArgs {
-        model: model.into(),
-        data: data.into(),
-        test: None,
-        holdout: 0.3,
-        seed: 0,
-        restarts: 2,
-        delay: None,
-        dim: 6,
-        json: Some(format!("{out}.json").into()),
-        html: Some(format!("{out}.html").into()),
-    };
-    let start = std::time::Instant::now();
-    cli_check::run(&args).unwrap();
-    eprintln!("ELAPSED {:.1?}", start.elapsed());
-}

@@ -46,8 +46,26 @@ impl<'a, E: Copy> View<'a, E> {
         }
     }
 
-    fn at(&self, row: usize, column: usize) -> E {
-        self.values[row * self.row_stride + column * self.column_stride]
+    /// Appends entries `(row, start..start + width)` to `out`.
+    fn extend_row(&self, out: &mut Vec<E>, row: usize, start: usize, width: usize) {
+        let first = row * self.row_stride + start * self.column_stride;
+        if self.column_stride == 1 {
+            out.extend_from_slice(&self.values[first..first + width]);
+        } else {
+            let stride = self.column_stride;
+            out.extend(self.values[first..].iter().step_by(stride).take(width));
+        }
+    }
+
+    /// Appends entries `(start..start + height, column)` to `out`.
+    fn extend_column(&self, out: &mut Vec<E>, column: usize, start: usize, height: usize) {
+        let first = start * self.row_stride + column * self.column_stride;
+        if self.row_stride == 1 {
+            out.extend_from_slice(&self.values[first..first + height]);
+        } else {
+            let stride = self.row_stride;
+            out.extend(self.values[first..].iter().step_by(stride).take(height));
+        }
     }
 }
 
@@ -75,8 +93,7 @@ impl<E: Real> Gemm<E> {
         self.rhs.clear();
         for &(start, width) in &strips {
             for k in 0..inner {
-                self.rhs
-                    .extend((start..start + width).map(|column| rhs.at(k, column)));
+                rhs.extend_row(&mut self.rhs, k, start, width);
             }
         }
         let mut row = 0;
@@ -84,7 +101,7 @@ impl<E: Real> Gemm<E> {
             let height = if rows - row >= BLOCK { BLOCK } else { 1 };
             self.lhs.clear();
             for k in 0..inner {
-                self.lhs.extend((row..row + height).map(|r| lhs.at(r, k)));
+                lhs.extend_column(&mut self.lhs, k, row, height);
             }
             let block = &mut out[row * columns..(row + height) * columns];
             let mut panel_start = 0;

@@ -429,20 +429,17 @@ impl<E: Lane> Backprop<'_, E> {
     }
 }
 
-/// Normalises raw embedding rows as the graph backend does: `(raw - mean) / std`, with `0`
-/// in place of the raw value of lag-0 state columns.
+/// Normalises raw embedding rows as the graph backend does: the z-score of each column,
+/// `-mean / std` in the lag-0 state columns.
 fn normalise<E: Real>(closure: &ClosurePlan, raw: &[f64], out: &mut Vec<E>) {
     out.clear();
-    let width = closure.width();
-    out.extend(raw.iter().enumerate().map(|(index, &value)| {
-        let column = index % width;
-        let source = if closure.is_stage_state[column] {
-            0.0
-        } else {
-            value
-        };
-        E::from_double((source - closure.column_mean[column]) / closure.column_std[column])
-    }));
+    for row in raw.chunks_exact(closure.width()) {
+        out.extend(
+            (row.iter().zip(&closure.column_scale))
+                .zip(&closure.column_shift)
+                .map(|((&value, &scale), &shift)| E::from_double(value * scale + shift)),
+        );
+    }
 }
 
 /// Adds the stage estimate, scaled by `1 / std`, into the lag-0 state columns.

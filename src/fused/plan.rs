@@ -19,12 +19,11 @@ pub struct ClosurePlan {
     pub weight_at: Vec<usize>,
     /// Start of each layer's bias.
     pub bias_at: Vec<usize>,
-    /// Per embedding column, the mean and std it is z-scored with.
-    pub column_mean: Vec<f64>,
-    /// See `column_mean`.
-    pub column_std: Vec<f64>,
-    /// Whether the column is a lag-0 state (its raw value is replaced by the estimate).
-    pub is_stage_state: Vec<bool>,
+    /// Per embedding column, the factor of the z-score `raw * scale + shift`: `1 / std`,
+    /// or 0 for a lag-0 state (its raw value is replaced by the stage estimate).
+    pub column_scale: Vec<f64>,
+    /// Per embedding column, `-mean / std`.
+    pub column_shift: Vec<f64>,
     /// `(column, state index, 1 / std)` of every lag-0 state column.
     pub stage_columns: Vec<(usize, usize, f64)>,
 }
@@ -125,8 +124,8 @@ fn closure_plan(
         bias_at.push(bias.0);
     }
     let norm = &setup.normalisation;
-    let (mut column_mean, mut column_std) = (Vec::new(), Vec::new());
-    let (mut is_stage_state, mut stage_columns) = (Vec::new(), Vec::new());
+    let (mut column_scale, mut column_shift) = (Vec::new(), Vec::new());
+    let mut stage_columns = Vec::new();
     for (column, (var, lag)) in closure.embedding.layout().into_iter().enumerate() {
         let (mean, std) = match var {
             Var::Input(i) => norm.input_mean.get(i).zip(norm.input_std.get(i)),
@@ -134,22 +133,20 @@ fn closure_plan(
             _ => None,
         }
         .ok_or_else(|| BackendError::internal(format!("no normalisation for {var:?}")))?;
-        column_mean.push(*mean);
-        column_std.push(*std);
         let stage_state = matches!(var, Var::State(_)) && lag == 0;
         if stage_state {
             stage_columns.push((column, state_index(model, var)?, 1.0 / std));
         }
-        is_stage_state.push(stage_state);
+        column_scale.push(if stage_state { 0.0 } else { 1.0 / std });
+        column_shift.push(-mean / std);
     }
     Ok(ClosurePlan {
         widths,
         activation: closure.network.activation,
         weight_at,
         bias_at,
-        column_mean,
-        column_std,
-        is_stage_state,
+        column_scale,
+        column_shift,
         stage_columns,
     })
 }
