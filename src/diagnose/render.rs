@@ -64,7 +64,11 @@ fn header(out: &mut String, report: &Report) {
 
 fn where_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "1. Where the gap lies");
-    let ratio = report.gap_before / report.noise_floor;
+    let ratio = if report.noise_floor > 0.0 {
+        format!("{}x", num(report.gap_before / report.noise_floor))
+    } else {
+        "noise-free data".to_string()
+    };
     let verdict = if report.significant {
         "significant"
     } else {
@@ -72,10 +76,9 @@ fn where_section(out: &mut String, report: &Report) {
     };
     let _ = writeln!(
         out,
-        "   gap before {} (held-out free run, normalised MSE); noise floor {} ({}x): {verdict}",
+        "   gap before {} (held-out free run, normalised MSE); noise floor {} ({ratio}): {verdict}",
         num(report.gap_before),
         num(report.noise_floor),
-        num(ratio)
     );
     let params: Vec<String> = report
         .fitted_params
@@ -236,34 +239,39 @@ fn which_section(out: &mut String, report: &Report) {
 
 fn how_far_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "3. How far it shrinks");
-    let row = |out: &mut String, label: &str, gap: f64| {
+    let mut rows: Vec<(String, f64)> = Vec::new();
+    if let Some(best) = report.effects.first() {
+        rows.push((format!("after {}", best.name), best.gap_after));
+    }
+    if let Some(combined) = &report.combined {
+        rows.push((
+            format!("after {}", combined.names.join(" + ")),
+            combined.gap_after,
+        ));
+    }
+    if let Some(locus) = report.locus.first() {
+        rows.push((
+            format!("free correction at {}", locus.name),
+            locus.bound_after,
+        ));
+    }
+    rows.push(("noise floor".into(), report.noise_floor));
+    let width = rows.iter().map(|r| r.0.len()).max().unwrap_or(0).max(12);
+    let _ = writeln!(
+        out,
+        "   {:<width$} {:>10}",
+        "before",
+        num(report.gap_before)
+    );
+    for (label, gap) in rows {
         let shrink = 1.0 - gap / report.gap_before;
         let _ = writeln!(
             out,
-            "   {label:<36} {:>10}  {:>9}",
+            "   {label:<width$} {:>10}  {:>9}",
             num(gap),
             percent(-shrink)
         );
-    };
-    let _ = writeln!(out, "   {:<36} {:>10}", "before", num(report.gap_before));
-    if let Some(best) = report.effects.first() {
-        row(out, &format!("after {}", best.name), best.gap_after);
     }
-    if let Some(combined) = &report.combined {
-        row(
-            out,
-            &format!("after {}", combined.names.join(" + ")),
-            combined.gap_after,
-        );
-    }
-    if let Some(locus) = report.locus.first() {
-        row(
-            out,
-            &format!("free correction at {}", locus.name),
-            locus.bound_after,
-        );
-    }
-    row(out, "noise floor", report.noise_floor);
     match &report.credited {
         Some(name) => {
             let _ = writeln!(out, "   credited: {name}");

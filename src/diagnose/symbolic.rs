@@ -11,7 +11,8 @@
 //! (relative to the largest) are dropped and the rest refitted until the support settles.
 //! Each support found is refitted in physical units and scored by its R^2 on the training
 //! rows; the best formula of each size up to [`MAX_TERMS`] is kept when it leaves at most
-//! half the unexplained variance of the smaller ones.
+//! half the unexplained variance of the smaller ones (and none after one reaching R^2
+//! 0.999).
 
 use super::linalg::{solve_spd, Normal};
 use super::locus::Along;
@@ -24,6 +25,8 @@ const THRESHOLDS: [f64; 8] = [0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7];
 /// A larger formula must leave at most this fraction of the smaller one's unexplained
 /// variance to be listed.
 const MIN_GAIN: f64 = 0.5;
+/// No larger formula is listed once one reaches this R^2.
+const GOOD_ENOUGH: f64 = 0.999;
 /// Multiples of a variable's median used as `K`.
 const K_MULTIPLES: [f64; 5] = [0.1, 0.3, 1.0, 3.0, 10.0];
 
@@ -59,7 +62,7 @@ pub fn hints(along: &Along, target: &str) -> Vec<Formula> {
     let mut formulas = Vec::new();
     let mut previous = f64::NEG_INFINITY;
     for (r2, support, coefficients) in best.into_iter().flatten() {
-        if 1.0 - r2 < MIN_GAIN * (1.0 - previous) {
+        if previous < GOOD_ENOUGH && 1.0 - r2 < MIN_GAIN * (1.0 - previous) {
             formulas.push(Formula {
                 target: target.to_string(),
                 text: format_formula(&library, &support, &coefficients),

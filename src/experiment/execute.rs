@@ -11,7 +11,7 @@ use std::time::Instant;
 use sha2::{Digest, Sha256};
 
 use super::grid::RunSpec;
-use super::reference::{free_run_error, state_std};
+use super::reference::{free_run, free_run_error, free_run_errors, mean_error, state_std};
 use super::results::{self, Fingerprint, Measure, RunResult, RunStatus, StudyRecord};
 use super::{ExperimentError, ExperimentFailure, Study, Validation};
 use crate::data::{Column, Dataset, MinRows};
@@ -372,7 +372,7 @@ pub fn execute(
 
 /// Calls `work(0..count)` on a local pool of `jobs` threads, each taking the next item in
 /// order; the first failure stops the queue (items under way finish) and is returned.
-fn run_queue(
+pub(super) fn run_queue(
     jobs: usize,
     count: usize,
     work: &(dyn Fn(usize) -> Result<(), ExperimentFailure> + Sync),
@@ -517,7 +517,23 @@ fn evaluate(
         (results::finite(mean), per_state)
     };
     let (offline_mse, offline_per_state) = rescale(&report.metrics.offline);
-    let (online_mse, online_per_state) = rescale(&report.metrics.online);
+    let run = free_run(
+        &loaded.model,
+        &trained.network,
+        &trained.setup,
+        &loaded.validation,
+    )?;
+    let reference = |name: &str, column: &[f64]| {
+        (prepared.reference_scale.iter())
+            .find(|(n, _)| n == name)
+            .map_or_else(|| state_std(column), |(_, s)| *s)
+    };
+    let online = free_run_errors(&loaded.model, &run, &loaded.validation, &reference);
+    let online_mse = results::finite(mean_error(&online));
+    let online_per_state = online.iter().map(|(n, e)| Measure::new(n, *e)).collect();
+    let left_range = (report.metrics.online.as_ref())
+        .and_then(|set| set.divergence.as_ref())
+        .map(ToString::to_string);
     let mut generalisation = Vec::new();
     for data in &prepared.generalisation {
         let error = free_run_error(&loaded.model, &trained.network, &trained.setup, data)?;
@@ -547,6 +563,7 @@ fn evaluate(
         validation_pairs: report.validation_pairs,
         wall_seconds: started.elapsed().as_secs_f64(),
         warnings: report.warnings.iter().map(ToString::to_string).collect(),
+        left_range,
     })
 }
 

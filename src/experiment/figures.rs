@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use super::execute::{LoadedModel, Prepared};
-use super::reference::{first_predicted_row, true_params, truth_along, TruthRun};
+use super::reference::{first_predicted_row, free_run, true_params, truth_along, TruthRun};
 use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::backend::{Network, Setup};
 use crate::data::Dataset;
@@ -195,7 +195,11 @@ fn predictions<'a>(
     for entry in trained {
         let (index, network, setup, id) = entry;
         let model = &prepared.models[*index].model;
-        match predict(model, network, setup, data, mode) {
+        let table = match mode {
+            Mode::Online => free_run(model, network, setup, data),
+            Mode::Offline => predict(model, network, setup, data, mode),
+        };
+        match table {
             Ok(table) => tables.push((entry, table)),
             Err(error) => notes.push(format!("cannot predict with run `{id}`: {error}")),
         }

@@ -6,7 +6,7 @@ use crate::data::Dataset;
 use crate::ir;
 use crate::signal::Signal;
 use crate::sim::{SimOptions, Tolerances};
-use crate::train::predict::{predict, Mode, PredictionTable};
+use crate::train::predict::{predict_in_range, Mode, PredictionTable};
 use crate::train::TrainError;
 
 use super::ExperimentFailure;
@@ -31,32 +31,64 @@ pub fn first_predicted_row(data: &Dataset, table: &PredictionTable) -> usize {
     data.len() - table.columns.first().map_or(0, Vec::len)
 }
 
-/// Online error of a free run over a whole record: driven by its inputs from its first
-/// full history, the MSE of every later row's measured states, z-scored with the record's
-/// own standard deviation, averaged over states (infinite when the run diverged).
+/// A free run along `data`: driven by its inputs alone from its first full history, never
+/// stopped (the paper's online run; `gbc train` stops a run that leaves the training data's
+/// physical range, which would make any run that dips below zero count as diverged).
+pub fn free_run(
+    model: &ir::Model,
+    network: &Network,
+    setup: &Setup,
+    data: &Dataset,
+) -> Result<PredictionTable, TrainError> {
+    predict_in_range(model, network, setup, data, (Mode::Online, None))
+}
+
+/// MSE of each measured state of a free run against `data` over the rows after its first,
+/// z-scored with `scale(state, column)`; infinite where the run did not stay finite.
+pub fn free_run_errors(
+    model: &ir::Model,
+    table: &PredictionTable,
+    data: &Dataset,
+    scale: &dyn Fn(&str, &[f64]) -> f64,
+) -> Vec<(String, f64)> {
+    let first = first_predicted_row(data, table);
+    let mut errors = Vec::new();
+    for (index, state) in model.states.iter().enumerate() {
+        let (Some(actual), Some(predicted)) =
+            (data.column(&state.name), table.columns.get(1 + index))
+        else {
+            continue;
+        };
+        let std = scale(&state.name, actual);
+        let squared: f64 = (predicted.iter().zip(&actual[first..]))
+            .skip(1)
+            .map(|(p, a)| ((p - a) / std).powi(2))
+            .sum();
+        let mse = squared / (predicted.len().saturating_sub(1)).max(1) as f64;
+        errors.push((
+            state.name.clone(),
+            if mse.is_nan() { f64::INFINITY } else { mse },
+        ));
+    }
+    errors
+}
+
+/// Mean of per-state errors (infinite if any is).
+pub fn mean_error(errors: &[(String, f64)]) -> f64 {
+    errors.iter().map(|(_, e)| e).sum::<f64>() / errors.len().max(1) as f64
+}
+
+/// Online error of an unstopped free run over a whole record, each state z-scored with the
+/// record's own standard deviation, averaged over states.
 pub fn free_run_error(
     model: &ir::Model,
     network: &Network,
     setup: &Setup,
     data: &Dataset,
 ) -> Result<f64, TrainError> {
-    let table = predict(model, network, setup, data, Mode::Online)?;
-    let first = first_predicted_row(data, &table);
-    let mut total = 0.0;
-    for (index, state) in model.states.iter().enumerate() {
-        let Some(actual) = data.column(&state.name) else {
-            continue;
-        };
-        let predicted = &table.columns[1 + index];
-        let std = state_std(actual);
-        let squared: f64 = (predicted.iter().zip(&actual[first..]))
-            .skip(1)
-            .map(|(p, a)| ((p - a) / std).powi(2))
-            .sum();
-        total += squared / (predicted.len().saturating_sub(1)).max(1) as f64;
-    }
-    let mean = total / model.states.len().max(1) as f64;
-    Ok(if mean.is_nan() { f64::INFINITY } else { mean })
+    let table = free_run(model, network, setup, data)?;
+    let errors = free_run_errors(model, &table, data, &|_, column| state_std(column));
+    Ok(mean_error(&errors))
 }
 
 /// The truth model simulated along a record.

@@ -110,7 +110,8 @@ pub struct RunResult {
     pub error: Option<String>,
     /// Offline validation MSE (one step from the true history), mean over states.
     pub offline_mse: Option<f64>,
-    /// Online validation MSE (free run over the validation window), mean over states.
+    /// Online validation MSE (one free run over the whole validation window, never stopped),
+    /// mean over states.
     pub online_mse: Option<f64>,
     /// Offline MSE per measured state.
     pub offline_per_state: Vec<Measure>,
@@ -132,6 +133,11 @@ pub struct RunResult {
     /// Stiffness warnings issued before training.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// Where the free run over the validation window first left the training module's
+    /// physical range (10 times the training extremes; below zero for a state never negative
+    /// in training), if it did. The online error ignores this and covers the whole run.
+    #[serde(default)]
+    pub left_range: Option<String>,
 }
 
 impl RunResult {
@@ -157,6 +163,7 @@ impl RunResult {
             validation_pairs: 0,
             wall_seconds: seconds,
             warnings: Vec::new(),
+            left_range: None,
         }
     }
 

@@ -137,6 +137,7 @@ fn result(id: &str, model: &str, size: usize, online: Option<f64>) -> RunResult 
         validation_pairs: 250,
         wall_seconds: 1.25,
         warnings: vec!["stiff".into()],
+        left_range: Some("the free run left the physical range at t = 3".into()),
     }
 }
 
@@ -380,4 +381,30 @@ fn runaway_trajectories_are_clipped_to_the_data_window_and_say_so() {
     assert_eq!(clipped, vec![(0.0, 2.0), (1.0, 4.0), (2.0, 0.0)]);
     let (name, kept) = super::figures::clip("gb", [(0.0, 1.5)].into_iter(), range);
     assert_eq!((name.as_str(), kept), ("gb", vec![(0.0, 1.5)]));
+}
+
+#[test]
+fn the_job_queue_runs_every_item_once_and_stops_at_the_first_failure() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let seen = Mutex::new(Vec::new());
+    let outcome = super::execute::run_queue(4, 10, &|item| {
+        seen.lock().map(|mut s| s.push(item)).unwrap_or_default();
+        Ok(())
+    });
+    assert!(outcome.is_ok());
+    let mut seen = seen.into_inner().unwrap_or_default();
+    seen.sort_unstable();
+    assert_eq!(seen, (0..10).collect::<Vec<_>>());
+    let done = AtomicUsize::new(0);
+    let outcome = super::execute::run_queue(1, 10, &|item| {
+        done.fetch_add(1, Ordering::Relaxed);
+        if item == 2 {
+            Err(super::ExperimentFailure::Internal("disk full".into()))
+        } else {
+            Ok(())
+        }
+    });
+    assert!(matches!(outcome, Err(super::ExperimentFailure::Internal(m)) if m == "disk full"));
+    assert_eq!(done.into_inner(), 3, "nothing runs after the failure");
 }

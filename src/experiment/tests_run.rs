@@ -16,7 +16,7 @@ use super::tests::scratch_dir;
 use super::{execute, grid, merge, prepare, Prepared, Progress, Shard, Study, StudyModel};
 use crate::data::MinRows;
 use crate::train::artifacts;
-use crate::train::predict::{predict, Mode};
+use crate::train::predict::{predict_in_range, Mode};
 
 fn tiny_study() -> Study {
     let dir = Path::new("models/mm_chemostat");
@@ -199,12 +199,12 @@ fn validation_errors_match_an_independent_recomputation_on_the_common_scale() {
     assert_eq!(loaded.validation.len(), 1800 - loaded.offset);
     let restored = artifacts::restore(&loaded.model, &loaded.source, &weights_dir(&dir, &run.id));
     let (network, setup, _) = restored.unwrap_or_else(|e| panic!("{e}"));
-    let table = predict(
+    let table = predict_in_range(
         &loaded.model,
         &network,
         &setup,
         &loaded.validation,
-        Mode::Online,
+        (Mode::Online, None),
     );
     let table = table.unwrap_or_else(|e| panic!("{e}"));
     let data = loaded.validation.column("S").unwrap_or_default();
@@ -221,6 +221,25 @@ fn validation_errors_match_an_independent_recomputation_on_the_common_scale() {
         "{found} vs {expected}"
     );
     assert_eq!(run.validation_pairs, 1800 - 1550 - 1);
+    // The training module's own errors, z-scored with the run's training split, agree once
+    // put on the window's scale (its free run stays in range here, so nothing stops it).
+    let (info, _) = artifacts::load(&weights_dir(&dir, &run.id)).unwrap_or_else(|e| panic!("{e}"));
+    let to_window = (info.normalisation.state_std[0] / scale).powi(2);
+    let trained_online = info.metrics.online.map(|set| set.overall * to_window);
+    let trained_offline = info.metrics.offline.map(|set| set.overall * to_window);
+    let close = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) => (a - b).abs() <= 1e-6 * b.abs(),
+        _ => false,
+    };
+    assert!(
+        close(trained_online, Some(found)),
+        "{trained_online:?} vs {found}"
+    );
+    assert!(
+        close(trained_offline, run.offline_mse),
+        "{trained_offline:?} vs {:?}",
+        run.offline_mse
+    );
     let published = publish(&prepared, &results, &dir, &weights_in(&dir));
     assert!(published.is_ok_and(|p| p.figures.iter().any(|f| f.name == "closure_r")));
     let _ = std::fs::remove_dir_all(dir);

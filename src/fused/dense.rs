@@ -45,28 +45,6 @@ impl<'a, E: Copy> View<'a, E> {
             column_stride: columns,
         }
     }
-
-    /// Appends entries `(row, start..start + width)` to `out`.
-    fn extend_row(&self, out: &mut Vec<E>, row: usize, start: usize, width: usize) {
-        let first = row * self.row_stride + start * self.column_stride;
-        if self.column_stride == 1 {
-            out.extend_from_slice(&self.values[first..first + width]);
-        } else {
-            let stride = self.column_stride;
-            out.extend(self.values[first..].iter().step_by(stride).take(width));
-        }
-    }
-
-    /// Appends entries `(start..start + height, column)` to `out`.
-    fn extend_column(&self, out: &mut Vec<E>, column: usize, start: usize, height: usize) {
-        let first = start * self.row_stride + column * self.column_stride;
-        if self.row_stride == 1 {
-            out.extend_from_slice(&self.values[first..first + height]);
-        } else {
-            let stride = self.row_stride;
-            out.extend(self.values[first..].iter().step_by(stride).take(height));
-        }
-    }
 }
 
 /// Packing buffers reused from product to product.
@@ -92,32 +70,76 @@ impl<E: Real> Gemm<E> {
         let strips = strips(columns);
         self.rhs.clear();
         for &(start, width) in &strips {
-            for k in 0..inner {
-                rhs.extend_row(&mut self.rhs, k, start, width);
+            match width {
+                STRIP => pack_panel::<E, STRIP>(&mut self.rhs, rhs, start, inner),
+                NARROW => pack_panel::<E, NARROW>(&mut self.rhs, rhs, start, inner),
+                _ => pack_panel::<E, 1>(&mut self.rhs, rhs, start, inner),
             }
         }
-        let mut row = 0;
-        while row < rows {
-            let height = if rows - row >= BLOCK { BLOCK } else { 1 };
-            self.lhs.clear();
+        let full = rows / BLOCK * BLOCK;
+        for row in (0..full).step_by(BLOCK) {
+            let block = &mut out[row * columns..(row + BLOCK) * columns];
+            self.row_block::<BLOCK>(block, lhs, row, (columns, inner), &strips);
+        }
+        for row in full..rows {
+            let block = &mut out[row * columns..(row + 1) * columns];
+            self.row_block::<1>(block, lhs, row, (columns, inner), &strips);
+        }
+    }
+
+    /// Rows `row..row + R` of the product, strip by strip.
+    fn row_block<const R: usize>(
+        &mut self,
+        out: &mut [E],
+        lhs: View<E>,
+        row: usize,
+        (columns, inner): (usize, usize),
+        strips: &[(usize, usize)],
+    ) {
+        pack_rows::<E, R>(&mut self.lhs, lhs, row, inner);
+        let mut panel_start = 0;
+        for &(start, width) in strips {
+            let panel = &self.rhs[panel_start..panel_start + inner * width];
+            panel_start += inner * width;
+            match width {
+                STRIP => tile::<E, R, STRIP>(out, &self.lhs, panel, start, columns),
+                NARROW => tile::<E, R, NARROW>(out, &self.lhs, panel, start, columns),
+                _ => tile::<E, R, 1>(out, &self.lhs, panel, start, columns),
+            }
+        }
+    }
+}
+
+/// Appends columns `start..start + N` of `rhs` (all `inner` rows) to `out`, row by row.
+fn pack_panel<E: Real, const N: usize>(out: &mut Vec<E>, rhs: View<E>, start: usize, inner: usize) {
+    let (rows, columns) = (rhs.row_stride, rhs.column_stride);
+    for k in 0..inner {
+        let first = k * rows + start * columns;
+        if columns == 1 {
+            let block: &[E] = &rhs.values[first..first + N];
+            out.extend_from_slice(block);
+        } else {
+            out.extend((0..N).map(|c| rhs.values[first + c * columns]));
+        }
+    }
+}
+
+/// Writes rows `row..row + R` of `lhs` into `packed` interleaved: entry `k * R + j` is
+/// `lhs(row + j, k)`.
+fn pack_rows<E: Real, const R: usize>(packed: &mut Vec<E>, lhs: View<E>, row: usize, inner: usize) {
+    packed.resize(inner * R, E::ZERO);
+    let (rows, columns) = (lhs.row_stride, lhs.column_stride);
+    if rows == 1 {
+        for (k, chunk) in packed.chunks_exact_mut(R).enumerate() {
+            let first = row + k * columns;
+            chunk.copy_from_slice(&lhs.values[first..first + R]);
+        }
+    } else {
+        for j in 0..R {
+            let first = (row + j) * rows;
             for k in 0..inner {
-                lhs.extend_column(&mut self.lhs, k, row, height);
+                packed[k * R + j] = lhs.values[first + k * columns];
             }
-            let block = &mut out[row * columns..(row + height) * columns];
-            let mut panel_start = 0;
-            for &(start, width) in &strips {
-                let panel = &self.rhs[panel_start..panel_start + inner * width];
-                panel_start += inner * width;
-                match (height, width) {
-                    (BLOCK, STRIP) => tile::<E, BLOCK, STRIP>(block, &self.lhs, panel, start, columns),
-                    (BLOCK, NARROW) => tile::<E, BLOCK, NARROW>(block, &self.lhs, panel, start, columns),
-                    (BLOCK, _) => tile::<E, BLOCK, 1>(block, &self.lhs, panel, start, columns),
-                    (_, STRIP) => tile::<E, 1, STRIP>(block, &self.lhs, panel, start, columns),
-                    (_, NARROW) => tile::<E, 1, NARROW>(block, &self.lhs, panel, start, columns),
-                    _ => tile::<E, 1, 1>(block, &self.lhs, panel, start, columns),
-                }
-            }
-            row += height;
         }
     }
 }

@@ -1,5 +1,12 @@
-//! Training throughput: Adam steps per second and seconds per epoch for a model on a record,
-//! timed on the same code path as `gbc train` (the entry point of `gbc bench`).
+//! Training throughput: the median time of an epoch of Adam steps (and of one step) for a
+//! model on a record, timed on the same code path as `gbc train` (the entry point of
+//! `gbc bench`; `docs/performance.md` records the numbers).
+//!
+//! The pairs are built once as in training; then whole epochs of shuffled mini-batches each
+//! take one Adam step per batch (gather the batch, forward RK4 pass through the closure
+//! networks and the physics, reverse pass, update). One untimed warm-up epoch comes first;
+//! every later epoch is timed on its own, and the report gives the median, which a busy
+//! machine disturbs less than the mean.
 
 use std::time::Instant;
 
@@ -7,13 +14,34 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{Network, Precision, Setup};
+use crate::backend::{Batch, Network, Precision, Setup};
 use crate::data::Dataset;
+use crate::fused::FusedNetwork;
 use crate::ir;
 
 use super::evaluate::run_in_hidden;
 use super::pairs::{first_pair_row, stage_fractions, PairTable};
 use super::{analysis, hidden_initial_values, normalise, record_of, TrainError};
+
+/// Which implementation of the training step is timed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    /// The graph backend, [`Network`]: what `gbc train` runs.
+    Graph,
+    /// The hand-fused step, [`FusedNetwork`] (performance study, `src/fused/`).
+    Fused,
+}
+
+impl Engine {
+    /// The name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Graph => "graph",
+            Engine::Fused => "fused",
+        }
+    }
+}
 
 /// What to time.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,27 +56,33 @@ pub struct BenchOptions {
     pub precision: Precision,
     /// RK4 sub-steps per sample.
     pub substeps: usize,
-    /// Seed.
+    /// Seed of the weights and the shuffles.
     pub seed: u64,
+    /// The step implementation.
+    pub engine: Engine,
 }
 
 /// Measured throughput.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct BenchReport {
+    /// The step implementation.
+    pub engine: Engine,
     /// Element type.
     pub precision: Precision,
     /// Training pairs.
     pub train_points: usize,
     /// Batch size.
     pub batch_size: usize,
-    /// Adam steps timed.
-    pub steps: usize,
-    /// Wall-clock seconds of the timed epochs.
-    pub seconds: f64,
-    /// Adam steps per second.
-    pub steps_per_second: f64,
-    /// Seconds per epoch (`train_points / batch_size` steps, rounded up).
-    pub seconds_per_epoch: f64,
+    /// Adam steps per epoch (`train_points / batch_size`, rounded up).
+    pub steps_per_epoch: usize,
+    /// Wall-clock seconds of each timed epoch, in order.
+    pub epoch_seconds: Vec<f64>,
+    /// Median of `epoch_seconds`.
+    pub median_epoch_seconds: f64,
+    /// The median epoch divided by its steps.
+    pub median_step_seconds: f64,
+    /// Mean training loss of the last timed epoch (a check that it trains).
+    pub final_loss: f64,
 }
 
 /// Times training of `model` on the first `train_points` pairs of `data`.
@@ -76,39 +110,82 @@ pub fn bench(
         normalisation: normalise(&record, first + options.train_points + 1),
         scales: analysis::closure_scales(model, &record, &rows, &hidden_init)?,
     };
-    let mut network = Network::build(model, &setup)?;
+    let network = Network::build(model, &setup)?;
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let hidden = run_in_hidden(&network, model, &record, &fractions, &hidden_init)?;
     let table = PairTable::build(model, &record, &rows, &hidden, &fractions);
+    let mut step = Step::new(options.engine, network, model, &setup)?;
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let mut order: Vec<usize> = (0..table.len()).collect();
     let batch_size = options.batch_size.max(1);
-    let mut epoch = |network: &mut Network| -> Result<usize, TrainError> {
+    let mut epoch = |step: &mut Step| -> Result<f64, TrainError> {
         order.shuffle(&mut rng);
-        let mut steps = 0;
+        let mut total = 0.0;
         for chunk in order.chunks(batch_size) {
-            network.train_step(&table.batch(chunk), 1e-3)?;
-            steps += 1;
+            total += step.train(&table.batch(chunk))? * chunk.len() as f64;
         }
-        Ok(steps)
+        Ok(total / order.len().max(1) as f64)
     };
-    epoch(&mut network)?;
-    let started = Instant::now();
-    let mut steps = 0;
+    epoch(&mut step)?;
+    let mut epoch_seconds = Vec::with_capacity(options.epochs.max(1));
+    let mut final_loss = f64::NAN;
     for _ in 0..options.epochs.max(1) {
-        steps += epoch(&mut network)?;
+        let started = Instant::now();
+        final_loss = epoch(&mut step)?;
+        epoch_seconds.push(started.elapsed().as_secs_f64());
     }
-    let seconds = started.elapsed().as_secs_f64();
     let steps_per_epoch = options.train_points.div_ceil(batch_size);
+    let median_epoch_seconds = median(&epoch_seconds);
     Ok(BenchReport {
+        engine: options.engine,
         precision: options.precision,
         train_points: options.train_points,
         batch_size,
-        steps,
-        seconds,
-        steps_per_second: steps as f64 / seconds,
-        seconds_per_epoch: seconds / steps as f64 * steps_per_epoch as f64,
+        steps_per_epoch,
+        epoch_seconds,
+        median_epoch_seconds,
+        median_step_seconds: median_epoch_seconds / steps_per_epoch as f64,
+        final_loss,
     })
+}
+
+/// The median of a non-empty list (NaN for an empty one).
+pub fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    match sorted.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0,
+    }
+}
+
+/// The training step being timed.
+enum Step {
+    Graph(Network),
+    Fused(Box<FusedNetwork>),
+}
+
+impl Step {
+    fn new(
+        engine: Engine,
+        network: Network,
+        model: &ir::Model,
+        setup: &Setup,
+    ) -> Result<Step, TrainError> {
+        Ok(match engine {
+            Engine::Graph => Step::Graph(network),
+            Engine::Fused => Step::Fused(Box::new(FusedNetwork::build(model, setup)?)),
+        })
+    }
+
+    /// One Adam step (learning rate 1e-3, as in the paper); the loss before it.
+    fn train(&mut self, batch: &Batch) -> Result<f64, TrainError> {
+        Ok(match self {
+            Step::Graph(network) => network.train_step(batch, 1e-3)?,
+            Step::Fused(fused) => fused.train_step(batch, 1e-3)?,
+        })
+    }
 }
 
 #[cfg(test)]
@@ -116,26 +193,45 @@ mod tests {
     use super::*;
     use crate::train::fixtures::chemostat;
 
-    #[test]
-    fn bench_times_whole_epochs_of_adam_steps() {
-        let (data, _) = chemostat::data(200, (0.002, 0.02), 1);
-        let options = BenchOptions {
+    fn options(engine: Engine) -> BenchOptions {
+        BenchOptions {
             train_points: 120,
             batch_size: 50,
-            epochs: 2,
+            epochs: 3,
             precision: Precision::F32,
             substeps: 1,
             seed: 0,
-        };
-        let report = bench(&chemostat::grey_box(), &data, &options).unwrap();
-        assert_eq!(report.steps, 6);
-        assert!(report.seconds > 0.0 && report.steps_per_second > 0.0);
-        let per_epoch = report.seconds / 2.0;
-        assert!((report.seconds_per_epoch / per_epoch - 1.0).abs() < 1e-9);
+            engine,
+        }
+    }
+
+    #[test]
+    fn bench_times_whole_epochs_of_adam_steps_with_both_engines() {
+        let (data, _) = chemostat::data(200, (0.002, 0.02), 1);
+        let model = chemostat::grey_box();
+        let graph = bench(&model, &data, &options(Engine::Graph)).unwrap();
+        let fused = bench(&model, &data, &options(Engine::Fused)).unwrap();
+        for report in [&graph, &fused] {
+            assert_eq!(report.steps_per_epoch, 3);
+            assert_eq!(report.epoch_seconds.len(), 3);
+            assert!(report.epoch_seconds.iter().all(|&s| s > 0.0));
+            let step = report.median_epoch_seconds / 3.0;
+            assert!((report.median_step_seconds / step - 1.0).abs() < 1e-12);
+        }
+        // Same weights, same shuffles, same arithmetic up to rounding: the same training.
+        let relative = (fused.final_loss / graph.final_loss - 1.0).abs();
+        assert!(relative < 1e-3, "{} vs {}", fused.final_loss, graph.final_loss);
         let too_many = BenchOptions {
             train_points: 1000,
-            ..options
+            ..options(Engine::Graph)
         };
-        assert!(bench(&chemostat::grey_box(), &data, &too_many).is_err());
+        assert!(bench(&model, &data, &too_many).is_err());
+    }
+
+    #[test]
+    fn median_takes_the_middle_or_the_mean_of_the_two_middles() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert!(median(&[]).is_nan());
     }
 }
