@@ -1,0 +1,322 @@
+//! `gbc bench`: how fast gbc trains and simulates the shipped models, on this machine.
+//!
+//! For each shipped model (bioreactor GB1, GB2 and the black-box map at 1000 training
+//! pairs, the chemostat grey-box model at 500; batch 50), each precision and each step
+//! implementation (`graph`, what `gbc train` runs, and `fused`, the hand-fused step of
+//! `src/fused/`) it prints the median time of one Adam step and of one epoch. It also times
+//! a 3000 h simulation of the bioreactor truth model and, with `--full`, one paper-scale
+//! training end to end. `--json FILE` writes every measurement. Run it from the repository
+//! root (or pass `--root`); docs/performance.md has the numbers and the peer comparison.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::train::{read_data, train_error};
+use super::{CommandError, CommandResult};
+use crate::backend::Precision;
+use crate::signal::Signal;
+use crate::sim::SimOptions;
+use crate::train::bench::{bench, median, BenchOptions, BenchReport, Engine};
+use crate::train::{Recipe, TrainOptions, Validation};
+
+/// A shipped model `gbc bench` times.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchModel {
+    /// models/bioreactor/gb1.gbm, 1000 pairs.
+    Gb1,
+    /// models/bioreactor/gb2.gbm, 1000 pairs.
+    Gb2,
+    /// models/bioreactor/blackbox.gbm, 1000 pairs.
+    Blackbox,
+    /// models/mm_chemostat/greybox.gbm, 500 pairs.
+    Chemostat,
+}
+
+impl BenchModel {
+    const ALL: [BenchModel; 4] = [
+        BenchModel::Gb1,
+        BenchModel::Gb2,
+        BenchModel::Blackbox,
+        BenchModel::Chemostat,
+    ];
+
+    /// Model file, data file and training pairs, relative to the repository root.
+    fn files(self) -> (&'static str, &'static str, usize) {
+        const BIOREACTOR: &str = "models/bioreactor/data/steps.csv";
+        match self {
+            BenchModel::Gb1 => ("models/bioreactor/gb1.gbm", BIOREACTOR, 1000),
+            BenchModel::Gb2 => ("models/bioreactor/gb2.gbm", BIOREACTOR, 1000),
+            BenchModel::Blackbox => ("models/bioreactor/blackbox.gbm", BIOREACTOR, 1000),
+            BenchModel::Chemostat => (
+                "models/mm_chemostat/greybox.gbm",
+                "models/mm_chemostat/data/steps.csv",
+                500,
+            ),
+        }
+    }
+}
+
+/// Element types to time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PrecisionChoice {
+    /// 32-bit floats only.
+    F32,
+    /// 64-bit floats only.
+    F64,
+    /// Both.
+    Both,
+}
+
+/// Step implementations to time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum EngineChoice {
+    /// The graph backend (dfdx), as `gbc train` runs.
+    Graph,
+    /// The hand-fused step.
+    Fused,
+    /// Both.
+    Both,
+}
+
+/// Arguments of `gbc bench`.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// The repository root holding `models/`.
+    #[arg(long, default_value = ".", value_name = "DIR")]
+    pub root: PathBuf,
+    /// Time only these models (repeatable; default: all).
+    #[arg(long = "model", value_enum, value_name = "MODEL")]
+    pub models: Vec<BenchModel>,
+    /// Element types.
+    #[arg(long, value_enum, default_value_t = PrecisionChoice::Both)]
+    pub precision: PrecisionChoice,
+    /// Step implementations.
+    #[arg(long, value_enum, default_value_t = EngineChoice::Both)]
+    pub engine: EngineChoice,
+    /// Timed epochs per measurement (after one warm-up epoch); the median is reported.
+    #[arg(long, default_value_t = 20)]
+    pub epochs: usize,
+    /// Do not time the simulation of the bioreactor truth model.
+    #[arg(long)]
+    pub no_simulation: bool,
+    /// Also time one paper-scale training end to end (GB2, 1000 pairs, the paper's recipe,
+    /// f32, graph backend, validation with a 200 h free run).
+    #[arg(long)]
+    pub full: bool,
+    /// Epochs of the --full training.
+    #[arg(long, default_value_t = 1000, value_name = "N")]
+    pub full_epochs: usize,
+    /// Write every measurement as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+/// One timed model, precision and engine.
+#[derive(Debug, serde::Serialize)]
+struct TrainingRow {
+    model: String,
+    #[serde(flatten)]
+    report: BenchReport,
+}
+
+/// The simulation timing.
+#[derive(Debug, serde::Serialize)]
+struct SimulationRow {
+    model: String,
+    hours: f64,
+    samples: usize,
+    median_seconds: f64,
+}
+
+/// The end-to-end training timing.
+#[derive(Debug, serde::Serialize)]
+struct FullRow {
+    model: String,
+    train_points: usize,
+    epochs: usize,
+    seconds: f64,
+}
+
+/// Everything measured, as written by `--json`.
+#[derive(Debug, serde::Serialize)]
+struct Measurements {
+    cores: usize,
+    training: Vec<TrainingRow>,
+    simulation: Option<SimulationRow>,
+    full: Option<FullRow>,
+}
+
+/// Runs the benchmarks and prints a table.
+pub fn run(args: &BenchArgs) -> CommandResult {
+    let models = if args.models.is_empty() {
+        BenchModel::ALL.to_vec()
+    } else {
+        args.models.clone()
+    };
+    let mut measurements = Measurements {
+        cores: std::thread::available_parallelism().map_or(1, usize::from),
+        training: Vec::new(),
+        simulation: None,
+        full: None,
+    };
+    println!(
+        "{:<34} {:>6} {:>5} {:>6} {:>9} {:>10}",
+        "model", "pairs", "type", "engine", "ms/step", "ms/epoch"
+    );
+    for model in models {
+        for row in time_training(&args.root, model, args)? {
+            print_row(&row);
+            measurements.training.push(row);
+        }
+    }
+    if !args.no_simulation {
+        let simulation = time_simulation(&args.root)?;
+        println!(
+            "simulation of {} ({} h, {} samples): {:.1} ms",
+            simulation.model,
+            simulation.hours,
+            simulation.samples,
+            simulation.median_seconds * 1e3
+        );
+        measurements.simulation = Some(simulation);
+    }
+    if args.full {
+        let full = time_full_training(&args.root, args.full_epochs)?;
+        println!(
+            "paper-scale training of {} ({} pairs, {} epochs, validation included): {:.1} s",
+            full.model, full.train_points, full.epochs, full.seconds
+        );
+        measurements.full = Some(full);
+    }
+    if let Some(path) = &args.json {
+        let json = serde_json::to_string_pretty(&measurements)
+            .map_err(|error| CommandError::Internal(format!("cannot encode results: {error}")))?;
+        crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
+    }
+    Ok(())
+}
+
+fn print_row(row: &TrainingRow) {
+    let report = &row.report;
+    let precision = match report.precision {
+        Precision::F32 => "f32",
+        Precision::F64 => "f64",
+    };
+    println!(
+        "{:<34} {:>6} {:>5} {:>6} {:>9.3} {:>10.2}",
+        row.model,
+        report.train_points,
+        precision,
+        report.engine.name(),
+        report.median_step_seconds * 1e3,
+        report.median_epoch_seconds * 1e3
+    );
+}
+
+/// Every requested precision and engine for one model.
+fn time_training(
+    root: &Path,
+    which: BenchModel,
+    args: &BenchArgs,
+) -> Result<Vec<TrainingRow>, CommandError> {
+    let (model_file, data_file, train_points) = which.files();
+    let model = super::load_model(&root.join(model_file))?;
+    let data = read_data(&model, &root.join(data_file))?;
+    let precisions: &[Precision] = match args.precision {
+        PrecisionChoice::F32 => &[Precision::F32],
+        PrecisionChoice::F64 => &[Precision::F64],
+        PrecisionChoice::Both => &[Precision::F32, Precision::F64],
+    };
+    let engines: &[Engine] = match args.engine {
+        EngineChoice::Graph => &[Engine::Graph],
+        EngineChoice::Fused => &[Engine::Fused],
+        EngineChoice::Both => &[Engine::Graph, Engine::Fused],
+    };
+    let mut rows = Vec::new();
+    for &precision in precisions {
+        for &engine in engines {
+            let options = BenchOptions {
+                train_points,
+                batch_size: 50,
+                epochs: args.epochs,
+                precision,
+                substeps: 1,
+                seed: 0,
+                engine,
+            };
+            let report = bench(&model, &data, &options).map_err(train_error)?;
+            rows.push(TrainingRow {
+                model: model_file.to_string(),
+                report,
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// 3000 h of the bioreactor truth model under random light steps, median of three runs.
+fn time_simulation(root: &Path) -> Result<SimulationRow, CommandError> {
+    let file = "models/bioreactor/truth.gbm";
+    let model = super::load_model(&root.join(file))?;
+    let (hours, dt) = (2999.0, 1.0);
+    let program = crate::signal::parse_program("steps(hold=5..40, seed=1)")
+        .map_err(CommandError::user)?;
+    let signals = (model.inputs.iter())
+        .map(|input| program.generate(input, 0.0, hours, dt))
+        .collect::<Result<Vec<Signal>, _>>()
+        .map_err(CommandError::user)?;
+    let options = SimOptions::new(hours, dt);
+    let mut seconds = Vec::new();
+    let mut samples = 0;
+    for _ in 0..3 {
+        let started = Instant::now();
+        let trajectory = crate::sim::simulate(&model, &signals, &options).map_err(|error| {
+            if error.is_internal() {
+                CommandError::Internal(error.to_string())
+            } else {
+                CommandError::user(error)
+            }
+        })?;
+        seconds.push(started.elapsed().as_secs_f64());
+        samples = trajectory.times.len();
+    }
+    Ok(SimulationRow {
+        model: file.to_string(),
+        hours: hours + dt,
+        samples,
+        median_seconds: median(&seconds),
+    })
+}
+
+/// One paper-scale training of GB2 as `gbc train` runs it.
+fn time_full_training(root: &Path, epochs: usize) -> Result<FullRow, CommandError> {
+    let (model_file, data_file, train_points) = BenchModel::Gb2.files();
+    let model = super::load_model(&root.join(model_file))?;
+    let data = read_data(&model, &root.join(data_file))?;
+    let options = TrainOptions {
+        epochs,
+        batch_size: 50,
+        learning_rate: 1e-3,
+        train_points: Some(train_points),
+        seed: 0,
+        precision: Precision::F32,
+        substeps: 1,
+        online_horizon: Some(200.0),
+    };
+    let started = Instant::now();
+    crate::train::train_with(
+        &model,
+        &data,
+        &[Validation::Rest],
+        &options,
+        &Recipe::paper(),
+        &mut |_| {},
+    )
+    .map_err(train_error)?;
+    Ok(FullRow {
+        model: model_file.to_string(),
+        train_points,
+        epochs,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
