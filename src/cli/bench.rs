@@ -259,8 +259,8 @@ fn time_simulation(root: &Path) -> Result<SimulationRow, CommandError> {
     let file = "models/bioreactor/truth.gbm";
     let model = super::load_model(&root.join(file))?;
     let (hours, dt) = (2999.0, 1.0);
-    let program = crate::signal::parse_program("steps(hold=5..40, seed=1)")
-        .map_err(CommandError::user)?;
+    let program =
+        crate::signal::parse_program("steps(hold=5..40, seed=1)").map_err(CommandError::user)?;
     let signals = (model.inputs.iter())
         .map(|input| program.generate(input, 0.0, hours, dt))
         .collect::<Result<Vec<Signal>, _>>()

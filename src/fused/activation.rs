@@ -83,7 +83,11 @@ fn gelu<E: Real>(x: E) -> (E, E) {
     let inner = (beta * (x + kappa * x * x * x)).tanh();
     let value = half * x * (E::ONE + inner);
     let slope = half * (E::ONE + inner)
-        + half * x * (E::ONE - inner * inner) * beta * (E::ONE + E::from_double(3.0) * kappa * x * x);
+        + half
+            * x
+            * (E::ONE - inner * inner)
+            * beta
+            * (E::ONE + E::from_double(3.0) * kappa * x * x);
     (value, slope)
 }
 
@@ -172,7 +176,10 @@ mod tests {
         for (index, &z) in points.iter().enumerate() {
             let value = if z > 30.0 { z } else { z.exp().ln_1p() };
             let slope = 1.0 / (1.0 + (-z).exp());
-            assert!((double[index] - value).abs() <= 1e-14 * value.max(1e-300), "{z}");
+            assert!(
+                (double[index] - value).abs() <= 1e-14 * value.max(1e-300),
+                "{z}"
+            );
             assert!((double_slopes[index] - slope).abs() <= 1e-15, "{z}");
             // Below z = -86 the value stays at e^-86 instead of going subnormal.
             let absolute = (single[index] as f64 - value).abs();

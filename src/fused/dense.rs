@@ -217,13 +217,19 @@ mod tests {
         let mut gemm = Gemm::default();
         for (rows, columns, inner) in [(3, 20, 5), (1, 1, 1), (4, 3, 7), (9, 8, 3), (5, 17, 2)] {
             let lhs: Vec<f64> = (0..rows * inner).map(|i| (i as f64 * 0.37).sin()).collect();
-            let rhs: Vec<f64> = (0..inner * columns).map(|i| (i as f64 * 0.11).cos()).collect();
+            let rhs: Vec<f64> = (0..inner * columns)
+                .map(|i| (i as f64 * 0.11).cos())
+                .collect();
             let start: Vec<f64> = (0..rows * columns).map(|i| i as f64).collect();
             let shape = (rows, columns, inner);
             let mut out = start.clone();
             let (a, b) = (View::row_major(&lhs, inner), View::row_major(&rhs, columns));
             gemm.multiply_add(&mut out, shape, a, b);
-            let product = reference(|r, k| lhs[r * inner + k], |k, c| rhs[k * columns + c], shape);
+            let product = reference(
+                |r, k| lhs[r * inner + k],
+                |k, c| rhs[k * columns + c],
+                shape,
+            );
             for (index, &found) in out.iter().enumerate() {
                 let expected = start[index] + product[index];
                 assert!((found - expected).abs() < 1e-12, "{shape:?}");
@@ -236,7 +242,10 @@ mod tests {
                 .map(|i| rhs[(i % inner) * columns + i / inner])
                 .collect();
             let mut out_t = start.clone();
-            let (a, b) = (View::transposed(&lhs_t, rows), View::transposed(&rhs_t, inner));
+            let (a, b) = (
+                View::transposed(&lhs_t, rows),
+                View::transposed(&rhs_t, inner),
+            );
             gemm.multiply_add(&mut out_t, shape, a, b);
             assert_eq!(out_t, out, "{shape:?} transposed");
         }

@@ -1,6 +1,14 @@
 //! The fused training step in one element type: the forward RK4 step of the paper (eq. 4-7)
-//! through every closure network and the physics program, the normalised loss, a
-//! hand-written reverse pass, and Adam, over buffers kept from step to step.
+//! through every closure network and the physics program, the normalised loss, the reverse
+//! pass ([`super::reverse`]) and Adam, over buffers kept from step to step.
+//!
+//! **First layers by stage time.** A closure's network input at a stage is the batch's
+//! normalised embedding at that stage time plus the stage estimate in the lag-0 state
+//! columns. The embedding part is the same for every stage at the same time (RK4's second
+//! and third stages share `t + h/2`), so its product with the first weight matrix is formed
+//! once per stage time, and the estimate enters as a rank-`states` update; in the reverse
+//! pass the first weight matrix's gradient is likewise one product per stage time. This
+//! saves two of the eight large products of a GB2 step.
 
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::real::Real;
@@ -8,7 +16,7 @@ use crate::backend::{BackendError, Batch, Setup};
 use crate::ir::{self, Dynamics};
 
 use super::activation::{activate, Lane};
-use super::dense::{add_column_sums, Gemm, View};
+use super::dense::{Gemm, View};
 use super::plan::{ClosurePlan, Plan};
 
 const BETA1: f64 = 0.9;
@@ -17,30 +25,30 @@ const EPSILON: f64 = 1e-8;
 
 /// What one stage evaluation keeps for the reverse pass.
 #[derive(Debug, Default)]
-struct Stage<E> {
-    /// Offset of the stage time (index into each closure's embeddings).
-    offset: usize,
+pub(super) struct Stage<E> {
+    /// Index of the stage time (into each closure's embeddings).
+    pub offset: usize,
     /// `rows x states`: the state estimate the stage is evaluated at.
-    state: Vec<E>,
-    /// `layers[closure][l]`: the activations entering layer `l` (`l = 0`: the network
-    /// input); the last entry is the network output.
-    layers: Vec<Vec<Vec<E>>>,
+    pub state: Vec<E>,
+    /// `layers[closure][l]`: the activations leaving layer `l` (`l >= 1`; entry 0 unused);
+    /// the last entry is the network output.
+    pub layers: Vec<Vec<Vec<E>>>,
     /// `slopes[closure][l]`: the activation's slope at hidden layer `l + 1`.
-    slopes: Vec<Vec<Vec<E>>>,
+    pub slopes: Vec<Vec<Vec<E>>>,
     /// Register values of the physics program.
-    values: Vec<E>,
+    pub values: Vec<E>,
     /// `rows x states`: the balances (or next values of a `next` model).
-    balances: Vec<E>,
+    pub balances: Vec<E>,
 }
 
 /// The fused step's weights, optimiser state and reusable buffers.
 pub struct Kernel<E: Lane> {
-    plan: Plan,
-    program: Program,
+    pub(super) plan: Plan,
+    pub(super) program: Program,
     dynamics: Dynamics,
     step: f64,
     substeps: usize,
-    states: usize,
+    pub(super) states: usize,
     inverse_std: Vec<E>,
     /// Every trainable value, tensors back to back in [`Plan::tensors`] order.
     pub weights: Vec<E>,
@@ -49,14 +57,14 @@ pub struct Kernel<E: Lane> {
     first_moment: Vec<E>,
     second_moment: Vec<E>,
     adam_steps: i32,
-    rows: usize,
-    inputs: Vec<E>,
+    pub(super) rows: usize,
+    pub(super) inputs: Vec<E>,
     /// `constants[closure][offset]`: normalised embeddings (lag-0 state entries `-mean/std`).
-    constants: Vec<Vec<Vec<E>>>,
-    stages: Vec<Stage<E>>,
-    gemm: Gemm<E>,
-    delta: Vec<E>,
-    below: Vec<E>,
+    pub(super) constants: Vec<Vec<Vec<E>>>,
+    /// `first_products[closure][offset]`: `constants @ W0 + b0`.
+    first_products: Vec<Vec<Vec<E>>>,
+    pub(super) stages: Vec<Stage<E>>,
+    pub(super) gemm: Gemm<E>,
 }
 
 impl<E: Lane> Kernel<E> {
@@ -93,10 +101,9 @@ impl<E: Lane> Kernel<E> {
             rows: 0,
             inputs: Vec::new(),
             constants: vec![Vec::new(); plan.closures.len()],
+            first_products: vec![Vec::new(); plan.closures.len()],
             stages: (0..count).map(|_| Stage::default()).collect(),
             gemm: Gemm::default(),
-            delta: Vec::new(),
-            below: Vec::new(),
             plan,
         })
     }
@@ -146,7 +153,9 @@ impl<E: Lane> Kernel<E> {
             .zip(&mut self.constants)
         {
             if raw.len() < offsets || raw.iter().any(|r| r.len() != rows * closure.width()) {
-                return Err(BackendError::internal("a batch embedding has the wrong size"));
+                return Err(BackendError::internal(
+                    "a batch embedding has the wrong size",
+                ));
             }
             normalised.resize_with(offsets, Vec::new);
             for (out, values) in normalised.iter_mut().zip(raw) {
@@ -159,7 +168,7 @@ impl<E: Lane> Kernel<E> {
         Ok(())
     }
 
-    fn stage_offsets(&self) -> usize {
+    pub(super) fn stage_offsets(&self) -> usize {
         match self.dynamics {
             Dynamics::Discrete => 1,
             Dynamics::Continuous => 2 * self.substeps + 1,
@@ -168,6 +177,7 @@ impl<E: Lane> Kernel<E> {
 
     /// The forward pass: `x(t + h)` for every row.
     fn forward(&mut self) -> Vec<E> {
+        self.first_layer_products();
         if self.dynamics == Dynamics::Discrete {
             self.stages[0].offset = 0;
             self.evaluate(0);
@@ -176,9 +186,13 @@ impl<E: Lane> Kernel<E> {
         let dt = self.step / self.substeps as f64;
         let mut state = self.stages[0].state.clone();
         for substep in 0..self.substeps {
-            let first = 4 * substep;
-            let base = 2 * substep;
-            let fractions = [(0.0, base), (0.5, base + 1), (0.5, base + 1), (1.0, base + 2)];
+            let (first, base) = (4 * substep, 2 * substep);
+            let fractions = [
+                (0.0, base),
+                (0.5, base + 1),
+                (0.5, base + 1),
+                (1.0, base + 2),
+            ];
             for (index, &(fraction, offset)) in fractions.iter().enumerate() {
                 let stage = first + index;
                 let estimate = if index == 0 {
@@ -200,6 +214,32 @@ impl<E: Lane> Kernel<E> {
         state
     }
 
+    /// `constants @ W0 + b0` for every closure and stage time.
+    fn first_layer_products(&mut self) {
+        let rows = self.rows;
+        for ((closure, constants), products) in (self.plan.closures.iter())
+            .zip(&self.constants)
+            .zip(&mut self.first_products)
+        {
+            let (inner, width) = (closure.widths[0], closure.widths[1]);
+            let weight = &self.weights[closure.weight_at[0]..][..inner * width];
+            let bias = &self.weights[closure.bias_at[0]..][..width];
+            products.resize_with(constants.len(), Vec::new);
+            for (product, constant) in products.iter_mut().zip(constants) {
+                product.clear();
+                for _ in 0..rows {
+                    product.extend_from_slice(bias);
+                }
+                self.gemm.multiply_add(
+                    product,
+                    (rows, width, inner),
+                    View::row_major(constant, inner),
+                    View::row_major(weight, width),
+                );
+            }
+        }
+    }
+
     /// Evaluates every closure network and the physics at stage `index`.
     fn evaluate(&mut self, index: usize) {
         let rows = self.rows;
@@ -211,30 +251,33 @@ impl<E: Lane> Kernel<E> {
             let slopes = &mut stage.slopes[closure_index];
             layers.resize_with(closure.widths.len(), Vec::new);
             slopes.resize_with(closure.layers().saturating_sub(1), Vec::new);
-            let input = &mut layers[0];
-            input.clear();
-            input.extend_from_slice(&self.constants[closure_index][stage.offset]);
-            add_stage_state(closure, &stage.state, self.states, input);
-            for layer in 0..closure.layers() {
-                let (before, after) = layers.split_at_mut(layer + 1);
-                let (inner, width) = (closure.widths[layer], closure.widths[layer + 1]);
-                let weight = &self.weights[closure.weight_at[layer]..][..inner * width];
-                let bias = &self.weights[closure.bias_at[layer]..][..width];
-                let out = &mut after[0];
-                out.clear();
-                for _ in 0..rows {
-                    out.extend_from_slice(bias);
+            let first = &mut layers[1];
+            first.clear();
+            first.extend_from_slice(&self.first_products[closure_index][stage.offset]);
+            let first_weight = &self.weights[closure.weight_at[0]..];
+            add_stage_state(closure, &stage.state, self.states, first_weight, first);
+            for layer in 1..=closure.layers() {
+                if layer > 1 {
+                    let (inner, width) = (closure.widths[layer - 1], closure.widths[layer]);
+                    let weight = &self.weights[closure.weight_at[layer - 1]..][..inner * width];
+                    let bias = &self.weights[closure.bias_at[layer - 1]..][..width];
+                    let (before, after) = layers.split_at_mut(layer);
+                    let out = &mut after[0];
+                    out.clear();
+                    for _ in 0..rows {
+                        out.extend_from_slice(bias);
+                    }
+                    self.gemm.multiply_add(
+                        out,
+                        (rows, width, inner),
+                        View::row_major(&before[layer - 1], inner),
+                        View::row_major(weight, width),
+                    );
                 }
-                self.gemm.multiply_add(
-                    out,
-                    (rows, width, inner),
-                    View::row_major(&before[layer], inner),
-                    View::row_major(weight, width),
-                );
-                if layer + 1 < closure.layers() {
-                    let slope = &mut slopes[layer];
-                    slope.resize(out.len(), E::ZERO);
-                    activate(closure.activation, out, slope);
+                if layer < closure.layers() {
+                    let slope = &mut slopes[layer - 1];
+                    slope.resize(layers[layer].len(), E::ZERO);
+                    activate(closure.activation, &mut layers[layer], slope);
                 }
             }
         }
@@ -250,7 +293,9 @@ impl<E: Lane> Kernel<E> {
             nets: &nets,
         };
         stage.values = self.program.forward(&inputs);
-        stage.balances = self.program.read(&stage.values, rows, &self.program.balances);
+        stage.balances = self
+            .program
+            .read(&stage.values, rows, &self.program.balances);
     }
 
     /// The loss and its gradient with respect to the predicted next states.
@@ -275,83 +320,65 @@ impl<E: Lane> Kernel<E> {
 
     /// The reverse pass from the seed on `x(t + h)`, accumulating into the gradient.
     fn backward(&mut self, seed: Vec<E>) {
+        let mut offset_deltas = self.offset_deltas();
         if self.dynamics == Dynamics::Discrete {
-            self.reverse_stage(0, &seed);
-            return;
-        }
-        let dt = self.step / self.substeps as f64;
-        let mut upstream = seed;
-        for substep in (0..self.substeps).rev() {
-            let first = 4 * substep;
-            let mut stage_seeds: Vec<Vec<E>> = [1.0, 2.0, 2.0, 1.0]
-                .iter()
-                .map(|weight| scaled(&upstream, dt * weight / 6.0))
-                .collect();
-            let mut start_gradient = upstream;
-            for index in (0..4).rev() {
-                let estimate_gradient = self.reverse_stage(first + index, &stage_seeds[index]);
-                if index > 0 {
-                    let fraction = if index == 3 { 1.0 } else { 0.5 };
-                    add_scaled(&mut stage_seeds[index - 1], dt * fraction, &estimate_gradient);
+            self.reverse_stage(0, &seed, &mut offset_deltas);
+        } else {
+            let dt = self.step / self.substeps as f64;
+            let mut upstream = seed;
+            for substep in (0..self.substeps).rev() {
+                let first = 4 * substep;
+                let mut stage_seeds: Vec<Vec<E>> = [1.0, 2.0, 2.0, 1.0]
+                    .iter()
+                    .map(|weight| scaled(&upstream, dt * weight / 6.0))
+                    .collect();
+                let mut start_gradient = upstream;
+                for index in (0..4).rev() {
+                    let estimate_gradient =
+                        self.reverse_stage(first + index, &stage_seeds[index], &mut offset_deltas);
+                    if index > 0 {
+                        let fraction = if index == 3 { 1.0 } else { 0.5 };
+                        add_scaled(
+                            &mut stage_seeds[index - 1],
+                            dt * fraction,
+                            &estimate_gradient,
+                        );
+                    }
+                    add_scaled(&mut start_gradient, 1.0, &estimate_gradient);
                 }
-                add_scaled(&mut start_gradient, 1.0, &estimate_gradient);
+                upstream = start_gradient;
             }
-            upstream = start_gradient;
+        }
+        self.first_layer_gradients(&offset_deltas);
+    }
+
+    /// `dW0 += constants^T delta` per closure and stage time, `delta` summed over the
+    /// stages at that time.
+    fn first_layer_gradients(&mut self, offset_deltas: &[Vec<Vec<E>>]) {
+        let rows = self.rows;
+        for ((closure, constants), deltas) in (self.plan.closures.iter())
+            .zip(&self.constants)
+            .zip(offset_deltas)
+        {
+            let (inner, width) = (closure.widths[0], closure.widths[1]);
+            let weight_gradient = &mut self.gradient[closure.weight_at[0]..][..inner * width];
+            for (constant, delta) in constants.iter().zip(deltas) {
+                self.gemm.multiply_add(
+                    weight_gradient,
+                    (inner, width, rows),
+                    View::transposed(constant, inner),
+                    View::row_major(delta, width),
+                );
+            }
         }
     }
 
-    /// Reverse of stage `index` given the adjoint of its balances; accumulates the weight
-    /// and param gradients and returns the gradient with respect to its state estimate.
-    fn reverse_stage(&mut self, index: usize, seed: &[E]) -> Vec<E> {
-        let rows = self.rows;
-        let stage = &self.stages[index];
-        let nets: Vec<&[E]> = (stage.layers.iter())
-            .map(|layers| layers.last().map_or(&[][..], Vec::as_slice))
-            .collect();
-        let (start, length) = self.plan.params;
-        let inputs = ProgramInputs {
-            rows,
-            states: &stage.state,
-            inputs: &self.inputs,
-            params: &self.weights[start..start + length],
-            nets: &nets,
-        };
-        let physics = self
-            .program
-            .backward(&inputs, &stage.values, &self.program.balances, seed);
-        let mut state_gradient = physics.states;
-        for (slot, &value) in self.gradient[start..start + length]
-            .iter_mut()
-            .zip(&physics.params)
-        {
-            *slot += value;
-        }
-        for ((closure_index, closure), net_gradient) in
-            self.plan.closures.iter().enumerate().zip(physics.nets)
-        {
-            self.delta = net_gradient;
-            let mut backprop = Backprop {
-                gemm: &mut self.gemm,
-                delta: &mut self.delta,
-                below: &mut self.below,
-            };
-            backprop.network(
-                closure,
-                &stage.layers[closure_index],
-                &stage.slopes[closure_index],
-                &self.weights,
-                &mut self.gradient,
-            );
-            let first_layer = &self.weights[closure.weight_at[0]..];
-            add_stage_state_gradient(
-                closure,
-                first_layer,
-                &self.delta,
-                self.states,
-                &mut state_gradient,
-            );
-        }
-        state_gradient
+    /// Zeroed `rows x widths[1]` sums of first-layer deltas per closure and stage time.
+    fn offset_deltas(&self) -> Vec<Vec<Vec<E>>> {
+        let offsets = self.stage_offsets();
+        (self.plan.closures.iter())
+            .map(|c| vec![vec![E::ZERO; self.rows * c.widths[1]]; offsets])
+            .collect()
     }
 
     /// One bias-corrected Adam update along [`Kernel::gradient`] (Kingma & Ba 2015).
@@ -375,60 +402,6 @@ impl<E: Lane> Kernel<E> {
     }
 }
 
-/// The buffers of the reverse pass through one network.
-struct Backprop<'a, E> {
-    gemm: &'a mut Gemm<E>,
-    /// On entry the gradient of the network output; on exit that of the first layer's
-    /// pre-activation.
-    delta: &'a mut Vec<E>,
-    below: &'a mut Vec<E>,
-}
-
-impl<E: Lane> Backprop<'_, E> {
-    /// Reverse pass through one closure network at one stage: accumulates the weight and
-    /// bias gradients into `gradient`.
-    fn network(
-        &mut self,
-        closure: &ClosurePlan,
-        layers: &[Vec<E>],
-        slopes: &[Vec<E>],
-        weights: &[E],
-        gradient: &mut [E],
-    ) {
-        let rows = layers[0].len() / closure.width().max(1);
-        for layer in (0..closure.layers()).rev() {
-            let (inner, width) = (closure.widths[layer], closure.widths[layer + 1]);
-            self.gemm.multiply_add(
-                &mut gradient[closure.weight_at[layer]..][..inner * width],
-                (inner, width, rows),
-                View::transposed(&layers[layer], inner),
-                View::row_major(self.delta, width),
-            );
-            add_column_sums(
-                &mut gradient[closure.bias_at[layer]..][..width],
-                self.delta,
-                width,
-            );
-            if layer == 0 {
-                break;
-            }
-            let weight = &weights[closure.weight_at[layer]..][..inner * width];
-            self.below.clear();
-            self.below.resize(rows * inner, E::ZERO);
-            self.gemm.multiply_add(
-                self.below,
-                (rows, inner, width),
-                View::row_major(self.delta, width),
-                View::transposed(weight, width),
-            );
-            for (value, &slope) in self.below.iter_mut().zip(&slopes[layer - 1]) {
-                *value = *value * slope;
-            }
-            std::mem::swap(self.delta, self.below);
-        }
-    }
-}
-
 /// Normalises raw embedding rows as the graph backend does: the z-score of each column,
 /// `-mean / std` in the lag-0 state columns.
 fn normalise<E: Real>(closure: &ClosurePlan, raw: &[f64], out: &mut Vec<E>) {
@@ -442,42 +415,31 @@ fn normalise<E: Real>(closure: &ClosurePlan, raw: &[f64], out: &mut Vec<E>) {
     }
 }
 
-/// Adds the stage estimate, scaled by `1 / std`, into the lag-0 state columns.
-fn add_stage_state<E: Real>(closure: &ClosurePlan, state: &[E], states: usize, input: &mut [E]) {
-    let width = closure.width();
-    for (row, estimate) in input.chunks_exact_mut(width).zip(state.chunks_exact(states)) {
-        for &(column, index, inverse_std) in &closure.stage_columns {
-            row[column] += estimate[index] * E::from_double(inverse_std);
-        }
-    }
-}
-
-/// The gradient reaching the stage estimate through the lag-0 state columns:
-/// `g_x[r, s] += (delta[r, :] . W0[column, :]) / std`.
-fn add_stage_state_gradient<E: Real>(
+/// Adds the stage estimate's share of the first layer: `(x / std) W0[column, :]` for every
+/// lag-0 state column.
+fn add_stage_state<E: Real>(
     closure: &ClosurePlan,
-    first_layer: &[E],
-    delta: &[E],
+    state: &[E],
     states: usize,
-    state_gradient: &mut [E],
+    first_weight: &[E],
+    first: &mut [E],
 ) {
     let width = closure.widths[1];
-    for (delta_row, gradient_row) in delta
-        .chunks_exact(width)
-        .zip(state_gradient.chunks_exact_mut(states))
+    for (row, estimate) in first
+        .chunks_exact_mut(width)
+        .zip(state.chunks_exact(states))
     {
         for &(column, index, inverse_std) in &closure.stage_columns {
-            let weights = &first_layer[column * width..(column + 1) * width];
-            let mut dot = E::ZERO;
-            for (&d, &w) in delta_row.iter().zip(weights) {
-                dot += d * w;
+            let scale = estimate[index] * E::from_double(inverse_std);
+            let weights = &first_weight[column * width..(column + 1) * width];
+            for (slot, &w) in row.iter_mut().zip(weights) {
+                *slot += scale * w;
             }
-            gradient_row[index] += dot * E::from_double(inverse_std);
         }
     }
 }
 
-fn axpy<E: Real>(a: &[E], factor: f64, b: &[E]) -> Vec<E> {
+pub(super) fn axpy<E: Real>(a: &[E], factor: f64, b: &[E]) -> Vec<E> {
     let factor = E::from_double(factor);
     a.iter().zip(b).map(|(&x, &y)| x + factor * y).collect()
 }
@@ -487,7 +449,7 @@ fn scaled<E: Real>(values: &[E], factor: f64) -> Vec<E> {
     values.iter().map(|&v| v * factor).collect()
 }
 
-fn add_scaled<E: Real>(target: &mut [E], factor: f64, values: &[E]) {
+pub(super) fn add_scaled<E: Real>(target: &mut [E], factor: f64, values: &[E]) {
     let factor = E::from_double(factor);
     for (slot, &value) in target.iter_mut().zip(values) {
         *slot += factor * value;

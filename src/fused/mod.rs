@@ -29,6 +29,7 @@ pub mod activation;
 pub mod dense;
 mod kernel;
 mod plan;
+mod reverse;
 
 #[cfg(test)]
 mod tests;

@@ -220,7 +220,12 @@ mod tests {
         }
         // Same weights, same shuffles, same arithmetic up to rounding: the same training.
         let relative = (fused.final_loss / graph.final_loss - 1.0).abs();
-        assert!(relative < 1e-3, "{} vs {}", fused.final_loss, graph.final_loss);
+        assert!(
+            relative < 1e-3,
+            "{} vs {}",
+            fused.final_loss,
+            graph.final_loss
+        );
         let too_many = BenchOptions {
             train_points: 1000,
             ..options(Engine::Graph)
