@@ -2,8 +2,8 @@
 //! the time grid, with a byte span for every defect.
 
 use super::error::{ColumnRef, DataError, DataSource, Location};
-use crate::suggest::did_you_mean;
 use super::{Column, Dataset, MinRows};
+use crate::suggest::did_you_mean;
 use miette::{NamedSource, SourceSpan};
 use std::collections::HashMap;
 use std::path::PathBuf;

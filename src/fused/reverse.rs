@@ -3,7 +3,6 @@
 //! per stage time by the kernel (see [`super::kernel`]).
 
 use crate::backend::program::ProgramInputs;
-use crate::backend::real::Real;
 
 use super::activation::Lane;
 use super::dense::{add_column_sums, Gemm, View};

@@ -98,12 +98,23 @@ fn random_weights(template: &[NamedTensor], seed: u64) -> Vec<NamedTensor> {
 }
 
 /// Loss and every gradient entry of the fused step against the graph backend, with
-/// relative tolerance `tolerance` (entries compared against the largest of their tensor).
-fn assert_matches_backend(model: &ir::Model, setup: &Setup, batch: &Batch, tolerance: f64) {
+/// relative tolerance `tolerance` (entries compared against the largest of their tensor),
+/// at random weights of order one or (`initial`) at the initial weights.
+fn assert_matches_backend(
+    model: &ir::Model,
+    setup: &Setup,
+    batch: &Batch,
+    tolerance: f64,
+    initial: bool,
+) {
     let mut network = Network::build(model, setup).unwrap();
     let mut fused = FusedNetwork::build(model, setup).unwrap();
     assert_eq!(fused.weights(), network.weights(), "same initial weights");
-    let weights = random_weights(&network.weights(), 9);
+    let weights = if initial {
+        network.weights()
+    } else {
+        random_weights(&network.weights(), 9)
+    };
     network.set_weights(&weights).unwrap();
     fused.set_weights(&weights).unwrap();
     let (expected_loss, expected) = network.gradient(batch).unwrap();
@@ -131,7 +142,7 @@ fn gradients_match_the_backend_for_every_activation_in_f64() {
         let model = kitchen_sink(activation);
         let setup = setup(&model, Precision::F64, 1);
         let batch = random_batch(&model, &setup, 6, 1);
-        assert_matches_backend(&model, &setup, &batch, 1e-11);
+        assert_matches_backend(&model, &setup, &batch, 1e-11, false);
     }
 }
 
@@ -140,7 +151,7 @@ fn gradients_match_the_backend_in_f32() {
     let model = kitchen_sink(Activation::Softplus);
     let setup = setup(&model, Precision::F32, 1);
     let batch = random_batch(&model, &setup, 7, 2);
-    assert_matches_backend(&model, &setup, &batch, 2e-5);
+    assert_matches_backend(&model, &setup, &batch, 2e-5, false);
 }
 
 #[test]
@@ -148,15 +159,16 @@ fn gradients_match_the_backend_with_substeps_and_for_next_models() {
     let model = kitchen_sink(Activation::Tanh);
     let setup_two = setup(&model, Precision::F64, 2);
     let batch = random_batch(&model, &setup_two, 5, 3);
-    assert_matches_backend(&model, &setup_two, &batch, 1e-11);
+    assert_matches_backend(&model, &setup_two, &batch, 1e-11, false);
     let discrete = chemostat::black_box();
     let setup_next = setup(&discrete, Precision::F64, 1);
     let batch = random_batch(&discrete, &setup_next, 5, 4);
-    assert_matches_backend(&discrete, &setup_next, &batch, 1e-11);
+    assert_matches_backend(&discrete, &setup_next, &batch, 1e-11, false);
 }
 
-/// The shipped GB2 model on pairs of its shipped record, with the normalisation and closure
-/// scales `gbc train` would use.
+/// The shipped GB2 model on pairs of its shipped record, with the normalisation `gbc train`
+/// would use, at its initial weights (random weights of order one make its gradients of
+/// order 1e6, where f32 rounding of the two summation orders differs by 1e-4).
 #[test]
 fn gradients_match_the_backend_for_the_bioreactor_gb2_model() {
     use crate::train::pairs::{first_pair_row, stage_fractions, PairTable};
@@ -177,7 +189,7 @@ fn gradients_match_the_backend_for_the_bioreactor_gb2_model() {
     let fractions = stage_fractions(model.dynamics, 1);
     let table = PairTable::build(&model, &record, &rows, &[], &fractions);
     let batch = table.batch(&(0..40).collect::<Vec<_>>());
-    for (precision, tolerance) in [(Precision::F64, 1e-10), (Precision::F32, 1e-4)] {
+    for (precision, tolerance) in [(Precision::F64, 1e-10), (Precision::F32, 1e-5)] {
         let setup = Setup {
             step: record.step,
             substeps: 1,
@@ -186,7 +198,7 @@ fn gradients_match_the_backend_for_the_bioreactor_gb2_model() {
             normalisation: crate::train::normalise(&record, first + 41),
             scales: vec![vec![1.0; 3]],
         };
-        assert_matches_backend(&model, &setup, &batch, tolerance);
+        assert_matches_backend(&model, &setup, &batch, tolerance, true);
     }
 }
 

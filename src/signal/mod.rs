@@ -35,8 +35,8 @@ mod program;
 pub use error::{ArgumentSource, SignalError};
 pub use generate::{DEFAULT_HOLD_STEPS, MAX_SAMPLES};
 
-use crate::suggest::did_you_mean;
 use crate::ir::Input;
+use crate::suggest::did_you_mean;
 use generate::{Context, Grid};
 use miette::{NamedSource, SourceSpan};
 use program::Kind;

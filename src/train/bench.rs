@@ -160,7 +160,8 @@ pub fn median(values: &[f64]) -> f64 {
     }
 }
 
-/// The training step being timed.
+/// The training step being timed (one value per benchmark: its size does not matter).
+#[allow(clippy::large_enum_variant)]
 enum Step {
     Graph(Network),
     Fused(Box<FusedNetwork>),
