@@ -320,3 +320,53 @@ fn time_full_training(root: &Path, epochs: usize) -> Result<FullRow, CommandErro
         seconds: started.elapsed().as_secs_f64(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn root() -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    }
+
+    #[test]
+    fn every_benchmarked_model_and_record_is_shipped() {
+        for model in BenchModel::ALL {
+            let (model_file, data_file, _) = model.files();
+            assert!(root().join(model_file).is_file(), "{model_file}");
+            assert!(root().join(data_file).is_file(), "{data_file}");
+        }
+    }
+
+    #[test]
+    fn bench_writes_one_row_per_precision_and_engine() {
+        let json = std::env::temp_dir().join(format!("gbc-bench-{}.json", std::process::id()));
+        let args = BenchArgs {
+            root: root(),
+            models: vec![BenchModel::Chemostat],
+            precision: PrecisionChoice::Both,
+            engine: EngineChoice::Both,
+            epochs: 1,
+            no_simulation: true,
+            full: false,
+            full_epochs: 1,
+            json: Some(json.clone()),
+        };
+        run(&args).unwrap();
+        let written: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        std::fs::remove_file(&json).unwrap();
+        let rows = written["training"].as_array().unwrap();
+        let labels: Vec<(String, String)> = (rows.iter())
+            .map(|r| (r["precision"].to_string(), r["engine"].to_string()))
+            .collect();
+        let distinct: std::collections::HashSet<_> = labels.iter().collect();
+        assert!(labels.len() == 4 && distinct.len() == 4, "{labels:?}");
+        for row in rows {
+            assert_eq!(row["train_points"], 500);
+            assert_eq!(row["steps_per_epoch"], 10);
+            assert!(row["median_step_seconds"].as_f64().unwrap() > 0.0);
+        }
+        assert!(written["simulation"].is_null() && written["full"].is_null());
+    }
+}

@@ -4,6 +4,7 @@
 //! Exit codes: 0 success, 1 user error (a coded diagnostic was printed), 2 internal error
 //! (a bug in gbc, including any panic).
 
+mod bench;
 mod check;
 mod compile;
 mod demo;
@@ -74,6 +75,8 @@ pub enum Command {
     Experiment(experiment::ExperimentArgs),
     /// The main job: both paper studies, scaled down, with an HTML report.
     Demo(demo::DemoArgs),
+    /// Time training steps, epochs and simulation of the shipped models on this machine.
+    Bench(bench::BenchArgs),
 }
 
 /// Runs one parsed command line.
@@ -87,6 +90,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Diagnose(args) => diagnose::run(args),
         Command::Experiment(args) => experiment::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Bench(args) => bench::run(args),
     }
 }
 

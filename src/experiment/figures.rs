@@ -26,6 +26,12 @@ pub const WIDTH: f64 = 640.0;
 pub const HEIGHT: f64 = 380.0;
 /// Colour of data and truth series.
 pub const DATA_COLOR: &str = "#000000";
+/// Errors above this are drawn at it in the MSE figures (an MSE of 1 is the error of
+/// predicting the mean; 100 is a free run ten standard deviations off).
+pub const MSE_CEILING: f64 = 100.0;
+/// Most points drawn per series (longer series keep every k-th point and the last): a
+/// figure 640 pixels wide shows no more.
+pub const MAX_POINTS: usize = 1000;
 /// Largest deviation (in standard deviations) of the truth from the data before the
 /// closure figures carry a warning.
 pub const TRUTH_TOLERANCE: f64 = 0.05;
@@ -120,8 +126,15 @@ pub fn mse_figure(prepared: &Prepared, results: &[RunResult], metric: Metric) ->
                 spread.map(|s| (r.size, s))
             })
             .collect();
-        let points = cells.iter().map(|(n, s)| (*n as f64, s.median)).collect();
-        let band = cells.iter().map(|(_, s)| (s.min, s.max)).collect();
+        let cap = |value: f64| value.min(MSE_CEILING);
+        let points = cells
+            .iter()
+            .map(|(n, s)| (*n as f64, cap(s.median)))
+            .collect();
+        let band = cells
+            .iter()
+            .map(|(_, s)| (cap(s.min), cap(s.max)))
+            .collect();
         let series = Series::line(&model.label, points)
             .styled(Style::LineMarkers)
             .with_band(band)
@@ -132,7 +145,8 @@ pub fn mse_figure(prepared: &Prepared, results: &[RunResult], metric: Metric) ->
         name: format!("mse_{word}"),
         caption: format!(
             "Validation MSE ({paper}) against training points: median over replicates, band \
-             from min to max (paper Fig. 2b/3b); a median or max that diverged is left out."
+             from min to max (paper Fig. 2b/3b). Values above {MSE_CEILING} (free runs that \
+             blew up, or diverged) are drawn at {MSE_CEILING}."
         ),
         svg: chart.to_svg(WIDTH, HEIGHT),
     }
@@ -242,7 +256,7 @@ fn state_charts(
             .collect();
         let range = widened_range(&actual[first..]);
         let mut chart = Chart::new(&format!("{title}: {state}"), "time", state)
-            .with(Series::line("data", truth).colored(DATA_COLOR));
+            .with(Series::line("data", thin(truth)).colored(DATA_COLOR));
         for ((index, ..), table) in tables {
             let Some(values) = column(table, state) else {
                 continue;
@@ -290,12 +304,26 @@ pub fn clip(
             (x, inside)
         })
         .collect();
+    let points = thin(points);
     let name = if clipped {
         format!("{name} (clipped)")
     } else {
         name.to_string()
     };
     (name, points)
+}
+
+/// Every k-th point and the last, so that at most about [`MAX_POINTS`] remain.
+pub fn thin(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    let stride = points.len().div_ceil(MAX_POINTS).max(1);
+    if stride == 1 {
+        return points;
+    }
+    let last = points.len() - 1;
+    (points.into_iter().enumerate())
+        .filter(|(index, _)| index % stride == 0 || *index == last)
+        .map(|(_, point)| point)
+        .collect()
 }
 
 fn trajectory_figures(
@@ -405,11 +433,11 @@ fn closure_figure(
             let start = loaded.offset + first_predicted_row(&loaded.validation, table);
             let truth = true_values[start.min(true_values.len())..].iter().copied();
             let points = times.iter().copied().zip(truth).collect();
-            chart = chart.with(Series::line("truth", points).colored(DATA_COLOR));
+            chart = chart.with(Series::line("truth", thin(points)).colored(DATA_COLOR));
             truth_added = true;
         }
         let points = times.iter().copied().zip(values.iter().copied()).collect();
-        let series = Series::line(&loaded.label, points).styled(Style::Dashed);
+        let series = Series::line(&loaded.label, thin(points)).styled(Style::Dashed);
         chart = chart.with(series.colored(color(*index)));
     }
     Figure {

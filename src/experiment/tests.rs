@@ -408,3 +408,16 @@ fn the_job_queue_runs_every_item_once_and_stops_at_the_first_failure() {
     assert!(matches!(outcome, Err(super::ExperimentFailure::Internal(m)) if m == "disk full"));
     assert_eq!(done.into_inner(), 3, "nothing runs after the failure");
 }
+
+#[test]
+fn long_series_are_thinned_to_every_kth_point_and_the_last() {
+    use super::figures::{thin, MAX_POINTS};
+    let short: Vec<(f64, f64)> = (0..MAX_POINTS).map(|i| (i as f64, 0.0)).collect();
+    assert_eq!(thin(short.clone()), short);
+    let long: Vec<(f64, f64)> = (0..2 * MAX_POINTS + 1).map(|i| (i as f64, 0.0)).collect();
+    let kept = thin(long);
+    assert!(kept.len() <= MAX_POINTS + 1, "{}", kept.len());
+    assert_eq!(kept.first().map(|p| p.0), Some(0.0));
+    assert_eq!(kept.last().map(|p| p.0), Some(2.0 * MAX_POINTS as f64));
+    assert!(kept.windows(2).all(|w| w[1].0 - w[0].0 <= 3.0));
+}

@@ -60,11 +60,33 @@ impl<E: Real> Gemm<E> {
     pub fn multiply_add(
         &mut self,
         out: &mut [E],
+        shape: (usize, usize, usize),
+        lhs: View<E>,
+        rhs: View<E>,
+    ) {
+        self.product::<true>(out, shape, lhs, rhs);
+    }
+
+    /// `out = lhs @ rhs`, shapes as in [`Gemm::multiply_add`] (`out` is overwritten, so it
+    /// need not be zeroed first).
+    pub fn multiply(
+        &mut self,
+        out: &mut [E],
+        shape: (usize, usize, usize),
+        lhs: View<E>,
+        rhs: View<E>,
+    ) {
+        self.product::<false>(out, shape, lhs, rhs);
+    }
+
+    fn product<const ADD: bool>(
+        &mut self,
+        out: &mut [E],
         (rows, columns, inner): (usize, usize, usize),
         lhs: View<E>,
         rhs: View<E>,
     ) {
-        if rows == 0 || columns == 0 || inner == 0 {
+        if rows == 0 || columns == 0 {
             return;
         }
         let strips = strips(columns);
@@ -79,16 +101,16 @@ impl<E: Real> Gemm<E> {
         let full = rows / BLOCK * BLOCK;
         for row in (0..full).step_by(BLOCK) {
             let block = &mut out[row * columns..(row + BLOCK) * columns];
-            self.row_block::<BLOCK>(block, lhs, row, (columns, inner), &strips);
+            self.row_block::<BLOCK, ADD>(block, lhs, row, (columns, inner), &strips);
         }
         for row in full..rows {
             let block = &mut out[row * columns..(row + 1) * columns];
-            self.row_block::<1>(block, lhs, row, (columns, inner), &strips);
+            self.row_block::<1, ADD>(block, lhs, row, (columns, inner), &strips);
         }
     }
 
     /// Rows `row..row + R` of the product, strip by strip.
-    fn row_block<const R: usize>(
+    fn row_block<const R: usize, const ADD: bool>(
         &mut self,
         out: &mut [E],
         lhs: View<E>,
@@ -101,10 +123,11 @@ impl<E: Real> Gemm<E> {
         for &(start, width) in strips {
             let panel = &self.rhs[panel_start..panel_start + inner * width];
             panel_start += inner * width;
+            let place = (start, columns);
             match width {
-                STRIP => tile::<E, R, STRIP>(out, &self.lhs, panel, start, columns),
-                NARROW => tile::<E, R, NARROW>(out, &self.lhs, panel, start, columns),
-                _ => tile::<E, R, 1>(out, &self.lhs, panel, start, columns),
+                STRIP => tile::<E, R, STRIP, ADD>(out, &self.lhs, panel, place),
+                NARROW => tile::<E, R, NARROW, ADD>(out, &self.lhs, panel, place),
+                _ => tile::<E, R, 1, ADD>(out, &self.lhs, panel, place),
             }
         }
     }
@@ -134,6 +157,13 @@ fn pack_rows<E: Real, const R: usize>(packed: &mut Vec<E>, lhs: View<E>, row: us
             let first = row + k * columns;
             chunk.copy_from_slice(&lhs.values[first..first + R]);
         }
+    } else if columns == 1 && R == BLOCK {
+        // Four contiguous rows, interleaved: a 4 x inner transpose without index checks.
+        let line = |j: usize| &lhs.values[(row + j) * rows..][..inner];
+        let lines = line(0).iter().zip(line(1)).zip(line(2)).zip(line(3));
+        for (chunk, (((&a, &b), &c), &d)) in packed.chunks_exact_mut(BLOCK).zip(lines) {
+            chunk.copy_from_slice(&[a, b, c, d]);
+        }
     } else {
         for j in 0..R {
             let first = (row + j) * rows;
@@ -157,18 +187,20 @@ fn strips(columns: usize) -> Vec<(usize, usize)> {
 }
 
 /// Columns `start..start + N` of the `R` rows of `out`, from the packed `lhs` (`inner x R`)
-/// and the packed `panel` (`inner x N`): `R x N` independent sums in registers.
+/// and the packed `panel` (`inner x N`): `R x N` independent sums in registers, starting
+/// from `out` (`ADD`) or from zero.
 #[inline(always)]
-fn tile<E: Real, const R: usize, const N: usize>(
+fn tile<E: Real, const R: usize, const N: usize, const ADD: bool>(
     out: &mut [E],
     lhs: &[E],
     panel: &[E],
-    start: usize,
-    columns: usize,
+    (start, columns): (usize, usize),
 ) {
     let mut acc = [[E::ZERO; N]; R];
-    for (row, sums) in acc.iter_mut().enumerate() {
-        sums.copy_from_slice(&out[row * columns + start..][..N]);
+    if ADD {
+        for (row, sums) in acc.iter_mut().enumerate() {
+            sums.copy_from_slice(&out[row * columns + start..][..N]);
+        }
     }
     for (scales, block) in lhs.chunks_exact(R).zip(panel.chunks_exact(N)) {
         for (sums, &scale) in acc.iter_mut().zip(scales) {
@@ -248,6 +280,13 @@ mod tests {
             );
             gemm.multiply_add(&mut out_t, shape, a, b);
             assert_eq!(out_t, out, "{shape:?} transposed");
+            // Overwriting ignores what `out` held.
+            let mut fresh = vec![f64::NAN; rows * columns];
+            let (a, b) = (View::row_major(&lhs, inner), View::row_major(&rhs, columns));
+            gemm.multiply(&mut fresh, shape, a, b);
+            for (found, expected) in fresh.iter().zip(&product) {
+                assert!((found - expected).abs() < 1e-12, "{shape:?} overwritten");
+            }
         }
     }
 

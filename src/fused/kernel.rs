@@ -18,6 +18,7 @@ use crate::ir::{self, Dynamics};
 use super::activation::{activate, Lane};
 use super::dense::{Gemm, View};
 use super::plan::{ClosurePlan, Plan};
+use super::reverse::Scratch;
 
 const BETA1: f64 = 0.9;
 const BETA2: f64 = 0.999;
@@ -65,6 +66,7 @@ pub struct Kernel<E: Lane> {
     first_products: Vec<Vec<Vec<E>>>,
     pub(super) stages: Vec<Stage<E>>,
     pub(super) gemm: Gemm<E>,
+    pub(super) scratch: Scratch<E>,
 }
 
 impl<E: Lane> Kernel<E> {
@@ -104,6 +106,7 @@ impl<E: Lane> Kernel<E> {
             first_products: vec![Vec::new(); plan.closures.len()],
             stages: (0..count).map(|_| Stage::default()).collect(),
             gemm: Gemm::default(),
+            scratch: Scratch::default(),
             plan,
         })
     }
@@ -320,9 +323,9 @@ impl<E: Lane> Kernel<E> {
 
     /// The reverse pass from the seed on `x(t + h)`, accumulating into the gradient.
     fn backward(&mut self, seed: Vec<E>) {
-        let mut offset_deltas = self.offset_deltas();
+        self.clear_offset_deltas();
         if self.dynamics == Dynamics::Discrete {
-            self.reverse_stage(0, &seed, &mut offset_deltas);
+            self.reverse_stage(0, &seed);
         } else {
             let dt = self.step / self.substeps as f64;
             let mut upstream = seed;
@@ -334,8 +337,7 @@ impl<E: Lane> Kernel<E> {
                     .collect();
                 let mut start_gradient = upstream;
                 for index in (0..4).rev() {
-                    let estimate_gradient =
-                        self.reverse_stage(first + index, &stage_seeds[index], &mut offset_deltas);
+                    let estimate_gradient = self.reverse_stage(first + index, &stage_seeds[index]);
                     if index > 0 {
                         let fraction = if index == 3 { 1.0 } else { 0.5 };
                         add_scaled(
@@ -349,16 +351,16 @@ impl<E: Lane> Kernel<E> {
                 upstream = start_gradient;
             }
         }
-        self.first_layer_gradients(&offset_deltas);
+        self.first_layer_gradients();
     }
 
     /// `dW0 += constants^T delta` per closure and stage time, `delta` summed over the
     /// stages at that time.
-    fn first_layer_gradients(&mut self, offset_deltas: &[Vec<Vec<E>>]) {
+    fn first_layer_gradients(&mut self) {
         let rows = self.rows;
         for ((closure, constants), deltas) in (self.plan.closures.iter())
             .zip(&self.constants)
-            .zip(offset_deltas)
+            .zip(&self.scratch.offset_deltas)
         {
             let (inner, width) = (closure.widths[0], closure.widths[1]);
             let weight_gradient = &mut self.gradient[closure.weight_at[0]..][..inner * width];
@@ -373,12 +375,18 @@ impl<E: Lane> Kernel<E> {
         }
     }
 
-    /// Zeroed `rows x widths[1]` sums of first-layer deltas per closure and stage time.
-    fn offset_deltas(&self) -> Vec<Vec<Vec<E>>> {
+    /// Zeroes the `rows x widths[1]` sums of first-layer deltas per closure and stage time.
+    fn clear_offset_deltas(&mut self) {
         let offsets = self.stage_offsets();
-        (self.plan.closures.iter())
-            .map(|c| vec![vec![E::ZERO; self.rows * c.widths[1]]; offsets])
-            .collect()
+        let sums = &mut self.scratch.offset_deltas;
+        sums.resize_with(self.plan.closures.len(), Vec::new);
+        for (closure, per_offset) in self.plan.closures.iter().zip(sums) {
+            per_offset.resize_with(offsets, Vec::new);
+            for sum in per_offset {
+                sum.clear();
+                sum.resize(self.rows * closure.widths[1], E::ZERO);
+            }
+        }
     }
 
     /// One bias-corrected Adam update along [`Kernel::gradient`] (Kingma & Ba 2015).

@@ -9,17 +9,29 @@ use super::dense::{add_column_sums, Gemm, View};
 use super::kernel::Kernel;
 use super::plan::ClosurePlan;
 
+/// Buffers of the reverse pass, kept from step to step.
+#[derive(Debug, Default)]
+pub(super) struct Scratch<E> {
+    /// `offset_deltas[closure][stage time]`: first-layer deltas summed over the stages at
+    /// that time (`rows x widths[1]`).
+    pub offset_deltas: Vec<Vec<Vec<E>>>,
+    /// The gradient being passed down a network, and the layer below it.
+    delta: Vec<E>,
+    below: Vec<E>,
+    /// The stage estimate in the lag-0 state columns (`rows x columns`), the first-layer
+    /// weights of those columns (`columns x widths[1]`), and the gradients of both.
+    estimate: Vec<E>,
+    estimate_weights: Vec<E>,
+    estimate_gradient: Vec<E>,
+    estimate_weight_gradient: Vec<E>,
+}
+
 impl<E: Lane> Kernel<E> {
     /// Reverse of stage `index` given the adjoint of its balances: accumulates the weight
-    /// and param gradients, adds each closure's first-layer delta into
+    /// and param gradients, adds each closure's first-layer delta into the scratch's
     /// `offset_deltas[closure][stage time]`, and returns the gradient with respect to the
     /// stage's state estimate.
-    pub(super) fn reverse_stage(
-        &mut self,
-        index: usize,
-        seed: &[E],
-        offset_deltas: &mut [Vec<Vec<E>>],
-    ) -> Vec<E> {
+    pub(super) fn reverse_stage(&mut self, index: usize, seed: &[E]) -> Vec<E> {
         let stage = &self.stages[index];
         let nets: Vec<&[E]> = (stage.layers.iter())
             .map(|layers| layers.last().map_or(&[][..], Vec::as_slice))
@@ -32,40 +44,34 @@ impl<E: Lane> Kernel<E> {
             params: &self.weights[start..start + length],
             nets: &nets,
         };
-        let physics = self
-            .program
-            .backward(&inputs, &stage.values, &self.program.balances, seed);
+        let physics = (self.program).backward(&inputs, &stage.values, &self.program.balances, seed);
         let mut state_gradient = physics.states;
         let param_gradient = &mut self.gradient[start..start + length];
         for (slot, &value) in param_gradient.iter_mut().zip(&physics.params) {
             *slot += value;
         }
-        for (((closure, layers), slopes), (net_gradient, deltas)) in (self.plan.closures.iter())
-            .zip(&stage.layers)
-            .zip(&stage.slopes)
-            .zip(physics.nets.into_iter().zip(offset_deltas.iter_mut()))
+        let scratch = &mut self.scratch;
+        for (closure_index, (closure, net_gradient)) in
+            (self.plan.closures.iter().zip(physics.nets)).enumerate()
         {
+            scratch.delta = net_gradient;
             let mut backprop = Backprop {
                 gemm: &mut self.gemm,
                 closure,
                 rows: self.rows,
+                scratch: &mut *scratch,
             };
-            let delta = backprop.hidden_layers(
-                net_gradient,
-                layers,
-                slopes,
-                &self.weights,
-                &mut self.gradient,
-            );
+            let (layers, slopes) = (&stage.layers[closure_index], &stage.slopes[closure_index]);
+            backprop.hidden_layers(layers, slopes, &self.weights, &mut self.gradient);
+            let state = (stage.state.as_slice(), self.states);
             backprop.first_layer(
-                &delta,
-                &stage.state,
-                self.states,
+                state,
                 &self.weights,
                 &mut self.gradient,
                 &mut state_gradient,
             );
-            for (sum, &value) in deltas[stage.offset].iter_mut().zip(&delta) {
+            let sums = &mut scratch.offset_deltas[closure_index][stage.offset];
+            for (sum, &value) in sums.iter_mut().zip(&scratch.delta) {
                 *sum += value;
             }
         }
@@ -78,85 +84,118 @@ struct Backprop<'a, E> {
     gemm: &'a mut Gemm<E>,
     closure: &'a ClosurePlan,
     rows: usize,
+    scratch: &'a mut Scratch<E>,
 }
 
 impl<E: Lane> Backprop<'_, E> {
-    /// From the gradient of the network output down to that of the first layer's
-    /// pre-activation (returned), accumulating the weight and bias gradients of every layer
-    /// but the first.
+    /// From the gradient of the network output (in `scratch.delta`) down to that of the
+    /// first layer's pre-activation (left there), accumulating the weight and bias gradients
+    /// of every layer but the first.
     fn hidden_layers(
         &mut self,
-        mut delta: Vec<E>,
         layers: &[Vec<E>],
         slopes: &[Vec<E>],
         weights: &[E],
         gradient: &mut [E],
-    ) -> Vec<E> {
+    ) {
         let (closure, rows) = (self.closure, self.rows);
+        let Scratch { delta, below, .. } = &mut *self.scratch;
         for layer in (1..closure.layers()).rev() {
             let (inner, width) = (closure.widths[layer], closure.widths[layer + 1]);
             self.gemm.multiply_add(
                 &mut gradient[closure.weight_at[layer]..][..inner * width],
                 (inner, width, rows),
                 View::transposed(&layers[layer], inner),
-                View::row_major(&delta, width),
+                View::row_major(delta, width),
             );
             add_column_sums(
                 &mut gradient[closure.bias_at[layer]..][..width],
-                &delta,
+                delta,
                 width,
             );
             let weight = &weights[closure.weight_at[layer]..][..inner * width];
-            let mut below = vec![E::ZERO; rows * inner];
-            self.gemm.multiply_add(
-                &mut below,
+            below.resize(rows * inner, E::ZERO);
+            self.gemm.multiply(
+                below,
                 (rows, inner, width),
-                View::row_major(&delta, width),
+                View::row_major(delta, width),
                 View::transposed(weight, width),
             );
             for (value, &slope) in below.iter_mut().zip(&slopes[layer - 1]) {
                 *value = *value * slope;
             }
-            delta = below;
+            std::mem::swap(delta, below);
         }
-        delta
     }
 
     /// The first layer's bias gradient, and what passes through its lag-0 state columns:
-    /// their weight gradient `(x / std) delta` and the estimate's gradient
-    /// `(delta . W0[column, :]) / std`. (The embedding part of the weight gradient is one
+    /// their weight gradient `(x / std)^T delta` and the estimate's gradient
+    /// `(delta W0[columns, :]^T) / std`. (The embedding part of the weight gradient is one
     /// product per stage time, formed by the kernel.)
     fn first_layer(
         &mut self,
-        delta: &[E],
-        state: &[E],
-        states: usize,
+        (state, states): (&[E], usize),
         weights: &[E],
         gradient: &mut [E],
         state_gradient: &mut [E],
     ) {
-        let closure = self.closure;
+        let (closure, rows) = (self.closure, self.rows);
         let width = closure.widths[1];
-        add_column_sums(&mut gradient[closure.bias_at[0]..][..width], delta, width);
+        let scratch = &mut *self.scratch;
+        add_column_sums(
+            &mut gradient[closure.bias_at[0]..][..width],
+            &scratch.delta,
+            width,
+        );
+        let columns = closure.stage_columns.len();
+        if columns == 0 {
+            return;
+        }
         let first = closure.weight_at[0];
-        for ((delta_row, estimate), gradient_row) in (delta.chunks_exact(width))
-            .zip(state.chunks_exact(states))
-            .zip(state_gradient.chunks_exact_mut(states))
+        scratch.estimate.clear();
+        for estimate in state.chunks_exact(states) {
+            scratch.estimate.extend(
+                (closure.stage_columns.iter())
+                    .map(|&(_, index, inverse_std)| estimate[index] * E::from_double(inverse_std)),
+            );
+        }
+        scratch.estimate_weights.clear();
+        for &(column, _, _) in &closure.stage_columns {
+            let row = &weights[first + column * width..][..width];
+            scratch.estimate_weights.extend_from_slice(row);
+        }
+        scratch.estimate_gradient.resize(rows * columns, E::ZERO);
+        self.gemm.multiply(
+            &mut scratch.estimate_gradient,
+            (rows, columns, width),
+            View::row_major(&scratch.delta, width),
+            View::transposed(&scratch.estimate_weights, width),
+        );
+        scratch
+            .estimate_weight_gradient
+            .resize(columns * width, E::ZERO);
+        self.gemm.multiply(
+            &mut scratch.estimate_weight_gradient,
+            (columns, width, rows),
+            View::transposed(&scratch.estimate, columns),
+            View::row_major(&scratch.delta, width),
+        );
+        for (&(column, _, _), values) in
+            (closure.stage_columns.iter()).zip(scratch.estimate_weight_gradient.chunks_exact(width))
         {
-            for &(column, index, inverse_std) in &closure.stage_columns {
-                let inverse_std = E::from_double(inverse_std);
-                let scale = estimate[index] * inverse_std;
-                let weight_gradient = &mut gradient[first + column * width..][..width];
-                let mut dot = E::ZERO;
-                for ((slot, &d), &w) in weight_gradient
-                    .iter_mut()
-                    .zip(delta_row)
-                    .zip(&weights[first + column * width..][..width])
-                {
-                    *slot += scale * d;
-                    dot += d * w;
-                }
-                gradient_row[index] += dot * inverse_std;
+            for (slot, &value) in gradient[first + column * width..][..width]
+                .iter_mut()
+                .zip(values)
+            {
+                *slot += value;
+            }
+        }
+        for (gradient_row, estimate_row) in (state_gradient.chunks_exact_mut(states))
+            .zip(scratch.estimate_gradient.chunks_exact(columns))
+        {
+            for (&(_, index, inverse_std), &value) in closure.stage_columns.iter().zip(estimate_row)
+            {
+                gradient_row[index] += value * E::from_double(inverse_std);
             }
         }
     }
