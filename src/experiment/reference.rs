@@ -33,7 +33,7 @@ pub fn first_predicted_row(data: &Dataset, table: &PredictionTable) -> usize {
 
 /// A free run along `data`: driven by its inputs alone from its first full history, never
 /// stopped (the paper's online run; `gbc train` stops a run that leaves the training data's
-/// physical range, which would make any run that dips below zero count as diverged).
+/// physical range, which would end the run and make its error infinite).
 pub fn free_run(
     model: &ir::Model,
     network: &Network,

@@ -41,10 +41,16 @@ pub struct PhysicalRange {
     pub upper: Vec<f64>,
 }
 
+/// How far below zero, as a share of its training maximum, a state never negative in
+/// training may go before a free run counts as diverged. A concentration near zero that a
+/// model undershoots by a little is an error the MSE measures, not a blow-up; one a tenth
+/// of its scale below zero is unphysical.
+pub const UNDERSHOOT: f64 = 0.1;
+
 impl PhysicalRange {
-    /// From the training split's extremes: `[0, factor * max]` for a state never negative
-    /// in training, else `[-factor * max|x|, factor * max|x|]`. `None` when the
-    /// normalisation has no extremes (runs saved before they were recorded).
+    /// From the training split's extremes: `[-UNDERSHOOT * max, factor * max]` for a state
+    /// never negative in training, else `[-factor * max|x|, factor * max|x|]`. `None` when
+    /// the normalisation has no extremes (runs saved before they were recorded).
     pub fn new(normalisation: &Normalisation, factor: f64) -> Option<PhysicalRange> {
         let (min, max) = (&normalisation.state_min, &normalisation.state_max);
         if min.is_empty() || min.len() != max.len() {
@@ -54,7 +60,7 @@ impl PhysicalRange {
             .map(|(&lo, &hi)| {
                 let largest = lo.abs().max(hi.abs());
                 if lo >= 0.0 {
-                    (0.0, factor * hi)
+                    (-UNDERSHOOT * hi, factor * hi)
                 } else {
                     (-factor * largest, factor * largest)
                 }
