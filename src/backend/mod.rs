@@ -36,6 +36,7 @@ mod tests_rollout;
 
 use crate::ir;
 
+pub use adam::AdamState;
 pub use net::INIT_LAST_LAYER;
 
 /// The unconstrained starting values of the model's params (their transforms give the

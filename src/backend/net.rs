@@ -11,13 +11,16 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::adam::Adam;
+use super::adam::AdamState;
 use super::graph::{gradient_of, Element, GradientBuffer, Graph, Matrix, Scalar, Vector};
 use super::layout::{
     check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout,
     Prepared, PreparedStep,
 };
 use super::program::Program;
-use super::{BackendError, Batch, NamedTensor, Prediction, RolloutBatch, Setup, StepSettings};
+use super::{
+    BackendError, Batch, NamedTensor, Network, Prediction, RolloutBatch, Setup, StepSettings,
+};
 use crate::ir::{self, Dynamics};
 
 /// Scale of the last layer's initial weights relative to Glorot's: small, so that a model
@@ -317,6 +320,16 @@ where
         Ok(())
     }
 
+    /// Adam's step count and moments.
+    pub fn adam_state(&self) -> AdamState {
+        self.adam.state()
+    }
+
+    /// Replaces Adam's step count and moments.
+    pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
+        self.adam.set_state(state)
+    }
+
     /// Constrained param values.
     pub fn param_values(&self) -> Vec<f64> {
         if self.program.param_values.is_empty() {
@@ -479,6 +492,25 @@ where
             tensors.params.as_ref(),
             &nets,
         )
+    }
+}
+
+impl Network {
+    /// Adam's step count and moments, per tensor of [`Network::weights`] (to hand training
+    /// over to [`crate::fused::FusedNetwork`] and back).
+    pub fn adam_state(&self) -> AdamState {
+        match &self.inner {
+            super::Inner::Single(net) => net.adam_state(),
+            super::Inner::Double(net) => net.adam_state(),
+        }
+    }
+
+    /// Replaces Adam's step count and moments (sizes must match [`Network::weights`]).
+    pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
+        match &mut self.inner {
+            super::Inner::Single(net) => net.set_adam_state(state),
+            super::Inner::Double(net) => net.set_adam_state(state),
+        }
     }
 }
 

@@ -302,6 +302,7 @@ fn time_full_training(root: &Path, epochs: usize) -> Result<FullRow, CommandErro
         precision: Precision::F32,
         substeps: 1,
         online_horizon: Some(200.0),
+        engine: Engine::Graph,
     };
     let started = Instant::now();
     crate::train::train_with(

@@ -428,6 +428,7 @@ pub fn options_of(study: &Study, spec: &RunSpec) -> TrainOptions {
         seed: spec.seed,
         precision: study.precision,
         substeps: study.substeps,
+        engine: study.engine,
         // The free run covers the whole validation window (the default).
         ..TrainOptions::default()
     }

@@ -134,8 +134,9 @@ pub struct RunResult {
     #[serde(default)]
     pub warnings: Vec<String>,
     /// Where the free run over the validation window first left the training module's
-    /// physical range (10 times the training extremes; a tenth of its maximum below zero for a
-    /// state never negative in training), if it did. The online error ignores this and covers the whole run.
+    /// physical range (10 times the training extremes; a tenth of its maximum below zero
+    /// for a state never negative in training), if it did. The online error ignores this
+    /// and covers the whole run.
     #[serde(default)]
     pub left_range: Option<String>,
 }

@@ -10,7 +10,7 @@ use miette::{NamedSource, SourceSpan};
 
 use super::ExperimentError;
 use crate::backend::Precision;
-use crate::train::Recipe;
+use crate::train::{Engine, Recipe};
 
 /// One model of a study.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -103,6 +103,10 @@ pub struct Study {
     /// The training recipe (default: the paper's).
     #[serde(default)]
     pub training: Training,
+    /// What runs the one-step epochs (default, and left out of the file: the graph
+    /// backend; `fused`: the hand-fused step, the same results up to rounding).
+    #[serde(default, skip_serializing_if = "Engine::is_graph")]
+    pub engine: Engine,
     /// The mechanistic model that made the data: true closure values (its outputs named
     /// `<output>_true` or its lets named `<output>`) and true param values (its consts).
     #[serde(default)]
@@ -153,6 +157,7 @@ impl Study {
             precision: Precision::F32,
             substeps: 1,
             training: Training::Paper,
+            engine: Engine::Graph,
             truth: Some(dir.join("truth.gbm")),
             generalisation: vec![dir.join("data/chirp.csv")],
             representative_size: Some(PAPER_REPRESENTATIVE_SIZE),
@@ -179,6 +184,7 @@ impl Study {
             precision: Precision::F32,
             substeps: 1,
             training: Training::Paper,
+            engine: Engine::Graph,
             truth: Some(dir.join("truth.gbm")),
             generalisation: vec![dir.join("data/steps_seed2.csv")],
             representative_size: Some(PAPER_REPRESENTATIVE_SIZE),

@@ -12,13 +12,14 @@
 
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::real::Real;
-use crate::backend::{BackendError, Batch, Setup};
+use crate::backend::{BackendError, Batch, Setup, StepSettings};
 use crate::ir::{self, Dynamics};
 
 use super::activation::{activate, Lane};
 use super::dense::{Gemm, View};
 use super::plan::{ClosurePlan, Plan};
 use super::reverse::Scratch;
+use crate::backend::AdamState;
 
 const BETA1: f64 = 0.9;
 const BETA2: f64 = 0.999;
@@ -116,11 +117,42 @@ impl<E: Lane> Kernel<E> {
         &self.plan
     }
 
-    /// One Adam step on the batch; returns the loss before it.
-    pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
+    /// One Adam step on the batch (clipped and with the params' own learning rate as
+    /// `settings` ask); returns the loss before it.
+    pub fn train_step(
+        &mut self,
+        batch: &Batch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
         let loss = self.loss_and_gradient(batch)?;
-        self.adam(learning_rate);
+        if let Some(limit) = settings.max_gradient_norm {
+            self.clip_gradient(limit);
+        }
+        self.adam(settings);
         Ok(loss)
+    }
+
+    /// Adam's step count and moments, cut into the plan's tensors.
+    pub fn adam_state(&self) -> AdamState {
+        AdamState {
+            steps: u64::try_from(self.adam_steps).unwrap_or(0),
+            first: super::split(&self.plan, &self.first_moment),
+            second: super::split(&self.plan, &self.second_moment),
+        }
+    }
+
+    /// Replaces Adam's step count and moments.
+    pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
+        let lengths: Vec<usize> = self.plan.tensors.iter().map(|&(_, n)| n).collect();
+        self.adam_steps = state.check(&lengths)?;
+        let flatten = |moments: &[Vec<f64>]| -> Vec<E> {
+            (moments.iter().flatten())
+                .map(|&v| E::from_double(v))
+                .collect()
+        };
+        self.first_moment = flatten(&state.first);
+        self.second_moment = flatten(&state.second);
+        Ok(())
     }
 
     /// The normalised one-step loss of the batch; its gradient is left in
@@ -389,23 +421,76 @@ impl<E: Lane> Kernel<E> {
         }
     }
 
-    /// One bias-corrected Adam update along [`Kernel::gradient`] (Kingma & Ba 2015).
-    fn adam(&mut self, learning_rate: f64) {
+    /// Rescales the gradient to Euclidean norm `limit` when it is longer (and finite), as
+    /// the graph backend does: the norm summed in `f64` in tensor order.
+    fn clip_gradient(&mut self, limit: f64) {
+        let norm = (self.gradient.iter())
+            .map(|g| g.to_double().powi(2))
+            .sum::<f64>()
+            .sqrt();
+        if norm > limit && norm.is_finite() {
+            let factor = E::from_double(limit / norm);
+            self.gradient.iter_mut().for_each(|g| *g = *g * factor);
+        }
+    }
+
+    /// One bias-corrected Adam update along [`Kernel::gradient`] (Kingma & Ba 2015), the
+    /// params at `settings.param_learning_rate` and everything else at
+    /// `settings.learning_rate`.
+    fn adam(&mut self, settings: &StepSettings) {
         self.adam_steps += 1;
         let correction1 = 1.0 - BETA1.powi(self.adam_steps);
         let correction2 = 1.0 - BETA2.powi(self.adam_steps);
-        let step = E::from_double(learning_rate * correction2.sqrt() / correction1);
-        let epsilon = E::from_double(EPSILON * correction2.sqrt());
-        let (beta1, beta2) = (E::from_double(BETA1), E::from_double(BETA2));
-        let (keep1, keep2) = (E::from_double(1.0 - BETA1), E::from_double(1.0 - BETA2));
-        for (((weight, &g), first), second) in (self.weights.iter_mut())
-            .zip(&self.gradient)
-            .zip(&mut self.first_moment)
-            .zip(&mut self.second_moment)
+        let step_of = |rate: f64| E::from_double(rate * correction2.sqrt() / correction1);
+        let moments = Moments {
+            epsilon: E::from_double(EPSILON * correction2.sqrt()),
+            beta: (E::from_double(BETA1), E::from_double(BETA2)),
+            keep: (E::from_double(1.0 - BETA1), E::from_double(1.0 - BETA2)),
+        };
+        let (start, length) = self.plan.params;
+        let ranges = [
+            (0..start, settings.learning_rate),
+            (start..start + length, settings.param_learning_rate),
+            (start + length..self.weights.len(), settings.learning_rate),
+        ];
+        for (range, rate) in ranges {
+            moments.update(
+                &mut self.weights[range.clone()],
+                &self.gradient[range.clone()],
+                (
+                    &mut self.first_moment[range.clone()],
+                    &mut self.second_moment[range],
+                ),
+                step_of(rate),
+            );
+        }
+    }
+}
+
+/// The constants of one Adam step.
+struct Moments<E> {
+    epsilon: E,
+    beta: (E, E),
+    keep: (E, E),
+}
+
+impl<E: Real> Moments<E> {
+    /// Updates the moments of a run of weights and moves the weights by `step` along them.
+    fn update(
+        &self,
+        weights: &mut [E],
+        gradient: &[E],
+        (first, second): (&mut [E], &mut [E]),
+        step: E,
+    ) {
+        let (beta1, beta2) = self.beta;
+        let (keep1, keep2) = self.keep;
+        for (((weight, &g), first), second) in
+            (weights.iter_mut()).zip(gradient).zip(first).zip(second)
         {
             *first = beta1 * *first + keep1 * g;
             *second = beta2 * *second + keep2 * g * g;
-            *weight = *weight - step * *first / (second.sqrt() + epsilon);
+            *weight = *weight - step * *first / (second.sqrt() + self.epsilon);
         }
     }
 }

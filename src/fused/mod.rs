@@ -20,8 +20,11 @@
 //!   weight vector with a single Adam loop.
 //!
 //! Its loss and gradients agree with the graph backend's to rounding (tested in both
-//! precisions); it starts from the same weights as [`crate::backend::Network::build`] and
-//! reads and writes the same [`NamedTensor`] lists.
+//! precisions); it starts from the same weights as [`crate::backend::Network::build`],
+//! takes the same [`StepSettings`] (params at their own learning rate, global-norm
+//! clipping) and reads and writes the same [`NamedTensor`] lists and [`AdamState`], so a
+//! training run can hand over between the two mid-way (`gbc train --engine fused` runs its
+//! one-step epochs here and its rollouts on the graph backend).
 //!
 //! [`Program`]: crate::backend::program::Program
 
@@ -35,7 +38,9 @@ mod reverse;
 mod tests;
 
 use crate::backend::real::Real;
-use crate::backend::{BackendError, Batch, NamedTensor, Network, Precision, Setup};
+use crate::backend::{
+    AdamState, BackendError, Batch, NamedTensor, Network, Precision, Setup, StepSettings,
+};
 use crate::ir;
 
 use kernel::Kernel;
@@ -82,7 +87,29 @@ impl FusedNetwork {
 
     /// One Adam step on the batch's loss; returns the loss before the step.
     pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
-        dispatch!(mut self, kernel => kernel.train_step(batch, learning_rate))
+        self.train_step_with(batch, &StepSettings::plain(learning_rate))
+    }
+
+    /// One Adam step on the batch's loss with the params at their own learning rate and
+    /// optional global-norm clipping, as [`Network::train_step_with`]; returns the loss
+    /// before the step.
+    pub fn train_step_with(
+        &mut self,
+        batch: &Batch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        dispatch!(mut self, kernel => kernel.train_step(batch, settings))
+    }
+
+    /// Adam's step count and moments, per tensor of [`FusedNetwork::weights`].
+    pub fn adam_state(&self) -> AdamState {
+        dispatch!(self, kernel => kernel.adam_state())
+    }
+
+    /// Replaces Adam's step count and moments (sizes must match
+    /// [`FusedNetwork::weights`]).
+    pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
+        dispatch!(mut self, kernel => kernel.set_adam_state(state))
     }
 
     /// The loss and its gradient with respect to every tensor of

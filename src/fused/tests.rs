@@ -1,6 +1,7 @@
 //! The fused step against the graph backend: same loss, same gradient entry by entry, same
-//! Adam trajectory, for every activation, sub-steps, `next` models, hidden states, and the
-//! shipped bioreactor GB2 model on its own data.
+//! Adam trajectory (params at their own learning rate, clipped gradients, Adam state handed
+//! over), for every activation, sub-steps, `next` models, hidden states, and the shipped
+//! bioreactor GB2 model on its own data.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -166,11 +167,9 @@ fn gradients_match_the_backend_with_substeps_and_for_next_models() {
     assert_matches_backend(&discrete, &setup_next, &batch, 1e-11, false);
 }
 
-/// The shipped GB2 model on pairs of its shipped record, with the normalisation `gbc train`
-/// would use, at its initial weights (random weights of order one make its gradients of
-/// order 1e6, where f32 rounding of the two summation orders differs by 1e-4).
-#[test]
-fn gradients_match_the_backend_for_the_bioreactor_gb2_model() {
+/// The shipped GB2 model, a batch of the first `rows` pairs of its shipped record, and the
+/// setup `gbc train` would use for them in `precision`.
+fn bioreactor_gb2(rows: usize, precision: Precision) -> (ir::Model, Batch, Setup) {
     use crate::train::pairs::{first_pair_row, stage_fractions, PairTable};
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let model = crate::driver::compile_file(&root.join("models/bioreactor/gb2.gbm"), &[])
@@ -185,21 +184,147 @@ fn gradients_match_the_backend_for_the_bioreactor_gb2_model() {
     .unwrap();
     let record = crate::train::record_of(&model, &data).unwrap();
     let first = first_pair_row(&model, record.step);
-    let rows: Vec<usize> = (first..first + 40).collect();
+    let pairs: Vec<usize> = (first..first + rows).collect();
     let fractions = stage_fractions(model.dynamics, 1);
-    let table = PairTable::build(&model, &record, &rows, &[], &fractions);
-    let batch = table.batch(&(0..40).collect::<Vec<_>>());
+    let table = PairTable::build(&model, &record, &pairs, &[], &fractions);
+    let batch = table.batch(&(0..rows).collect::<Vec<_>>());
+    let setup = Setup {
+        step: record.step,
+        substeps: 1,
+        precision,
+        seed: 0,
+        normalisation: crate::train::normalise(&record, first + rows + 1),
+        scales: vec![vec![1.0; 3]],
+    };
+    (model, batch, setup)
+}
+
+/// The shipped GB2 model on pairs of its shipped record, with the normalisation `gbc train`
+/// would use, at its initial weights (random weights of order one make its gradients of
+/// order 1e6, where f32 rounding of the two summation orders differs by 1e-4).
+#[test]
+fn gradients_match_the_backend_for_the_bioreactor_gb2_model() {
     for (precision, tolerance) in [(Precision::F64, 1e-10), (Precision::F32, 1e-5)] {
-        let setup = Setup {
-            step: record.step,
-            substeps: 1,
-            precision,
-            seed: 0,
-            normalisation: crate::train::normalise(&record, first + 41),
-            scales: vec![vec![1.0; 3]],
-        };
+        let (model, batch, setup) = bioreactor_gb2(40, precision);
         assert_matches_backend(&model, &setup, &batch, tolerance, true);
     }
+}
+
+/// The first Adam step from zero moments moves weight `i` by
+/// `rate g_i / (|g_i| + 1e-8)` against the clipped gradient `g = factor * gradient` (the
+/// bias corrections cancel): the params at `param_rate`, the network weights at `rate`.
+fn assert_first_step(
+    before: &[NamedTensor],
+    after: &[NamedTensor],
+    (gradient, factor): (&[Vec<f64>], f64),
+    (rate, param_rate): (f64, f64),
+) {
+    for ((old, new), gradient) in before.iter().zip(after).zip(gradient) {
+        let rate = if old.name == "params" {
+            param_rate
+        } else {
+            rate
+        };
+        for ((a, b), g) in old.values.iter().zip(&new.values).zip(gradient) {
+            let clipped = factor * g;
+            let expected = -rate * clipped / (clipped.abs() + 1e-8);
+            assert!(
+                (b - a - expected).abs() <= 1e-9 * rate,
+                "{}: moved by {} instead of {expected}",
+                old.name,
+                b - a
+            );
+        }
+    }
+}
+
+/// GB2 has params: at a param learning rate ten times the network's and a gradient clipped
+/// to 1e-4 of its norm (so small that Adam's epsilon shows), the fused step follows the
+/// backend step for step (f64), and the first step is the one Adam takes by hand.
+#[test]
+fn param_learning_rate_and_clipping_follow_the_backend_on_gb2() {
+    let (model, batch, setup) = bioreactor_gb2(50, Precision::F64);
+    let mut network = Network::build(&model, &setup).unwrap();
+    let mut fused = FusedNetwork::build(&model, &setup).unwrap();
+    let (_, gradient) = network.gradient(&batch).unwrap();
+    let norm = gradient.iter().flatten().map(|g| g * g).sum::<f64>().sqrt();
+    let settings = StepSettings {
+        learning_rate: 1e-3,
+        param_learning_rate: 1e-2,
+        max_gradient_norm: Some(norm * 1e-4),
+    };
+    let initial = network.weights();
+    for step in 0..4 {
+        let expected = network.train_step_with(&batch, &settings).unwrap();
+        let found = fused.train_step_with(&batch, &settings).unwrap();
+        assert!(
+            (found / expected - 1.0).abs() < 1e-12,
+            "step {step}: {found} vs {expected}"
+        );
+        if step == 0 {
+            let rates = (settings.learning_rate, settings.param_learning_rate);
+            for weights in [network.weights(), fused.weights()] {
+                assert_first_step(&initial, &weights, (&gradient, 1e-4), rates);
+            }
+        }
+    }
+    for (a, b) in network.weights().iter().zip(fused.weights()) {
+        for (x, y) in a.values.iter().zip(&b.values) {
+            assert!(
+                (x - y).abs() <= 1e-10 * x.abs().max(1e-3),
+                "{}: {x} vs {y}",
+                a.name
+            );
+        }
+    }
+    let (graph_state, fused_state) = (network.adam_state(), fused.adam_state());
+    assert_eq!((graph_state.steps, fused_state.steps), (4, 4));
+    let pairs = (graph_state.second.iter().flatten()).zip(fused_state.second.iter().flatten());
+    for (a, b) in pairs {
+        assert!((a - b).abs() <= 1e-10 * a.abs(), "second moment {a} vs {b}");
+    }
+}
+
+/// Weights and Adam state handed from the backend to the fused step mid-way: the next steps
+/// are the ones the backend takes itself (a fresh Adam state would make the step sizes of
+/// a first step instead).
+#[test]
+fn adam_state_hands_over_between_the_engines() {
+    let model = kitchen_sink(Activation::Softplus);
+    let setup = setup(&model, Precision::F32, 1);
+    let mut network = Network::build(&model, &setup).unwrap();
+    for step in 0..3 {
+        network
+            .train_step(&random_batch(&model, &setup, 8, step), 1e-2)
+            .unwrap();
+    }
+    let mut fused = FusedNetwork::build(&model, &setup).unwrap();
+    fused.set_weights(&network.weights()).unwrap();
+    fused.set_adam_state(&network.adam_state()).unwrap();
+    assert_eq!(
+        fused.adam_state(),
+        network.adam_state(),
+        "f32 moments survive f64 exactly"
+    );
+    let mut fresh = FusedNetwork::build(&model, &setup).unwrap();
+    fresh.set_weights(&network.weights()).unwrap();
+    let batch = random_batch(&model, &setup, 8, 3);
+    network.train_step(&batch, 1e-2).unwrap();
+    fused.train_step(&batch, 1e-2).unwrap();
+    fresh.train_step(&batch, 1e-2).unwrap();
+    let distance = |a: &[NamedTensor], b: &[NamedTensor]| {
+        (a.iter().zip(b))
+            .flat_map(|(x, y)| x.values.iter().zip(&y.values).map(|(p, q)| (p - q).abs()))
+            .fold(0.0_f64, f64::max)
+    };
+    assert!(distance(&network.weights(), &fused.weights()) < 1e-5);
+    assert!(distance(&network.weights(), &fresh.weights()) > 1e-3);
+    let mut wrong = network.adam_state();
+    wrong.first.pop();
+    assert!(matches!(
+        fused.set_adam_state(&wrong),
+        Err(BackendError::WeightsMismatch(_))
+    ));
 }
 
 #[test]

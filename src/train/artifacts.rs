@@ -11,8 +11,8 @@ use crate::backend::{NamedTensor, Network, Normalisation, Precision, Setup};
 use crate::ir;
 
 use super::{
-    Metrics, ParamEstimate, PolishSummary, Recipe, StiffnessWarning, TrainError, TrainOptions,
-    Trained,
+    Engine, Metrics, ParamEstimate, PolishSummary, Recipe, StiffnessWarning, TrainError,
+    TrainOptions, Trained,
 };
 
 /// File name of the weights inside a run directory.
@@ -118,6 +118,9 @@ pub struct TrainingInfo {
     pub validation_pairs: usize,
     /// Mean loss of the last epoch.
     pub final_loss: Option<f64>,
+    /// What ran the one-step epochs (runs saved before it was recorded: the graph backend).
+    #[serde(default)]
+    pub engine: Engine,
 }
 
 /// sha256 of a text, lowercase hex.
@@ -195,6 +198,7 @@ pub fn run_info(
             train_pairs: report.train_pairs,
             validation_pairs: report.validation_pairs,
             final_loss: report.losses.last().copied(),
+            engine: options.engine,
         },
         recipe: Some(report.recipe.clone()),
         estimates: report.estimates.clone(),

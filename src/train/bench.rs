@@ -23,25 +23,7 @@ use super::evaluate::run_in_hidden;
 use super::pairs::{first_pair_row, stage_fractions, PairTable};
 use super::{analysis, hidden_initial_values, normalise, record_of, TrainError};
 
-/// Which implementation of the training step is timed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Engine {
-    /// The graph backend, [`Network`]: what `gbc train` runs.
-    Graph,
-    /// The hand-fused step, [`FusedNetwork`] (performance study, `src/fused/`).
-    Fused,
-}
-
-impl Engine {
-    /// The name used in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Engine::Graph => "graph",
-            Engine::Fused => "fused",
-        }
-    }
-}
+pub use super::Engine;
 
 /// What to time.
 #[derive(Debug, Clone, PartialEq)]

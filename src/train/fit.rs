@@ -1,25 +1,37 @@
 //! The epochs of training: one-step epochs of shuffled pair batches and, for the
 //! multi-step objective, rollout epochs over shuffled shooting windows (see
 //! [`super::recipe`]).
+//!
+//! With [`Engine::Fused`] the one-step epochs run on a [`FusedNetwork`] and everything else
+//! on the graph [`Network`]: whichever of the two stepped last holds the current weights
+//! and Adam state, and hands both over before the other one steps (at the curriculum's
+//! switch to rollouts, and at the end, so that the polish and the evaluation see the
+//! trained network). Hidden states are refreshed through the graph network after it has
+//! been given the fused step's current weights.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{Network, StepSettings};
+use crate::backend::{BackendError, Batch, Network, Setup, StepSettings};
+use crate::fused::FusedNetwork;
 use crate::ir;
 
 use super::pairs::stage_fractions;
 use super::windows::{rollout_batch, shooting_starts};
-use super::{refresh_hidden, Event, Recipe, Split, TrainError, TrainOptions};
+use super::{refresh_hidden, Engine, Event, Recipe, Split, TrainError, TrainOptions};
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
     pub model: &'a ir::Model,
+    pub setup: &'a Setup,
     pub options: &'a TrainOptions,
     pub recipe: &'a Recipe,
     pub hidden_init: &'a [f64],
 }
+
+/// One Adam step on a one-step batch with the given settings; the loss before it.
+type OneStep<'s> = dyn FnMut(&Batch, &StepSettings) -> Result<f64, BackendError> + 's;
 
 impl Fit<'_> {
     fn settings(&self) -> StepSettings {
@@ -31,7 +43,8 @@ impl Fit<'_> {
         }
     }
 
-    /// Runs every epoch; returns the mean training loss of each.
+    /// Runs every epoch; returns the mean training loss of each. `network` ends with the
+    /// trained weights and Adam state whichever engine ran the one-step epochs.
     pub fn run(
         &self,
         network: &mut Network,
@@ -42,20 +55,19 @@ impl Fit<'_> {
         let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
+        let mut engines = Engines::new(network, options.engine, self.model, self.setup)?;
         for epoch in 1..=options.epochs {
-            if epoch > 1 {
-                refresh_hidden(network, self.model, training, &fractions, self.hidden_init)?;
+            if epoch > 1 && !self.model.hidden.is_empty() {
+                let current = engines.current_weights()?;
+                refresh_hidden(current, self.model, training, &fractions, self.hidden_init)?;
             }
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
-            let loss = if horizon <= 1 {
-                self.one_step_epoch(network, training, &mut rng)
-            } else {
-                self.rollout_epoch(network, training, (horizon, &fractions), &mut rng)
-            }
-            .map_err(|found| match found {
-                EpochFailure::Backend(error) => TrainError::Backend(error),
-                EpochFailure::NotFinite(loss) => TrainError::Diverged { epoch, loss },
-            })?;
+            let loss = self
+                .epoch(&mut engines, training, (horizon, &fractions), &mut rng)
+                .map_err(|found| match found {
+                    EpochFailure::Backend(error) => TrainError::Backend(error),
+                    EpochFailure::NotFinite(loss) => TrainError::Diverged { epoch, loss },
+                })?;
             losses.push(loss);
             on_event(Event::Epoch {
                 epoch,
@@ -63,12 +75,34 @@ impl Fit<'_> {
                 horizon,
             });
         }
+        engines.graph()?;
         Ok(losses)
+    }
+
+    /// One epoch of `horizon`-step windows (1: one-step pairs) on the engine that runs it.
+    fn epoch(
+        &self,
+        engines: &mut Engines,
+        training: &Split,
+        (horizon, fractions): (usize, &[f64]),
+        rng: &mut ChaCha8Rng,
+    ) -> Result<f64, EpochFailure> {
+        if horizon > 1 {
+            let network = engines.graph()?;
+            return self.rollout_epoch(network, training, (horizon, fractions), rng);
+        }
+        if engines.fused.is_some() {
+            let fused = engines.fused()?;
+            self.one_step_epoch(&mut |b, s| fused.train_step_with(b, s), training, rng)
+        } else {
+            let network = engines.graph()?;
+            self.one_step_epoch(&mut |b, s| network.train_step_with(b, s), training, rng)
+        }
     }
 
     fn one_step_epoch(
         &self,
-        network: &mut Network,
+        step: &mut OneStep,
         training: &Split,
         rng: &mut ChaCha8Rng,
     ) -> Result<f64, EpochFailure> {
@@ -77,7 +111,7 @@ impl Fit<'_> {
         order.shuffle(rng);
         let mut total = 0.0;
         for chunk in order.chunks(self.options.batch_size) {
-            let loss = network.train_step_with(&training.table.batch(chunk), &settings)?;
+            let loss = step(&training.table.batch(chunk), &settings)?;
             finite(loss)?;
             total += loss * chunk.len() as f64;
         }
@@ -98,7 +132,8 @@ impl Fit<'_> {
         let phase = rng.gen_range(0..horizon);
         let mut starts = shooting_starts(first, pairs, horizon, phase);
         if starts.is_empty() {
-            return self.one_step_epoch(network, training, rng);
+            let step = &mut |b: &Batch, s: &StepSettings| network.train_step_with(b, s);
+            return self.one_step_epoch(step, training, rng);
         }
         starts.shuffle(rng);
         let per_batch = (self.recipe.windows_per_batch)
@@ -119,6 +154,67 @@ impl Fit<'_> {
             total += loss * chunk.len() as f64;
         }
         Ok(total / starts.len() as f64)
+    }
+}
+
+/// The graph network and, with [`Engine::Fused`], the fused step; `fused_holds` says
+/// whether the fused step has stepped since it last handed over, i.e. holds the current
+/// weights and Adam state.
+struct Engines<'n> {
+    network: &'n mut Network,
+    fused: Option<FusedNetwork>,
+    fused_holds: bool,
+}
+
+impl<'n> Engines<'n> {
+    /// The engines for `engine`; the fused step, if any, is built (so that a model it
+    /// refuses fails before the first epoch).
+    fn new(
+        network: &'n mut Network,
+        engine: Engine,
+        model: &ir::Model,
+        setup: &Setup,
+    ) -> Result<Self, BackendError> {
+        let fused = match engine {
+            Engine::Graph => None,
+            Engine::Fused => Some(FusedNetwork::build(model, setup)?),
+        };
+        Ok(Engines {
+            network,
+            fused,
+            fused_holds: false,
+        })
+    }
+
+    /// The graph network, given the fused step's weights and Adam state if it holds them.
+    fn graph(&mut self) -> Result<&mut Network, BackendError> {
+        if let Some(fused) = self.fused.as_ref().filter(|_| self.fused_holds) {
+            self.network.set_weights(&fused.weights())?;
+            self.network.set_adam_state(&fused.adam_state())?;
+            self.fused_holds = false;
+        }
+        Ok(self.network)
+    }
+
+    /// The fused step, given the graph network's weights and Adam state if it holds them.
+    fn fused(&mut self) -> Result<&mut FusedNetwork, BackendError> {
+        let fused = (self.fused.as_mut())
+            .ok_or_else(|| BackendError::internal("a fused epoch without a fused step"))?;
+        if !self.fused_holds {
+            fused.set_weights(&self.network.weights())?;
+            fused.set_adam_state(&self.network.adam_state())?;
+            self.fused_holds = true;
+        }
+        Ok(fused)
+    }
+
+    /// The graph network with the current weights (Adam's state stays where it is), for
+    /// computations that do not step.
+    fn current_weights(&mut self) -> Result<&Network, BackendError> {
+        if let Some(fused) = self.fused.as_ref().filter(|_| self.fused_holds) {
+            self.network.set_weights(&fused.weights())?;
+        }
+        Ok(self.network)
     }
 }
 

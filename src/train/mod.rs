@@ -49,7 +49,7 @@ use evaluate::run_in_hidden;
 pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 use pairs::{first_pair_row, stage_fractions, PairTable, Record};
 pub use polish::{ParamEstimate, PolishSummary};
-pub use recipe::{Objective, Recipe};
+pub use recipe::{Engine, Objective, Recipe};
 pub use validation::Validation;
 use validation::{refresh_hidden, validate, validation_splits, Split};
 
@@ -75,6 +75,8 @@ pub struct TrainOptions {
     pub substeps: usize,
     /// Length (model time) of the online free run; `None` runs to the end.
     pub online_horizon: Option<f64>,
+    /// Which implementation runs the one-step epochs.
+    pub engine: Engine,
 }
 
 impl Default for TrainOptions {
@@ -88,6 +90,7 @@ impl Default for TrainOptions {
             precision: Precision::F32,
             substeps: 1,
             online_horizon: None,
+            engine: Engine::Graph,
         }
     }
 }
@@ -279,6 +282,7 @@ pub fn train_with(
     }
     let fit = fit::Fit {
         model,
+        setup: &setup,
         options,
         recipe,
         hidden_init: &hidden_init,

@@ -38,6 +38,35 @@ impl Objective {
     }
 }
 
+/// Which implementation runs the one-step training epochs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    /// The graph backend, [`crate::backend::Network`], for every epoch.
+    #[default]
+    Graph,
+    /// The hand-fused step, [`crate::fused::FusedNetwork`], for the one-step epochs (the
+    /// same result up to rounding, about twice as fast); rollouts, hidden-state refreshes,
+    /// the polish and the evaluation run on the graph backend, which takes over the
+    /// weights and Adam's state.
+    Fused,
+}
+
+impl Engine {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Graph => "graph",
+            Engine::Fused => "fused",
+        }
+    }
+
+    /// Whether this is the graph backend (the default, left out of study files).
+    pub fn is_graph(&self) -> bool {
+        *self == Engine::Graph
+    }
+}
+
 /// Default longest rollout, in steps.
 pub const DEFAULT_HORIZON: usize = 50;
 /// Default share of epochs trained one-step before rollouts start.
@@ -67,8 +96,8 @@ pub struct Recipe {
     /// After training, fit the params by Levenberg-Marquardt with the network frozen
     /// ([`super::polish`]); `None`: on for the multi-step objective, off for one-step.
     pub polish: Option<bool>,
-    /// A free run stops when a measured state leaves `[0, factor * max]` (states never
-    /// negative in training) or `[-factor * max|x|, factor * max|x|]`, the extremes taken
+    /// A free run stops when a measured state leaves `[-0.1 * max, factor * max]` (states
+    /// never negative in training; see [`super::evaluate::UNDERSHOOT`]) or `[-factor * max|x|, factor * max|x|]`, the extremes taken
     /// over the training split, or becomes non-finite.
     pub range_factor: f64,
 }
