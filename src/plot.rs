@@ -238,7 +238,7 @@ impl Chart {
         let x = Axis::new(xs, self.x_log, MARGIN_LEFT, width - MARGIN_RIGHT);
         let y = Axis::new(all(), self.y_log, height - MARGIN_BOTTOM, MARGIN_TOP);
         let mut svg = String::new();
-        let _ = self.write_frame(&mut svg, &x, &y, width, height);
+        let _ = self.write_frame(&mut svg, (&x, true), &y, width, height);
         for (index, series) in self.series.iter().enumerate() {
             let color = series
                 .color
@@ -254,7 +254,7 @@ impl Chart {
     fn write_frame(
         &self,
         svg: &mut String,
-        x: &Axis,
+        (x, x_ticks): (&Axis, bool),
         y: &Axis,
         w: f64,
         h: f64,
@@ -271,7 +271,7 @@ impl Chart {
             escape(&self.title)
         )?;
         let (left, right, top, bottom) = (x.start, x.end, y.end, y.start);
-        for tick in x.ticks() {
+        for tick in x.ticks().into_iter().filter(|_| x_ticks) {
             let px = x.pixel(tick);
             writeln!(
                 svg,
@@ -439,7 +439,8 @@ impl BarChart {
         );
         let chart = Chart::new(&self.title, "", &self.y_label);
         let mut svg = String::new();
-        let _ = chart.write_frame(&mut svg, &Axis { log: false, ..x }, &y, width, height);
+        // The x axis only places the bars: no numeric ticks under the category names.
+        let _ = chart.write_frame(&mut svg, (&Axis { log: false, ..x }, false), &y, width, height);
         let plot_width = width - MARGIN_LEFT - MARGIN_RIGHT;
         let slot = plot_width / self.categories.len().max(1) as f64;
         let bar = slot * 0.8 / self.groups.len().max(1) as f64;
@@ -555,5 +556,12 @@ mod tests {
         };
         let svg = bars.to_svg(300.0, 200.0);
         assert_eq!(svg.matches("<rect x=").count(), 3, "frame + two bars");
+        // Category names label the x axis; no numeric ticks sit under them.
+        let x_labels: Vec<&str> = (svg.lines())
+            .filter(|l| l.contains(r#"text-anchor="middle">"#) && !l.contains("font-size"))
+            .filter(|l| !l.contains("></text>"))
+            .collect();
+        assert_eq!(x_labels.len(), 2, "{x_labels:?}");
+        assert!(x_labels[0].contains(">before<") && x_labels[1].contains(">after<"));
     }
 }
