@@ -440,7 +440,13 @@ impl BarChart {
         let chart = Chart::new(&self.title, "", &self.y_label);
         let mut svg = String::new();
         // The x axis only places the bars: no numeric ticks under the category names.
-        let _ = chart.write_frame(&mut svg, (&Axis { log: false, ..x }, false), &y, width, height);
+        let _ = chart.write_frame(
+            &mut svg,
+            (&Axis { log: false, ..x }, false),
+            &y,
+            width,
+            height,
+        );
         let plot_width = width - MARGIN_LEFT - MARGIN_RIGHT;
         let slot = plot_width / self.categories.len().max(1) as f64;
         let bar = slot * 0.8 / self.groups.len().max(1) as f64;

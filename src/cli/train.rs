@@ -20,8 +20,8 @@ use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, Engine, ErrorSet, Event, Objective, Recipe, TrainError, TrainOptions, Trained,
-    Validation,
+    self, artifacts, Engine, ErrorSet, Event, Objective, ParamSource, Recipe, TrainError,
+    TrainOptions, Trained, Validation,
 };
 
 /// The loss training minimises.
@@ -42,6 +42,17 @@ pub enum PolishArg {
     On,
     /// Never.
     Off,
+}
+
+/// Where the params come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ParamsArg {
+    /// From the balances where they determine the params, else trained with the network.
+    Auto,
+    /// Estimated from the balances alone before training and held fixed.
+    Balances,
+    /// Trained with the network by Adam, then polished (the paper's way).
+    Train,
 }
 
 /// Element type of training.
@@ -145,6 +156,12 @@ pub struct TrainArgs {
     /// Fit the params by Levenberg-Marquardt with the network frozen after training.
     #[arg(long, value_enum, default_value_t = PolishArg::Auto)]
     pub polish: PolishArg,
+    /// Where the params come from: `balances` estimates them from the balances alone
+    /// (closure outputs free per interval) before training and holds them fixed; `auto`
+    /// does so where the balances determine them (more measured states than closure
+    /// outputs, no hidden states) and for the multi-step objective; `train` trains them.
+    #[arg(long, value_enum, default_value_t = ParamsArg::Auto)]
+    pub params: ParamsArg,
     /// A free run stops when a state leaves [0, F x max] of the training data ([-F x max|x|,
     /// F x max|x|] for a state that was negative).
     #[arg(long, default_value_t = DEFAULT_RANGE_FACTOR, value_name = "F")]
@@ -234,6 +251,11 @@ pub fn recipe_of(args: &TrainArgs) -> Recipe {
             PolishArg::Off => Some(false),
         },
         range_factor: args.range_factor,
+        params: match (args.params, args.objective) {
+            (ParamsArg::Balances, _) => ParamSource::Balances,
+            (ParamsArg::Train, _) | (ParamsArg::Auto, ObjectiveArg::OneStep) => ParamSource::Train,
+            (ParamsArg::Auto, ObjectiveArg::MultiStep) => ParamSource::Auto,
+        },
     }
 }
 
@@ -357,12 +379,17 @@ fn print_params(trained: &Trained) {
     if report.params.is_empty() {
         return;
     }
-    match &report.polish {
-        Some(polish) => println!(
+    match (&report.polish, &report.balance_fit) {
+        (_, Some(fit)) => println!(
+            "params (from the balances over {} intervals, held fixed in training; rms scaled \
+             residual {:.3e}; +- standard error):",
+            fit.intervals, fit.rms_residual
+        ),
+        (Some(polish), None) => println!(
             "params (polished in {} steps, one-step loss {:.4e} -> {:.4e}; +- standard error):",
             polish.steps, polish.loss_before, polish.loss_after
         ),
-        None => println!("params (+- standard error):"),
+        (None, None) => println!("params (+- standard error):"),
     }
     for estimate in &report.estimates {
         let flag = if estimate.well_identified {

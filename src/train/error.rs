@@ -164,6 +164,20 @@ pub enum TrainError {
         /// The missing column.
         column: String,
     },
+    /// `--params balances` for a model whose balances do not determine its params.
+    #[error(
+        "expected a model whose balances determine its params (`der` balances, no hidden \
+         states, more measured states than closure outputs, at least one param), found \
+         `{model}`"
+    )]
+    #[diagnostic(
+        code(gbm::E0422),
+        help("train the params with the network instead: `--params train` (or `auto`)")
+    )]
+    ParamsFromBalances {
+        /// The model's name.
+        model: String,
+    },
     /// The network failed.
     #[error(transparent)]
     #[diagnostic(transparent)]

@@ -28,6 +28,8 @@ pub(super) struct Fit<'a> {
     pub options: &'a TrainOptions,
     pub recipe: &'a Recipe,
     pub hidden_init: &'a [f64],
+    /// Hold the params at their initial values (they came from the balances).
+    pub freeze_params: bool,
 }
 
 /// One Adam step on a one-step batch with the given settings; the loss before it.
@@ -37,8 +39,11 @@ impl Fit<'_> {
     fn settings(&self) -> StepSettings {
         StepSettings {
             learning_rate: self.options.learning_rate,
-            param_learning_rate: (self.recipe.param_learning_rate)
-                .unwrap_or(self.options.learning_rate),
+            param_learning_rate: if self.freeze_params {
+                0.0
+            } else {
+                (self.recipe.param_learning_rate).unwrap_or(self.options.learning_rate)
+            },
             max_gradient_norm: self.recipe.max_gradient_norm,
         }
     }

@@ -21,6 +21,7 @@
 
 pub mod analysis;
 pub mod artifacts;
+pub mod balances;
 pub mod bench;
 mod error;
 pub mod evaluate;
@@ -44,12 +45,13 @@ use crate::data::Dataset;
 use crate::ir;
 
 pub use analysis::StiffnessWarning;
+pub use balances::BalanceFit;
 pub use error::TrainError;
 use evaluate::run_in_hidden;
 pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 use pairs::{first_pair_row, stage_fractions, PairTable, Record};
 pub use polish::{ParamEstimate, PolishSummary};
-pub use recipe::{Engine, Objective, Recipe};
+pub use recipe::{Engine, Objective, ParamSource, Recipe};
 pub use validation::Validation;
 use validation::{refresh_hidden, validate, validation_splits, Split};
 
@@ -172,6 +174,9 @@ pub struct TrainReport {
     pub estimates: Vec<ParamEstimate>,
     /// What the final polish of the params did, when it ran.
     pub polish: Option<PolishSummary>,
+    /// The params' estimate from the balances, when they came from there (then held
+    /// fixed while the network trained; see [`balances`]).
+    pub balance_fit: Option<BalanceFit>,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -241,6 +246,25 @@ pub fn train_with(
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }
+    let balance_fit = match recipe.params {
+        ParamSource::Train => None,
+        ParamSource::Auto | ParamSource::Balances => {
+            balances::estimate(model, &scales, &record, &train_rows)?
+        }
+    };
+    if recipe.params == ParamSource::Balances && balance_fit.is_none() {
+        return Err(TrainError::ParamsFromBalances {
+            model: model.name.clone(),
+        });
+    }
+    let fitted;
+    let model = match &balance_fit {
+        Some(fit) => {
+            fitted = with_initial_params(model, fit);
+            &fitted
+        }
+        None => model,
+    };
     let setup = Setup {
         step: record.step,
         substeps: options.substeps,
@@ -286,16 +310,20 @@ pub fn train_with(
         options,
         recipe,
         hidden_init: &hidden_init,
+        freeze_params: balance_fit.is_some(),
     };
     let losses = fit.run(&mut network, &mut training, on_event)?;
     refresh_hidden(&network, model, &mut training, &fractions, &hidden_init)?;
-    let (polish, estimates) = polish::polish_and_estimate(
-        &mut network,
-        model,
-        &training.table,
-        &setup,
-        recipe.polishes(model),
-    )?;
+    let (polish, estimates) = match &balance_fit {
+        Some(fit) => (None, fit.estimates.clone()),
+        None => polish::polish_and_estimate(
+            &mut network,
+            model,
+            &training.table,
+            &setup,
+            recipe.polishes(model),
+        )?,
+    };
     for split in &mut validating {
         let (offline, online) = validate(&network, model, split, context, &hidden_init)?;
         metrics.validations.push(ValidationErrors {
@@ -322,6 +350,7 @@ pub fn train_with(
         recipe: recipe.clone(),
         estimates,
         polish,
+        balance_fit,
     };
     Ok(Trained {
         network,
@@ -532,4 +561,13 @@ pub fn hidden_initial_values(model: &ir::Model) -> Result<Vec<f64>, TrainError> 
             }))
         })
         .collect()
+}
+
+/// `model` with its params' initial values set to the balance estimate.
+fn with_initial_params(model: &ir::Model, fit: &BalanceFit) -> ir::Model {
+    let mut fitted = model.clone();
+    for (param, estimate) in fitted.params.iter_mut().zip(&fit.estimates) {
+        param.init = estimate.value;
+    }
+    fitted
 }

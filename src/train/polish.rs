@@ -325,7 +325,7 @@ fn normal_equations(jacobian: &[Vec<f64>], residuals: &[f64]) -> (Vec<f64>, Vec<
 
 /// Solves the symmetric positive definite system `a x = b` by Cholesky; `None` when `a` is
 /// not numerically positive definite.
-fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+pub(super) fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
     let mut lower = vec![0.0; n * n];
     for i in 0..n {
         for j in 0..=i {

@@ -67,6 +67,31 @@ impl Engine {
     }
 }
 
+/// Where the params come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ParamSource {
+    /// From the balances when [`super::balances::applicable`] (then held fixed while the
+    /// network trains), else trained with the network.
+    #[default]
+    Auto,
+    /// Estimated from the balances alone before training, held fixed ([`super::balances`]).
+    Balances,
+    /// Trained with the network by Adam (and polished, see [`Recipe::polish`]): the paper's.
+    Train,
+}
+
+impl ParamSource {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            ParamSource::Auto => "auto",
+            ParamSource::Balances => "balances",
+            ParamSource::Train => "train",
+        }
+    }
+}
+
 /// Default longest rollout, in steps.
 pub const DEFAULT_HORIZON: usize = 50;
 /// Default share of epochs trained one-step before rollouts start.
@@ -100,6 +125,9 @@ pub struct Recipe {
     /// never negative in training; see [`super::evaluate::UNDERSHOOT`]) or `[-factor * max|x|, factor * max|x|]`, the extremes taken
     /// over the training split, or becomes non-finite.
     pub range_factor: f64,
+    /// Where the params come from (`Auto`: from the balances where they determine them).
+    #[serde(default)]
+    pub params: ParamSource,
 }
 
 impl Default for Recipe {
@@ -114,6 +142,7 @@ impl Default for Recipe {
             max_gradient_norm: None,
             polish: None,
             range_factor: DEFAULT_RANGE_FACTOR,
+            params: ParamSource::Auto,
         }
     }
 }
@@ -124,6 +153,7 @@ impl Recipe {
         Recipe {
             objective: Objective::OneStep,
             polish: Some(false),
+            params: ParamSource::Train,
             ..Recipe::default()
         }
     }

@@ -85,6 +85,8 @@ fn an_exploding_free_run_stops_where_it_leaves_the_physical_range() {
     let data = dataset(1.0, vec![("x", vec![1.0; 60])]);
     let recipe = Recipe {
         polish: Some(false),
+        // Keep a = 0.2: from the balances the flat record would give a = 0.
+        params: ParamSource::Train,
         ..Recipe::default()
     };
     let trained = train_with(
@@ -361,4 +363,63 @@ fn chemostat_rate() -> ClosureSpec<'static> {
         hidden: vec![8, 8],
         activation: crate::ir::Activation::Softplus,
     }
+}
+
+/// The default recipe takes GB1's yields from the balances and holds them while the
+/// network trains, on either engine; the paper's recipe trains them.
+#[test]
+fn yields_from_the_balances_are_held_through_training() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let model = crate::driver::compile_file(&root.join("models/bioreactor/gb1.gbm"), &[])
+        .unwrap()
+        .model;
+    let data = crate::data::read(
+        &root.join("models/bioreactor/data/steps.csv"),
+        &["u", "X", "A", "B", "S"],
+        crate::data::MinRows::new(2, "one step"),
+    )
+    .unwrap();
+    let recipe = Recipe {
+        horizon: 4,
+        ..Recipe::default()
+    };
+    for engine in [Engine::Graph, Engine::Fused] {
+        let options = TrainOptions {
+            engine,
+            precision: crate::backend::Precision::F64,
+            ..options(4, 200)
+        };
+        let trained = train_with(&model, &data, &[], &options, &recipe, &mut quiet).unwrap();
+        let report = &trained.report;
+        let fit = report
+            .balance_fit
+            .as_ref()
+            .expect("estimated from the balances");
+        assert!(report.polish.is_none());
+        for ((name, value), (estimate, truth)) in
+            (report.params.iter()).zip(fit.estimates.iter().zip([0.435, 0.607, 0.3]))
+        {
+            assert_eq!(name, &estimate.name);
+            assert!(
+                (value / estimate.value - 1.0).abs() < 1e-12,
+                "{name} moved: {value}"
+            );
+            assert!((value / truth - 1.0).abs() < 1e-6, "{name} = {value}");
+        }
+    }
+    let paper = train_with(
+        &model,
+        &data,
+        &[],
+        &options(2, 200),
+        &Recipe::paper(),
+        &mut quiet,
+    )
+    .unwrap();
+    assert!(paper.report.balance_fit.is_none());
+    assert!(paper
+        .report
+        .params
+        .iter()
+        .all(|(_, v)| (v - 0.5).abs() > 1e-9));
 }

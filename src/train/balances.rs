@@ -1,0 +1,752 @@
+//! Params from the balances alone, before any network is trained (beyond the paper).
+//!
+//! A grey-box model with more measured balances than closure outputs over-determines its
+//! rates: in the bioreactor the balances of X, A and B each fix one rate (mu, mu_A, mu_B)
+//! from the data, and the substrate balance, with those rates, leaves the yields as the
+//! only unknowns. The network is not needed to find them, and a network's small bias in a
+//! rate is exactly what moves a weakly identified constant far (`docs/training.md`).
+//!
+//! Over each interval `[t_i, t_i+1]` of the training rows the balances are evaluated at
+//! the interval's midpoint state `xbar_i` (the midpoint rule, second order) with the held
+//! input `u_i`, the raw params `theta` shared by all intervals, and the raw network outputs
+//! `n_i` of the interval, *free*: one unknown per closure output and interval, entering
+//! through the model's own priors and constraints (the backend's physics program). Windows
+//! of [`WINDOW`] consecutive intervals then ask, for every measured state `k`,
+//!
+//! ```text
+//! (x_k(end) - x_k(start)) / h = sum over the window's intervals of f_k(xbar_i, u_i, theta, n_i)
+//! ```
+//!
+//! (summing over a window averages measurement noise in the difference quotients; on
+//! noise-free data every window fits exactly whatever its length). The residuals, scaled by
+//! the spread of each state's window quotient, are minimised by Levenberg-Marquardt over
+//! `theta` and every `n_i` at once; the normal equations are block-arrow shaped (the
+//! outputs of different windows do not interact), so each step eliminates the outputs
+//! window by window and solves a `P x P` system for `theta` (Schur complement). Jacobians
+//! by central differences.
+//!
+//! Standard errors come from the same linearisation, `s^2 (Schur)^-1`, with `s^2` the
+//! residual sum of squares over the equations the outputs cannot absorb, mapped through each
+//! param's transform. With noise-free data the residuals are discretisation error and the
+//! errors are tiny; with noise they grow, and a constant the data barely see (the
+//! bioreactor's Y_X at 1 % noise) is flagged poorly identified. The noisy difference
+//! quotients are regressors too (errors in variables), so at high noise the estimate is
+//! biased as well as uncertain: the error says how sharply the balances pin a param, not a
+//! confidence interval.
+
+use crate::backend::program::{Program, ProgramInputs};
+use crate::backend::{initial_raw_params, BackendError};
+use crate::ir::{self, Dynamics};
+
+use super::pairs::Record;
+use super::polish::{solve, ParamEstimate, IDENTIFIABILITY_LIMIT};
+
+/// Most Levenberg-Marquardt iterations.
+const MAX_ITERATIONS: usize = 200;
+/// Intervals per window: each window's equation sums the balances of this many
+/// consecutive intervals against the state change over all of them, which averages
+/// measurement noise in the difference quotients (noise-free data fit exactly either way).
+pub const WINDOW: usize = 5;
+
+/// The params the balances give.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BalanceFit {
+    /// Intervals used.
+    pub intervals: usize,
+    /// Accepted Levenberg-Marquardt steps.
+    pub steps: usize,
+    /// Root mean square of the scaled residuals at the end.
+    pub rms_residual: f64,
+    /// Each param's value and standard error.
+    pub estimates: Vec<ParamEstimate>,
+    /// Raw (unconstrained) values, in declaration order.
+    #[serde(skip)]
+    pub raw: Vec<f64>,
+}
+
+/// Whether the balances determine the params without a network: a `der` model with
+/// params, no hidden states, and more measured balances than closure outputs.
+pub fn applicable(model: &ir::Model) -> bool {
+    let outputs: usize = model.closures.iter().map(|c| c.outputs.len()).sum();
+    model.dynamics == Dynamics::Continuous
+        && model.hidden.is_empty()
+        && !model.params.is_empty()
+        && outputs < model.states.len()
+}
+
+/// Estimates the params from the intervals starting at `rows` (each needs its successor in
+/// the record); `None` when [`applicable`] says no or the fit does not converge to finite
+/// values.
+pub fn estimate(
+    model: &ir::Model,
+    scales: &[Vec<f64>],
+    record: &Record,
+    rows: &[usize],
+) -> Result<Option<BalanceFit>, BackendError> {
+    if !applicable(model) {
+        return Ok(None);
+    }
+    let rows: Vec<usize> = (rows.iter().copied())
+        .filter(|&row| row + 1 < record.len())
+        .collect();
+    let program = Program::compile(model, scales)?;
+    let problem = Problem::new(model, program, record, &rows);
+    Ok(problem.and_then(|p| p.fit(model)))
+}
+
+/// The data of the fit.
+struct Problem {
+    program: Program,
+    /// Intervals.
+    rows: usize,
+    /// Measured states `K`.
+    measured: usize,
+    /// Per closure, its width; `m` is their sum.
+    widths: Vec<usize>,
+    /// `rows x K` midpoint states.
+    states: Vec<f64>,
+    /// `rows x inputs` held inputs.
+    inputs: Vec<f64>,
+    /// Windows of consecutive intervals, `[first, last)` interval indices.
+    windows: Vec<(usize, usize)>,
+    /// `windows x K` difference quotients `(x(end) - x(start)) / h` of each window.
+    targets: Vec<f64>,
+    /// Per measured state, 1 / spread of its window quotient.
+    weights: Vec<f64>,
+}
+
+/// The unknowns: raw params and per-interval raw network outputs (`rows x m`).
+#[derive(Clone)]
+struct Point {
+    theta: Vec<f64>,
+    outputs: Vec<f64>,
+}
+
+impl Problem {
+    fn new(model: &ir::Model, program: Program, record: &Record, rows: &[usize]) -> Option<Self> {
+        let measured = model.states.len();
+        let widths = program.shape().nets.clone();
+        measured.checked_sub(widths.iter().sum())?;
+        let (mut states, mut inputs) = (Vec::new(), Vec::new());
+        let mut windows: Vec<(usize, usize)> = Vec::new();
+        for (index, &row) in rows.iter().enumerate() {
+            for values in &record.states {
+                states.push(0.5 * (values[row] + values[row + 1]));
+            }
+            inputs.extend(record.inputs.iter().map(|u| u[row]));
+            match windows.last_mut() {
+                Some((first, last))
+                    if *last == index && index - *first < WINDOW && rows[index - 1] + 1 == row =>
+                {
+                    *last = index + 1
+                }
+                _ => windows.push((index, index + 1)),
+            }
+        }
+        if windows.len() * (measured - widths.iter().sum::<usize>()) <= model.params.len() {
+            return None;
+        }
+        let mut targets = Vec::with_capacity(windows.len() * measured);
+        for &(first, last) in &windows {
+            let (start, end) = (rows[first], rows[last - 1] + 1);
+            targets.extend((record.states.iter()).map(|v| (v[end] - v[start]) / record.step));
+        }
+        let weights = (0..measured)
+            .map(|k| {
+                let column: Vec<f64> = (0..windows.len())
+                    .map(|w| targets[w * measured + k])
+                    .collect();
+                let mean = column.iter().sum::<f64>() / column.len() as f64;
+                let spread = (column.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
+                    / column.len() as f64)
+                    .sqrt();
+                if spread > 0.0 && spread.is_finite() {
+                    1.0 / spread
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Some(Problem {
+            program,
+            rows: rows.len(),
+            measured,
+            widths,
+            states,
+            inputs,
+            windows,
+            targets,
+            weights,
+        })
+    }
+
+    fn outputs_per_row(&self) -> usize {
+        self.widths.iter().sum()
+    }
+
+    /// The measured balances `f` of every interval, `rows x K`.
+    fn balances(&self, point: &Point) -> Vec<f64> {
+        let m = self.outputs_per_row();
+        let nets: Vec<Vec<f64>> = (0..self.widths.len())
+            .map(|c| {
+                let offset: usize = self.widths[..c].iter().sum();
+                (0..self.rows)
+                    .flat_map(|r| (0..self.widths[c]).map(move |j| (r, j)))
+                    .map(|(r, j)| point.outputs[r * m + offset + j])
+                    .collect()
+            })
+            .collect();
+        let slices: Vec<&[f64]> = nets.iter().map(Vec::as_slice).collect();
+        let values = self.program.forward(&ProgramInputs {
+            rows: self.rows,
+            states: &self.states,
+            inputs: &self.inputs,
+            params: &point.theta,
+            nets: &slices,
+        });
+        let all = self
+            .program
+            .read(&values, self.rows, &self.program.balances);
+        let width = self.program.balances.len();
+        (0..self.rows)
+            .flat_map(|r| (0..self.measured).map(move |k| (r, k)))
+            .map(|(r, k)| all[r * width + k])
+            .collect()
+    }
+
+    /// Scaled residuals, `windows x K`: each window's quotient minus the sum of its
+    /// intervals' balances.
+    fn residuals(&self, point: &Point) -> Vec<f64> {
+        let balances = self.balances(point);
+        let k = self.measured;
+        let mut residuals = Vec::with_capacity(self.windows.len() * k);
+        for (w, &(first, last)) in self.windows.iter().enumerate() {
+            for state in 0..k {
+                let sum: f64 = (first..last).map(|l| balances[l * k + state]).sum();
+                residuals.push((self.targets[w * k + state] - sum) * self.weights[state]);
+            }
+        }
+        residuals
+    }
+
+    /// Central-difference derivatives of the interval balances (`rows x K` each): per raw
+    /// param, and per output slot `j` (slot `j` of every interval moved at once: an
+    /// interval's balances read only its own outputs).
+    fn jacobian(&self, point: &Point) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let difference = |up: Point, down: Point, delta: f64| {
+            let (a, b) = (self.balances(&up), self.balances(&down));
+            a.iter()
+                .zip(&b)
+                .map(|(a, b)| (a - b) / (2.0 * delta))
+                .collect::<Vec<f64>>()
+        };
+        let params = (0..point.theta.len())
+            .map(|p| {
+                let delta = 1e-6 * point.theta[p].abs().max(1.0);
+                let (mut up, mut down) = (point.clone(), point.clone());
+                up.theta[p] += delta;
+                down.theta[p] -= delta;
+                difference(up, down, delta)
+            })
+            .collect();
+        let m = self.outputs_per_row();
+        let slots = (0..m)
+            .map(|j| {
+                let delta = 1e-6;
+                let (mut up, mut down) = (point.clone(), point.clone());
+                for r in 0..self.rows {
+                    up.outputs[r * m + j] += delta;
+                    down.outputs[r * m + j] -= delta;
+                }
+                difference(up, down, delta)
+            })
+            .collect();
+        (params, slots)
+    }
+
+    /// The window blocks of the residuals' Jacobian: per window, `K x (intervals * m)` for
+    /// its outputs and `K x P` for the params (row-major).
+    fn window_jacobians(&self, point: &Point) -> Vec<WindowJacobian> {
+        let (dp, dn) = self.jacobian(point);
+        let (k, m) = (self.measured, self.outputs_per_row());
+        (self.windows.iter())
+            .map(|&(first, last)| {
+                let width = (last - first) * m;
+                let mut outputs = vec![0.0; k * width];
+                let mut params = vec![0.0; k * dp.len()];
+                for state in 0..k {
+                    let weight = -self.weights[state];
+                    for l in first..last {
+                        for j in 0..m {
+                            outputs[state * width + (l - first) * m + j] =
+                                weight * dn[j][l * k + state];
+                        }
+                        for (q, column) in dp.iter().enumerate() {
+                            params[state * dp.len() + q] += weight * column[l * k + state];
+                        }
+                    }
+                }
+                WindowJacobian { outputs, params }
+            })
+            .collect()
+    }
+
+    fn fit(&self, model: &ir::Model) -> Option<BalanceFit> {
+        let (p, m, k) = (model.params.len(), self.outputs_per_row(), self.measured);
+        let mut point = Point {
+            theta: initial_raw_params(model),
+            outputs: vec![0.0; self.rows * m],
+        };
+        let mut residuals = self.residuals(&point);
+        let mut cost = dot(&residuals, &residuals);
+        let (mut lambda, mut steps) = (1e-3, 0);
+        for _ in 0..MAX_ITERATIONS {
+            let system = Normal::build(&self.window_jacobians(&point), &residuals, k, p);
+            let Some((d_theta, d_windows)) = system.step(lambda) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let d_outputs: Vec<f64> = d_windows.into_iter().flatten().collect();
+            let trial = Point {
+                theta: point
+                    .theta
+                    .iter()
+                    .zip(&d_theta)
+                    .map(|(a, b)| a + b)
+                    .collect(),
+                outputs: (point.outputs.iter().zip(&d_outputs))
+                    .map(|(a, b)| a + b)
+                    .collect(),
+            };
+            let trial_residuals = self.residuals(&trial);
+            let trial_cost = dot(&trial_residuals, &trial_residuals);
+            if trial_cost.is_finite() && trial_cost < cost {
+                let converged = cost - trial_cost <= 1e-12 * cost;
+                (point, residuals, cost) = (trial, trial_residuals, trial_cost);
+                lambda = (lambda / 3.0).max(1e-12);
+                steps += 1;
+                if converged || cost == 0.0 {
+                    break;
+                }
+            } else {
+                lambda *= 5.0;
+                if lambda > 1e12 {
+                    break;
+                }
+            }
+        }
+        let system = Normal::build(&self.window_jacobians(&point), &residuals, k, p);
+        // Residual degrees of freedom: the windows' equations less what the outputs can
+        // absorb (at most K - 1 of a window's K equations) and the params.
+        let absorbed: usize = (self.windows.iter())
+            .map(|(first, last)| ((last - first) * m).min(k - 1))
+            .sum();
+        let freedom = (self.windows.len() * k).saturating_sub(absorbed + p).max(1) as f64;
+        let variance = cost / freedom;
+        let covariance = system.param_covariance();
+        let values = self.param_values(&point.theta);
+        let estimates = (0..p)
+            .map(|i| {
+                let slope = self.transform_slope(&point.theta, i);
+                let raw_variance = covariance.as_ref().map_or(f64::INFINITY, |c| c[i * p + i]);
+                let std_error = (variance * raw_variance).sqrt() * slope.abs();
+                let std_error = if std_error.is_finite() {
+                    std_error
+                } else {
+                    f64::INFINITY
+                };
+                let relative_error = std_error / values[i].abs();
+                ParamEstimate {
+                    name: model.params[i].name.clone(),
+                    value: values[i],
+                    std_error,
+                    relative_error,
+                    well_identified: relative_error < IDENTIFIABILITY_LIMIT,
+                }
+            })
+            .collect::<Vec<_>>();
+        if !estimates.iter().all(|e| e.value.is_finite()) {
+            return None;
+        }
+        Some(BalanceFit {
+            intervals: self.rows,
+            steps,
+            rms_residual: (cost / residuals.len().max(1) as f64).sqrt(),
+            estimates,
+            raw: point.theta,
+        })
+    }
+
+    /// Constrained param values for raw `theta` (through the program's transforms).
+    fn param_values(&self, theta: &[f64]) -> Vec<f64> {
+        let nets: Vec<Vec<f64>> = self.widths.iter().map(|&w| vec![0.0; w]).collect();
+        let slices: Vec<&[f64]> = nets.iter().map(Vec::as_slice).collect();
+        let values = self.program.forward(&ProgramInputs {
+            rows: 1,
+            states: &self.states[..self.measured],
+            inputs: &self.inputs[..self.inputs.len() / self.rows],
+            params: theta,
+            nets: &slices,
+        });
+        self.program.read(&values, 1, &self.program.param_values)
+    }
+
+    /// `d value_i / d raw_i` by central differences.
+    fn transform_slope(&self, theta: &[f64], i: usize) -> f64 {
+        let delta = 1e-6 * theta[i].abs().max(1.0);
+        let (mut up, mut down) = (theta.to_vec(), theta.to_vec());
+        up[i] += delta;
+        down[i] -= delta;
+        (self.param_values(&up)[i] - self.param_values(&down)[i]) / (2.0 * delta)
+    }
+}
+
+/// One window's Jacobian blocks, row-major with one row per measured state.
+struct WindowJacobian {
+    /// `K x (intervals * m)`.
+    outputs: Vec<f64>,
+    /// `K x P`.
+    params: Vec<f64>,
+}
+
+/// One window's share of the normal equations.
+struct WindowSystem {
+    /// Its unknown outputs.
+    width: usize,
+    /// `width x width`: `J_n' J_n`.
+    block: Vec<f64>,
+    /// `width x P`: `J_n' J_theta`.
+    coupling: Vec<f64>,
+    /// `width`: `J_n' r`.
+    gradient: Vec<f64>,
+}
+
+/// The params' system after eliminating every window's outputs: the Schur complement
+/// (`P x P`), its right-hand side, and per window `A^-1 B` and `A^-1 g` for the back
+/// substitution.
+type Reduced = (Vec<f64>, Vec<f64>, Vec<(Vec<f64>, Vec<f64>)>);
+
+/// The block-arrow normal equations `J'J d = -J'r` of one Levenberg-Marquardt step.
+struct Normal {
+    p: usize,
+    /// `P x P`: `sum_w J_theta,w' J_theta,w`.
+    params: Vec<f64>,
+    /// `P`: `J_theta' r`.
+    params_gradient: Vec<f64>,
+    windows: Vec<WindowSystem>,
+}
+
+impl Normal {
+    fn build(jacobians: &[WindowJacobian], r: &[f64], k: usize, p: usize) -> Self {
+        let mut params = vec![0.0; p * p];
+        let mut params_gradient = vec![0.0; p];
+        let mut windows = Vec::with_capacity(jacobians.len());
+        for (w, jacobian) in jacobians.iter().enumerate() {
+            let width = jacobian.outputs.len() / k.max(1);
+            let jn = |state: usize, a: usize| jacobian.outputs[state * width + a];
+            let jp = |state: usize, q: usize| jacobian.params[state * p + q];
+            let mut block = vec![0.0; width * width];
+            let mut coupling = vec![0.0; width * p];
+            let mut gradient = vec![0.0; width];
+            for state in 0..k {
+                let residual = r[w * k + state];
+                for a in 0..width {
+                    let ja = jn(state, a);
+                    if ja == 0.0 {
+                        continue;
+                    }
+                    gradient[a] += ja * residual;
+                    for b in 0..width {
+                        block[a * width + b] += ja * jn(state, b);
+                    }
+                    for q in 0..p {
+                        coupling[a * p + q] += ja * jp(state, q);
+                    }
+                }
+                for q in 0..p {
+                    params_gradient[q] += jp(state, q) * residual;
+                    for s in 0..p {
+                        params[q * p + s] += jp(state, q) * jp(state, s);
+                    }
+                }
+            }
+            windows.push(WindowSystem {
+                width,
+                block,
+                coupling,
+                gradient,
+            });
+        }
+        Normal {
+            p,
+            params,
+            params_gradient,
+            windows,
+        }
+    }
+
+    /// A block with Levenberg-Marquardt damping and a floor that keeps it invertible where
+    /// an output does not move any balance (a growth rate while the biomass is zero, or
+    /// the outputs of a window beyond what its equations fix).
+    fn damped(block: &[f64], n: usize, lambda: f64) -> Vec<f64> {
+        let trace = (0..n).map(|i| block[i * n + i]).sum::<f64>() / n.max(1) as f64;
+        let mut damped = block.to_vec();
+        for i in 0..n {
+            damped[i * n + i] += lambda * block[i * n + i] + 1e-9 * trace.max(1e-300);
+        }
+        damped
+    }
+
+    /// `A^-1 [coupling | gradient]` of one window.
+    fn eliminate(window: &WindowSystem, p: usize, lambda: f64) -> Option<(Vec<f64>, Vec<f64>)> {
+        let n = window.width;
+        let block = Self::damped(&window.block, n, lambda);
+        let mut inverse_coupling = vec![0.0; n * p];
+        for q in 0..p {
+            let column: Vec<f64> = (0..n).map(|a| window.coupling[a * p + q]).collect();
+            for (a, value) in solve(&block, &column, n)?.into_iter().enumerate() {
+                inverse_coupling[a * p + q] = value;
+            }
+        }
+        let inverse_gradient = solve(&block, &window.gradient, n)?;
+        Some((inverse_coupling, inverse_gradient))
+    }
+
+    /// The Schur complement `sum_w (C_w - B_w' A_w^-1 B_w)` (damped by `lambda`) and, with
+    /// it, each window's eliminated blocks.
+    fn schur(&self, lambda: f64) -> Option<Reduced> {
+        let p = self.p;
+        let mut schur = Self::damped(&self.params, p, lambda);
+        let mut rhs: Vec<f64> = self.params_gradient.iter().map(|g| -g).collect();
+        let mut eliminated = Vec::with_capacity(self.windows.len());
+        for window in &self.windows {
+            let (inverse_coupling, inverse_gradient) = Self::eliminate(window, p, lambda)?;
+            for q in 0..p {
+                for s in 0..p {
+                    schur[q * p + s] -= (0..window.width)
+                        .map(|a| window.coupling[a * p + q] * inverse_coupling[a * p + s])
+                        .sum::<f64>();
+                }
+                rhs[q] += (0..window.width)
+                    .map(|a| window.coupling[a * p + q] * inverse_gradient[a])
+                    .sum::<f64>();
+            }
+            eliminated.push((inverse_coupling, inverse_gradient));
+        }
+        Some((schur, rhs, eliminated))
+    }
+
+    /// The step `(d_theta, d_outputs per window)` of `(J'J + lambda diag) d = -J'r`;
+    /// `None` when a system is not positive definite.
+    fn step(&self, lambda: f64) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+        let p = self.p;
+        let (schur, rhs, eliminated) = self.schur(lambda)?;
+        let d_theta = if p == 0 {
+            Vec::new()
+        } else {
+            solve(&schur, &rhs, p)?
+        };
+        let d_windows = (self.windows.iter().zip(&eliminated))
+            .map(|(window, (inverse_coupling, inverse_gradient))| {
+                (0..window.width)
+                    .map(|a| {
+                        let coupled: f64 = (0..p)
+                            .map(|q| inverse_coupling[a * p + q] * d_theta[q])
+                            .sum();
+                        -inverse_gradient[a] - coupled
+                    })
+                    .collect()
+            })
+            .collect();
+        Some((d_theta, d_windows))
+    }
+
+    /// `(Schur complement)^-1` without damping: the raw params' covariance up to `s^2`.
+    fn param_covariance(&self) -> Option<Vec<f64>> {
+        let p = self.p;
+        let (schur, _, _) = self.schur(0.0)?;
+        let mut inverse = vec![0.0; p * p];
+        for column in 0..p {
+            let mut unit = vec![0.0; p];
+            unit[column] = 1.0;
+            for (row, value) in solve(&schur, &unit, p)?.into_iter().enumerate() {
+                inverse[row * p + column] = value;
+            }
+        }
+        Some(inverse)
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal as Gaussian};
+
+    use super::*;
+    use crate::train::fixtures::chemostat;
+
+    /// A shipped bioreactor model and the shipped record (noise-free, from truth.gbm).
+    fn bioreactor(model: &str) -> (ir::Model, Record) {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let model = crate::driver::compile_file(&root.join(model), &[])
+            .unwrap()
+            .model;
+        let data = crate::data::read(
+            &root.join("models/bioreactor/data/steps.csv"),
+            &["u", "X", "A", "B", "S"],
+            crate::data::MinRows::new(2, "one step"),
+        )
+        .unwrap();
+        let record = crate::train::record_of(&model, &data).unwrap();
+        (model, record)
+    }
+
+    fn unit_scales(model: &ir::Model) -> Vec<Vec<f64>> {
+        (model.closures.iter())
+            .map(|c| c.outputs.iter().map(|o| o.scale.unwrap_or(1.0)).collect())
+            .collect()
+    }
+
+    const TRUTH: [f64; 3] = [0.435, 0.607, 0.3];
+
+    #[test]
+    fn the_bioreactor_yields_come_from_the_balances_alone() {
+        // Truth (table 2): Y_X 0.435, Y_A 0.607, Y_B 0.3; both models start them at 0.5.
+        for file in ["models/bioreactor/gb1.gbm", "models/bioreactor/gb2.gbm"] {
+            let (model, record) = bioreactor(file);
+            let rows: Vec<usize> = (50..550).collect();
+            let fit = estimate(&model, &unit_scales(&model), &record, &rows)
+                .unwrap()
+                .expect("the balances determine the yields");
+            assert_eq!(fit.intervals, 500);
+            for (estimate, truth) in fit.estimates.iter().zip(TRUTH) {
+                assert!(
+                    (estimate.value / truth - 1.0).abs() < 1e-6,
+                    "{file}: {estimate:?}"
+                );
+                assert!(estimate.well_identified, "{file}: {estimate:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn with_measurement_noise_the_yields_stay_close_and_their_errors_grow() {
+        let (model, mut record) = bioreactor("models/bioreactor/gb1.gbm");
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let noise = Gaussian::new(0.0, 1e-3).unwrap();
+        for column in &mut record.states {
+            for value in column.iter_mut() {
+                *value *= 1.0 + noise.sample(&mut rng);
+            }
+        }
+        let rows: Vec<usize> = (50..1050).collect();
+        let fit = estimate(&model, &unit_scales(&model), &record, &rows)
+            .unwrap()
+            .unwrap();
+        let [y_x, y_a, y_b] = [0, 1, 2].map(|i| &fit.estimates[i]);
+        // Y_A and Y_B carry most of the substrate uptake and stay within 2 %; Y_X, a few
+        // per cent of it, within 10 %, and its standard error says it is the weak one.
+        assert!((y_a.value / TRUTH[1] - 1.0).abs() < 0.02, "{y_a:?}");
+        assert!((y_b.value / TRUTH[2] - 1.0).abs() < 0.02, "{y_b:?}");
+        assert!((y_x.value / TRUTH[0] - 1.0).abs() < 0.1, "{y_x:?}");
+        assert!(y_x.relative_error > 3.0 * y_a.relative_error, "{fit:?}");
+        assert!(
+            (y_x.value - TRUTH[0]).abs() < 3.0 * y_x.std_error,
+            "{y_x:?}"
+        );
+    }
+
+    #[test]
+    fn only_models_whose_balances_overdetermine_their_rates_qualify() {
+        let (gb1, _) = bioreactor("models/bioreactor/gb1.gbm");
+        assert!(applicable(&gb1));
+        // One balance, one closure output, no params.
+        assert!(!applicable(&chemostat::grey_box()));
+        // A discrete map.
+        assert!(!applicable(&chemostat::black_box()));
+        let mut hidden = gb1.clone();
+        hidden.hidden.push(hidden.states[0].clone());
+        assert!(!applicable(&hidden));
+    }
+
+    #[test]
+    fn the_eliminated_step_solves_the_full_normal_equations() {
+        // Three windows of K = 3 equations, two outputs each, two params: solve the whole
+        // damped system densely and compare.
+        let (k, p, widths) = (3, 2, [2, 2, 2]);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let unit = Gaussian::new(0.0, 1.0).unwrap();
+        let mut draw = |n: usize| -> Vec<f64> { (0..n).map(|_| unit.sample(&mut rng)).collect() };
+        let jacobians: Vec<WindowJacobian> = (widths.iter())
+            .map(|&w| WindowJacobian {
+                outputs: draw(k * w),
+                params: draw(k * p),
+            })
+            .collect();
+        let residuals = draw(widths.len() * k);
+        let lambda = 0.1;
+        let (d_theta, d_windows) = Normal::build(&jacobians, &residuals, k, p)
+            .step(lambda)
+            .unwrap();
+        // Dense J: rows = windows x K, columns = params then every window's outputs.
+        let columns = p + widths.iter().sum::<usize>();
+        let rows = widths.len() * k;
+        let mut dense = vec![0.0; rows * columns];
+        let mut offset = p;
+        for (w, jacobian) in jacobians.iter().enumerate() {
+            for state in 0..k {
+                let row = w * k + state;
+                for q in 0..p {
+                    dense[row * columns + q] = jacobian.params[state * p + q];
+                }
+                for a in 0..widths[w] {
+                    dense[row * columns + offset + a] = jacobian.outputs[state * widths[w] + a];
+                }
+            }
+            offset += widths[w];
+        }
+        let mut normal = vec![0.0; columns * columns];
+        let mut gradient = vec![0.0; columns];
+        for row in 0..rows {
+            for a in 0..columns {
+                gradient[a] -= dense[row * columns + a] * residuals[row];
+                for b in 0..columns {
+                    normal[a * columns + b] += dense[row * columns + a] * dense[row * columns + b];
+                }
+            }
+        }
+        // The same damping as `Normal::damped`, block by block.
+        let mut blocks = vec![(0, p)];
+        let mut start = p;
+        for &w in &widths {
+            blocks.push((start, w));
+            start += w;
+        }
+        let mut damped = normal.clone();
+        for &(start, n) in &blocks {
+            let trace = (start..start + n)
+                .map(|i| normal[i * columns + i])
+                .sum::<f64>()
+                / n as f64;
+            for i in start..start + n {
+                damped[i * columns + i] += lambda * normal[i * columns + i] + 1e-9 * trace;
+            }
+        }
+        let expected = solve(&damped, &gradient, columns).unwrap();
+        let found: Vec<f64> = d_theta
+            .into_iter()
+            .chain(d_windows.into_iter().flatten())
+            .collect();
+        for (a, b) in found.iter().zip(&expected) {
+            assert!(
+                (a - b).abs() < 1e-9 * b.abs().max(1.0),
+                "{found:?} vs {expected:?}"
+            );
+        }
+    }
+}
