@@ -241,6 +241,8 @@ enum Inner {
     Double(net::GreyBox<f64>),
 }
 
+/// Runs `$body` with `$net` bound to whichever precision the caller's `Inner::Single` /
+/// `Inner::Double` value holds (the network here and the fused step share that shape).
 macro_rules! dispatch {
     ($self:expr, $net:ident => $body:expr) => {
         match &$self.inner {
@@ -255,6 +257,7 @@ macro_rules! dispatch {
         }
     };
 }
+pub(crate) use dispatch;
 
 impl Network {
     /// Lowers `model` into a trainable network with freshly initialised weights.

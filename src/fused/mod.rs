@@ -39,7 +39,7 @@ mod tests;
 
 use crate::backend::real::Real;
 use crate::backend::{
-    AdamState, BackendError, Batch, NamedTensor, Network, Precision, Setup, StepSettings,
+    dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, Setup, StepSettings,
 };
 use crate::ir;
 
@@ -54,21 +54,6 @@ pub struct FusedNetwork {
 enum Inner {
     Single(Kernel<f32>),
     Double(Kernel<f64>),
-}
-
-macro_rules! dispatch {
-    ($self:expr, $kernel:ident => $body:expr) => {
-        match &$self.inner {
-            Inner::Single($kernel) => $body,
-            Inner::Double($kernel) => $body,
-        }
-    };
-    (mut $self:expr, $kernel:ident => $body:expr) => {
-        match &mut $self.inner {
-            Inner::Single($kernel) => $body,
-            Inner::Double($kernel) => $body,
-        }
-    };
 }
 
 impl FusedNetwork {
