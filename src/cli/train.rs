@@ -162,8 +162,8 @@ pub struct TrainArgs {
     /// outputs, no hidden states) and for the multi-step objective; `train` trains them.
     #[arg(long, value_enum, default_value_t = ParamsArg::Auto)]
     pub params: ParamsArg,
-    /// A free run stops when a state leaves [0, F x max] of the training data ([-F x max|x|,
-    /// F x max|x|] for a state that was negative).
+    /// A free run stops when a state leaves [-0.1 x max, F x max] of the training data
+    /// ([-F x max|x|, F x max|x|] for a state that was negative).
     #[arg(long, default_value_t = DEFAULT_RANGE_FACTOR, value_name = "F")]
     pub range_factor: f64,
     /// Directory to write the weights and run.json into.
