@@ -60,6 +60,9 @@ pub struct RunInfo {
     /// What the final polish of the params did, when it ran.
     #[serde(default)]
     pub polish: Option<PolishSummary>,
+    /// The params' estimate from the balances, when they came from there.
+    #[serde(default)]
+    pub balance_fit: Option<super::BalanceFit>,
     /// Validation errors.
     pub metrics: Metrics,
     /// Stiffness warnings issued.
@@ -203,6 +206,7 @@ pub fn run_info(
         recipe: Some(report.recipe.clone()),
         estimates: report.estimates.clone(),
         polish: report.polish.clone(),
+        balance_fit: report.balance_fit.clone(),
         metrics: report.metrics.clone(),
         warnings: report.warnings.clone(),
         weights: WEIGHTS_FILE.to_string(),
