@@ -7,50 +7,9 @@ use rand_chacha::ChaCha8Rng;
 use super::graph::{Graph, Matrix};
 use super::*;
 use crate::ir::{Activation, Constraint};
-use crate::train::fixtures::{rk4_reference, ClosureSpec, ModelBuilder, OutputSpec};
-
-/// A model exercising everything the physics layer does: an embedding over states and an
-/// input, a multiplicative and an additive prior, a scaled output, a positive and a bounded
-/// param (one inside a prior), a hidden state and a power.
-fn kitchen_sink(activation: Activation) -> ir::Model {
-    ModelBuilder::new("kitchen_sink")
-        .input("u")
-        .state("X")
-        .state("S")
-        .hidden("E", 0.2)
-        .constant("D", 0.1)
-        .param("Y", 0.5, Constraint::Positive)
-        .param("k", 1.5, Constraint::Bounds(0.5, 3.0))
-        .closure(ClosureSpec {
-            name: "rates",
-            outputs: vec![
-                OutputSpec {
-                    name: "a",
-                    scale: None,
-                    prior: Some(("*=", "0.5 * S / (1 + S)")),
-                },
-                OutputSpec {
-                    name: "b",
-                    scale: Some(0.3),
-                    prior: Some(("+=", "0.1 * u * X * Y")),
-                },
-                OutputSpec {
-                    name: "c",
-                    scale: Some(0.2),
-                    prior: None,
-                },
-            ],
-            observe: &["X", "S", "u"],
-            delay: 1.0,
-            dim: 3,
-            hidden: vec![5, 4],
-            activation,
-        })
-        .der("X", "(a - D) * X + c")
-        .der("S", "D * (2 - S) - a / Y * X + b - 0.1 * E * S ^ k")
-        .der("E", "(u - E) / 2")
-        .build()
-}
+use crate::train::fixtures::{
+    kitchen_sink, random_batch, rk4_reference, ClosureSpec, ModelBuilder, OutputSpec,
+};
 
 fn setup(precision: Precision, step: f64, substeps: usize, scales: Vec<Vec<f64>>) -> Setup {
     Setup {
@@ -66,30 +25,6 @@ fn setup(precision: Precision, step: f64, substeps: usize, scales: Vec<Vec<f64>>
             ..Normalisation::default()
         },
         scales,
-    }
-}
-
-/// A random batch with states in [0.5, 2] (so that `S ^ k` is defined).
-fn random_batch(model: &ir::Model, setup: &Setup, rows: usize, seed: u64) -> Batch {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut uniform = |count: usize, lo: f64, hi: f64| -> Vec<f64> {
-        (0..count).map(|_| rng.gen_range(lo..hi)).collect()
-    };
-    let states = model.states.len() + model.hidden.len();
-    let offsets = setup.stage_offsets(model.dynamics);
-    let embeddings = (model.closures.iter())
-        .map(|c| {
-            (0..offsets)
-                .map(|_| uniform(rows * c.embedding.width(), 0.5, 2.0))
-                .collect()
-        })
-        .collect();
-    Batch {
-        rows,
-        states: uniform(rows * states, 0.5, 2.0),
-        inputs: uniform(rows * model.inputs.len(), 0.0, 1.0),
-        embeddings,
-        targets: uniform(rows * model.states.len(), 0.5, 2.0),
     }
 }
 

@@ -251,10 +251,10 @@ pub fn recipe_of(args: &TrainArgs) -> Recipe {
             PolishArg::Off => Some(false),
         },
         range_factor: args.range_factor,
-        params: match (args.params, args.objective) {
-            (ParamsArg::Balances, _) => ParamSource::Balances,
-            (ParamsArg::Train, _) | (ParamsArg::Auto, ObjectiveArg::OneStep) => ParamSource::Train,
-            (ParamsArg::Auto, ObjectiveArg::MultiStep) => ParamSource::Auto,
+        params: match args.params {
+            ParamsArg::Auto => ParamSource::Auto,
+            ParamsArg::Balances => ParamSource::Balances,
+            ParamsArg::Train => ParamSource::Train,
         },
     }
 }

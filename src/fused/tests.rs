@@ -8,39 +8,8 @@ use rand_chacha::ChaCha8Rng;
 
 use super::*;
 use crate::backend::Normalisation;
-use crate::ir::{Activation, Constraint};
-use crate::train::fixtures::{chemostat, ClosureSpec, ModelBuilder, OutputSpec};
-
-/// Priors of both kinds, a scaled output, a positive and a bounded param, a hidden state,
-/// a power: every path of the physics program carries gradient.
-fn kitchen_sink(activation: Activation) -> ir::Model {
-    let output = |name, scale, prior| OutputSpec { name, scale, prior };
-    ModelBuilder::new("kitchen_sink")
-        .input("u")
-        .state("X")
-        .state("S")
-        .hidden("E", 0.2)
-        .constant("D", 0.1)
-        .param("Y", 0.5, Constraint::Positive)
-        .param("k", 1.5, Constraint::Bounds(0.5, 3.0))
-        .closure(ClosureSpec {
-            name: "rates",
-            outputs: vec![
-                output("a", None, Some(("*=", "0.5 * S / (1 + S)"))),
-                output("b", Some(0.3), Some(("+=", "0.1 * u * X * Y"))),
-                output("c", Some(0.2), None),
-            ],
-            observe: &["X", "S", "u"],
-            delay: 1.0,
-            dim: 3,
-            hidden: vec![5, 4],
-            activation,
-        })
-        .der("X", "(a - D) * X + c")
-        .der("S", "D * (2 - S) - a / Y * X + b - 0.1 * E * S ^ k")
-        .der("E", "(u - E) / 2")
-        .build()
-}
+use crate::ir::Activation;
+use crate::train::fixtures::{chemostat, kitchen_sink, random_batch};
 
 fn setup(model: &ir::Model, precision: Precision, substeps: usize) -> Setup {
     let measured = model.states.len();
@@ -59,30 +28,6 @@ fn setup(model: &ir::Model, precision: Precision, substeps: usize) -> Setup {
         scales: (model.closures.iter())
             .map(|c| vec![0.7; c.outputs.len()])
             .collect(),
-    }
-}
-
-/// Random states in [0.5, 2] (so that `S ^ k` is defined), inputs and embeddings.
-fn random_batch(model: &ir::Model, setup: &Setup, rows: usize, seed: u64) -> Batch {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut uniform = |count: usize, lo: f64, hi: f64| -> Vec<f64> {
-        (0..count).map(|_| rng.gen_range(lo..hi)).collect()
-    };
-    let states = model.states.len() + model.hidden.len();
-    let offsets = setup.stage_offsets(model.dynamics);
-    let embeddings = (model.closures.iter())
-        .map(|c| {
-            (0..offsets)
-                .map(|_| uniform(rows * c.embedding.width(), 0.5, 2.0))
-                .collect()
-        })
-        .collect();
-    Batch {
-        rows,
-        states: uniform(rows * states, 0.5, 2.0),
-        inputs: uniform(rows * model.inputs.len(), 0.0, 1.0),
-        embeddings,
-        targets: uniform(rows * model.states.len(), 0.5, 2.0),
     }
 }
 

@@ -561,16 +561,27 @@ impl Normal {
         Some((d_theta, d_windows))
     }
 
-    /// `(Schur complement)^-1` without damping: the raw params' covariance up to `s^2`.
+    /// `(Schur complement)^-1` without damping: the raw params' covariance up to `s^2`,
+    /// with an infinite variance for a param the balances do not determine (its column of
+    /// the Jacobian is zero, or the closure outputs and other params absorb it: its Schur
+    /// diagonal is nothing next to its own curvature).
     fn param_covariance(&self) -> Option<Vec<f64>> {
         let p = self.p;
         let (schur, _, _) = self.schur(0.0)?;
+        let floor = Self::damped(&self.params, p, 0.0);
         let mut inverse = vec![0.0; p * p];
         for column in 0..p {
             let mut unit = vec![0.0; p];
             unit[column] = 1.0;
             for (row, value) in solve(&schur, &unit, p)?.into_iter().enumerate() {
                 inverse[row * p + column] = value;
+            }
+        }
+        for q in 0..p {
+            let curvature = self.params[q * p + q];
+            let left = schur[q * p + q] - (floor[q * p + q] - curvature);
+            if !(curvature > 0.0 && left > 1e-8 * curvature) {
+                inverse[q * p + q] = f64::INFINITY;
             }
         }
         Some(inverse)
@@ -659,6 +670,41 @@ mod tests {
             (y_x.value - TRUTH[0]).abs() < 3.0 * y_x.std_error,
             "{y_x:?}"
         );
+    }
+
+    #[test]
+    fn a_param_outside_the_balances_is_flagged_not_identified() {
+        // `unused` enters only an output: the balances say nothing about it, however
+        // exactly they fit (a flat record fits them to rounding).
+        let model = crate::driver::compile(
+            "t.gbm",
+            "model t\ntime h\ninput u\nstate X\nstate S\nparam k = 0.3 positive\n\
+             param unused = 2 positive\nclosure c {\n  outputs r ~ 0.1\n  observe X, S, u\n}\n\
+             output o = unused * X\nder X = r * X - 0.05 * X\n\
+             der S = 0.05 * (1 - S) - r * X / k\n",
+            &[],
+        )
+        .unwrap()
+        .model;
+        let record = Record {
+            step: 1.0,
+            times: (0..30).map(f64::from).collect(),
+            inputs: vec![vec![0.5; 30]],
+            states: vec![vec![1.0; 30], vec![0.5; 30]],
+        };
+        let rows: Vec<usize> = (0..29).collect();
+        let fit = estimate(&model, &unit_scales(&model), &record, &rows)
+            .unwrap()
+            .unwrap();
+        // Steady state: r = 0.05 from X, then 0.05 * 0.5 = 0.05 / k from S, so k = 2.
+        assert!((fit.estimates[0].value - 2.0).abs() < 1e-6, "{fit:?}");
+        assert!(fit.estimates[0].well_identified, "{fit:?}");
+        let unused = &fit.estimates[1];
+        assert!(
+            unused.std_error.is_infinite() && !unused.well_identified,
+            "{unused:?}"
+        );
+        assert_eq!(unused.value, 2.0);
     }
 
     #[test]

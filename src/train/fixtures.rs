@@ -7,6 +7,10 @@
 
 use std::collections::HashMap;
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::backend::{Batch, Setup};
 use crate::ir::{
     self, Activation, BinOp, Closure, ClosureOutput, Constraint, Dynamics, Embedding, Expr, Func,
     Network, Prior, PriorKind, Var,
@@ -529,3 +533,71 @@ pub mod chemostat {
             .build()
     }
 }
+
+/// Priors of both kinds, a scaled output, a positive and a bounded param, a hidden state,
+/// a power: every path of the physics program carries gradient.
+pub fn kitchen_sink(activation: Activation) -> ir::Model {
+    let output = |name, scale, prior| OutputSpec { name, scale, prior };
+    ModelBuilder::new("kitchen_sink")
+        .input("u")
+        .state("X")
+        .state("S")
+        .hidden("E", 0.2)
+        .constant("D", 0.1)
+        .param("Y", 0.5, Constraint::Positive)
+        .param("k", 1.5, Constraint::Bounds(0.5, 3.0))
+        .closure(ClosureSpec {
+            name: "rates",
+            outputs: vec![
+                output("a", None, Some(("*=", "0.5 * S / (1 + S)"))),
+                output("b", Some(0.3), Some(("+=", "0.1 * u * X * Y"))),
+                output("c", Some(0.2), None),
+            ],
+            observe: &["X", "S", "u"],
+            delay: 1.0,
+            dim: 3,
+            hidden: vec![5, 4],
+            activation,
+        })
+        .der("X", "(a - D) * X + c")
+        .der("S", "D * (2 - S) - a / Y * X + b - 0.1 * E * S ^ k")
+        .der("E", "(u - E) / 2")
+        .build()
+}
+
+/// Random states in [0.5, 2] (so that `S ^ k` is defined), inputs and embeddings.
+pub fn random_batch(model: &ir::Model, setup: &Setup, rows: usize, seed: u64) -> Batch {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut uniform = |count: usize, lo: f64, hi: f64| -> Vec<f64> {
+        (0..count).map(|_| rng.gen_range(lo..hi)).collect()
+    };
+    let states = model.states.len() + model.hidden.len();
+    let offsets = setup.stage_offsets(model.dynamics);
+    let embeddings = (model.closures.iter())
+        .map(|c| {
+            (0..offsets)
+                .map(|_| uniform(rows * c.embedding.width(), 0.5, 2.0))
+                .collect()
+        })
+        .collect();
+    Batch {
+        rows,
+        states: uniform(rows * states, 0.5, 2.0),
+        inputs: uniform(rows * model.inputs.len(), 0.0, 1.0),
+        embeddings,
+        targets: uniform(rows * model.states.len(), 0.5, 2.0),
+    }
+}
+
+/// Training options of the training tests: `epochs`, the first `train_points` pairs, seed 3.
+pub fn options(epochs: usize, train_points: usize) -> crate::train::TrainOptions {
+    crate::train::TrainOptions {
+        epochs,
+        train_points: Some(train_points),
+        seed: 3,
+        ..Default::default()
+    }
+}
+
+/// A training-event sink that ignores every event.
+pub fn quiet(_: crate::train::Event) {}

@@ -246,11 +246,10 @@ pub fn train_with(
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }
-    let balance_fit = match recipe.params {
-        ParamSource::Train => None,
-        ParamSource::Auto | ParamSource::Balances => {
-            balances::estimate(model, &scales, &record, &train_rows)?
-        }
+    let balance_fit = if recipe.params_from_balances() {
+        balances::estimate(model, &scales, &record, &train_rows)?
+    } else {
+        None
     };
     if recipe.params == ParamSource::Balances && balance_fit.is_none() {
         return Err(TrainError::ParamsFromBalances {

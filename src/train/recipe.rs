@@ -71,25 +71,15 @@ impl Engine {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ParamSource {
-    /// From the balances when [`super::balances::applicable`] (then held fixed while the
-    /// network trains), else trained with the network.
+    /// For the multi-step objective, from the balances when
+    /// [`super::balances::applicable`] (then held fixed while the network trains); else
+    /// trained with the network.
     #[default]
     Auto,
     /// Estimated from the balances alone before training, held fixed ([`super::balances`]).
     Balances,
     /// Trained with the network by Adam (and polished, see [`Recipe::polish`]): the paper's.
     Train,
-}
-
-impl ParamSource {
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            ParamSource::Auto => "auto",
-            ParamSource::Balances => "balances",
-            ParamSource::Train => "train",
-        }
-    }
 }
 
 /// Default longest rollout, in steps.
@@ -155,6 +145,16 @@ impl Recipe {
             polish: Some(false),
             params: ParamSource::Train,
             ..Recipe::default()
+        }
+    }
+
+    /// Whether the params are to be estimated from the balances before training (where
+    /// they determine them: see [`super::balances::applicable`]).
+    pub fn params_from_balances(&self) -> bool {
+        match self.params {
+            ParamSource::Balances => true,
+            ParamSource::Train => false,
+            ParamSource::Auto => self.objective == Objective::MultiStep,
         }
     }
 

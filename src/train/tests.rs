@@ -1,19 +1,8 @@
 //! Training tests on data simulated from the paper's chemostat (spec section 4).
 
 use super::evaluate::{online_error, simulate, Feed};
-use super::fixtures::chemostat;
+use super::fixtures::{chemostat, options, quiet};
 use super::*;
-
-fn options(epochs: usize, train_points: usize) -> TrainOptions {
-    TrainOptions {
-        epochs,
-        train_points: Some(train_points),
-        seed: 3,
-        ..TrainOptions::default()
-    }
-}
-
-fn quiet(_: Event) {}
 
 #[test]
 fn short_training_on_chemostat_data_cuts_the_validation_error() {

@@ -2,20 +2,9 @@
 //! the physical range, the polish of params and their standard errors, and validation on
 //! several records.
 
-use super::fixtures::{chemostat, dataset, ClosureSpec, ModelBuilder, OutputSpec};
+use super::fixtures::{chemostat, dataset, options, quiet, ClosureSpec, ModelBuilder, OutputSpec};
 use super::*;
 use crate::ir::Constraint;
-
-fn options(epochs: usize, train_points: usize) -> TrainOptions {
-    TrainOptions {
-        epochs,
-        train_points: Some(train_points),
-        seed: 3,
-        ..TrainOptions::default()
-    }
-}
-
-fn quiet(_: Event) {}
 
 #[test]
 fn multi_step_training_warms_up_then_rolls_out_and_improves_the_free_run() {
