@@ -62,6 +62,8 @@ pub struct EmbedEntry {
     pub state: usize,
     /// Multiplier.
     pub factor: f64,
+    /// The one batch row it applies to (`None`: every row).
+    pub row: Option<usize>,
 }
 
 /// The state-fed entries of a closure's network input.
@@ -132,6 +134,44 @@ where
         let scaled = Self::traced(b).try_mul(E::from_double(factor))?;
         let sum = Self::traced(a).try_add(scaled)?;
         Ok(self.keep(sum))
+    }
+
+    /// `a + diag(factors) b`: row `i` of `b` scaled by `factors[i]` (a step of its own
+    /// size per row).
+    pub fn axpy_rows(
+        &mut self,
+        a: &Matrix<E>,
+        factors: &[E],
+        b: &Matrix<E>,
+    ) -> Result<Matrix<E>, BackendError> {
+        let (rows, columns) = *a.shape();
+        if *b.shape() != (rows, columns) || factors.len() != rows {
+            return Err(BackendError::internal("axpy_rows operands differ in shape"));
+        }
+        let mut values = a.as_vec();
+        let b_values = b.as_vec();
+        for (row, &factor) in factors.iter().enumerate() {
+            let span = row * columns..(row + 1) * columns;
+            for (slot, &value) in values[span.clone()].iter_mut().zip(&b_values[span]) {
+                *slot += value * factor;
+            }
+        }
+        let result = self.device.try_tensor_from_vec(values, (rows, columns))?;
+        let (a_ghost, b_ghost, result_ghost) = (a.ghost(), b.ghost(), result.ghost());
+        let factors = factors.to_vec();
+        self.tape.add_backward_op(move |grads| {
+            let upstream = grads.get_or_alloc_mut(&result_ghost)?.to_vec();
+            accumulate(grads.get_or_alloc_mut(&a_ghost)?, &upstream);
+            let target = grads.get_or_alloc_mut(&b_ghost)?;
+            for (row, &factor) in factors.iter().enumerate() {
+                let span = row * columns..(row + 1) * columns;
+                for (slot, &g) in target[span.clone()].iter_mut().zip(&upstream[span]) {
+                    *slot += g * factor;
+                }
+            }
+            Ok(())
+        });
+        Ok(result)
     }
 
     /// A hidden-layer activation.
@@ -205,9 +245,10 @@ where
         for entry in &columns.entries {
             let (state_width, state_values) = (source_values.get(entry.source))
                 .filter(|(width, _)| entry.state < *width)
+                .filter(|_| entry.row.is_none_or(|row| row < rows))
                 .ok_or_else(|| BackendError::internal("embedding entry without a source"))?;
             let factor = E::from_double(entry.factor);
-            for row in 0..rows {
+            for row in entry_rows(entry, rows) {
                 values[row * width + entry.column] +=
                     state_values[row * state_width + entry.state] * factor;
             }
@@ -227,7 +268,7 @@ where
                 let target = grads.get_or_alloc_mut(ghost)?;
                 for entry in entries {
                     let factor = E::from_double(entry.factor);
-                    for row in 0..rows {
+                    for row in entry_rows(entry, rows) {
                         target[row * state_width + entry.state] +=
                             upstream[row * width + entry.column] * factor;
                     }
@@ -298,42 +339,56 @@ where
         Ok((result, values))
     }
 
-    /// Mean over steps, rows and measured states of
+    /// The weighted mean over steps, rows and measured states of
     /// `((prediction - target) * inverse_std)^2`: `predictions[k]` is compared with
-    /// `targets[k]` (`rows x measured`); measured states are the first `inverse_std.len()`
-    /// columns of each prediction.
+    /// `targets[k]` (`rows x measured`), each cell weighted by `weights[k]` where given
+    /// (0: not measured) and the sum divided by the number of cells of positive weight
+    /// (every cell when no weights are given); measured states are the first
+    /// `inverse_std.len()` columns of each prediction.
     pub fn normalised_mse(
         &mut self,
         predictions: &[Matrix<E>],
         targets: &[&[E]],
+        weights: &[Option<&[E]>],
         inverse_std: &[E],
     ) -> Result<Scalar<E>, BackendError> {
-        if predictions.len() != targets.len() || predictions.is_empty() {
+        if predictions.len() != targets.len()
+            || predictions.len() != weights.len()
+            || predictions.is_empty()
+        {
             return Err(BackendError::internal(
                 "loss needs one target block per step",
             ));
         }
         let (rows, width) = *predictions[0].shape();
         let measured = inverse_std.len();
-        let count = E::from_double((predictions.len() * rows * measured).max(1) as f64);
+        let mut cells = 0usize;
         let mut residuals = Vec::with_capacity(predictions.len());
         let mut total = E::ZERO;
-        for (prediction, target) in predictions.iter().zip(targets) {
+        for ((prediction, target), weight) in predictions.iter().zip(targets).zip(weights) {
             let values = prediction.as_vec();
-            if values.len() != rows * width || target.len() != rows * measured {
+            let weight_fits = weight.is_none_or(|w| w.len() == rows * measured);
+            if values.len() != rows * width || target.len() != rows * measured || !weight_fits {
                 return Err(BackendError::internal("loss blocks differ in size"));
             }
-            let mut scaled_residuals = vec![E::ZERO; rows * measured];
+            // Scaled residual times its weight: the gradient's factor per cell.
+            let mut weighted = vec![E::ZERO; rows * measured];
             for row in 0..rows {
                 for state in 0..measured {
-                    let scaled = (values[row * width + state] - target[row * measured + state])
-                        * inverse_std[state];
-                    scaled_residuals[row * measured + state] = scaled;
-                    total += scaled * scaled;
+                    let cell = row * measured + state;
+                    let w = weight.map_or(<E as Real>::ONE, |w| w[cell]);
+                    if w <= E::ZERO {
+                        continue;
+                    }
+                    cells += 1;
+                    let scaled = (values[row * width + state] - target[cell]) * inverse_std[state];
+                    weighted[cell] = w * scaled;
+                    total += w * scaled * scaled;
                 }
             }
-            residuals.push(scaled_residuals);
+            residuals.push(weighted);
         }
+        let count = E::from_double(cells.max(1) as f64);
         let loss = self.device.try_tensor_from_vec(vec![total / count], ())?;
         let loss_ghost = loss.ghost();
         let ghosts: Vec<_> = predictions.iter().map(|p| p.ghost()).collect();
@@ -371,6 +426,14 @@ where
     GradientBuffer<E>: DerefMut<Target = Vec<E>>,
 {
     Ok(grads.get_or_alloc_mut(tensor)?.to_vec())
+}
+
+/// The batch rows an embedding entry adds to.
+fn entry_rows(entry: &EmbedEntry, rows: usize) -> std::ops::Range<usize> {
+    match entry.row {
+        Some(row) => row..row + 1,
+        None => 0..rows,
+    }
 }
 
 fn accumulate<E: Real>(target: &mut [E], source: &[E]) {

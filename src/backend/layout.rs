@@ -53,6 +53,10 @@ pub struct PreparedStep<E: Element> {
     pub columns: Vec<Vec<Arc<EmbedColumns>>>,
     /// `rows x measured` targets (empty when predicting).
     pub targets: Vec<E>,
+    /// The step `h` of each row (kept in `f64`: the RK4 multiples are formed there).
+    pub step_sizes: Vec<f64>,
+    /// `rows x measured` loss weights (`None`: every cell weighs 1).
+    pub weights: Option<Vec<E>>,
 }
 
 impl ClosureLayout {
@@ -73,19 +77,24 @@ impl ClosureLayout {
         values
     }
 
-    /// The stage-estimate entries plus a rollout's feedback entries, each scaled by its
-    /// column's `1 / std`.
-    fn with_feedback(&self, feedback: &[super::Feedback]) -> Result<EmbedColumns, BackendError> {
+    /// The stage-estimate entries plus a rollout's feedback entries (each for its own
+    /// row), each scaled by its column's `1 / std`.
+    fn with_feedback(
+        &self,
+        feedback: &[super::Feedback],
+        rows: usize,
+    ) -> Result<EmbedColumns, BackendError> {
         let mut columns = (*self.state_columns).clone();
         for entry in feedback {
             let std = (self.column_std.get(entry.column))
-                .filter(|_| entry.sample >= 1)
+                .filter(|_| entry.sample >= 1 && entry.row < rows)
                 .ok_or_else(|| BackendError::internal("feedback outside the embedding"))?;
             columns.entries.push(EmbedEntry {
                 column: entry.column,
                 source: entry.sample,
                 state: entry.state,
                 factor: entry.weight / std,
+                row: Some(entry.row),
             });
         }
         Ok(columns)
@@ -104,6 +113,44 @@ fn expect(what: &str, actual: usize, expected: usize) -> Result<(), BackendError
 
 fn convert<E: Element>(values: &[f64]) -> Vec<E> {
     values.iter().map(|&v| E::from_double(v)).collect()
+}
+
+/// Each row's step: `given` when it has one per row, else `nominal` for every row.
+fn step_sizes(
+    given: Option<&Vec<f64>>,
+    rows: usize,
+    nominal: f64,
+) -> Result<Vec<f64>, BackendError> {
+    match given.filter(|g| !g.is_empty()) {
+        Some(sizes) => {
+            expect("step sizes", sizes.len(), rows)?;
+            if let Some(bad) = sizes.iter().find(|h| !(**h >= 0.0 && h.is_finite())) {
+                return Err(BackendError::internal(format!("a step of size {bad}")));
+            }
+            Ok(sizes.clone())
+        }
+        None => Ok(vec![nominal; rows]),
+    }
+}
+
+/// The loss weights of a step (`None` when the batch gives none).
+fn loss_weights<E: Element>(
+    given: Option<&Vec<f64>>,
+    rows: usize,
+    measured: usize,
+) -> Result<Option<Vec<E>>, BackendError> {
+    match given.filter(|g| !g.is_empty()) {
+        Some(weights) => {
+            expect("loss weights", weights.len(), rows * measured)?;
+            if weights.iter().any(|w| !(*w >= 0.0 && w.is_finite())) {
+                return Err(BackendError::internal(
+                    "a negative or non-finite loss weight",
+                ));
+            }
+            Ok(Some(convert(weights)))
+        }
+        None => Ok(None),
+    }
 }
 
 /// Normalised constant matrices of one step, `[closure][offset]`.
@@ -130,17 +177,30 @@ where
     Ok(constants)
 }
 
+/// What a batch is prepared against: the closures' layouts, the program's shape, the
+/// number of measured states and the nominal step.
+pub struct Frame<'a> {
+    /// Every closure's layout.
+    pub closures: &'a [ClosureLayout],
+    /// The physics program's shape.
+    pub shape: &'a super::program::ProgramShape,
+    /// Measured states (target columns).
+    pub measured: usize,
+    /// The step of rows that give none.
+    pub nominal_step: f64,
+}
+
 /// A one-step batch as a prepared batch of one step.
 pub fn prepare<E: Element>(
     graph: &Graph<E>,
-    closures: &[ClosureLayout],
-    shape: &super::program::ProgramShape,
+    frame: &Frame,
     batch: &Batch,
 ) -> Result<Prepared<E>, BackendError>
 where
     Cpu: Device<E>,
     GradientBuffer<E>: DerefMut<Target = Vec<E>>,
 {
+    let (closures, shape) = (frame.closures, frame.shape);
     let rows = batch.rows;
     expect("states", batch.states.len(), rows * shape.states)?;
     expect("inputs", batch.inputs.len(), rows * shape.inputs)?;
@@ -156,6 +216,8 @@ where
             constants,
             columns,
             targets: convert(&batch.targets),
+            step_sizes: step_sizes(Some(&batch.step_sizes), rows, frame.nominal_step)?,
+            weights: loss_weights(Some(&batch.weights), rows, frame.measured)?,
         }],
     })
 }
@@ -163,15 +225,23 @@ where
 /// A rollout batch as a prepared batch of `batch.steps` steps.
 pub fn prepare_rollout<E: Element>(
     graph: &Graph<E>,
-    closures: &[ClosureLayout],
-    shape: &super::program::ProgramShape,
+    frame: &Frame,
     batch: &RolloutBatch,
 ) -> Result<Prepared<E>, BackendError>
 where
     Cpu: Device<E>,
     GradientBuffer<E>: DerefMut<Target = Vec<E>>,
 {
+    let (closures, shape) = (frame.closures, frame.shape);
     let rows = batch.rows;
+    for (what, count) in [
+        ("step-size steps", batch.step_sizes.len()),
+        ("weight steps", batch.weights.len()),
+    ] {
+        if count != 0 {
+            expect(what, count, batch.steps)?;
+        }
+    }
     expect("states", batch.states.len(), rows * shape.states)?;
     expect("input steps", batch.inputs.len(), batch.steps)?;
     expect("embedding steps", batch.embeddings.len(), batch.steps)?;
@@ -189,7 +259,7 @@ where
         for ((closure, offsets), per_offset) in closures.iter().zip(feedback).zip(&constants) {
             expect("feedback offsets", offsets.len(), per_offset.len())?;
             let built = (offsets.iter())
-                .map(|entries| closure.with_feedback(entries).map(Arc::new))
+                .map(|entries| closure.with_feedback(entries, rows).map(Arc::new))
                 .collect::<Result<Vec<_>, _>>()?;
             columns.push(built);
         }
@@ -199,6 +269,8 @@ where
             constants,
             columns,
             targets,
+            step_sizes: step_sizes(batch.step_sizes.get(step), rows, frame.nominal_step)?,
+            weights: loss_weights(batch.weights.get(step), rows, frame.measured)?,
         });
     }
     Ok(Prepared {
@@ -243,6 +315,7 @@ pub fn closure_layout(
                 source: 0,
                 state: state_index(model, var)?,
                 factor: 1.0 / std,
+                row: None,
             });
         }
         is_stage_state.push(stage_state);

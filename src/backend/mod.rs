@@ -32,6 +32,8 @@ pub mod real;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_irregular;
+#[cfg(test)]
 mod tests_rollout;
 
 use crate::ir;
@@ -83,7 +85,8 @@ pub struct Normalisation {
 /// Everything besides the model that fixes the network.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Setup {
-    /// Sampling step `h` of the data.
+    /// The nominal step `h`: the integration grid's longest step (`--dt`; the sampling step
+    /// of a uniform record), taken by batch rows that give no step of their own.
     pub step: f64,
     /// RK4 sub-steps per sample (1 = the paper's single step).
     pub substeps: usize,
@@ -123,14 +126,23 @@ pub struct Batch {
     pub embeddings: Vec<Vec<Vec<f64>>>,
     /// `rows x measured` states at `t + h` (may be empty when only predicting).
     pub targets: Vec<f64>,
+    /// The step `h` of each row (irregular grids); empty: every row steps
+    /// [`Setup::step`].
+    pub step_sizes: Vec<f64>,
+    /// `rows x measured` loss weight of each target cell: 0 where the cell was not
+    /// measured, else the column's weight; empty: every cell weighs 1. The loss is
+    /// `sum(w r^2) / #(w > 0)` over the z-scored residuals `r`.
+    pub weights: Vec<f64>,
 }
 
 /// A predicted state fed back into a later step's embedding: at a rollout step, network
-/// input `column` of a closure gains `weight` times state `state` as predicted `sample`
-/// steps into the window (linear interpolation between predicted samples; `sample >= 1`,
-/// sample 0 being the data the window starts from).
+/// input `column` of a closure in batch row `row` gains `weight` times state `state` as
+/// predicted `sample` steps into the window (linear interpolation between predicted
+/// samples; `sample >= 1`, sample 0 being the data the window starts from).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Feedback {
+    /// Batch row (window) it applies to.
+    pub row: usize,
     /// Network input column of the closure.
     pub column: usize,
     /// Steps into the window of the predicted state (at least 1).
@@ -158,10 +170,15 @@ pub struct RolloutBatch {
     /// data, with every share that a [`Feedback`] supplies left at zero (lag-0 state
     /// entries are ignored, as in [`Batch`]).
     pub embeddings: Vec<Vec<Vec<Vec<f64>>>>,
-    /// `feedback[step][closure][offset]`: the predicted shares, the same for every row.
+    /// `feedback[step][closure][offset]`: the predicted shares of every row.
     pub feedback: Vec<Vec<Vec<Vec<Feedback>>>>,
     /// `targets[step]`: `rows x measured` states after that step (empty when predicting).
     pub targets: Vec<Vec<f64>>,
+    /// `step_sizes[step]`: the step `h` of each row (empty: [`Setup::step`] everywhere).
+    pub step_sizes: Vec<Vec<f64>>,
+    /// `weights[step]`: `rows x measured` loss weights as in [`Batch::weights`] (empty:
+    /// every cell weighs 1).
+    pub weights: Vec<Vec<f64>>,
 }
 
 /// How one optimiser step is taken.

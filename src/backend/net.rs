@@ -14,7 +14,7 @@ use super::adam::Adam;
 use super::adam::AdamState;
 use super::graph::{gradient_of, Element, GradientBuffer, Graph, Matrix, Scalar, Vector};
 use super::layout::{
-    check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout,
+    check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout, Frame,
     Prepared, PreparedStep,
 };
 use super::program::Program;
@@ -210,7 +210,11 @@ where
             .iter()
             .map(|s| s.targets.as_slice())
             .collect();
-        let loss = graph.normalised_mse(&forward.predictions, &targets, &self.inverse_std)?;
+        let weights: Vec<Option<&[E]>> = (prepared.steps.iter())
+            .map(|s| s.weights.as_deref())
+            .collect();
+        let loss =
+            graph.normalised_mse(&forward.predictions, &targets, &weights, &self.inverse_std)?;
         Ok((tensors, loss))
     }
 
@@ -376,8 +380,17 @@ where
         Tensors { layers, params }
     }
 
+    fn frame(&self) -> Frame<'_> {
+        Frame {
+            closures: &self.closures,
+            shape: self.program.shape(),
+            measured: self.inverse_std.len(),
+            nominal_step: self.step,
+        }
+    }
+
     fn prepare(&self, graph: &Graph<E>, batch: &Batch) -> Result<Prepared<E>, BackendError> {
-        prepare(graph, &self.closures, self.program.shape(), batch)
+        prepare(graph, &self.frame(), batch)
     }
 
     fn prepare_rollout(
@@ -385,7 +398,7 @@ where
         graph: &Graph<E>,
         batch: &RolloutBatch,
     ) -> Result<Prepared<E>, BackendError> {
-        prepare_rollout(graph, &self.closures, self.program.shape(), batch)
+        prepare_rollout(graph, &self.frame(), batch)
     }
 
     /// Runs every step of a prepared batch, each from the previous step's prediction.
@@ -425,7 +438,14 @@ where
         if self.dynamics == Dynamics::Discrete {
             return Ok((first, values));
         }
-        let dt = self.step / self.substeps as f64;
+        // Each row's sub-step `dt = h / K` and the RK4 multiples of it.
+        let substeps = self.substeps as f64;
+        let scaled = |divisor: f64| -> Vec<E> {
+            (batch.step_sizes.iter())
+                .map(|&h| E::from_double(h / substeps / divisor))
+                .collect()
+        };
+        let (half, whole, sixth) = (scaled(2.0), scaled(1.0), scaled(6.0));
         let mut state = start.clone();
         let mut k1 = first;
         for substep in 0..self.substeps {
@@ -435,22 +455,22 @@ where
                     .stage(graph, tensors, batch, (&state, history), offset)?
                     .0;
             }
-            let x2 = graph.axpy(&state, dt / 2.0, &k1)?;
+            let x2 = graph.axpy_rows(&state, &half, &k1)?;
             let k2 = self
                 .stage(graph, tensors, batch, (&x2, history), offset + 1)?
                 .0;
-            let x3 = graph.axpy(&state, dt / 2.0, &k2)?;
+            let x3 = graph.axpy_rows(&state, &half, &k2)?;
             let k3 = self
                 .stage(graph, tensors, batch, (&x3, history), offset + 1)?
                 .0;
-            let x4 = graph.axpy(&state, dt, &k3)?;
+            let x4 = graph.axpy_rows(&state, &whole, &k3)?;
             let k4 = self
                 .stage(graph, tensors, batch, (&x4, history), offset + 2)?
                 .0;
             let sum = graph.axpy(&k1, 2.0, &k2)?;
             let sum = graph.axpy(&sum, 2.0, &k3)?;
             let sum = graph.axpy(&sum, 1.0, &k4)?;
-            state = graph.axpy(&state, dt / 6.0, &sum)?;
+            state = graph.axpy_rows(&state, &sixth, &sum)?;
         }
         Ok((state, values))
     }

@@ -161,7 +161,12 @@ fn softplus_activation_is_safe_in_value_and_gradient() {
     let zeros = vec![0.0; inputs.len()];
     let ones = vec![1.0; inputs.len()];
     let loss = graph
-        .normalised_mse(std::slice::from_ref(&y), &[zeros.as_slice()], &ones)
+        .normalised_mse(
+            std::slice::from_ref(&y),
+            &[zeros.as_slice()],
+            &[None],
+            &ones,
+        )
         .unwrap();
     let mut grads = graph.backward(loss).unwrap();
     let gradient = super::graph::gradient_of(&mut grads, &x).unwrap();
@@ -234,6 +239,7 @@ fn one_step(model: &ir::Model, setup: &Setup, state: [f64; 2], inlet: f64) -> Pr
         inputs: vec![inlet],
         embeddings,
         targets: vec![0.0],
+        ..Batch::default()
     };
     network.predict(&batch).unwrap()
 }
@@ -327,6 +333,7 @@ fn a_multiplicative_prior_with_a_silent_network_is_its_prior() {
         inputs: vec![inlet],
         embeddings,
         targets: vec![0.0],
+        ..Batch::default()
     };
     let grey_prediction = network.predict(&batch).unwrap();
     let exact_prediction = one_step(&exact, &chemostat_setup(1.0, 1, vec![]), state, inlet);

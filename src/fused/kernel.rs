@@ -60,6 +60,10 @@ pub struct Kernel<E: Lane> {
     second_moment: Vec<E>,
     adam_steps: i32,
     pub(super) rows: usize,
+    /// The sub-step `h / K` of each row of the loaded batch.
+    substep_sizes: Vec<f64>,
+    /// `rows x measured` loss weights of the loaded batch (empty: every cell weighs 1).
+    loss_weights: Vec<f64>,
     pub(super) inputs: Vec<E>,
     /// `constants[closure][offset]`: normalised embeddings (lag-0 state entries `-mean/std`).
     pub(super) constants: Vec<Vec<Vec<E>>>,
@@ -102,6 +106,8 @@ impl<E: Lane> Kernel<E> {
             second_moment: vec![E::ZERO; size],
             adam_steps: 0,
             rows: 0,
+            substep_sizes: Vec::new(),
+            loss_weights: Vec::new(),
             inputs: Vec::new(),
             constants: vec![Vec::new(); plan.closures.len()],
             first_products: vec![Vec::new(); plan.closures.len()],
@@ -174,11 +180,24 @@ impl<E: Lane> Kernel<E> {
         let fits = batch.states.len() == rows * shape.states
             && batch.inputs.len() == rows * shape.inputs
             && batch.targets.len() == rows * measured
-            && batch.embeddings.len() == self.plan.closures.len();
-        if !fits {
+            && batch.embeddings.len() == self.plan.closures.len()
+            && (batch.step_sizes.is_empty() || batch.step_sizes.len() == rows)
+            && (batch.weights.is_empty() || batch.weights.len() == rows * measured);
+        let valid_steps = (batch.step_sizes.iter()).all(|h| *h >= 0.0 && h.is_finite());
+        let valid_weights = (batch.weights.iter()).all(|w| *w >= 0.0 && w.is_finite());
+        if !(fits && valid_steps && valid_weights) {
             return Err(BackendError::internal("the batch does not fit the model"));
         }
         self.rows = rows;
+        let substeps = self.substeps as f64;
+        self.substep_sizes.clear();
+        if batch.step_sizes.is_empty() {
+            self.substep_sizes.resize(rows, self.step / substeps);
+        } else {
+            (self.substep_sizes).extend(batch.step_sizes.iter().map(|h| h / substeps));
+        }
+        self.loss_weights.clear();
+        self.loss_weights.extend_from_slice(&batch.weights);
         self.inputs.clear();
         self.inputs
             .extend(batch.inputs.iter().map(|&v| E::from_double(v)));
@@ -218,7 +237,7 @@ impl<E: Lane> Kernel<E> {
             self.evaluate(0);
             return self.stages[0].balances.clone();
         }
-        let dt = self.step / self.substeps as f64;
+        let width = self.states;
         let mut state = self.stages[0].state.clone();
         for substep in 0..self.substeps {
             let (first, base) = (4 * substep, 2 * substep);
@@ -234,7 +253,12 @@ impl<E: Lane> Kernel<E> {
                     state.clone()
                 } else {
                     let previous = &self.stages[stage - 1].balances;
-                    axpy(&state, dt * fraction, previous)
+                    axpy_rows(
+                        &state,
+                        (&self.substep_sizes, fraction, 1.0),
+                        previous,
+                        width,
+                    )
                 };
                 self.stages[stage].state = estimate;
                 self.stages[stage].offset = offset;
@@ -244,7 +268,7 @@ impl<E: Lane> Kernel<E> {
             let mut sum = axpy(k(0), 2.0, k(1));
             sum = axpy(&sum, 2.0, k(2));
             sum = axpy(&sum, 1.0, k(3));
-            state = axpy(&state, dt / 6.0, &sum);
+            state = axpy_rows(&state, (&self.substep_sizes, 1.0, 6.0), &sum, width);
         }
         state
     }
@@ -334,20 +358,32 @@ impl<E: Lane> Kernel<E> {
     }
 
     /// The loss and its gradient with respect to the predicted next states.
+    /// Weighted as the graph backend's loss: `sum(w r^2) / #(w > 0)`.
     fn loss(&self, next: &[E], targets: &[f64]) -> (f64, Vec<E>) {
         let measured = self.inverse_std.len();
-        let count = E::from_double((self.rows * measured).max(1) as f64);
+        let weight = |cell: usize| self.loss_weights.get(cell).copied().unwrap_or(1.0);
+        let cells = (0..self.rows * measured)
+            .filter(|&cell| weight(cell) > 0.0)
+            .count();
+        let count = E::from_double(cells.max(1) as f64);
         let mut seed = vec![E::ZERO; next.len()];
         let mut total = E::ZERO;
-        for ((predicted, target), seed_row) in (next.chunks_exact(self.states))
+        for (row, ((predicted, target), seed_row)) in (next.chunks_exact(self.states))
             .zip(targets.chunks_exact(measured))
             .zip(seed.chunks_exact_mut(self.states))
+            .enumerate()
         {
             for state in 0..measured {
+                let w = weight(row * measured + state);
+                if w <= 0.0 {
+                    continue;
+                }
+                let w = E::from_double(w);
                 let scaled =
                     (predicted[state] - E::from_double(target[state])) * self.inverse_std[state];
-                total += scaled * scaled;
-                seed_row[state] = E::from_double(2.0) * scaled * self.inverse_std[state] / count;
+                total += w * scaled * scaled;
+                seed_row[state] =
+                    E::from_double(2.0) * (w * scaled) * self.inverse_std[state] / count;
             }
         }
         ((total / count).to_double(), seed)
@@ -359,23 +395,24 @@ impl<E: Lane> Kernel<E> {
         if self.dynamics == Dynamics::Discrete {
             self.reverse_stage(0, &seed);
         } else {
-            let dt = self.step / self.substeps as f64;
+            let (sizes, width) = (self.substep_sizes.clone(), self.states);
             let mut upstream = seed;
             for substep in (0..self.substeps).rev() {
                 let first = 4 * substep;
                 let mut stage_seeds: Vec<Vec<E>> = [1.0, 2.0, 2.0, 1.0]
                     .iter()
-                    .map(|weight| scaled(&upstream, dt * weight / 6.0))
+                    .map(|&weight| scaled_rows(&upstream, (&sizes, weight, 6.0), width))
                     .collect();
                 let mut start_gradient = upstream;
                 for index in (0..4).rev() {
                     let estimate_gradient = self.reverse_stage(first + index, &stage_seeds[index]);
                     if index > 0 {
                         let fraction = if index == 3 { 1.0 } else { 0.5 };
-                        add_scaled(
+                        add_scaled_rows(
                             &mut stage_seeds[index - 1],
-                            dt * fraction,
+                            (&sizes, fraction, 1.0),
                             &estimate_gradient,
+                            width,
                         );
                     }
                     add_scaled(&mut start_gradient, 1.0, &estimate_gradient);
@@ -537,9 +574,55 @@ pub(super) fn axpy<E: Real>(a: &[E], factor: f64, b: &[E]) -> Vec<E> {
     a.iter().zip(b).map(|(&x, &y)| x + factor * y).collect()
 }
 
-fn scaled<E: Real>(values: &[E], factor: f64) -> Vec<E> {
-    let factor = E::from_double(factor);
-    values.iter().map(|&v| v * factor).collect()
+/// Row `i`'s sub-step `dt_i` times `multiple / divisor`, as `dt * multiple / divisor`.
+type RowFactors<'a> = (&'a [f64], f64, f64);
+
+/// `a + (dt_i * multiple / divisor) b` row by row (`width` values a row).
+fn axpy_rows<E: Real>(
+    a: &[E],
+    (substeps, multiple, divisor): RowFactors,
+    b: &[E],
+    width: usize,
+) -> Vec<E> {
+    let mut out = Vec::with_capacity(a.len());
+    for ((a_row, b_row), &dt) in a.chunks(width).zip(b.chunks(width)).zip(substeps) {
+        let factor = E::from_double(dt * multiple / divisor);
+        out.extend(a_row.iter().zip(b_row).map(|(&x, &y)| x + factor * y));
+    }
+    out
+}
+
+/// `(dt_i * multiple / divisor) values` row by row.
+fn scaled_rows<E: Real>(
+    values: &[E],
+    (substeps, multiple, divisor): RowFactors,
+    width: usize,
+) -> Vec<E> {
+    let mut out = Vec::with_capacity(values.len());
+    for (row, &dt) in values.chunks(width).zip(substeps) {
+        let factor = E::from_double(dt * multiple / divisor);
+        out.extend(row.iter().map(|&v| v * factor));
+    }
+    out
+}
+
+/// `target += (dt_i * multiple / divisor) values` row by row.
+fn add_scaled_rows<E: Real>(
+    target: &mut [E],
+    (substeps, multiple, divisor): RowFactors,
+    values: &[E],
+    width: usize,
+) {
+    for ((slot_row, row), &dt) in target
+        .chunks_mut(width)
+        .zip(values.chunks(width))
+        .zip(substeps)
+    {
+        let factor = E::from_double(dt * multiple / divisor);
+        for (slot, &value) in slot_row.iter_mut().zip(row) {
+            *slot += factor * value;
+        }
+    }
 }
 
 pub(super) fn add_scaled<E: Real>(target: &mut [E], factor: f64, values: &[E]) {

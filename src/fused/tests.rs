@@ -92,6 +92,19 @@ fn gradients_match_the_backend_for_every_activation_in_f64() {
     }
 }
 
+/// Rows of their own step size and loss weights with unmeasured cells (irregular grids).
+#[test]
+fn gradients_match_the_backend_with_irregular_steps_and_loss_weights() {
+    let model = kitchen_sink(Activation::Softplus);
+    for substeps in [1, 2] {
+        let setup = setup(&model, Precision::F64, substeps);
+        let mut batch = random_batch(&model, &setup, 5, 8);
+        batch.step_sizes = vec![0.3, 1.1, 0.05, 0.6, 0.0];
+        batch.weights = vec![1.0, 0.0, 0.5, 2.0, 0.0, 0.0, 1.0, 1.0, 1.0, 3.0];
+        assert_matches_backend(&model, &setup, &batch, 1e-11, false);
+    }
+}
+
 #[test]
 fn gradients_match_the_backend_in_f32() {
     let model = kitchen_sink(Activation::Softplus);

@@ -180,6 +180,8 @@ pub fn simulate(
                 })
                 .collect(),
             targets: Vec::new(),
+            step_sizes: Vec::new(),
+            weights: Vec::new(),
         };
         let prediction = network.predict(&batch)?;
         trajectory.states.push(std::mem::take(&mut state));

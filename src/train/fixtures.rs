@@ -586,6 +586,7 @@ pub fn random_batch(model: &ir::Model, setup: &Setup, rows: usize, seed: u64) ->
         inputs: uniform(rows * model.inputs.len(), 0.0, 1.0),
         embeddings,
         targets: uniform(rows * model.states.len(), 0.5, 2.0),
+        ..Batch::default()
     }
 }
 

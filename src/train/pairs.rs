@@ -224,6 +224,8 @@ impl PairTable {
                 .map(|(stages, &width)| stages.iter().map(|s| gather(s, width)).collect())
                 .collect(),
             targets: gather(&self.targets, self.measured),
+            step_sizes: Vec::new(),
+            weights: Vec::new(),
         }
     }
 }

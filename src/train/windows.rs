@@ -22,7 +22,7 @@ use super::pairs::{hold, interpolate, snap, Record};
 pub fn window_embedding(
     closure: &ir::Closure,
     record: &Record,
-    start: usize,
+    (start, row): (usize, usize),
     (step, fraction): (usize, f64),
 ) -> (Vec<f64>, Vec<Feedback>) {
     let embedding = &closure.embedding;
@@ -53,6 +53,7 @@ pub fn window_embedding(
                             data_share += weight * record.states[i][start];
                         } else {
                             feedback.push(Feedback {
+                                row,
                                 column,
                                 sample,
                                 state: i,
@@ -89,6 +90,8 @@ pub fn rollout_batch(
         embeddings: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
         feedback: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
         targets: vec![Vec::new(); steps],
+        step_sizes: Vec::new(),
+        weights: Vec::new(),
     };
     for (window, &start) in starts.iter().enumerate() {
         batch.states.extend(record.states.iter().map(|s| s[start]));
@@ -100,11 +103,9 @@ pub fn rollout_batch(
             for (closure_index, closure) in model.closures.iter().enumerate() {
                 for (offset, &fraction) in fractions.iter().enumerate() {
                     let (raw, feedback) =
-                        window_embedding(closure, record, start, (step, fraction));
+                        window_embedding(closure, record, (start, window), (step, fraction));
                     batch.embeddings[step][closure_index][offset].extend(raw);
-                    if window == 0 {
-                        batch.feedback[step][closure_index][offset] = feedback;
-                    }
+                    batch.feedback[step][closure_index][offset].extend(feedback);
                 }
             }
         }
@@ -177,7 +178,8 @@ mod tests {
         let closure = &model.closures[0];
         for step in 0..4 {
             for fraction in [0.0, 0.5, 1.0] {
-                let (mut raw, feedback) = window_embedding(closure, &record, 4, (step, fraction));
+                let (mut raw, feedback) =
+                    window_embedding(closure, &record, (4, 0), (step, fraction));
                 for entry in &feedback {
                     raw[entry.column] +=
                         entry.weight * record.states[entry.state][4 + entry.sample];
@@ -194,8 +196,10 @@ mod tests {
         // Step 0 never feeds back; at step 1, f = 0.5 the lag-1 state (1.5 samples back)
         // sits at q = 0: data only; at step 2, f = 1 it sits at q = 1.5: half sample 1,
         // half sample 2.
-        assert!(window_embedding(closure, &record, 4, (0, 1.0)).1.is_empty());
-        let (_, feedback) = window_embedding(closure, &record, 4, (2, 1.0));
+        assert!(window_embedding(closure, &record, (4, 0), (0, 1.0))
+            .1
+            .is_empty());
+        let (_, feedback) = window_embedding(closure, &record, (4, 0), (2, 1.0));
         let lag_one: Vec<_> = feedback.iter().filter(|f| f.column == 2).collect();
         assert_eq!(lag_one.len(), 2);
         assert_eq!((lag_one[0].sample, lag_one[0].weight), (1, 0.5));
