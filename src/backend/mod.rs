@@ -62,25 +62,7 @@ pub enum Precision {
     F64,
 }
 
-/// Per-column normalisation from the training split (spec sections 3 and 4).
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
-pub struct Normalisation {
-    /// Mean of each measured state.
-    pub state_mean: Vec<f64>,
-    /// Standard deviation of each measured state (never zero).
-    pub state_std: Vec<f64>,
-    /// Mean of each input.
-    pub input_mean: Vec<f64>,
-    /// Standard deviation of each input (never zero).
-    pub input_std: Vec<f64>,
-    /// Smallest value of each measured state over the training split (empty when
-    /// unknown, as in runs saved before it was recorded).
-    #[serde(default)]
-    pub state_min: Vec<f64>,
-    /// Largest value of each measured state over the training split (empty when unknown).
-    #[serde(default)]
-    pub state_max: Vec<f64>,
-}
+pub use crate::record::Normalisation;
 
 /// Everything besides the model that fixes the network.
 #[derive(Debug, Clone, PartialEq)]

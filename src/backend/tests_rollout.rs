@@ -5,7 +5,8 @@
 use super::*;
 use crate::ir::{Activation, Constraint};
 use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
-use crate::train::pairs::{stage_fractions, Record};
+use crate::record::{GridOptions, Record, Track};
+use crate::train::pairs::stage_fractions;
 use crate::train::windows::rollout_batch;
 
 /// Two states, a bounded param, a delay of 1.5 samples (stage times between samples).
@@ -40,17 +41,34 @@ fn model() -> ir::Model {
         .build()
 }
 
-fn record() -> Record {
+/// Fourteen rows a unit apart, or (`irregular`) at uneven times with missing cells, so
+/// that windows differ in their steps, their feedback and their loss weights.
+fn record(irregular: bool) -> Track {
     let rows = 14;
-    Record {
-        step: 1.0,
-        times: (0..rows).map(|i| i as f64).collect(),
-        inputs: vec![(0..rows).map(|i| ((i / 3) % 2) as f64).collect()],
-        states: vec![
-            (0..rows).map(|i| 1.0 + 0.05 * (i as f64).sin()).collect(),
-            (0..rows).map(|i| 1.5 - 0.03 * i as f64).collect(),
+    let times: Vec<f64> = if irregular {
+        (0..rows).map(|i| i as f64 + 0.3 * ((i * 7 % 5) as f64 / 4.0)).collect()
+    } else {
+        (0..rows).map(|i| i as f64).collect()
+    };
+    let mut record = Record::complete(
+        "r",
+        times.clone(),
+        vec![(0..rows).map(|i| ((i / 3) % 2) as f64).collect()],
+        vec![
+            times.iter().map(|t| 1.0 + 0.05 * t.sin()).collect(),
+            times.iter().map(|t| 1.5 - 0.03 * t).collect(),
         ],
+    );
+    if irregular {
+        record.states[0][6] = None;
+        record.states[1][9] = None;
     }
+    let grid = GridOptions {
+        max_step: 1.0,
+        gap_limits: vec![1.5, 1.5],
+        subdivide: true,
+    };
+    Track::lay(&record, &grid, &[])
 }
 
 fn network(model: &ir::Model, substeps: usize) -> Network {
@@ -77,12 +95,17 @@ fn network(model: &ir::Model, substeps: usize) -> Network {
     network
 }
 
-fn assert_rollout_gradient_matches(substeps: usize) {
+fn assert_rollout_gradient_matches(substeps: usize, irregular: bool) {
     let model = model();
-    let record = record();
+    let tracks = [record(irregular)];
     let network = network(&model, substeps);
     let fractions = stage_fractions(model.dynamics, substeps);
-    let batch = rollout_batch(&model, &record, &[], &[3, 5], 6, &fractions);
+    let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, 3), (0, 5)], 6, &fractions);
+    if irregular {
+        let steps: Vec<f64> = batch.step_sizes.iter().flatten().copied().collect();
+        assert!(steps.iter().any(|&h| (h - 1.0).abs() > 0.05), "{steps:?}");
+        assert!(batch.weights.iter().flatten().any(|&w| w == 0.0));
+    }
     assert!(batch
         .feedback
         .iter()
@@ -122,12 +145,18 @@ fn network_clone(model: &ir::Model, substeps: usize, weights: &[NamedTensor]) ->
 
 #[test]
 fn rollout_gradient_matches_finite_differences() {
-    assert_rollout_gradient_matches(1);
+    assert_rollout_gradient_matches(1, false);
 }
 
 #[test]
 fn rollout_gradient_matches_finite_differences_with_substeps() {
-    assert_rollout_gradient_matches(2);
+    assert_rollout_gradient_matches(2, false);
+}
+
+/// Windows of their own steps and feedback weights per row, with unmeasured cells.
+#[test]
+fn rollout_gradient_matches_finite_differences_on_an_irregular_record() {
+    assert_rollout_gradient_matches(1, true);
 }
 
 /// With a zero network learning rate only the params move, and clipping to a tiny norm
@@ -135,9 +164,9 @@ fn rollout_gradient_matches_finite_differences_with_substeps() {
 #[test]
 fn params_train_at_their_own_rate() {
     let model = model();
-    let record = record();
+    let tracks = [record(false)];
     let fractions = stage_fractions(model.dynamics, 1);
-    let batch = rollout_batch(&model, &record, &[], &[3, 5], 4, &fractions);
+    let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, 3), (0, 5)], 4, &fractions);
     let mut network = network(&model, 1);
     let before = network.weights();
     let settings = StepSettings {

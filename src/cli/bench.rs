@@ -17,7 +17,7 @@ use crate::backend::Precision;
 use crate::signal::Signal;
 use crate::sim::SimOptions;
 use crate::train::bench::{bench, median, BenchOptions, BenchReport, Engine};
-use crate::train::{Recipe, TrainOptions, Validation};
+use crate::train::{Part, Recipe, TrainOptions, TrainingData};
 
 /// A shipped model `gbc bench` times.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -222,6 +222,12 @@ fn time_training(
     let (model_file, data_file, train_points) = which.files();
     let model = super::load_model(&root.join(model_file))?;
     let data = read_data(&model, &root.join(data_file))?;
+    let record = crate::train::record_of(&model, &data).map_err(train_error)?;
+    let data = TrainingData {
+        train: std::slice::from_ref(&record),
+        validation: &[],
+        part: Part::FirstPairs(Some(train_points)),
+    };
     let precisions: &[Precision] = match args.precision {
         PrecisionChoice::F32 => &[Precision::F32],
         PrecisionChoice::F64 => &[Precision::F64],
@@ -236,7 +242,7 @@ fn time_training(
     for &precision in precisions {
         for &engine in engines {
             let options = BenchOptions {
-                train_points,
+                train_points: Some(train_points),
                 batch_size: 50,
                 epochs: args.epochs,
                 precision,
@@ -293,22 +299,23 @@ fn time_full_training(root: &Path, epochs: usize) -> Result<FullRow, CommandErro
     let (model_file, data_file, train_points) = BenchModel::Gb2.files();
     let model = super::load_model(&root.join(model_file))?;
     let data = read_data(&model, &root.join(data_file))?;
+    let record = crate::train::record_of(&model, &data).map_err(train_error)?;
     let options = TrainOptions {
         epochs,
-        batch_size: 50,
-        learning_rate: 1e-3,
         train_points: Some(train_points),
-        seed: 0,
-        precision: Precision::F32,
-        substeps: 1,
         online_horizon: Some(200.0),
         engine: Engine::Graph,
+        ..TrainOptions::default()
     };
     let started = Instant::now();
+    let data = TrainingData {
+        train: std::slice::from_ref(&record),
+        validation: &[],
+        part: Part::FirstPairs(Some(train_points)),
+    };
     crate::train::train_with(
         &model,
         &data,
-        &[Validation::Rest],
         &options,
         &Recipe::paper(),
         &mut |_| {},

@@ -7,6 +7,7 @@
 mod bench;
 mod check;
 mod compile;
+mod data;
 mod demo;
 mod diagnose;
 mod experiment;

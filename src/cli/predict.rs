@@ -50,14 +50,16 @@ pub fn run(args: &PredictArgs) -> CommandResult {
     let (network, setup, info) =
         artifacts::restore(&model, &source, &args.weights).map_err(train_error)?;
     let data = read_data(&model, &args.data)?;
+    let record = crate::train::record_of(&model, &data).map_err(train_error)?;
     let mode = match args.mode {
         ModeArg::Offline => predict::Mode::Offline,
         ModeArg::Online => predict::Mode::Online,
     };
     let factor = info.recipe.map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
+    let history = crate::train::History::Measured;
     let range = PhysicalRange::new(&setup.normalisation, factor);
     let mut table =
-        predict::predict_in_range(&model, &network, &setup, &data, (mode, range.as_ref()))
+        predict::predict_in_range(&model, &network, &setup, &record, (mode, history, range.as_ref()))
             .map_err(train_error)?;
     if let Some(divergence) = &table.divergence {
         eprintln!("warning: {divergence}; the predictions stop there");

@@ -1,5 +1,7 @@
-//! `gbc train MODEL DATA.csv`: fit a grey-box (or black-box) model's networks and params to
-//! a record with Adam, report the validation errors and trained params, and write the run.
+//! `gbc train MODEL DATA...`: fit a grey-box (or black-box) model's networks and params to
+//! a data set (one or more experiments) with Adam, report the validation errors per
+//! experiment and pooled, the trained params and each experiment's initial state, and write
+//! the run.
 //!
 //! The default recipe is multi-step (free-run rollouts with a curriculum, then a polish of
 //! the params); `--objective one-step` is the paper's (see `docs/training.md`). Stiffness
@@ -12,16 +14,18 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::data::{hold_out, load_records, ColumnArgs};
 use super::{CommandError, CommandResult};
 use crate::backend::Precision;
 use crate::data::MinRows;
 use crate::ir::Model;
+use crate::record::Record;
 use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, Engine, ErrorSet, Event, Objective, ParamSource, Recipe, TrainError,
-    TrainOptions, Trained, Validation,
+    self, artifacts, Engine, ErrorSet, Event, History, Objective, ParamSource, Part, Recipe,
+    TrainError, TrainOptions, Trained, TrainingData,
 };
 
 /// The loss training minimises.
@@ -92,17 +96,52 @@ impl From<EngineArg> for Engine {
     }
 }
 
+/// Where whole-experiment free runs and training windows start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum HistoryArg {
+    /// At each experiment's first row, the history before it held at the first values.
+    Held,
+    /// At the first row whose whole embedding lies inside the experiment (the paper's).
+    Measured,
+}
+
 /// Arguments of `gbc train`.
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
     /// The model file (with closures or params).
     pub model: PathBuf,
-    /// The training record (CSV with `t`, the inputs and the measured states).
-    pub data: PathBuf,
-    /// A validation record (repeatable). The pairs after --train-points validate too, first
-    /// (without --val and --train-points, the last 30 % of DATA validate).
-    #[arg(long, value_name = "FILE")]
+    /// The data set: one or more CSV files, each an experiment (or several, with an
+    /// `experiment` column); `t`, the inputs and the measured states, cells may be empty.
+    #[arg(required = true, num_args = 1..)]
+    pub data: Vec<PathBuf>,
+    /// Files of whole experiments that validate (repeatable).
+    #[arg(long, value_name = "FILE", num_args = 1..)]
     pub val: Vec<PathBuf>,
+    /// Experiments of the data set that validate instead of training (repeatable).
+    #[arg(long, value_name = "NAME", num_args = 1..)]
+    pub holdout: Vec<String>,
+    /// Hold out the last share of each experiment's rows (the free run still starts at the
+    /// experiment's first row and is scored on the held-out tail).
+    #[arg(long, value_name = "SHARE", conflicts_with = "train_points")]
+    pub val_fraction: Option<f64>,
+    /// Leave-one-experiment-out cross-validation: one model per experiment trained on the
+    /// others and scored on it, each fold and the median reported; the saved model is then
+    /// trained on every experiment.
+    #[arg(long)]
+    pub cv: bool,
+    /// Longest integration step (default: the median spacing of the densest measured
+    /// column, at most the shortest embedding delay).
+    #[arg(long, value_name = "H")]
+    pub dt: Option<f64>,
+    /// Loss weight of a measured state's cells: `--weight X=2` (repeatable; others 1).
+    #[arg(long, value_name = "NAME=W", value_parser = parse_weight)]
+    pub weight: Vec<(String, f64)>,
+    /// Where free runs of whole experiments and training windows start.
+    #[arg(long, value_enum, default_value_t = HistoryArg::Held)]
+    pub history: HistoryArg,
+    /// How data columns are named.
+    #[command(flatten)]
+    pub columns: ColumnArgs,
     /// Passes over the training pairs.
     #[arg(long, default_value_t = 100)]
     pub epochs: usize,
@@ -112,7 +151,9 @@ pub struct TrainArgs {
     /// Adam learning rate.
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
-    /// Train on the first N pairs (default: all with --val, else the first 70 %).
+    /// The paper's protocol on one experiment: train on its first N one-step pairs; the
+    /// pairs after them validate when nothing else does (default with one experiment and no
+    /// other split: the first 70 %).
     #[arg(long, value_name = "N")]
     pub train_points: Option<usize>,
     /// Seed of the initialisation and the shuffling (same seed, same result).
@@ -178,15 +219,10 @@ pub struct TrainArgs {
 pub fn run(args: &TrainArgs) -> CommandResult {
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
-    let data = read_data(&model, &args.data)?;
-    let files = (args.val.iter())
-        .map(|path| read_data(&model, path))
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut validations = Vec::new();
-    if args.train_points.is_some() || files.is_empty() {
-        validations.push(Validation::Rest);
-    }
-    validations.extend(files.iter().map(Validation::File));
+    let records = load_records(&model, &args.data, &args.columns)?;
+    let (mut train_records, mut validation) = hold_out(records, &args.holdout)?;
+    validation.extend(load_records(&model, &args.val, &args.columns)?);
+    let part = part_of(args, &mut train_records, &mut validation)?;
     let options = TrainOptions {
         epochs: args.epochs,
         batch_size: args.batch,
@@ -197,22 +233,34 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         substeps: args.substeps,
         online_horizon: args.online_horizon,
         engine: args.engine.into(),
+        dt: args.dt,
+        history: match args.history {
+            HistoryArg::Held => History::Held,
+            HistoryArg::Measured => History::Measured,
+        },
+        column_weights: args.weight.clone(),
+    };
+    let recipe = recipe_of(args);
+    if args.cv {
+        cross_validate(&model, &train_records, (&options, &recipe))?;
+    }
+    let data = TrainingData {
+        train: &train_records,
+        validation: &validation,
+        part,
     };
     let started = Instant::now();
     let mut progress = Progress::default();
-    let recipe = recipe_of(args);
-    let outcome = train::train_with(
-        &model,
-        &data,
-        &validations,
-        &options,
-        &recipe,
-        &mut |event| progress.observe(event, options.epochs),
-    );
+    let outcome = train::train_with(&model, &data, &options, &recipe, &mut |event| {
+        progress.observe(event, options.epochs)
+    });
     progress.finish();
     let trained = outcome.map_err(train_error)?;
     let model_path = args.model.display().to_string();
-    let data_path = args.data.display().to_string();
+    let data_path = (args.data.iter())
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
     let info = artifacts::run_info(
         &model,
         (&model_path, &source),
@@ -230,6 +278,96 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     }
     print_summary(&model, &trained, started.elapsed().as_secs_f64(), args);
     Ok(())
+}
+
+/// How the training experiments are split, from the flags: `--val-fraction`,
+/// `--train-points` (the paper's protocol), whole experiments (`--val`, `--holdout`), or by
+/// default the first 70 % of one experiment's pairs or, with several experiments, the last
+/// experiment held out (announced on stderr). With `--cv` and nothing else the final model
+/// trains on every experiment.
+fn part_of(
+    args: &TrainArgs,
+    train: &mut Vec<Record>,
+    validation: &mut Vec<Record>,
+) -> Result<Part, CommandError> {
+    if let Some(share) = args.val_fraction {
+        if !(share > 0.0 && share < 1.0) {
+            return Err(train_error(TrainError::BadOption {
+                option: "--val-fraction".into(),
+                expected: "a share strictly between 0 and 1".into(),
+                found: share.to_string(),
+            }));
+        }
+        return Ok(Part::Tail(share));
+    }
+    if args.train_points.is_some() || (train.len() == 1 && validation.is_empty()) {
+        return Ok(Part::FirstPairs(args.train_points));
+    }
+    if validation.is_empty() && !args.cv {
+        if let Some(last) = train.pop() {
+            eprintln!(
+                "validating on experiment `{}` (the last one; choose with --holdout NAME, \
+                 --val-fraction SHARE or --cv)",
+                last.name
+            );
+            validation.push(last);
+        }
+    }
+    Ok(Part::All)
+}
+
+/// Runs leave-one-experiment-out cross-validation and prints each fold and the medians.
+fn cross_validate(
+    model: &Model,
+    records: &[Record],
+    settings: (&TrainOptions, &Recipe),
+) -> CommandResult {
+    let progress = std::cell::RefCell::new(Progress::default());
+    let epochs = settings.0.epochs;
+    let result = train::cv::cross_validate(
+        model,
+        records,
+        settings,
+        &mut |fold, folds| {
+            progress.borrow_mut().finish();
+            let name = &records[fold].name;
+            eprintln!("cross-validation fold {}/{folds}: holding out `{name}`", fold + 1);
+        },
+        &mut |event| progress.borrow_mut().observe(event, epochs),
+    );
+    progress.borrow_mut().finish();
+    let result = result.map_err(train_error)?;
+    println!("leave-one-experiment-out cross-validation ({} folds):", result.folds.len());
+    println!("  {:<24} {:>12} {:>12}", "held out", "offline", "online");
+    for fold in &result.folds {
+        let overall = |set: &Option<ErrorSet>| set.as_ref().map_or("-".into(), |s| error(s.overall));
+        println!(
+            "  {:<24} {:>12} {:>12}",
+            fold.held_out,
+            overall(&fold.offline),
+            overall(&fold.online)
+        );
+    }
+    let median = |value: Option<f64>| value.map_or("-".into(), error);
+    println!(
+        "  {:<24} {:>12} {:>12}",
+        "median",
+        median(result.median_offline),
+        median(result.median_online)
+    );
+    Ok(())
+}
+
+/// `NAME=W` with a number.
+fn parse_weight(argument: &str) -> Result<(String, f64), String> {
+    let (name, weight) = argument
+        .split_once('=')
+        .ok_or_else(|| format!("expected NAME=WEIGHT (e.g. `X=2`), found `{argument}`"))?;
+    let weight: f64 = weight
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected a number after `=`, found `{}`", weight.trim()))?;
+    Ok((name.trim().to_string(), weight))
 }
 
 /// The recipe the flags ask for.
@@ -345,32 +483,75 @@ fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArg
             .last()
             .map_or("-".into(), |l| format!("{l:.4e}"))
     );
-    let validations = &report.metrics.validations;
-    if validations.is_empty() {
-        println!("no validation pairs: pass --val FILE or a smaller --train-points");
-    }
-    for set in validations {
+    let metrics = &report.metrics;
+    if metrics.validations.is_empty() {
         println!(
-            "validation on {} ({} pairs; MSE of z-scored states):",
+            "nothing validates: pass --val FILE, --holdout NAME, --val-fraction SHARE or a \
+             smaller --train-points"
+        );
+    }
+    for set in &metrics.validations {
+        println!(
+            "validation on {} ({} pairs; MSE of z-scored states at measured cells):",
             set.name, set.pairs
         );
-        print_errors(&set.offline, &set.online);
+        print_errors(set.offline.as_ref(), set.online.as_ref());
     }
+    if metrics.validations.len() > 1 {
+        println!("validation pooled over every experiment:");
+        print_errors(metrics.offline.as_ref(), metrics.online.as_ref());
+    }
+    print_initial_states(report);
     print_params(trained);
     if let Some(directory) = &args.output {
         println!("weights written to {}", directory.display());
     }
 }
 
-fn print_errors(offline: &ErrorSet, online: &ErrorSet) {
+/// One row per measured state; an error that could not be measured shows as `-`.
+fn print_errors(offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
     println!("  {:<16} {:>12} {:>12}", "state", "offline", "online");
-    for ((name, off), (_, on)) in offline.per_state.iter().zip(&online.per_state) {
-        println!("  {name:<16} {:>12} {:>12}", error(*off), error(*on));
+    let names: Vec<&String> = (offline.iter().chain(online.iter()))
+        .flat_map(|set| set.per_state.iter().map(|(name, _)| name))
+        .fold(Vec::new(), |mut names, name| {
+            if !names.contains(&name) {
+                names.push(name);
+            }
+            names
+        });
+    let of = |set: Option<&ErrorSet>, name: &str| {
+        set.and_then(|s| s.per_state.iter().find(|(n, _)| n == name))
+            .map_or("-".to_string(), |(_, e)| error(*e))
+    };
+    for name in names {
+        println!("  {name:<16} {:>12} {:>12}", of(offline, name), of(online, name));
     }
-    let overall = (error(offline.overall), error(online.overall));
-    println!("  {:<16} {:>12} {:>12}", "overall", overall.0, overall.1);
-    if let Some(divergence) = &online.divergence {
+    let overall = |set: Option<&ErrorSet>| set.map_or("-".to_string(), |s| error(s.overall));
+    println!("  {:<16} {:>12} {:>12}", "overall", overall(offline), overall(online));
+    if let Some(divergence) = online.and_then(|s| s.divergence.as_ref()) {
         println!("  {divergence}");
+    }
+}
+
+/// The initial values that were not measured: declared or fitted per experiment.
+fn print_initial_states(report: &train::TrainReport) {
+    let unmeasured: Vec<_> = (report.initial_states.iter())
+        .flat_map(|state| {
+            (state.states.iter())
+                .filter(|(_, _, origin)| *origin != train::Origin::Measured)
+                .map(move |(name, value, origin)| (&state.experiment, name, value, origin))
+        })
+        .collect();
+    if unmeasured.is_empty() {
+        return;
+    }
+    println!("initial states not measured at an experiment's first row:");
+    for (experiment, name, value, origin) in unmeasured {
+        let how = match origin {
+            train::Origin::Declared => "declared",
+            _ => "fitted",
+        };
+        println!("  {experiment:<24} {name} = {value:.6} ({how})");
     }
 }
 

@@ -429,6 +429,8 @@ pub fn options_of(study: &Study, spec: &RunSpec) -> TrainOptions {
         precision: study.precision,
         substeps: study.substeps,
         engine: study.engine,
+        // The paper's protocol: validation runs start from measured history.
+        history: train::History::Measured,
         // The free run covers the whole validation window (the default).
         ..TrainOptions::default()
     }
@@ -444,18 +446,27 @@ fn run_one(
     let loaded = &prepared.models[spec.model];
     let options = options_of(&prepared.study, spec);
     let started = Instant::now();
-    let trained = train::train_with(
-        &loaded.model,
-        &prepared.training,
-        &[train::Validation::File(&loaded.validation)],
-        &options,
+    let training = train::record_of(&loaded.model, &prepared.training);
+    let validation = train::record_of(&loaded.model, &loaded.validation);
+    let trained = training.and_then(|training| {
+        let validation = validation?;
+        let data = train::TrainingData {
+            train: std::slice::from_ref(&training),
+            validation: std::slice::from_ref(&validation),
+            part: train::Part::All,
+        };
+        train::train_with(
+            &loaded.model,
+            &data,
+            &options,
         &prepared.study.training.recipe(),
-        &mut |event| {
-            if let Event::Epoch { epoch, .. } = event {
-                on_progress(Progress::Epoch(spec, epoch));
-            }
-        },
-    );
+            &mut |event| {
+                if let Event::Epoch { epoch, .. } = event {
+                    on_progress(Progress::Epoch(spec, epoch));
+                }
+            },
+        )
+    });
     let result = match trained.and_then(|trained| {
         let result = evaluate(prepared, loaded, spec, &trained, started)?;
         save_weights(

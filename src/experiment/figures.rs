@@ -17,7 +17,7 @@ use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::backend::{Network, Setup};
 use crate::data::Dataset;
 use crate::plot::{BarChart, Chart, Series, Style, PALETTE};
-use crate::train::artifacts;
+use crate::train::{artifacts, History};
 use crate::train::predict::{predict, Mode, PredictionTable};
 
 /// Figure size in pixels.
@@ -211,7 +211,9 @@ fn predictions<'a>(
         let model = &prepared.models[*index].model;
         let table = match mode {
             Mode::Online => free_run(model, network, setup, data),
-            Mode::Offline => predict(model, network, setup, data, mode),
+            Mode::Offline => crate::train::record_of(model, data).and_then(|record| {
+                predict(model, network, setup, &record, (mode, History::Measured))
+            }),
         };
         match table {
             Ok(table) => tables.push((entry, table)),

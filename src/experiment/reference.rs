@@ -40,7 +40,9 @@ pub fn free_run(
     setup: &Setup,
     data: &Dataset,
 ) -> Result<PredictionTable, TrainError> {
-    predict_in_range(model, network, setup, data, (Mode::Online, None))
+    let record = crate::train::record_of(model, data)?;
+    let protocol = (Mode::Online, crate::train::History::Measured, None);
+    predict_in_range(model, network, setup, &record, protocol)
 }
 
 /// MSE of each measured state of a free run against `data` over the rows after its first,

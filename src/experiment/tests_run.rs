@@ -203,8 +203,8 @@ fn validation_errors_match_an_independent_recomputation_on_the_common_scale() {
         &loaded.model,
         &network,
         &setup,
-        &loaded.validation,
-        (Mode::Online, None),
+        &crate::train::record_of(&loaded.model, &loaded.validation).unwrap(),
+        (Mode::Online, crate::train::History::Measured, None),
     );
     let table = table.unwrap_or_else(|e| panic!("{e}"));
     let data = loaded.validation.column("S").unwrap_or_default();

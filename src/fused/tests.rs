@@ -140,18 +140,20 @@ fn bioreactor_gb2(rows: usize, precision: Precision) -> (ir::Model, Batch, Setup
         crate::data::MinRows::new(2, "one step"),
     )
     .unwrap();
-    let record = crate::train::record_of(&model, &data).unwrap();
-    let first = first_pair_row(&model, record.step);
-    let pairs: Vec<usize> = (first..first + rows).collect();
+    let record = crate::train::fixtures::record(&model, &data);
+    let track = crate::train::fixtures::track(&model, &data);
+    let step = track.steps[0];
+    let first = first_pair_row(&model, step);
+    let pairs: Vec<(usize, usize)> = (first..first + rows).map(|k| (0, k)).collect();
     let fractions = stage_fractions(model.dynamics, 1);
-    let table = PairTable::build(&model, &record, &pairs, &[], &fractions);
+    let table = PairTable::build(&model, &[track], &pairs, &[], &fractions);
     let batch = table.batch(&(0..rows).collect::<Vec<_>>());
     let setup = Setup {
-        step: record.step,
+        step,
         substeps: 1,
         precision,
         seed: 0,
-        normalisation: crate::train::normalise(&record, first + rows + 1),
+        normalisation: crate::train::fixtures::normalise(&record, first + rows + 1),
         scales: vec![vec![1.0; 3]],
     };
     (model, batch, setup)

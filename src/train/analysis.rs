@@ -28,7 +28,9 @@ use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{initial_raw_params, BackendError};
 use crate::ir::{self, Dynamics, PriorKind};
 
-use super::pairs::Record;
+use crate::record::Track;
+
+use super::pairs::PairAt;
 
 /// The RK4 stability limit of `h * lambda` on the negative real axis.
 pub const RK4_STABILITY_LIMIT: f64 = 2.785;
@@ -40,7 +42,7 @@ pub struct StiffnessWarning {
     pub balance: String,
     /// Estimated most negative local eigenvalue (1st percentile).
     pub eigenvalue: f64,
-    /// Sampling step of the data.
+    /// The longest grid step among the training pairs.
     pub step: f64,
     /// RK4 sub-steps in use.
     pub substeps: usize,
@@ -87,38 +89,50 @@ struct Probe {
     /// `rows x measured` values the balances should take: the finite-difference
     /// derivatives of the data (`der`), or the next values (`next`).
     targets: Vec<f64>,
+    /// The longest step among the rows.
+    largest_step: f64,
 }
 
 impl Probe {
+    /// The physics at the pairs whose states are known from data at both ends.
     fn new(
         model: &ir::Model,
         scales: &[Vec<f64>],
-        record: &Record,
-        rows: &[usize],
+        (tracks, pairs): (&[Track], &[PairAt]),
         hidden: &[f64],
     ) -> Result<Probe, BackendError> {
         let program = Program::compile(model, scales)?;
+        let measured = model.states.len();
+        let usable: Vec<PairAt> = (pairs.iter().copied())
+            .filter(|&(index, knot)| {
+                let track = &tracks[index];
+                knot + 1 < track.len()
+                    && (0..measured).all(|i| track.known[i][knot] && track.known[i][knot + 1])
+            })
+            .collect();
         let mut probe = Probe {
             net_widths: program.shape().nets.clone(),
             program,
-            rows: rows.len(),
+            rows: usable.len(),
             states: Vec::new(),
             inputs: Vec::new(),
             params: initial_raw_params(model),
             targets: Vec::new(),
+            largest_step: 0.0,
         };
         let discrete = model.dynamics == Dynamics::Discrete;
-        let last = record.len().saturating_sub(1);
-        for &row in rows {
-            probe.states.extend(record.states.iter().map(|s| s[row]));
+        for &(index, knot) in &usable {
+            let track = &tracks[index];
+            let step = track.steps[knot];
+            probe.largest_step = probe.largest_step.max(step);
+            probe.states.extend(track.states.iter().map(|s| s[knot]));
             probe.states.extend_from_slice(hidden);
-            probe.inputs.extend(record.inputs.iter().map(|u| u[row]));
-            let next = (row + 1).min(last);
-            probe.targets.extend((record.states.iter()).map(|s| {
+            probe.inputs.extend(track.inputs.iter().map(|u| u[knot]));
+            probe.targets.extend((track.states.iter()).map(|s| {
                 if discrete {
-                    s[next]
+                    s[knot + 1]
                 } else {
-                    (s[next] - s[row]) / record.step
+                    (s[knot + 1] - s[knot]) / step
                 }
             }));
         }
@@ -155,20 +169,20 @@ impl Probe {
 /// default of the module documentation (1 for outputs with a `*=` prior, where it is unused).
 pub fn closure_scales(
     model: &ir::Model,
-    record: &Record,
-    rows: &[usize],
+    tracks: &[Track],
+    pairs: &[PairAt],
     hidden: &[f64],
 ) -> Result<Vec<Vec<f64>>, BackendError> {
     let unit: Vec<Vec<f64>> = (model.closures.iter())
         .map(|c| c.outputs.iter().map(|o| o.scale.unwrap_or(1.0)).collect())
         .collect();
-    let probe = Probe::new(model, &unit, record, rows, hidden)?;
+    let probe = Probe::new(model, &unit, (tracks, pairs), hidden)?;
     let known = probe.balances(&probe.states, &probe.silent_nets());
     let mut scales = unit.clone();
     for (closure, spec) in model.closures.iter().enumerate() {
         for (output, out) in spec.outputs.iter().enumerate() {
             let multiplicative = matches!(&out.prior, Some(p) if p.kind == PriorKind::Mul);
-            if out.scale.is_some() || multiplicative || rows.is_empty() {
+            if out.scale.is_some() || multiplicative || probe.rows == 0 {
                 continue;
             }
             scales[closure][output] = default_scale(&probe, &known, model, closure, output);
@@ -227,15 +241,17 @@ fn default_scale(
 pub fn stiffness(
     model: &ir::Model,
     scales: &[Vec<f64>],
-    record: &Record,
-    rows: &[usize],
+    (tracks, pairs): (&[Track], &[PairAt]),
     hidden: &[f64],
     substeps: usize,
 ) -> Result<Vec<StiffnessWarning>, BackendError> {
-    if model.dynamics == Dynamics::Discrete || rows.is_empty() {
+    if model.dynamics == Dynamics::Discrete {
         return Ok(Vec::new());
     }
-    let probe = Probe::new(model, scales, record, rows, hidden)?;
+    let probe = Probe::new(model, scales, (tracks, pairs), hidden)?;
+    if probe.rows == 0 {
+        return Ok(Vec::new());
+    }
     let silent = probe.silent_nets();
     let known = probe.balances(&probe.states, &silent);
     let width = probe.state_width();
@@ -274,7 +290,7 @@ pub fn stiffness(
         }
         rates.sort_by(f64::total_cmp);
         let eigenvalue = rates[rates.len() / 100];
-        let step = record.step;
+        let step = probe.largest_step;
         if eigenvalue * step / (substeps as f64) < -RK4_STABILITY_LIMIT {
             let stable_step = RK4_STABILITY_LIMIT / -eigenvalue;
             warnings.push(StiffnessWarning {

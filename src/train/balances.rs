@@ -38,7 +38,9 @@ use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{initial_raw_params, BackendError};
 use crate::ir::{self, Dynamics};
 
-use super::pairs::Record;
+use crate::record::Track;
+
+use super::pairs::PairAt;
 use super::polish::{solve, ParamEstimate, IDENTIFIABILITY_LIMIT};
 
 /// Most Levenberg-Marquardt iterations.
@@ -74,23 +76,28 @@ pub fn applicable(model: &ir::Model) -> bool {
         && outputs < model.states.len()
 }
 
-/// Estimates the params from the intervals starting at `rows` (each needs its successor in
-/// the record); `None` when [`applicable`] says no or the fit does not converge to finite
-/// values.
+/// Estimates the params from the intervals that start at `pairs` (track and knot) and whose
+/// ends are known from data; `None` when [`applicable`] says no or the fit does not converge
+/// to finite values.
 pub fn estimate(
     model: &ir::Model,
     scales: &[Vec<f64>],
-    record: &Record,
-    rows: &[usize],
+    tracks: &[Track],
+    pairs: &[PairAt],
 ) -> Result<Option<BalanceFit>, BackendError> {
     if !applicable(model) {
         return Ok(None);
     }
-    let rows: Vec<usize> = (rows.iter().copied())
-        .filter(|&row| row + 1 < record.len())
+    let measured = model.states.len();
+    let intervals: Vec<PairAt> = (pairs.iter().copied())
+        .filter(|&(index, knot)| {
+            let track = &tracks[index];
+            knot + 1 < track.len()
+                && (0..measured).all(|i| track.known[i][knot] && track.known[i][knot + 1])
+        })
         .collect();
     let program = Program::compile(model, scales)?;
-    let problem = Problem::new(model, program, record, &rows);
+    let problem = Problem::new(model, program, tracks, &intervals);
     Ok(problem.and_then(|p| p.fit(model)))
 }
 
@@ -107,6 +114,9 @@ struct Problem {
     states: Vec<f64>,
     /// `rows x inputs` held inputs.
     inputs: Vec<f64>,
+    /// Per interval, its step over the typical step: its balances' share of a window's
+    /// change.
+    spans: Vec<f64>,
     /// Windows of consecutive intervals, `[first, last)` interval indices.
     windows: Vec<(usize, usize)>,
     /// `windows x K` difference quotients `(x(end) - x(start)) / h` of each window.
@@ -123,21 +133,31 @@ struct Point {
 }
 
 impl Problem {
-    fn new(model: &ir::Model, program: Program, record: &Record, rows: &[usize]) -> Option<Self> {
+    fn new(
+        model: &ir::Model,
+        program: Program,
+        tracks: &[Track],
+        intervals: &[PairAt],
+    ) -> Option<Self> {
         let measured = model.states.len();
         let widths = program.shape().nets.clone();
         measured.checked_sub(widths.iter().sum())?;
-        let (mut states, mut inputs) = (Vec::new(), Vec::new());
+        let steps: Vec<f64> = (intervals.iter())
+            .map(|&(index, knot)| tracks[index].steps[knot])
+            .collect();
+        let typical = crate::numeric::median(&steps)?;
+        let (mut states, mut inputs, mut spans) = (Vec::new(), Vec::new(), Vec::new());
         let mut windows: Vec<(usize, usize)> = Vec::new();
-        for (index, &row) in rows.iter().enumerate() {
-            for values in &record.states {
-                states.push(0.5 * (values[row] + values[row + 1]));
+        for (index, &(track_index, knot)) in intervals.iter().enumerate() {
+            let track = &tracks[track_index];
+            for values in &track.states {
+                states.push(0.5 * (values[knot] + values[knot + 1]));
             }
-            inputs.extend(record.inputs.iter().map(|u| u[row]));
+            inputs.extend(track.inputs.iter().map(|u| u[knot]));
+            spans.push(track.steps[knot] / typical);
+            let follows = index > 0 && intervals[index - 1] == (track_index, knot.wrapping_sub(1));
             match windows.last_mut() {
-                Some((first, last))
-                    if *last == index && index - *first < WINDOW && rows[index - 1] + 1 == row =>
-                {
+                Some((first, last)) if *last == index && index - *first < WINDOW && follows => {
                     *last = index + 1
                 }
                 _ => windows.push((index, index + 1)),
@@ -148,8 +168,10 @@ impl Problem {
         }
         let mut targets = Vec::with_capacity(windows.len() * measured);
         for &(first, last) in &windows {
-            let (start, end) = (rows[first], rows[last - 1] + 1);
-            targets.extend((record.states.iter()).map(|v| (v[end] - v[start]) / record.step));
+            let (track_index, start) = intervals[first];
+            let end = intervals[last - 1].1 + 1;
+            let track = &tracks[track_index];
+            targets.extend((track.states.iter()).map(|v| (v[end] - v[start]) / typical));
         }
         let weights = (0..measured)
             .map(|k| {
@@ -169,11 +191,12 @@ impl Problem {
             .collect();
         Some(Problem {
             program,
-            rows: rows.len(),
+            rows: intervals.len(),
             measured,
             widths,
             states,
             inputs,
+            spans,
             windows,
             targets,
             weights,
@@ -222,7 +245,9 @@ impl Problem {
         let mut residuals = Vec::with_capacity(self.windows.len() * k);
         for (w, &(first, last)) in self.windows.iter().enumerate() {
             for state in 0..k {
-                let sum: f64 = (first..last).map(|l| balances[l * k + state]).sum();
+                let sum: f64 = (first..last)
+                    .map(|l| self.spans[l] * balances[l * k + state])
+                    .sum();
                 residuals.push((self.targets[w * k + state] - sum) * self.weights[state]);
             }
         }
@@ -277,12 +302,13 @@ impl Problem {
                 for state in 0..k {
                     let weight = -self.weights[state];
                     for l in first..last {
+                        let share = weight * self.spans[l];
                         for j in 0..m {
                             outputs[state * width + (l - first) * m + j] =
-                                weight * dn[j][l * k + state];
+                                share * dn[j][l * k + state];
                         }
                         for (q, column) in dp.iter().enumerate() {
-                            params[state * dp.len() + q] += weight * column[l * k + state];
+                            params[state * dp.len() + q] += share * column[l * k + state];
                         }
                     }
                 }
@@ -601,8 +627,9 @@ mod tests {
     use super::*;
     use crate::train::fixtures::chemostat;
 
-    /// A shipped bioreactor model and the shipped record (noise-free, from truth.gbm).
-    fn bioreactor(model: &str) -> (ir::Model, Record) {
+    /// A shipped bioreactor model and the shipped record (noise-free, from truth.gbm) on
+    /// its grid.
+    fn bioreactor(model: &str) -> (ir::Model, Track) {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let model = crate::driver::compile_file(&root.join(model), &[])
             .unwrap()
@@ -613,8 +640,13 @@ mod tests {
             crate::data::MinRows::new(2, "one step"),
         )
         .unwrap();
-        let record = crate::train::record_of(&model, &data).unwrap();
-        (model, record)
+        let track = crate::train::fixtures::track(&model, &data);
+        (model, track)
+    }
+
+    /// The intervals starting at `rows` of the one track.
+    fn at(rows: std::ops::Range<usize>) -> Vec<PairAt> {
+        rows.map(|r| (0, r)).collect()
     }
 
     fn unit_scales(model: &ir::Model) -> Vec<Vec<f64>> {
@@ -629,9 +661,8 @@ mod tests {
     fn the_bioreactor_yields_come_from_the_balances_alone() {
         // Truth (table 2): Y_X 0.435, Y_A 0.607, Y_B 0.3; both models start them at 0.5.
         for file in ["models/bioreactor/gb1.gbm", "models/bioreactor/gb2.gbm"] {
-            let (model, record) = bioreactor(file);
-            let rows: Vec<usize> = (50..550).collect();
-            let fit = estimate(&model, &unit_scales(&model), &record, &rows)
+            let (model, track) = bioreactor(file);
+            let fit = estimate(&model, &unit_scales(&model), &[track], &at(50..550))
                 .unwrap()
                 .expect("the balances determine the yields");
             assert_eq!(fit.intervals, 500);
@@ -647,16 +678,15 @@ mod tests {
 
     #[test]
     fn with_measurement_noise_the_yields_stay_close_and_their_errors_grow() {
-        let (model, mut record) = bioreactor("models/bioreactor/gb1.gbm");
+        let (model, mut track) = bioreactor("models/bioreactor/gb1.gbm");
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let noise = Gaussian::new(0.0, 1e-3).unwrap();
-        for column in &mut record.states {
+        for column in &mut track.states {
             for value in column.iter_mut() {
                 *value *= 1.0 + noise.sample(&mut rng);
             }
         }
-        let rows: Vec<usize> = (50..1050).collect();
-        let fit = estimate(&model, &unit_scales(&model), &record, &rows)
+        let fit = estimate(&model, &unit_scales(&model), &[track], &at(50..1050))
             .unwrap()
             .unwrap();
         let [y_x, y_a, y_b] = [0, 1, 2].map(|i| &fit.estimates[i]);
@@ -686,14 +716,15 @@ mod tests {
         )
         .unwrap()
         .model;
-        let record = Record {
-            step: 1.0,
-            times: (0..30).map(f64::from).collect(),
-            inputs: vec![vec![0.5; 30]],
-            states: vec![vec![1.0; 30], vec![0.5; 30]],
-        };
-        let rows: Vec<usize> = (0..29).collect();
-        let fit = estimate(&model, &unit_scales(&model), &record, &rows)
+        let record = crate::record::Record::complete(
+            "flat",
+            (0..30).map(f64::from).collect(),
+            vec![vec![0.5; 30]],
+            vec![vec![1.0; 30], vec![0.5; 30]],
+        );
+        let grid = crate::train::prepare::grid_for(&model, 1.0);
+        let track = Track::lay(&record, &grid, &[]);
+        let fit = estimate(&model, &unit_scales(&model), &[track], &at(0..29))
             .unwrap()
             .unwrap();
         // Steady state: r = 0.05 from X, then 0.05 * 0.5 = 0.05 / k from S, so k = 2.

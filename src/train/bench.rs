@@ -15,21 +15,22 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::backend::{Batch, Network, Precision, Setup};
-use crate::data::Dataset;
 use crate::fused::FusedNetwork;
 use crate::ir;
 
-use super::evaluate::run_in_hidden;
-use super::pairs::{first_pair_row, stage_fractions, PairTable};
-use super::{analysis, hidden_initial_values, normalise, record_of, TrainError};
+use super::pairs::stage_fractions;
+use super::prepare::Layout;
+use super::validation::{refresh, Course};
+use super::{analysis, hidden_initial_values, Part, TrainError, TrainOptions, TrainingData};
 
 pub use super::Engine;
 
 /// What to time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BenchOptions {
-    /// Training pairs (the first ones of the record).
-    pub train_points: usize,
+    /// Training pairs (the first ones of a single record; `None`: every pair of every
+    /// experiment).
+    pub train_points: Option<usize>,
     /// Pairs per Adam step.
     pub batch_size: usize,
     /// Epochs timed (after one untimed warm-up epoch).
@@ -67,35 +68,40 @@ pub struct BenchReport {
     pub final_loss: f64,
 }
 
-/// Times training of `model` on the first `train_points` pairs of `data`.
+/// Times training of `model` on the one-step pairs of `data` (the first `train_points` of
+/// a single record, or every pair of every experiment).
 pub fn bench(
     model: &ir::Model,
-    data: &Dataset,
+    data: &TrainingData,
     options: &BenchOptions,
 ) -> Result<BenchReport, TrainError> {
-    let record = record_of(model, data)?;
-    let first = first_pair_row(model, record.step);
-    let available = record.len().saturating_sub(first + 1);
-    if options.train_points == 0 || options.train_points > available {
+    let part = options.train_points.map_or(Part::All, |n| Part::FirstPairs(Some(n)));
+    if options.train_points == Some(0) {
         return Err(TrainError::TooManyTrainPoints {
-            available,
-            requested: options.train_points,
+            available: 0,
+            requested: 0,
         });
     }
-    let rows: Vec<usize> = (first..first + options.train_points).collect();
+    let train_options = TrainOptions {
+        substeps: options.substeps.max(1),
+        ..TrainOptions::default()
+    };
+    let layout = Layout::new(model, &TrainingData { part, ..*data }, &train_options)?;
     let hidden_init = hidden_initial_values(model)?;
     let setup = Setup {
-        step: record.step,
+        step: layout.grid.max_step,
         substeps: options.substeps.max(1),
         precision: options.precision,
         seed: options.seed,
-        normalisation: normalise(&record, first + options.train_points + 1),
-        scales: analysis::closure_scales(model, &record, &rows, &hidden_init)?,
+        normalisation: layout.normalisation.clone(),
+        scales: analysis::closure_scales(model, &layout.tracks, &layout.pairs, &hidden_init)?,
     };
     let network = Network::build(model, &setup)?;
     let fractions = stage_fractions(model.dynamics, setup.substeps);
-    let hidden = run_in_hidden(&network, model, &record, &fractions, &hidden_init)?;
-    let table = PairTable::build(model, &record, &rows, &hidden, &fractions);
+    let weights = vec![1.0; model.states.len()];
+    let mut course = Course::new(model, layout.tracks, (&layout.pairs, &weights), &fractions);
+    refresh(&network, model, &mut course, &fractions, &hidden_init)?;
+    let table = course.table;
     let mut step = Step::new(options.engine, network, model, &setup)?;
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let mut order: Vec<usize> = (0..table.len()).collect();
@@ -116,12 +122,12 @@ pub fn bench(
         final_loss = epoch(&mut step)?;
         epoch_seconds.push(started.elapsed().as_secs_f64());
     }
-    let steps_per_epoch = options.train_points.div_ceil(batch_size);
+    let steps_per_epoch = table.len().div_ceil(batch_size);
     let median_epoch_seconds = median(&epoch_seconds);
     Ok(BenchReport {
         engine: options.engine,
         precision: options.precision,
-        train_points: options.train_points,
+        train_points: table.len(),
         batch_size,
         steps_per_epoch,
         epoch_seconds,
@@ -178,7 +184,7 @@ mod tests {
 
     fn options(engine: Engine) -> BenchOptions {
         BenchOptions {
-            train_points: 120,
+            train_points: Some(120),
             batch_size: 50,
             epochs: 3,
             precision: Precision::F32,
@@ -192,6 +198,12 @@ mod tests {
     fn bench_times_whole_epochs_of_adam_steps_with_both_engines() {
         let (data, _) = chemostat::data(200, (0.002, 0.02), 1);
         let model = chemostat::grey_box();
+        let records = [crate::train::fixtures::record(&model, &data)];
+        let data = TrainingData {
+            train: &records,
+            validation: &[],
+            part: Part::All,
+        };
         let graph = bench(&model, &data, &options(Engine::Graph)).unwrap();
         let fused = bench(&model, &data, &options(Engine::Fused)).unwrap();
         for report in [&graph, &fused] {
@@ -210,7 +222,7 @@ mod tests {
             graph.final_loss
         );
         let too_many = BenchOptions {
-            train_points: 1000,
+            train_points: Some(1000),
             ..options(Engine::Graph)
         };
         assert!(bench(&model, &data, &too_many).is_err());

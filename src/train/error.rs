@@ -178,6 +178,84 @@ pub enum TrainError {
         /// The model's name.
         model: String,
     },
+    /// `--train-points` (the paper's protocol) with several training experiments.
+    #[error(
+        "expected one training experiment for --train-points (the first pairs of one record), \
+         found {experiments}"
+    )]
+    #[diagnostic(
+        code(gbm::E0423),
+        help(
+            "with several experiments hold out whole ones (--holdout NAME, --val FILE) or the \
+             tail of each (--val-fraction F)"
+        )
+    )]
+    TrainPointsOnSeveral {
+        /// Training experiments given.
+        experiments: usize,
+    },
+    /// A tail split that leaves a part too small.
+    #[error(
+        "expected at least {needed} rows in each part of experiment `{experiment}` split by \
+         --val-fraction {share}, found {train} training and {test} held-out rows"
+    )]
+    #[diagnostic(
+        code(gbm::E0424),
+        help("use a --val-fraction that leaves both parts {needed} rows, or hold out whole experiments")
+    )]
+    SplitTooSmall {
+        /// The experiment.
+        experiment: String,
+        /// The share held out.
+        share: f64,
+        /// Rows each part needs.
+        needed: usize,
+        /// Rows that would train.
+        train: usize,
+        /// Rows that would be held out.
+        test: usize,
+    },
+    /// A `next` model on data without one uniform step.
+    #[error(
+        "expected rows every {step} time units for a `next` model, found irregular times in \
+         experiment `{experiment}`"
+    )]
+    #[diagnostic(
+        code(gbm::E0425),
+        help(
+            "a discrete map steps from row to row; on irregular data use a continuous black \
+             box whose closure outputs are the derivatives (`der X = n_X`), as \
+             models/bioreactor/blackbox_ode.gbm does"
+        )
+    )]
+    IrregularForNext {
+        /// The first experiment that is irregular (or sampled at another step).
+        experiment: String,
+        /// The step of the grid.
+        step: f64,
+    },
+    /// A state that an experiment never measures, with no declared initial value.
+    #[error(
+        "expected an initial value for state `{state}` in experiment `{experiment}`, found no \
+         measured value and no declared one"
+    )]
+    #[diagnostic(
+        code(gbm::E0426),
+        help("declare one in the model (`state {state} = ...`) or measure it in the experiment")
+    )]
+    NoInitialValue {
+        /// The state.
+        state: String,
+        /// The experiment.
+        experiment: String,
+    },
+    /// Nothing left to train on.
+    #[error("expected at least one training experiment, found none")]
+    #[diagnostic(
+        code(gbm::E0427),
+        help("hold out fewer experiments: training needs at least one")
+    )]
+    NoTrainingExperiment,
     /// The network failed.
     #[error(transparent)]
     #[diagnostic(transparent)]

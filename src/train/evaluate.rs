@@ -1,32 +1,38 @@
-//! Running a trained network along a record: one-step (offline) predictions, free runs
-//! (online), the run-in of hidden states, and the paper's two errors in normalised units.
+//! Running a trained network along a track: one-step (offline) predictions, free runs
+//! (online), the run-in of hidden states and of the reference where the data leave it
+//! unknown, and the paper's two errors in normalised units, over measured cells only.
 //!
 //! A free run given a [`PhysicalRange`] stops at the first predicted measured state that
 //! leaves it or is not finite, and records where ([`Divergence`]); its online error is then
-//! infinite, never a finite error over the rows before the stop.
+//! infinite, never a finite error over the knots before the stop.
 
 use std::fmt;
 
 use crate::backend::{BackendError, Batch, Network, Normalisation};
 use crate::ir;
+use crate::record::Track;
 
-use super::pairs::{embedding_row, PairTable, Record};
+use super::pairs::{embedding_row, PairTable};
 
 /// Rows per prediction batch when evaluating many pairs at once.
 const EVALUATION_CHUNK: usize = 512;
 
-/// Mean squared errors of z-scored measured states. Infinite errors (a diverged free run)
-/// are written to JSON as `null` and read back as infinite.
+/// Mean squared errors of z-scored measured states, each over its measured cells. Infinite
+/// errors (a diverged free run) are written to JSON as `null` and read back as infinite.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorSet {
-    /// Per measured state, in model order: `(name, mse)`.
+    /// Per measured state with at least one scored cell, in model order: `(name, mse)`.
     #[serde(deserialize_with = "lenient::per_state")]
     pub per_state: Vec<(String, f64)>,
-    /// Mean over states.
+    /// Mean over those states.
     #[serde(deserialize_with = "lenient::number")]
     pub overall: f64,
-    /// Number of predicted rows the errors average over (up to the stop of a diverged run).
+    /// Number of predicted knots the errors average over (up to the stop of a diverged
+    /// run).
     pub rows: usize,
+    /// Number of measured cells scored.
+    #[serde(default)]
+    pub cells: usize,
     /// Where a free run left the physical range (its errors are then infinite).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub divergence: Option<Divergence>,
@@ -82,7 +88,10 @@ impl PhysicalRange {
 /// Where and why a free run stopped.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Divergence {
-    /// Record row of the offending state.
+    /// The experiment.
+    #[serde(default)]
+    pub experiment: String,
+    /// Knot of the offending state.
     pub row: usize,
     /// Its time.
     pub time: f64,
@@ -101,15 +110,15 @@ impl fmt::Display for Divergence {
         if self.value.is_finite() {
             write!(
                 formatter,
-                "the free run left the physical range at t = {} (row {}): {} = {:.4e}, outside \
+                "the free run of `{}` left the physical range at t = {}: {} = {:.4e}, outside \
                  [{lo:.4e}, {hi:.4e}]",
-                self.time, self.row, self.state, self.value
+                self.experiment, self.time, self.state, self.value
             )
         } else {
             write!(
                 formatter,
-                "the free run became non-finite at t = {} (row {}): {} = {}",
-                self.time, self.row, self.state, self.value
+                "the free run of `{}` diverged at t = {}: {} = {}",
+                self.experiment, self.time, self.state, self.value
             )
         }
     }
@@ -118,46 +127,47 @@ impl fmt::Display for Divergence {
 /// How measured states evolve along a simulated trajectory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Feed {
-    /// Measured states are reset to the data at every step (one-step predictions; used to
-    /// run hidden states in along the record).
+    /// Measured states are reset to the reference wherever it is known from data, and
+    /// run free (into the embedding too) where it is not: one-step predictions, the run-in
+    /// of hidden states and the model's fill of unknown stretches.
     Data,
     /// The network is fed its own predictions, through the state and the embedding alike.
     Own,
 }
 
-/// A trajectory from row `start` to row `end`, inclusive.
+/// A trajectory from knot `start` to knot `end`, inclusive.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Trajectory {
-    /// First row.
+    /// First knot.
     pub start: usize,
-    /// Per row: the state vector (measured, then hidden) the step from that row starts at.
+    /// Per knot: the state vector (measured, then hidden) the step from that knot starts at.
     pub states: Vec<Vec<f64>>,
-    /// Per row: the one-step prediction made from it.
+    /// Per knot: the one-step prediction made from it.
     pub next_states: Vec<Vec<f64>>,
-    /// Per row: every closure output at that row.
+    /// Per knot: every closure output at that knot.
     pub closure_outputs: Vec<Vec<f64>>,
-    /// Per row: the model's outputs at that row.
+    /// Per knot: the model's outputs at that knot.
     pub outputs: Vec<Vec<f64>>,
     /// Where the run stopped early, if it left the physical range.
     pub divergence: Option<Divergence>,
 }
 
-/// Simulates rows `start..=end` of `record` step by step, starting from the measured states
-/// of row `start` and the hidden states `hidden_start`, inputs taken from the data. With
-/// `Feed::Own` and a physical range, stops after the first prediction outside it.
+/// Simulates knots `start..=end` of `track` step by step, starting from the reference
+/// states at knot `start` and the hidden states `hidden_start`, inputs taken from the data.
+/// With `Feed::Own` and a physical range, stops after the first prediction outside it.
 pub fn simulate(
     network: &Network,
     model: &ir::Model,
-    record: &Record,
+    track: &Track,
     fractions: &[f64],
-    rows: (usize, usize),
+    knots: (usize, usize),
     hidden_start: &[f64],
     (feed, range): (Feed, Option<&PhysicalRange>),
 ) -> Result<Trajectory, BackendError> {
-    let (start, end) = rows;
+    let (start, end) = knots;
     let measured = model.states.len();
-    let mut history = record.clone();
-    let mut state: Vec<f64> = record.states.iter().map(|s| s[start]).collect();
+    let mut history = track.clone();
+    let mut state: Vec<f64> = track.states.iter().map(|s| s[start]).collect();
     state.extend_from_slice(hidden_start);
     let mut trajectory = Trajectory {
         start,
@@ -167,21 +177,20 @@ pub fn simulate(
         outputs: Vec::new(),
         divergence: None,
     };
-    for row in start..=end {
+    for knot in start..=end {
         let batch = Batch {
             rows: 1,
             states: state.clone(),
-            inputs: record.inputs.iter().map(|u| u[row]).collect(),
+            inputs: track.inputs.iter().map(|u| u[knot]).collect(),
             embeddings: (model.closures.iter())
                 .map(|c| {
                     (fractions.iter())
-                        .map(|&f| embedding_row(c, &history, row, f))
+                        .map(|&f| embedding_row(c, &history, knot, f))
                         .collect()
                 })
                 .collect(),
-            targets: Vec::new(),
-            step_sizes: Vec::new(),
-            weights: Vec::new(),
+            step_sizes: vec![track.steps[knot]],
+            ..Batch::default()
         };
         let prediction = network.predict(&batch)?;
         trajectory.states.push(std::mem::take(&mut state));
@@ -189,92 +198,191 @@ pub fn simulate(
         trajectory.outputs.push(prediction.outputs);
         let next = prediction.next_states;
         if let Some(range) = range.filter(|_| feed == Feed::Own) {
-            if let Some(state) = range.violation(&next) {
+            if let Some(index) = range.violation(&next) {
                 trajectory.divergence = Some(Divergence {
-                    row: row + 1,
-                    time: record.times.get(row + 1).copied().unwrap_or(f64::NAN),
-                    state: model.states[state].name.clone(),
-                    value: next[state],
-                    range: (range.lower[state], range.upper[state]),
+                    experiment: track.name.clone(),
+                    row: knot + 1,
+                    time: track.times.get(knot + 1).copied().unwrap_or(f64::NAN),
+                    state: model.states[index].name.clone(),
+                    value: next[index],
+                    range: (range.lower[index], range.upper[index]),
                 });
                 trajectory.next_states.push(next);
                 break;
             }
         }
-        if row + 1 < record.len() {
-            state = match feed {
-                Feed::Own => {
-                    for (series, &value) in history.states.iter_mut().zip(&next) {
-                        series[row + 1] = value;
-                    }
-                    next.clone()
+        if knot + 1 < track.len() {
+            state = next.clone();
+            for (index, value) in state.iter_mut().enumerate().take(measured) {
+                let reset = feed == Feed::Data && track.known[index][knot + 1];
+                if reset {
+                    *value = track.states[index][knot + 1];
+                } else {
+                    history.states[index][knot + 1] = *value;
                 }
-                Feed::Data => {
-                    let mut reset: Vec<f64> = record.states.iter().map(|s| s[row + 1]).collect();
-                    reset.extend_from_slice(&next[measured..]);
-                    reset
-                }
-            };
+            }
         }
         trajectory.next_states.push(next);
     }
     Ok(trajectory)
 }
 
-/// Hidden-state estimates at every row of `record`: from their initial values at row 0,
-/// integrated along the record with the measured states taken from the data. Empty rows
-/// for models without hidden states.
-pub fn run_in_hidden(
+/// What a run along a whole track from its first knot gives: hidden-state estimates at
+/// every knot, and the model's values of every measured state (equal to the reference
+/// where it is known, the model's own run where it is not).
+pub struct RunIn {
+    /// `hidden[knot]`: the hidden states (empty for models without any).
+    pub hidden: Vec<Vec<f64>>,
+    /// `states[i][knot]`: the run's measured state `i`.
+    pub states: Vec<Vec<f64>>,
+}
+
+/// Runs `track` from its first knot with [`Feed::Data`], the hidden states from `initial`.
+pub fn run_in(
     network: &Network,
     model: &ir::Model,
-    record: &Record,
+    track: &Track,
     fractions: &[f64],
     initial: &[f64],
-) -> Result<Vec<Vec<f64>>, BackendError> {
-    if model.hidden.is_empty() || record.is_empty() {
-        return Ok(vec![Vec::new(); record.len()]);
+) -> Result<RunIn, BackendError> {
+    let measured = model.states.len();
+    let needed = !model.hidden.is_empty() || !track.fully_known();
+    if !needed || track.is_empty() {
+        return Ok(RunIn {
+            hidden: vec![Vec::new(); if model.hidden.is_empty() { track.len() } else { 0 }],
+            states: track.states.clone(),
+        });
     }
-    let last = record.len() - 1;
     let run = simulate(
         network,
         model,
-        record,
+        track,
         fractions,
-        (0, last),
+        (0, track.len() - 1),
         initial,
         (Feed::Data, None),
     )?;
-    let measured = model.states.len();
-    Ok(run
-        .states
-        .into_iter()
-        .map(|s| s[measured..].to_vec())
-        .collect())
+    let hidden = (run.states.iter()).map(|s| s[measured..].to_vec()).collect();
+    let states = (0..measured)
+        .map(|index| run.states.iter().map(|s| s[index]).collect())
+        .collect();
+    Ok(RunIn { hidden, states })
 }
 
-/// Offline error: one step from the true history for every pair of `table`.
+/// Hidden-state estimates at every knot of `track` (see [`run_in`]). Empty rows for models
+/// without hidden states.
+pub fn run_in_hidden(
+    network: &Network,
+    model: &ir::Model,
+    track: &Track,
+    fractions: &[f64],
+    initial: &[f64],
+) -> Result<Vec<Vec<f64>>, BackendError> {
+    if model.hidden.is_empty() {
+        return Ok(vec![Vec::new(); track.len()]);
+    }
+    Ok(run_in(network, model, track, fractions, initial)?.hidden)
+}
+
+/// Squared z-scored errors summed per measured state, with their cell counts: errors of
+/// several runs pool into one [`ErrorSet`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ErrorSum {
+    squared: Vec<f64>,
+    cells: Vec<usize>,
+    rows: usize,
+    divergence: Option<Divergence>,
+}
+
+impl ErrorSum {
+    /// Zero for `states` measured states.
+    pub fn new(states: usize) -> Self {
+        ErrorSum {
+            squared: vec![0.0; states],
+            cells: vec![0; states],
+            rows: 0,
+            divergence: None,
+        }
+    }
+
+    /// Adds the squared error of one cell of state `state`.
+    pub fn add(&mut self, state: usize, squared: f64) {
+        self.squared[state] += squared;
+        self.cells[state] += 1;
+    }
+
+    /// Adds another sum (a diverged run makes the whole set infinite).
+    pub fn merge(&mut self, other: &ErrorSum) {
+        for state in 0..self.squared.len() {
+            self.squared[state] += other.squared[state];
+            self.cells[state] += other.cells[state];
+        }
+        self.rows += other.rows;
+        if self.divergence.is_none() {
+            self.divergence = other.divergence.clone();
+        }
+    }
+
+    /// The mean squared errors per state (states without a cell left out) and their mean;
+    /// `None` when no cell was scored.
+    pub fn finish(&self, model: &ir::Model) -> Option<ErrorSet> {
+        let cells: usize = self.cells.iter().sum();
+        if let Some(divergence) = &self.divergence {
+            let mut set = error_set(model, vec![f64::INFINITY; model.states.len()], 1);
+            set.rows = self.rows;
+            set.cells = cells;
+            set.divergence = Some(divergence.clone());
+            return Some(set);
+        }
+        if cells == 0 {
+            return None;
+        }
+        let per_state: Vec<(String, f64)> = (model.states.iter().enumerate())
+            .filter(|&(index, _)| self.cells[index] > 0)
+            .map(|(index, state)| {
+                let mean = self.squared[index] / self.cells[index] as f64;
+                (state.name.clone(), mean)
+            })
+            .collect();
+        let overall = per_state.iter().map(|(_, e)| e).sum::<f64>() / per_state.len() as f64;
+        Some(ErrorSet {
+            per_state,
+            overall,
+            rows: self.rows,
+            cells,
+            divergence: None,
+        })
+    }
+}
+
+/// Offline error: one step from the true history for every pair of `table`, over the
+/// measured cells of the targets.
 pub fn offline_error(
     network: &Network,
     model: &ir::Model,
     table: &PairTable,
     normalisation: &Normalisation,
-) -> Result<ErrorSet, BackendError> {
+) -> Result<ErrorSum, BackendError> {
     let measured = model.states.len();
     let width = measured + model.hidden.len();
-    let mut squared = vec![0.0; measured];
+    let mut sum = ErrorSum::new(measured);
     let indices: Vec<usize> = (0..table.len()).collect();
     for chunk in indices.chunks(EVALUATION_CHUNK) {
         let batch = table.batch(chunk);
         let prediction = network.predict(&batch)?;
         for row in 0..chunk.len() {
-            for (state, total) in squared.iter_mut().enumerate() {
+            for state in 0..measured {
+                if batch.weights[row * measured + state] <= 0.0 {
+                    continue;
+                }
                 let error = prediction.next_states[row * width + state]
                     - batch.targets[row * measured + state];
-                *total += (error / normalisation.state_std[state]).powi(2);
+                sum.add(state, (error / normalisation.state_std[state]).powi(2));
             }
         }
     }
-    Ok(error_set(model, squared, table.len()))
+    sum.rows = table.len();
+    Ok(sum)
 }
 
 /// JSON has no infinity or NaN: `serde_json` writes them as `null`; read `null` back.
@@ -302,35 +410,38 @@ mod lenient {
     }
 }
 
-/// Online error of a free run against the record, over the rows after its start; infinite
-/// for every state when the run diverged.
+/// Online error of a free run against the track's measured cells at knots after its start
+/// and at or after `scored_from` (a time); infinite for every state when the run diverged.
 pub fn online_error(
     model: &ir::Model,
-    record: &Record,
+    track: &Track,
     run: &Trajectory,
-    normalisation: &Normalisation,
-) -> ErrorSet {
+    (normalisation, scored_from): (&Normalisation, f64),
+) -> ErrorSum {
     let measured = model.states.len();
+    let mut sum = ErrorSum::new(measured);
     if let Some(divergence) = &run.divergence {
-        let mut set = error_set(model, vec![f64::INFINITY; measured], 1);
-        set.rows = run.next_states.len();
-        set.divergence = Some(divergence.clone());
-        return set;
+        sum.rows = run.next_states.len();
+        sum.divergence = Some(divergence.clone());
+        return sum;
     }
-    let mut squared = vec![0.0; measured];
-    let mut rows = 0;
     for (offset, next) in run.next_states.iter().enumerate() {
-        let row = run.start + offset + 1;
-        if row >= record.len() {
+        let knot = run.start + offset + 1;
+        if knot >= track.len() {
             break;
         }
-        for (state, total) in squared.iter_mut().enumerate() {
-            let error = next[state] - record.states[state][row];
-            *total += (error / normalisation.state_std[state]).powi(2);
+        if track.times[knot] < scored_from {
+            continue;
         }
-        rows += 1;
+        for state in 0..measured {
+            if track.measured[state][knot] {
+                let error = next[state] - track.states[state][knot];
+                sum.add(state, (error / normalisation.state_std[state]).powi(2));
+            }
+        }
+        sum.rows += 1;
     }
-    error_set(model, squared, rows)
+    sum
 }
 
 fn error_set(model: &ir::Model, squared: Vec<f64>, rows: usize) -> ErrorSet {
@@ -343,6 +454,7 @@ fn error_set(model: &ir::Model, squared: Vec<f64>, rows: usize) -> ErrorSet {
         per_state,
         overall,
         rows,
+        cells: rows * model.states.len(),
         divergence: None,
     }
 }

@@ -18,8 +18,10 @@ use crate::fused::FusedNetwork;
 use crate::ir;
 
 use super::pairs::stage_fractions;
+use super::split::Training;
+use super::validation::{refresh, Course};
 use super::windows::{rollout_batch, shooting_starts};
-use super::{refresh_hidden, Engine, Event, Recipe, Split, TrainError, TrainOptions};
+use super::{Engine, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -30,6 +32,8 @@ pub(super) struct Fit<'a> {
     pub hidden_init: &'a [f64],
     /// Hold the params at their initial values (they came from the balances).
     pub freeze_params: bool,
+    /// What trains on each track.
+    pub trainings: &'a [Training],
 }
 
 /// One Adam step on a one-step batch with the given settings; the loss before it.
@@ -53,7 +57,7 @@ impl Fit<'_> {
     pub fn run(
         &self,
         network: &mut Network,
-        training: &mut Split,
+        training: &mut Course,
         on_event: &mut dyn FnMut(Event),
     ) -> Result<Vec<f64>, TrainError> {
         let options = self.options;
@@ -61,12 +65,18 @@ impl Fit<'_> {
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
         let mut engines = Engines::new(network, options.engine, self.model, self.setup)?;
+        let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
+        let mut rollout_epochs = 0;
         for epoch in 1..=options.epochs {
-            if epoch > 1 && !self.model.hidden.is_empty() {
-                let current = engines.current_weights()?;
-                refresh_hidden(current, self.model, training, &fractions, self.hidden_init)?;
-            }
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
+            let fill_due = needs_fill && horizon > 1 && rollout_epochs % FILL_REFRESH == 0;
+            if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
+                let current = engines.current_weights()?;
+                refresh(current, self.model, training, &fractions, self.hidden_init)?;
+            }
+            if horizon > 1 {
+                rollout_epochs += 1;
+            }
             let loss = self
                 .epoch(&mut engines, training, (horizon, &fractions), &mut rng)
                 .map_err(|found| match found {
@@ -88,7 +98,7 @@ impl Fit<'_> {
     fn epoch(
         &self,
         engines: &mut Engines,
-        training: &Split,
+        training: &Course,
         (horizon, fractions): (usize, &[f64]),
         rng: &mut ChaCha8Rng,
     ) -> Result<f64, EpochFailure> {
@@ -108,7 +118,7 @@ impl Fit<'_> {
     fn one_step_epoch(
         &self,
         step: &mut OneStep,
-        training: &Split,
+        training: &Course,
         rng: &mut ChaCha8Rng,
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
@@ -126,16 +136,23 @@ impl Fit<'_> {
     fn rollout_epoch(
         &self,
         network: &mut Network,
-        training: &Split,
+        training: &Course,
         (horizon, fractions): (usize, &[f64]),
         rng: &mut ChaCha8Rng,
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
-        let pairs = training.table.len();
-        let first = training.table.rows.first().copied().unwrap_or(0);
-        let horizon = horizon.min(pairs.max(1));
+        let longest = (self.trainings.iter())
+            .map(|t| t.knots.len())
+            .max()
+            .unwrap_or(0);
+        let horizon = horizon.min(longest.max(1));
         let phase = rng.gen_range(0..horizon);
-        let mut starts = shooting_starts(first, pairs, horizon, phase);
+        let mut starts = Vec::new();
+        for (index, training_part) in self.trainings.iter().enumerate() {
+            let knots = &training_part.knots;
+            let tiles = shooting_starts(knots.start, knots.len(), horizon, phase);
+            starts.extend(tiles.into_iter().map(|knot| (index, knot)));
+        }
         if starts.is_empty() {
             let step = &mut |b: &Batch, s: &StepSettings| network.train_step_with(b, s);
             return self.one_step_epoch(step, training, rng);
@@ -148,8 +165,7 @@ impl Fit<'_> {
         for chunk in starts.chunks(per_batch) {
             let batch = rollout_batch(
                 self.model,
-                &training.record,
-                &training.hidden,
+                (&training.tracks, &training.hidden, &training.weights),
                 chunk,
                 horizon,
                 fractions,

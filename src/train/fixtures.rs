@@ -602,3 +602,44 @@ pub fn options(epochs: usize, train_points: usize) -> crate::train::TrainOptions
 
 /// A training-event sink that ignores every event.
 pub fn quiet(_: crate::train::Event) {}
+
+/// The complete record of `model`'s columns in `data`.
+pub fn record(model: &ir::Model, data: &crate::data::Dataset) -> crate::record::Record {
+    crate::train::record_of(model, data).unwrap()
+}
+
+/// The record of `data` laid on its own uniform grid (gap limits: the model's delays).
+pub fn track(model: &ir::Model, data: &crate::data::Dataset) -> crate::record::Track {
+    let record = record(model, data);
+    let step = record.uniform_step().unwrap();
+    let grid = crate::train::prepare::grid_for(model, step);
+    crate::record::Track::lay(&record, &grid, &[])
+}
+
+/// Normalisation over the first `rows` rows of a complete record.
+pub fn normalise(record: &crate::record::Record, rows: usize) -> crate::backend::Normalisation {
+    crate::record::Normalisation::over(
+        &[(record, 0..rows.min(record.len()))],
+        record.states.len(),
+        record.inputs.len(),
+    )
+}
+
+/// Trains `model` on the record `data` under the paper's protocol (the first
+/// `options.train_points` pairs), validated by the rest or by `validation` when given.
+pub fn train_one(
+    model: &ir::Model,
+    data: &crate::data::Dataset,
+    validation: Option<&crate::data::Dataset>,
+    options: &crate::train::TrainOptions,
+    recipe: &crate::train::Recipe,
+) -> Result<crate::train::Trained, crate::train::TrainError> {
+    let train = [record(model, data)];
+    let held: Vec<crate::record::Record> = validation.map(|v| record(model, v)).into_iter().collect();
+    let data = crate::train::TrainingData {
+        train: &train,
+        validation: &held,
+        part: crate::train::Part::FirstPairs(options.train_points),
+    };
+    crate::train::train_with(model, &data, options, recipe, &mut quiet)
+}

@@ -1,35 +1,42 @@
-//! Training of grey-box models on data (spec section 4; Lovelett et al. 2020, section 2).
+//! Training of grey-box models on data sets (spec section 4; records spec; Lovelett et al.
+//! 2020, section 2).
 //!
-//! [`train`] turns a record into one-step pairs ([`pairs`]), normalises with the training
-//! split, resolves closure magnitudes and warns about stiff balances ([`analysis`]), then
-//! runs Adam on shuffled mini-batches of the backend network and reports the paper's two
-//! validation errors ([`evaluate`]). [`artifacts`] saves and reloads a trained network,
-//! [`predict`] runs it along a record, [`mod@bench`] times its training steps.
+//! [`train`] lays each experiment on its integration grid ([`prepare`], [`crate::record`]),
+//! splits knots and experiments into training and validation ([`split`]), normalises over
+//! the training part's measured cells, resolves closure magnitudes and warns about stiff
+//! balances ([`analysis`]), then runs Adam on shuffled mini-batches of one-step pairs
+//! ([`pairs`]) or free-run windows ([`windows`]) and reports the paper's two validation
+//! errors per experiment and pooled ([`evaluate`]). [`artifacts`] saves and reloads a
+//! trained network, [`predict`] runs it along a record, [`mod@bench`] times its training
+//! steps.
 //!
-//! Decisions this module makes:
-//! - **Split**: the first `--train-points` pairs train; the remaining pairs of the same record
-//!   validate, or every pair of `--val FILE`. Without `--train-points` all pairs train when a
-//!   validation file is given, else the first 70 %.
-//! - **Normalisation**: mean and standard deviation of each input and measured state over
-//!   the rows the training pairs cover (a constant column gets std 1).
-//! - **Hidden states** (none in the paper's models) start at their declared initial values at
-//!   the first row and are integrated along the record with the measured states reset to the
-//!   data at every step; their estimates enter the pairs as constants, refreshed each epoch
-//!   with the current network (no gradient flows through their history).
-//! - **Online error**: a free run starting at the first validation pair with the true history
-//!   before it, driven by the data's inputs, over `--online-horizon` (default: to the end).
+//! Decisions this module makes (`docs/training.md` has them in full):
+//! - **Loss** at measured cells only (and observables), each z-scored by its column's
+//!   training statistics; `--weight X=W` scales a column's cells.
+//! - **Hidden states** start at their declared initial values at each experiment's first
+//!   knot and are integrated along it with the measured states reset to the data wherever
+//!   the data know them; where they do not (long gaps, before the first cell) the run goes
+//!   free and its values fill the reference. Both are refreshed with the current network
+//!   (hidden states every epoch, the fill every [`FILL_REFRESH`] rollout epochs); no
+//!   gradient flows through them.
+//! - **Online error**: a free run per validation experiment ([`split`] says from where),
+//!   driven by the data's inputs, over `--online-horizon` (default: to the end).
 
 pub mod analysis;
 pub mod artifacts;
 pub mod balances;
 pub mod bench;
+pub mod cv;
 mod error;
 pub mod evaluate;
 mod fit;
+pub mod initial;
 pub mod pairs;
 pub mod polish;
 pub mod predict;
+pub(crate) mod prepare;
 pub mod recipe;
+pub mod split;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
@@ -40,23 +47,23 @@ pub mod windows;
 #[cfg(test)]
 pub(crate) mod fixtures;
 
-use crate::backend::{Network, Normalisation, Precision, Setup};
-use crate::data::Dataset;
+use crate::backend::{Network, Precision, Setup};
 use crate::ir;
 
 pub use analysis::StiffnessWarning;
 pub use balances::BalanceFit;
 pub use error::TrainError;
-use evaluate::run_in_hidden;
 pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
-use pairs::{first_pair_row, stage_fractions, PairTable, Record};
+pub use initial::{InitialState, Origin};
+use pairs::stage_fractions;
 pub use polish::{ParamEstimate, PolishSummary};
+use prepare::Layout;
 pub use recipe::{Engine, Objective, ParamSource, Recipe};
-pub use validation::Validation;
-use validation::{refresh_hidden, validate, validation_splits, Split};
+pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
+use validation::{refresh, validate, Course};
 
-/// Share of the pairs that train when neither `--train-points` nor `--val` is given.
-pub const DEFAULT_TRAIN_SHARE: f64 = 0.7;
+/// Rollout epochs between refreshes of the model's fill of unknown stretches.
+pub const FILL_REFRESH: usize = 10;
 
 /// Options of a training run.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,18 +74,24 @@ pub struct TrainOptions {
     pub batch_size: usize,
     /// Adam learning rate.
     pub learning_rate: f64,
-    /// Number of training pairs (the first ones); see the module documentation.
+    /// Number of training pairs (the first ones) under the paper's protocol.
     pub train_points: Option<usize>,
     /// Seed of the initialisation and the shuffling.
     pub seed: u64,
     /// Element type.
     pub precision: Precision,
-    /// RK4 sub-steps per sample.
+    /// RK4 sub-steps per grid step.
     pub substeps: usize,
     /// Length (model time) of the online free run; `None` runs to the end.
     pub online_horizon: Option<f64>,
     /// Which implementation runs the one-step epochs.
     pub engine: Engine,
+    /// Longest grid step (`None`: the median spacing of the densest measured column).
+    pub dt: Option<f64>,
+    /// Where whole-experiment free runs and training windows start.
+    pub history: History,
+    /// Loss weight of each named measured state (others weigh 1).
+    pub column_weights: Vec<(String, f64)>,
 }
 
 impl Default for TrainOptions {
@@ -93,6 +106,9 @@ impl Default for TrainOptions {
             substeps: 1,
             online_horizon: None,
             engine: Engine::Graph,
+            dt: None,
+            history: History::Held,
+            column_weights: Vec::new(),
         }
     }
 }
@@ -123,34 +139,34 @@ pub enum Event<'a> {
     },
 }
 
-/// Validation errors in normalised units (the paper's two errors): of the first
-/// validation set, and of every validation set.
+/// Validation errors in normalised units (the paper's two errors): pooled over every
+/// validation experiment, and per experiment.
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Metrics {
     /// Offline validation error of the untrained network.
     pub initial_offline: Option<ErrorSet>,
     /// Online validation error of the untrained network.
     pub initial_online: Option<ErrorSet>,
-    /// Offline validation error (one step from true history).
+    /// Offline validation error (one step from measured history), pooled.
     pub offline: Option<ErrorSet>,
-    /// Online validation error (free run).
+    /// Online validation error (free runs), pooled.
     pub online: Option<ErrorSet>,
-    /// Both errors of every validation set, the first being the one above.
+    /// Both errors of every validation experiment (or tail).
     #[serde(default)]
     pub validations: Vec<ValidationErrors>,
 }
 
-/// The errors of one validation set.
+/// The errors of one validation experiment (or the validated part of one).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ValidationErrors {
-    /// The record (a file, or the rest of the training record).
+    /// The experiment (with `(rest)` or `(tail)` when part of a training experiment).
     pub name: String,
-    /// Its pairs.
+    /// Its one-step pairs with measured history.
     pub pairs: usize,
-    /// Offline error.
-    pub offline: ErrorSet,
+    /// Offline error (absent without a pair whose history is measured).
+    pub offline: Option<ErrorSet>,
     /// Online error (with the divergence, if the free run left the physical range).
-    pub online: ErrorSet,
+    pub online: Option<ErrorSet>,
 }
 
 /// What a training run reports.
@@ -166,7 +182,7 @@ pub struct TrainReport {
     pub losses: Vec<f64>,
     /// Number of training pairs.
     pub train_pairs: usize,
-    /// Number of validation pairs (of the first validation set).
+    /// Number of validation pairs (over every validation experiment).
     pub validation_pairs: usize,
     /// The recipe trained with.
     pub recipe: Recipe,
@@ -177,6 +193,10 @@ pub struct TrainReport {
     /// The params' estimate from the balances, when they came from there (then held
     /// fixed while the network trained; see [`balances`]).
     pub balance_fit: Option<BalanceFit>,
+    /// Each experiment's initial state (training experiments first).
+    pub initial_states: Vec<InitialState>,
+    /// The grid's longest step.
+    pub dt: f64,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -189,57 +209,41 @@ pub struct Trained {
     pub report: TrainReport,
 }
 
-/// Trains `model` on `data` with the default [`Recipe`], validating on `validation` when
-/// given, else on the pairs after the training pairs; `on_event` hears of warnings and of
-/// every epoch.
+/// Trains `model` on `data` with the default [`Recipe`]; `on_event` hears of warnings and
+/// of every epoch.
 pub fn train(
     model: &ir::Model,
-    data: &Dataset,
-    validation: Option<&Dataset>,
+    data: &TrainingData,
     options: &TrainOptions,
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
-    let validations = match validation {
-        Some(file) => vec![Validation::File(file)],
-        None => vec![Validation::Rest],
-    };
-    train_with(
-        model,
-        data,
-        &validations,
-        options,
-        &Recipe::default(),
-        on_event,
-    )
+    train_with(model, data, options, &Recipe::default(), on_event)
 }
 
-/// Trains `model` on `data` with `recipe`, validating on each of `validations` (the
-/// report's headline errors are those of the first that has pairs).
+/// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
+/// params from the balances), fit, evaluate, report.
 pub fn train_with(
     model: &ir::Model,
-    data: &Dataset,
-    validations: &[Validation],
+    data: &TrainingData,
     options: &TrainOptions,
     recipe: &Recipe,
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
     check_options(options, recipe)?;
     check_trainable(model)?;
-    let record = record_of(model, data)?;
-    check_delays(model, record.step)?;
-    let first = first_pair_row(model, record.step);
-    let available = pair_count(data, &record, first)?;
-    let has_file = validations.iter().any(|v| matches!(v, Validation::File(_)));
-    let train_count = train_pair_count(options, has_file, available)?;
-    let train_rows: Vec<usize> = (first..first + train_count).collect();
-    let normalisation = normalise(&record, first + train_count + 1);
+    let train_points = options.train_points.map(Some);
+    let data = TrainingData {
+        part: train_points.map_or(data.part, Part::FirstPairs),
+        ..*data
+    };
+    let layout = Layout::new(model, &data, options)?;
     let hidden_init = hidden_initial_values(model)?;
-    let scales = analysis::closure_scales(model, &record, &train_rows, &hidden_init)?;
+    let fractions = stage_fractions(model.dynamics, options.substeps);
+    let scales = analysis::closure_scales(model, &layout.tracks, &layout.pairs, &hidden_init)?;
     let warnings = analysis::stiffness(
         model,
         &scales,
-        &record,
-        &train_rows,
+        (&layout.tracks, &layout.pairs),
         &hidden_init,
         options.substeps,
     )?;
@@ -247,7 +251,7 @@ pub fn train_with(
         on_event(Event::Warning(warning));
     }
     let balance_fit = if recipe.params_from_balances() {
-        balances::estimate(model, &scales, &record, &train_rows)?
+        balances::estimate(model, &scales, &layout.tracks, &layout.pairs)?
     } else {
         None
     };
@@ -265,43 +269,47 @@ pub fn train_with(
         None => model,
     };
     let setup = Setup {
-        step: record.step,
+        step: layout.grid.max_step,
         substeps: options.substeps,
         precision: options.precision,
         seed: options.seed,
-        normalisation,
+        normalisation: layout.normalisation.clone(),
         scales,
     };
     let mut network = Network::build(model, &setup)?;
-    let fractions = stage_fractions(model.dynamics, options.substeps);
-    let hidden = run_in_hidden(&network, model, &record, &fractions, &hidden_init)?;
-    let table = PairTable::build(model, &record, &train_rows, &hidden, &fractions);
-    let mut training = Split {
-        name: data.path.display().to_string(),
-        record,
-        table,
-        hidden,
-    };
-    let mut validating = validation_splits(
+    let weights = column_weights(model, options)?;
+    let mut training = Course::new(
         model,
-        &training,
-        validations,
-        (first, &fractions),
-        &hidden_init,
-    )?;
-    let validation_pairs = validating.first().map_or(0, |v| v.table.len());
+        layout.tracks.clone(),
+        (&layout.pairs, &weights),
+        &fractions,
+    );
+    refresh(&network, model, &mut training, &fractions, &hidden_init)?;
+    let mut validating = Course::new(
+        model,
+        layout.validation_tracks.clone(),
+        (&[], &weights),
+        &fractions,
+    );
+    let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
     on_event(Event::Started {
         epochs: options.epochs,
-        train_pairs: train_count,
+        train_pairs: layout.pairs.len(),
         validation_pairs,
     });
     let range = PhysicalRange::new(&setup.normalisation, recipe.range_factor);
     let context = (&setup, options, range.as_ref());
     let mut metrics = Metrics::default();
-    if let Some(split) = validating.first_mut() {
-        let (offline, online) = validate(&network, model, split, context, &hidden_init)?;
-        metrics.initial_offline = Some(offline);
-        metrics.initial_online = Some(online);
+    if !layout.scorings.is_empty() {
+        let (offline, online, _) = validate(
+            &network,
+            model,
+            (&mut validating, &layout.scorings),
+            context,
+            &hidden_init,
+        )?;
+        metrics.initial_offline = offline;
+        metrics.initial_online = online;
     }
     let fit = fit::Fit {
         model,
@@ -310,9 +318,10 @@ pub fn train_with(
         recipe,
         hidden_init: &hidden_init,
         freeze_params: balance_fit.is_some(),
+        trainings: &layout.trainings,
     };
     let losses = fit.run(&mut network, &mut training, on_event)?;
-    refresh_hidden(&network, model, &mut training, &fractions, &hidden_init)?;
+    refresh(&network, model, &mut training, &fractions, &hidden_init)?;
     let (polish, estimates) = match &balance_fit {
         Some(fit) => (None, fit.estimates.clone()),
         None => polish::polish_and_estimate(
@@ -323,18 +332,17 @@ pub fn train_with(
             recipe.polishes(model),
         )?,
     };
-    for split in &mut validating {
-        let (offline, online) = validate(&network, model, split, context, &hidden_init)?;
-        metrics.validations.push(ValidationErrors {
-            name: split.name.clone(),
-            pairs: split.table.len(),
-            offline,
-            online,
-        });
-    }
-    if let Some(headline) = metrics.validations.first() {
-        metrics.offline = Some(headline.offline.clone());
-        metrics.online = Some(headline.online.clone());
+    if !layout.scorings.is_empty() {
+        let (offline, online, each) = validate(
+            &network,
+            model,
+            (&mut validating, &layout.scorings),
+            context,
+            &hidden_init,
+        )?;
+        metrics.offline = offline;
+        metrics.online = online;
+        metrics.validations = each;
     }
     let params = (model.params.iter().zip(network.param_values()))
         .map(|(p, v)| (p.name.clone(), v))
@@ -344,18 +352,47 @@ pub fn train_with(
         params,
         warnings,
         losses,
-        train_pairs: train_count,
+        train_pairs: layout.pairs.len(),
         validation_pairs,
         recipe: recipe.clone(),
         estimates,
         polish,
         balance_fit,
+        initial_states: layout.initial.clone(),
+        dt: layout.grid.max_step,
     };
     Ok(Trained {
         network,
         setup,
         report,
     })
+}
+
+/// Per measured state, its loss weight (`--weight X=W`; 1 otherwise).
+fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>, TrainError> {
+    let mut weights = vec![1.0; model.states.len()];
+    for (name, weight) in &options.column_weights {
+        let names: Vec<&str> = model.states.iter().map(|s| s.name.as_str()).collect();
+        let index = names.iter().position(|n| n == name).ok_or_else(|| {
+            TrainError::BadOption {
+                option: "--weight".into(),
+                expected: format!(
+                    "a measured state ({})",
+                    crate::suggest::did_you_mean(name, &names, "measured states")
+                ),
+                found: name.clone(),
+            }
+        })?;
+        if !(*weight > 0.0 && weight.is_finite()) {
+            return Err(TrainError::BadOption {
+                option: "--weight".into(),
+                expected: "a positive weight".into(),
+                found: format!("{name}={weight}"),
+            });
+        }
+        weights[index] = *weight;
+    }
+    Ok(weights)
 }
 
 fn check_options(options: &TrainOptions, recipe: &Recipe) -> Result<(), TrainError> {
@@ -432,22 +469,17 @@ fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
     Ok(())
 }
 
-fn check_delays(model: &ir::Model, step: f64) -> Result<(), TrainError> {
-    for closure in &model.closures {
-        let embedding = &closure.embedding;
-        if embedding.dim > 1 && embedding.delay < step * (1.0 - 1e-9) {
-            return Err(TrainError::DelayBelowStep {
-                closure: closure.name.clone(),
-                delay: embedding.delay,
-                step,
-            });
-        }
-    }
-    Ok(())
-}
 
-/// The measured states and inputs of `model` from `data`, as a [`Record`].
-pub fn record_of(model: &ir::Model, data: &Dataset) -> Result<Record, TrainError> {
+
+
+
+
+/// The measured states and inputs of `model` from a complete record `data`, as a
+/// [`crate::record::Record`].
+pub fn record_of(
+    model: &ir::Model,
+    data: &crate::data::Dataset,
+) -> Result<crate::record::Record, TrainError> {
     let column = |name: &str| {
         data.column(name)
             .map(<[f64]>::to_vec)
@@ -456,91 +488,19 @@ pub fn record_of(model: &ir::Model, data: &Dataset) -> Result<Record, TrainError
                 column: name.to_string(),
             })
     };
-    Ok(Record {
-        step: data.step,
-        times: data.times.clone(),
-        inputs: (model.inputs.iter())
+    let name = data.path.display().to_string();
+    let mut record = crate::record::Record::complete(
+        &name,
+        data.times.clone(),
+        (model.inputs.iter())
             .map(|i| column(&i.name))
             .collect::<Result<_, _>>()?,
-        states: (model.states.iter())
+        (model.states.iter())
             .map(|s| column(&s.name))
             .collect::<Result<_, _>>()?,
-    })
-}
-
-pub(crate) fn pair_count(
-    data: &Dataset,
-    record: &Record,
-    first: usize,
-) -> Result<usize, TrainError> {
-    if record.len() < first + 2 {
-        return Err(TrainError::TooFewRows {
-            file: data.path.display().to_string(),
-            needed: first + 2,
-            found: record.len(),
-            reason: format!("{first} rows of embedding history and one step"),
-        });
-    }
-    Ok(record.len() - 1 - first)
-}
-
-fn train_pair_count(
-    options: &TrainOptions,
-    has_validation_file: bool,
-    available: usize,
-) -> Result<usize, TrainError> {
-    match options.train_points {
-        Some(requested) if requested > available => Err(TrainError::TooManyTrainPoints {
-            available,
-            requested,
-        }),
-        Some(requested) => Ok(requested),
-        None if has_validation_file => Ok(available),
-        None => Ok(((available as f64 * DEFAULT_TRAIN_SHARE).round() as usize).clamp(1, available)),
-    }
-}
-
-/// Mean and std of every input and measured state, and the range of every measured state,
-/// over the first `rows` rows.
-pub fn normalise(record: &Record, rows: usize) -> Normalisation {
-    let stats = |series: &Vec<Vec<f64>>| -> (Vec<f64>, Vec<f64>) {
-        series
-            .iter()
-            .map(|values| {
-                let values = &values[..rows.min(values.len())];
-                let count = values.len().max(1) as f64;
-                let mean = values.iter().sum::<f64>() / count;
-                let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
-                let std = variance.sqrt();
-                let std = if std > 1e-12 * mean.abs().max(1e-300) && std.is_finite() {
-                    std
-                } else {
-                    1.0
-                };
-                (mean, std)
-            })
-            .unzip()
-    };
-    let (state_mean, state_std) = stats(&record.states);
-    let (input_mean, input_std) = stats(&record.inputs);
-    let extreme = |pick: fn(f64, f64) -> f64, start: f64| -> Vec<f64> {
-        (record.states.iter())
-            .map(|values| {
-                values[..rows.min(values.len())]
-                    .iter()
-                    .copied()
-                    .fold(start, pick)
-            })
-            .collect()
-    };
-    Normalisation {
-        state_mean,
-        state_std,
-        input_mean,
-        input_std,
-        state_min: extreme(f64::min, f64::INFINITY),
-        state_max: extreme(f64::max, f64::NEG_INFINITY),
-    }
+    );
+    record.source = name;
+    Ok(record)
 }
 
 /// Initial values of the hidden states (constant expressions of consts and params).

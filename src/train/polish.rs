@@ -2,7 +2,8 @@
 //! each param's standard error, so that a poorly identified constant is flagged.
 //!
 //! Both work on the normalised one-step residuals `r = (x_pred(t + h) - x(t + h)) / std`
-//! of every training pair, in double precision (a copy of the network), with the Jacobian
+//! of every measured target cell of every training pair (times the square root of its
+//! loss weight), in double precision (a copy of the network), with the Jacobian
 //! by central differences in the raw (unconstrained) params.
 //!
 //! - **Polish**: damped Gauss-Newton steps `(J'J + lambda diag(J'J)) d = -J'r` in the raw
@@ -146,9 +147,13 @@ impl<'a> Probe<'a> {
             let prediction = self.network.predict(&batch)?;
             for row in 0..chunk.len() {
                 for state in 0..self.measured {
+                    let weight = batch.weights[row * self.measured + state];
+                    if weight <= 0.0 {
+                        continue;
+                    }
                     let error = prediction.next_states[row * self.state_width + state]
                         - batch.targets[row * self.measured + state];
-                    residuals.push(error * self.inverse_std[state]);
+                    residuals.push(error * self.inverse_std[state] * weight.sqrt());
                 }
             }
         }

@@ -1,25 +1,29 @@
 //! Predictions of a trained network along a record, as a table: the states (measured and
-//! hidden), every closure output and every model output over time.
+//! hidden), every closure output and every model output over time, one row per record row.
 //!
-//! Rows run from the first row with a full embedding history to the end of the record.
-//! *Offline*, the state at a row is the one-step prediction from the true history at the
-//! row before (the first row repeats the data), and closure outputs are evaluated at the
-//! true state. *Online*, everything comes from one free run started at the first row,
-//! driven by the data's inputs alone. Hidden states are run in from their initial values
-//! at the first data row in both modes.
+//! Rows run from where the run starts (the first row, history held before it, or with
+//! [`History::Measured`] the first row with a full embedding history) to the end of the
+//! record. *Offline*, the state at a row is the one-step prediction from the measured
+//! history at the knot before (the first row repeats the data); where the data do not
+//! know a state the run goes free (the model's fill). *Online*, everything comes from one
+//! free run from the start, driven by the data's inputs alone. Hidden states are run in
+//! from their initial values at the first row in both modes.
 //!
 //! An online run stops where a measured state leaves the physical range of the training
 //! data ([`PhysicalRange`]): the table keeps every row, the offending state at its row and
 //! `NaN` everywhere after it, and [`PredictionTable::divergence`] says where and why.
 
 use crate::backend::{Network, Setup};
-use crate::data::Dataset;
 use crate::ir;
+use crate::record::{Record, Track};
 
-use super::evaluate::{run_in_hidden, simulate, Divergence, Feed, PhysicalRange};
-use super::pairs::{first_pair_row, stage_fractions};
+use super::evaluate::{run_in, simulate, Divergence, Feed, PhysicalRange};
+use super::initial::initial_state;
+use super::pairs::stage_fractions;
+use super::prepare::grid_for;
 use super::recipe::DEFAULT_RANGE_FACTOR;
-use super::{hidden_initial_values, record_of, TrainError};
+use super::split::{window_start, History};
+use super::{hidden_initial_values, TrainError};
 
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,42 +45,52 @@ pub struct PredictionTable {
     pub divergence: Option<Divergence>,
 }
 
-/// Predicts along `data` with a trained network; online runs stop outside the default
+/// Predicts along `record` with a trained network; online runs stop outside the default
 /// physical range of the training data.
 pub fn predict(
     model: &ir::Model,
     network: &Network,
     setup: &Setup,
-    data: &Dataset,
-    mode: Mode,
+    record: &Record,
+    (mode, history): (Mode, History),
 ) -> Result<PredictionTable, TrainError> {
     let range = PhysicalRange::new(&setup.normalisation, DEFAULT_RANGE_FACTOR);
-    predict_in_range(model, network, setup, data, (mode, range.as_ref()))
+    predict_in_range(model, network, setup, record, (mode, history, range.as_ref()))
 }
 
-/// Predicts along `data`; an online run stops when it leaves `range` (none: never).
+/// The track a trained network runs along `record` on: the grid of its training.
+pub fn track_of(model: &ir::Model, setup: &Setup, record: &Record) -> Result<Track, TrainError> {
+    let grid = grid_for(model, setup.step);
+    let start = initial_state(model, record)?;
+    Ok(Track::lay(record, &grid, &start.values()))
+}
+
+/// Predicts along `record`; an online run stops when it leaves `range` (none: never).
 pub fn predict_in_range(
     model: &ir::Model,
     network: &Network,
     setup: &Setup,
-    data: &Dataset,
-    (mode, range): (Mode, Option<&PhysicalRange>),
+    record: &Record,
+    (mode, history, range): (Mode, History, Option<&PhysicalRange>),
 ) -> Result<PredictionTable, TrainError> {
-    let record = record_of(model, data)?;
-    let first = first_pair_row(model, record.step);
-    if record.len() < first + 2 {
+    let mut track = track_of(model, setup, record)?;
+    let first = window_start(model, &track, history);
+    if track.len() < first + 2 {
         return Err(TrainError::TooFewRows {
-            file: data.path.display().to_string(),
+            file: record.source.clone(),
             needed: first + 2,
-            found: record.len(),
+            found: track.len(),
             reason: format!("{first} rows of embedding history and one step"),
         });
     }
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let initial = hidden_initial_values(model)?;
-    let hidden = run_in_hidden(network, model, &record, &fractions, &initial)?;
-    let hidden_start = hidden.get(first).cloned().unwrap_or_default();
-    let last = record.len() - 1;
+    let run_in = run_in(network, model, &track, &fractions, &initial)?;
+    for (state, values) in run_in.states.iter().enumerate() {
+        track.fill(state, values);
+    }
+    let hidden_start = run_in.hidden.get(first).cloned().unwrap_or(initial);
+    let last = track.len() - 1;
     let feed = match mode {
         Mode::Offline => Feed::Data,
         Mode::Online => Feed::Own,
@@ -84,14 +98,15 @@ pub fn predict_in_range(
     let run = simulate(
         network,
         model,
-        &record,
+        &track,
         &fractions,
         (first, last),
         &hidden_start,
         (feed, range),
     )?;
+    let knots = last + 1 - first;
     let states: Vec<Vec<f64>> = match mode {
-        Mode::Online => stopped_states(&run, last + 1 - first),
+        Mode::Online => stopped_states(&run, knots),
         Mode::Offline => std::iter::once(run.states[0].clone())
             .chain(
                 run.next_states
@@ -115,11 +130,15 @@ pub fn predict_in_range(
             .map(|o| o.name.clone()),
     );
     header.extend(model.outputs.iter().map(|o| o.name.clone()));
-    let rows = last + 1 - first;
-    let mut columns = vec![record.times[first..].to_vec()];
-    columns.extend(transpose(&states));
-    columns.extend(transpose(&pad(&run.closure_outputs, rows)));
-    columns.extend(transpose(&pad(&run.outputs, rows)));
+    let rows: Vec<usize> = (first..=last).filter(|&k| track.rows[k].is_some()).collect();
+    let pick = |all: &[Vec<f64>]| -> Vec<Vec<f64>> {
+        let padded = pad(all, knots);
+        rows.iter().map(|&k| padded[k - first].clone()).collect()
+    };
+    let mut columns = vec![rows.iter().map(|&k| track.times[k]).collect()];
+    columns.extend(transpose(&pick(&states)));
+    columns.extend(transpose(&pick(&run.closure_outputs)));
+    columns.extend(transpose(&pick(&run.outputs)));
     Ok(PredictionTable {
         header,
         columns,

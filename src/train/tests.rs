@@ -1,19 +1,16 @@
 //! Training tests on data simulated from the paper's chemostat (spec section 4).
 
 use super::evaluate::{online_error, simulate, Feed};
-use super::fixtures::{chemostat, options, quiet};
+use super::fixtures::{chemostat, normalise, options, record, track, train_one};
+use super::pairs::PairTable;
 use super::*;
+use crate::backend::Network;
+use crate::data::Dataset;
 
 #[test]
 fn short_training_on_chemostat_data_cuts_the_validation_error() {
     let (data, _) = chemostat::data(700, (0.002, 0.02), 1);
-    let trained = train(
-        &chemostat::grey_box(),
-        &data,
-        None,
-        &options(15, 500),
-        &mut quiet,
-    )
+    let trained = train_one(&chemostat::grey_box(), &data, None, &options(15, 500), &Recipe::default())
     .unwrap();
     let metrics = &trained.report.metrics;
     let before = metrics.initial_offline.as_ref().unwrap().overall;
@@ -34,7 +31,7 @@ fn short_training_on_chemostat_data_cuts_the_validation_error() {
 fn grey_box_beats_the_black_box_map_offline() {
     let (data, _) = chemostat::data(700, (0.002, 0.02), 1);
     let offline = |model: &ir::Model| {
-        let trained = train(model, &data, None, &options(15, 500), &mut quiet).unwrap();
+        let trained = train_one(model, &data, None, &options(15, 500), &Recipe::default()).unwrap();
         trained.report.metrics.offline.unwrap().overall
     };
     let (grey, black) = (
@@ -52,7 +49,8 @@ fn the_same_seed_gives_the_same_result_and_another_seed_does_not() {
             seed,
             ..options(2, 100)
         };
-        let trained = train(&chemostat::grey_box(), &data, None, &options, &mut quiet).unwrap();
+        let trained =
+            train_one(&chemostat::grey_box(), &data, None, &options, &Recipe::default()).unwrap();
         (trained.report.losses, trained.network.weights())
     };
     let (losses, weights) = run(5);
@@ -68,17 +66,17 @@ fn divergence_stops_training_naming_the_epoch() {
         ..options(5, 100)
     };
     let mut epochs_done = 0;
-    let result = train(
-        &chemostat::grey_box(),
-        &data,
-        None,
-        &options,
-        &mut |event| {
-            if let Event::Epoch { .. } = event {
-                epochs_done += 1;
-            }
-        },
-    );
+    let train_records = [record(&chemostat::grey_box(), &data)];
+    let training = TrainingData {
+        train: &train_records,
+        validation: &[],
+        part: Part::FirstPairs(options.train_points),
+    };
+    let result = train(&chemostat::grey_box(), &training, &options, &mut |event| {
+        if let Event::Epoch { .. } = event {
+            epochs_done += 1;
+        }
+    });
     match result {
         Err(TrainError::Diverged { epoch, loss }) => {
             assert!(!loss.is_finite());
@@ -102,16 +100,7 @@ fn hidden_states_are_run_in_and_a_rate_constant_is_learned() {
     // The paper's recipe: a polish would fit kcat to the early rows, where the enzyme
     // estimate is still far from the truth, as faithfully as to the rest.
     let model = chemostat::exact_law(chemostat::KCAT / 2.0);
-    let validations = [Validation::Rest];
-    let trained = train_with(
-        &model,
-        &data,
-        &validations,
-        &options,
-        &Recipe::paper(),
-        &mut quiet,
-    )
-    .unwrap();
+    let trained = train_one(&model, &data, None, &options, &Recipe::paper()).unwrap();
     let (name, kcat) = &trained.report.params[0];
     assert_eq!(name, "kcat");
     assert!((kcat / chemostat::KCAT - 1.0).abs() < 0.05, "kcat {kcat}");
@@ -121,10 +110,12 @@ fn hidden_states_are_run_in_and_a_rate_constant_is_learned() {
 fn default_magnitude_of_a_rate_is_its_typical_size() {
     let (data, enzyme) = chemostat::data(600, (0.002, 0.02), 6);
     let model = chemostat::grey_box();
-    let record = record_of(&model, &data).unwrap();
+    let track = track(&model, &data);
     let rows: Vec<usize> = (40..500).collect();
-    let scales = analysis::closure_scales(&model, &record, &rows, &[]).unwrap();
-    let substrate = &record.states[0];
+    let pairs: Vec<(usize, usize)> = rows.iter().map(|&r| (0, r)).collect();
+    let scales =
+        analysis::closure_scales(&model, std::slice::from_ref(&track), &pairs, &[]).unwrap();
+    let substrate = &track.states[0];
     let rms = (rows.iter())
         .map(|&r| chemostat::rate(&[substrate[r], enzyme[r]]).powi(2))
         .sum::<f64>()
@@ -145,10 +136,10 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
     let (stiff, _) = chemostat::data(300, (0.002, 1.0), 7);
     let model = chemostat::grey_box();
     let warnings = |data: &Dataset, substeps: usize| {
-        let record = record_of(&model, data).unwrap();
-        let rows: Vec<usize> = (40..299).collect();
-        let scales = analysis::closure_scales(&model, &record, &rows, &[]).unwrap();
-        analysis::stiffness(&model, &scales, &record, &rows, &[], substeps).unwrap()
+        let tracks = [track(&model, data)];
+        let pairs: Vec<(usize, usize)> = (40..299).map(|r| (0, r)).collect();
+        let scales = analysis::closure_scales(&model, &tracks, &pairs, &[]).unwrap();
+        analysis::stiffness(&model, &scales, (&tracks, &pairs), &[], substeps).unwrap()
     };
     assert!(warnings(&calm, 1).is_empty());
     let found = warnings(&stiff, 1);
@@ -166,11 +157,11 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
             substeps,
             precision: Precision::F64,
             seed: 0,
-            normalisation: normalise(&record_of(&exact, &stiff).unwrap(), 300),
+            normalisation: normalise(&record(&exact, &stiff), 300),
             scales: vec![],
         };
         let network = Network::build(&exact, &setup).unwrap();
-        let record = record_of(&exact, &stiff).unwrap();
+        let record = track(&exact, &stiff);
         let fractions = stage_fractions(exact.dynamics, substeps);
         let (_, enzyme) = chemostat::data(300, (0.002, 1.0), 7);
         let run = simulate(
@@ -183,7 +174,8 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
             (Feed::Own, None),
         )
         .unwrap();
-        online_error(&exact, &record, &run, &setup.normalisation).overall
+        let errors = online_error(&exact, &record, &run, (&setup.normalisation, f64::MIN));
+        errors.finish(&exact).unwrap().overall
     };
     let unstable = free_run_error(1);
     assert!(
@@ -194,7 +186,13 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
     assert!(stable < 1e-3, "free run with sub-steps: {stable}");
     // `train` tells its caller before the first epoch.
     let mut heard = Vec::new();
-    let trained = train(&model, &stiff, None, &options(1, 200), &mut |event| {
+    let stiff_records = [record(&model, &stiff)];
+    let training = TrainingData {
+        train: &stiff_records,
+        validation: &[],
+        part: Part::FirstPairs(Some(200)),
+    };
+    let trained = train(&model, &training, &options(1, 200), &mut |event| {
         if let Event::Warning(warning) = event {
             heard.push(warning.to_string());
         }
@@ -218,7 +216,7 @@ fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
     let (data, _) = chemostat::data(150, (0.002, 0.02), 8);
     let model = chemostat::grey_box();
     let options = options(2, 80);
-    let trained = train(&model, &data, None, &options, &mut quiet).unwrap();
+    let trained = train_one(&model, &data, None, &options, &Recipe::default()).unwrap();
     let source = "model chemostat_gb  # the text the hash is taken of\n";
     let info = artifacts::run_info(&model, ("gb.gbm", source), "memory.csv", &options, &trained);
     let directory = scratch_directory("roundtrip");
@@ -229,8 +227,10 @@ fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
         serde_json::from_str(&serde_json::to_string(&info).unwrap()).unwrap();
     assert_eq!(reloaded, json_round_trip);
     assert_eq!(network.weights(), trained.network.weights());
+    let data_record = record(&model, &data);
     let offline = |net: &Network, setup: &Setup| {
-        predict::predict(&model, net, setup, &data, predict::Mode::Offline).unwrap()
+        let how = (predict::Mode::Offline, History::Measured);
+        predict::predict(&model, net, setup, &data_record, how).unwrap()
     };
     let (again, original) = (
         offline(&network, &setup),
@@ -254,8 +254,12 @@ fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
 fn offline_predictions_are_one_step_and_online_ones_a_free_run() {
     let (data, _) = chemostat::data(120, (0.002, 0.02), 9);
     let model = chemostat::grey_box();
-    let trained = train(&model, &data, None, &options(1, 60), &mut quiet).unwrap();
-    let table = |mode| predict::predict(&model, &trained.network, &trained.setup, &data, mode);
+    let trained = train_one(&model, &data, None, &options(1, 60), &Recipe::default()).unwrap();
+    let data_record = record(&model, &data);
+    let table = |mode| {
+        let how = (mode, History::Measured);
+        predict::predict(&model, &trained.network, &trained.setup, &data_record, how)
+    };
     let (offline, online) = (
         table(predict::Mode::Offline).unwrap(),
         table(predict::Mode::Online).unwrap(),
@@ -267,9 +271,9 @@ fn offline_predictions_are_one_step_and_online_ones_a_free_run() {
     // Both start from the data; offline row k + 1 is the step from the true state at k.
     assert_eq!(offline.columns[1][0], measured[first]);
     assert_eq!(online.columns[1][0], measured[first]);
-    let record = record_of(&model, &data).unwrap();
+    let tracks = [track(&model, &data)];
     let fractions = stage_fractions(model.dynamics, 1);
-    let table_row = PairTable::build(&model, &record, &[first + 5], &[], &fractions);
+    let table_row = PairTable::build(&model, &tracks, &[(0, first + 5)], &[], &fractions);
     let step = trained.network.predict(&table_row.batch(&[0])).unwrap();
     assert_eq!(offline.columns[1][6], step.next_states[0]);
     assert_eq!(offline.columns[2][5], step.closure_outputs[0]);

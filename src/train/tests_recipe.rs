@@ -2,7 +2,9 @@
 //! the physical range, the polish of params and their standard errors, and validation on
 //! several records.
 
-use super::fixtures::{chemostat, dataset, options, quiet, ClosureSpec, ModelBuilder, OutputSpec};
+use super::fixtures::{
+    chemostat, dataset, options, quiet, record, train_one, ClosureSpec, ModelBuilder, OutputSpec,
+};
 use super::*;
 use crate::ir::Constraint;
 
@@ -16,10 +18,15 @@ fn multi_step_training_warms_up_then_rolls_out_and_improves_the_free_run() {
         ..Recipe::default()
     };
     let mut horizons = Vec::new();
+    let train_records = [record(&chemostat::grey_box(), &data)];
+    let training = TrainingData {
+        train: &train_records,
+        validation: &[],
+        part: Part::FirstPairs(Some(350)),
+    };
     let trained = train_with(
         &chemostat::grey_box(),
-        &data,
-        &[Validation::Rest],
+        &training,
         &options(12, 350),
         &recipe,
         &mut |event| {
@@ -43,10 +50,15 @@ fn the_paper_recipe_trains_one_step_and_does_not_polish() {
     let (data, _) = chemostat::data(300, (0.002, 0.02), 2);
     let mut horizons = Vec::new();
     let model = chemostat::exact_law(chemostat::KCAT / 2.0);
+    let train_records = [record(&model, &data)];
+    let training = TrainingData {
+        train: &train_records,
+        validation: &[],
+        part: Part::FirstPairs(Some(200)),
+    };
     let trained = train_with(
         &model,
-        &data,
-        &[Validation::Rest],
+        &training,
         &options(3, 200),
         &Recipe::paper(),
         &mut |event| {
@@ -78,15 +90,7 @@ fn an_exploding_free_run_stops_where_it_leaves_the_physical_range() {
         params: ParamSource::Train,
         ..Recipe::default()
     };
-    let trained = train_with(
-        &model,
-        &data,
-        &[Validation::File(&data)],
-        &options(0, 59),
-        &recipe,
-        &mut quiet,
-    )
-    .unwrap();
+    let trained = train_one(&model, &data, Some(&data), &options(0, 59), &recipe).unwrap();
     let z: f64 = 0.2;
     let growth = 1.0 + z + z * z / 2.0 + z.powi(3) / 6.0 + z.powi(4) / 24.0;
     let online = trained.report.metrics.online.unwrap();
@@ -100,8 +104,8 @@ fn an_exploding_free_run_stops_where_it_leaves_the_physical_range() {
         &model,
         &trained.network,
         &trained.setup,
-        &data,
-        predict::Mode::Online,
+        &record(&model, &data),
+        (predict::Mode::Online, History::Held),
     )
     .unwrap();
     let x = &table.columns[1];
@@ -124,7 +128,7 @@ fn the_polish_recovers_a_rate_constant_and_flags_an_unidentifiable_pair() {
         ..options(0, 250)
     };
     let fit = |model: &ir::Model| {
-        train_with(model, &data, &[], &options, &recipe, &mut quiet)
+        train_one(model, &data, None, &options, &recipe)
             .unwrap()
             .report
     };
@@ -169,44 +173,59 @@ fn the_polish_recovers_a_rate_constant_and_flags_an_unidentifiable_pair() {
     assert!(report.estimates.iter().all(|e| !e.well_identified));
 }
 
+/// Whole experiments validate each on its own, and the headline pools their cells: per
+/// state the mean squared error over every experiment's measured cells.
 #[test]
-fn every_validation_set_is_reported_and_the_first_is_the_headline() {
+fn every_validation_experiment_is_reported_and_the_headline_pools_their_cells() {
     let (data, _) = chemostat::data(300, (0.002, 0.02), 5);
-    let (other, _) = chemostat::data(200, (0.002, 0.02), 6);
-    let trained = train_with(
-        &chemostat::grey_box(),
-        &data,
-        &[Validation::Rest, Validation::File(&other)],
-        &options(2, 200),
-        &Recipe::default(),
-        &mut quiet,
-    )
-    .unwrap();
+    let (first, _) = chemostat::data(200, (0.002, 0.02), 6);
+    let (second, _) = chemostat::data(150, (0.002, 0.02), 7);
+    let model = chemostat::grey_box();
+    let named = |data: &crate::data::Dataset, name: &str| {
+        let mut r = record(&model, data);
+        r.name = name.into();
+        r
+    };
+    let train_records = [named(&data, "train")];
+    let held = [named(&first, "first"), named(&second, "second")];
+    let training = TrainingData {
+        train: &train_records,
+        validation: &held,
+        part: Part::All,
+    };
+    let options = TrainOptions {
+        train_points: None,
+        ..options(2, 1)
+    };
+    let trained = train_with(&model, &training, &options, &Recipe::default(), &mut quiet);
+    let trained = trained.unwrap();
     let metrics = &trained.report.metrics;
-    assert_eq!(metrics.validations.len(), 2);
-    assert_eq!(metrics.validations[0].pairs, 300 - 1 - 40 - 200);
-    assert_eq!(metrics.validations[1].pairs, 200 - 1 - 40);
-    assert_eq!(
-        metrics.online.as_ref(),
-        Some(&metrics.validations[0].online)
-    );
-    assert_ne!(metrics.validations[0].online, metrics.validations[1].online);
-    assert_eq!(
-        trained.report.validation_pairs,
-        metrics.validations[0].pairs
-    );
+    let names: Vec<&str> = metrics.validations.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names, vec!["first", "second"]);
+    // Offline pairs have their history inside the record: 40 rows of it.
+    assert_eq!(metrics.validations[0].pairs, 200 - 1 - 40);
+    assert_eq!(metrics.validations[1].pairs, 150 - 1 - 40);
+    assert_eq!(trained.report.validation_pairs, 159 + 109);
+    let online: Vec<&ErrorSet> = (metrics.validations.iter())
+        .map(|v| v.online.as_ref().unwrap())
+        .collect();
+    // Held history: each free run starts at its first row and scores every later one.
+    assert_eq!((online[0].cells, online[1].cells), (199, 149));
+    let pooled = metrics.online.as_ref().unwrap();
+    let expected = (online[0].overall * 199.0 + online[1].overall * 149.0) / 348.0;
+    assert!((pooled.overall / expected - 1.0).abs() < 1e-12);
+    assert_eq!(pooled.cells, 348);
 }
 
 #[test]
 fn bad_recipe_values_are_refused_naming_the_flag() {
     let (data, _) = chemostat::data(120, (0.002, 0.02), 7);
-    let refused = |recipe: Recipe| match train_with(
+    let refused = |recipe: Recipe| match train_one(
         &chemostat::grey_box(),
         &data,
-        &[],
+        None,
         &options(1, 60),
         &recipe,
-        &mut quiet,
     ) {
         Err(TrainError::BadOption { option, .. }) => option,
         Err(other) => panic!("expected a bad option, found {other}"),
@@ -243,15 +262,7 @@ fn train_both(
             engine,
             ..options.clone()
         };
-        train_with(
-            model,
-            data,
-            &[Validation::Rest],
-            &options,
-            recipe,
-            &mut quiet,
-        )
-        .unwrap()
+        train_one(model, data, None, &options, recipe).unwrap()
     };
     (run(Engine::Graph), run(Engine::Fused))
 }
@@ -378,7 +389,7 @@ fn yields_from_the_balances_are_held_through_training() {
             precision: crate::backend::Precision::F64,
             ..options(4, 200)
         };
-        let trained = train_with(&model, &data, &[], &options, &recipe, &mut quiet).unwrap();
+        let trained = train_one(&model, &data, None, &options, &recipe).unwrap();
         let report = &trained.report;
         let fit = report
             .balance_fit
@@ -396,15 +407,7 @@ fn yields_from_the_balances_are_held_through_training() {
             assert!((value / truth - 1.0).abs() < 1e-6, "{name} = {value}");
         }
     }
-    let paper = train_with(
-        &model,
-        &data,
-        &[],
-        &options(2, 200),
-        &Recipe::paper(),
-        &mut quiet,
-    )
-    .unwrap();
+    let paper = train_one(&model, &data, None, &options(2, 200), &Recipe::paper()).unwrap();
     assert!(paper.report.balance_fit.is_none());
     assert!(paper
         .report

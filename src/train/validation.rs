@@ -1,124 +1,135 @@
-//! Training and validation splits: a record turned into pairs with hidden-state
-//! estimates, and the paper's two validation errors on each validation set.
+//! Tracks in use: the training or validation tracks with their hidden-state estimates and
+//! the model's fill of unknown stretches, their pair table, and the paper's two validation
+//! errors per scored experiment and pooled.
 
 use crate::backend::{Network, Setup};
-use crate::data::Dataset;
 use crate::ir;
+use crate::record::Track;
 
-use super::evaluate::{offline_error, online_error, run_in_hidden, simulate, Feed, PhysicalRange};
-use super::pairs::{stage_fractions, PairTable, Record};
-use super::{pair_count, record_of, ErrorSet, TrainError, TrainOptions};
+use super::evaluate::{
+    offline_error, online_error, run_in, simulate, ErrorSum, Feed, PhysicalRange,
+};
+use super::pairs::{stage_fractions, PairAt, PairTable};
+use super::split::Scoring;
+use super::{ErrorSet, TrainError, TrainOptions, ValidationErrors};
 
-/// A set of pairs to validate on.
-#[derive(Debug, Clone, Copy)]
-pub enum Validation<'a> {
-    /// The pairs of the training record after the training pairs (none when every pair
-    /// trains).
-    Rest,
-    /// Every pair of another record.
-    File(&'a Dataset),
-}
-
-/// A record turned into pairs, with hidden-state estimates.
-pub(super) struct Split {
-    /// What it is called in reports.
-    pub name: String,
-    pub record: Record,
+/// Tracks with their hidden-state estimates and a table of pairs.
+pub(super) struct Course {
+    /// The tracks (their reference filled by the model where unknown).
+    pub tracks: Vec<Track>,
+    /// `hidden[track][knot]`.
+    pub hidden: Vec<Vec<Vec<f64>>>,
+    /// The pairs of the table.
     pub table: PairTable,
-    pub hidden: Vec<Vec<f64>>,
+    /// Per measured state, its loss weight.
+    pub weights: Vec<f64>,
 }
 
-/// Re-runs the hidden states along a split's record with the current network.
-pub(super) fn refresh_hidden(
+impl Course {
+    /// Tracks with hidden states at their initial values (refresh before use) and the pair
+    /// table of `pairs`, each target cell weighted by its column's weight.
+    pub fn new(
+        model: &ir::Model,
+        tracks: Vec<Track>,
+        (pairs, weights): (&[PairAt], &[f64]),
+        fractions: &[f64],
+    ) -> Course {
+        let hidden = tracks.iter().map(|t| vec![Vec::new(); t.len()]).collect();
+        let mut table = PairTable::build(model, &tracks, pairs, &[], fractions);
+        table.scale_weights(weights);
+        Course {
+            tracks,
+            hidden,
+            table,
+            weights: weights.to_vec(),
+        }
+    }
+}
+
+/// Re-runs the hidden states and the fill of unknown stretches along every track of
+/// `course` with the current network (nothing to do for a model without hidden states on
+/// fully known tracks).
+pub(super) fn refresh(
     network: &Network,
     model: &ir::Model,
-    split: &mut Split,
+    course: &mut Course,
     fractions: &[f64],
     hidden_init: &[f64],
 ) -> Result<(), TrainError> {
-    if model.hidden.is_empty() {
-        return Ok(());
+    let mut changed = false;
+    for (track, hidden) in course.tracks.iter_mut().zip(&mut course.hidden) {
+        if model.hidden.is_empty() && track.fully_known() {
+            continue;
+        }
+        let run = run_in(network, model, track, fractions, hidden_init)?;
+        for (state, values) in run.states.iter().enumerate() {
+            track.fill(state, values);
+        }
+        if !model.hidden.is_empty() {
+            *hidden = run.hidden;
+            changed = true;
+        }
     }
-    split.hidden = run_in_hidden(network, model, &split.record, fractions, hidden_init)?;
-    split.table.set_hidden(&split.hidden);
+    if changed {
+        course.table.set_hidden(&course.hidden);
+    }
     Ok(())
 }
 
-/// The validation splits that have pairs, in the order asked for.
-pub(super) fn validation_splits(
-    model: &ir::Model,
-    training: &Split,
-    validations: &[Validation],
-    (first, fractions): (usize, &[f64]),
-    hidden_init: &[f64],
-) -> Result<Vec<Split>, TrainError> {
-    let mut splits = Vec::new();
-    for validation in validations {
-        let (name, record, rows) = match validation {
-            Validation::File(data) => {
-                let record = record_of(model, data)?;
-                let step = training.record.step;
-                if (record.step - step).abs() > 1e-9 * step {
-                    return Err(TrainError::StepMismatch {
-                        file: data.path.display().to_string(),
-                        expected: step,
-                        found: record.step,
-                    });
-                }
-                let count = pair_count(data, &record, first)?;
-                let name = data.path.display().to_string();
-                (name, record, (first..first + count).collect::<Vec<_>>())
-            }
-            Validation::Rest => {
-                let start = first + training.table.len();
-                let end = training.record.len().saturating_sub(1);
-                let name = format!("{} (rest)", training.name);
-                (name, training.record.clone(), (start..end).collect())
-            }
-        };
-        if rows.is_empty() {
-            continue;
-        }
-        let hidden = vec![hidden_init.to_vec(); record.len()];
-        let table = PairTable::build(model, &record, &rows, &hidden, fractions);
-        splits.push(Split {
-            name,
-            record,
-            table,
-            hidden,
-        });
-    }
-    Ok(splits)
-}
-
-/// Offline and online errors of a split with the current network (hidden states run in
-/// first).
+/// Offline and online errors pooled over `scorings`, and per scoring, with the current
+/// network (hidden states and fill run in first).
 pub(super) fn validate(
     network: &Network,
     model: &ir::Model,
-    split: &mut Split,
+    (course, scorings): (&mut Course, &[Scoring]),
     (setup, options, range): (&Setup, &TrainOptions, Option<&PhysicalRange>),
     hidden_init: &[f64],
-) -> Result<(ErrorSet, ErrorSet), TrainError> {
+) -> Result<(Option<ErrorSet>, Option<ErrorSet>, Vec<ValidationErrors>), TrainError> {
     let fractions = stage_fractions(model.dynamics, setup.substeps);
-    refresh_hidden(network, model, split, &fractions, hidden_init)?;
-    let offline = offline_error(network, model, &split.table, &setup.normalisation)?;
-    let start = split.table.rows[0];
-    let last = split.record.len() - 1;
-    let end = match options.online_horizon {
-        Some(horizon) => (start + (horizon / setup.step).round() as usize).min(last),
-        None => last,
-    };
-    let hidden = split.hidden.get(start).cloned().unwrap_or_default();
-    let run = simulate(
-        network,
-        model,
-        &split.record,
-        &fractions,
-        (start, end.saturating_sub(1).max(start)),
-        &hidden,
-        (Feed::Own, range),
-    )?;
-    let online = online_error(model, &split.record, &run, &setup.normalisation);
-    Ok((offline, online))
+    refresh(network, model, course, &fractions, hidden_init)?;
+    let norm = &setup.normalisation;
+    let measured = model.states.len();
+    let (mut offline_all, mut online_all) = (ErrorSum::new(measured), ErrorSum::new(measured));
+    let mut each = Vec::new();
+    for scoring in scorings {
+        let pairs: Vec<PairAt> = scoring.pairs.iter().map(|&k| (scoring.track, k)).collect();
+        let mut table = PairTable::build(model, &course.tracks, &pairs, &course.hidden, &fractions);
+        table.scale_weights(&course.weights);
+        let offline = offline_error(network, model, &table, norm)?;
+        let track = &course.tracks[scoring.track];
+        let start = scoring.run_start;
+        let last = track.len() - 1;
+        let end = match options.online_horizon {
+            Some(horizon) => {
+                let until = track.times[start] + horizon;
+                let slack = 1e-9 * until.abs().max(1.0);
+                let end = track.times.partition_point(|&t| t <= until + slack);
+                end.saturating_sub(1).clamp(start, last)
+            }
+            None => last,
+        };
+        let hidden = (course.hidden[scoring.track].get(start))
+            .filter(|h| !h.is_empty())
+            .cloned()
+            .unwrap_or_else(|| hidden_init.to_vec());
+        let run = simulate(
+            network,
+            model,
+            track,
+            &fractions,
+            (start, end.saturating_sub(1).max(start)),
+            &hidden,
+            (Feed::Own, range),
+        )?;
+        let online = online_error(model, track, &run, (norm, scoring.scored_from));
+        offline_all.merge(&offline);
+        online_all.merge(&online);
+        each.push(ValidationErrors {
+            name: scoring.name.clone(),
+            pairs: pairs.len(),
+            offline: offline.finish(model),
+            online: online.finish(model),
+        });
+    }
+    Ok((offline_all.finish(model), online_all.finish(model), each))
 }

@@ -3,7 +3,7 @@
 //!
 //! A window starts at row `r` from the measured states there (and the hidden-state
 //! estimates), holds the data's inputs over each step, and is compared with the measured
-//! states of rows `r + 1 ..= r + K`. At step `k` and stage fraction `f`, a delayed state
+//! cells of knots `r + 1 ..= r + K` (a knot without a cell weighs nothing). At step `k` and stage fraction `f`, a delayed state
 //! sits `q = k + f - lag * delay / h` samples after the window start ([`super::pairs`]
 //! explains positions). Where `q <= 0` the value is read from the data as in a one-step
 //! pair; where `q > 0` it interpolates between samples `floor(q)` and `floor(q) + 1`, and
@@ -14,34 +14,35 @@
 
 use crate::backend::{Feedback, RolloutBatch};
 use crate::ir::{self, Var};
+use crate::record::grid::{hold, interpolate, snap, Track};
 
-use super::pairs::{hold, interpolate, snap, Record};
+use super::pairs::PairAt;
 
 /// A closure's raw embedding at step `step` (fraction `fraction`) of the window starting at
-/// `start`, with predicted shares left at zero, and those shares as feedback entries.
+/// knot `start` of `track`, batch row `row`, with predicted shares left at zero, and those
+/// shares as feedback entries.
 pub fn window_embedding(
     closure: &ir::Closure,
-    record: &Record,
+    track: &Track,
     (start, row): (usize, usize),
     (step, fraction): (usize, f64),
 ) -> (Vec<f64>, Vec<Feedback>) {
-    let embedding = &closure.embedding;
-    let lag_in_samples = embedding.delay / record.step;
-    let layout = embedding.layout();
+    let delay = closure.embedding.delay;
+    let layout = closure.embedding.layout();
     let mut raw = Vec::with_capacity(layout.len());
     let mut feedback = Vec::new();
     for (column, (var, lag)) in layout.into_iter().enumerate() {
-        let offset = step as f64 + fraction - lag as f64 * lag_in_samples;
+        let position = track.stage_position(start + step, fraction, (lag, delay));
         let value = match var {
-            Var::Input(i) => hold(&record.inputs[i], start as f64 + offset, fraction >= 1.0),
+            Var::Input(i) => hold(&track.inputs[i], position, fraction >= 1.0),
             Var::State(_) if lag == 0 => 0.0,
             Var::State(i) => {
-                let position = snap(offset);
-                if position <= 0.0 {
-                    interpolate(&record.states[i], start as f64 + position)
+                let offset = snap(position - start as f64);
+                if offset <= 0.0 {
+                    interpolate(&track.states[i], position)
                 } else {
-                    let below = position.floor();
-                    let weight_above = position - below;
+                    let below = offset.floor();
+                    let weight_above = offset - below;
                     let below = below as usize;
                     let mut data_share = 0.0;
                     for (sample, weight) in [(below, 1.0 - weight_above), (below + 1, weight_above)]
@@ -50,7 +51,7 @@ pub fn window_embedding(
                             continue;
                         }
                         if sample == 0 {
-                            data_share += weight * record.states[i][start];
+                            data_share += weight * track.states[i][start];
                         } else {
                             feedback.push(Feedback {
                                 row,
@@ -71,13 +72,14 @@ pub fn window_embedding(
     (raw, feedback)
 }
 
-/// A batch of `steps`-step windows starting at `starts` (every `start + steps` must be a
-/// row of `record`); `hidden[row]` holds the hidden-state estimates.
+/// A batch of `steps`-step windows starting at `starts` (track and knot; every
+/// `start + steps` must be a knot of its track); `hidden[track][knot]` holds the
+/// hidden-state estimates; each measured cell weighs its column's `weights[state]` (empty:
+/// 1).
 pub fn rollout_batch(
     model: &ir::Model,
-    record: &Record,
-    hidden: &[Vec<f64>],
-    starts: &[usize],
+    (tracks, hidden, weights): (&[Track], &[Vec<Vec<f64>>], &[f64]),
+    starts: &[PairAt],
     steps: usize,
     fractions: &[f64],
 ) -> RolloutBatch {
@@ -90,20 +92,26 @@ pub fn rollout_batch(
         embeddings: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
         feedback: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
         targets: vec![Vec::new(); steps],
-        step_sizes: Vec::new(),
-        weights: Vec::new(),
+        step_sizes: vec![Vec::new(); steps],
+        weights: vec![Vec::new(); steps],
     };
-    for (window, &start) in starts.iter().enumerate() {
-        batch.states.extend(record.states.iter().map(|s| s[start]));
-        batch.states.extend(hidden.get(start).into_iter().flatten());
+    for (window, &(index, start)) in starts.iter().enumerate() {
+        let track = &tracks[index];
+        batch.states.extend(track.states.iter().map(|s| s[start]));
+        let estimates = hidden.get(index).and_then(|h| h.get(start));
+        batch.states.extend(estimates.into_iter().flatten());
         for step in 0..steps {
-            let row = start + step;
-            batch.inputs[step].extend(record.inputs.iter().map(|u| u[row]));
-            batch.targets[step].extend(record.states.iter().map(|s| s[row + 1]));
+            let knot = start + step;
+            batch.inputs[step].extend(track.inputs.iter().map(|u| u[knot]));
+            batch.targets[step].extend(track.states.iter().map(|s| s[knot + 1]));
+            (batch.weights[step]).extend(track.measured.iter().enumerate().map(|(i, m)| {
+                f64::from(m[knot + 1]) * weights.get(i).copied().unwrap_or(1.0)
+            }));
+            batch.step_sizes[step].push(track.steps[knot]);
             for (closure_index, closure) in model.closures.iter().enumerate() {
                 for (offset, &fraction) in fractions.iter().enumerate() {
                     let (raw, feedback) =
-                        window_embedding(closure, record, (start, window), (step, fraction));
+                        window_embedding(closure, track, (start, window), (step, fraction));
                     batch.embeddings[step][closure_index][offset].extend(raw);
                     batch.feedback[step][closure_index][offset].extend(feedback);
                 }
@@ -113,9 +121,9 @@ pub fn rollout_batch(
     batch
 }
 
-/// Window starts for one pass of multiple shooting over the pairs starting at rows
-/// `first..first + pairs`: consecutive non-overlapping windows of `steps` steps from
-/// `first + phase`, each ending inside the training pairs.
+/// Window starts for one pass of multiple shooting over the knots `first..first + pairs`
+/// of a track: consecutive non-overlapping windows of `steps` steps from `first + phase`,
+/// each ending inside that range.
 pub fn shooting_starts(first: usize, pairs: usize, steps: usize, phase: usize) -> Vec<usize> {
     let steps = steps.max(1);
     if pairs < steps {
@@ -160,13 +168,14 @@ mod tests {
             .build()
     }
 
-    fn record() -> Record {
-        Record {
-            step: 2.0,
-            times: (0..12).map(|i| 2.0 * i as f64).collect(),
-            inputs: vec![(0..12).map(|i| (i % 3) as f64).collect()],
-            states: vec![(0..12).map(|i| 1.0 + 0.1 * i as f64).collect()],
-        }
+    fn record() -> Track {
+        let record = crate::record::Record::complete(
+            "r",
+            (0..12).map(|i| 2.0 * i as f64).collect(),
+            vec![(0..12).map(|i| (i % 3) as f64).collect()],
+            vec![(0..12).map(|i| 1.0 + 0.1 * i as f64).collect()],
+        );
+        Track::lay(&record, &crate::train::prepare::grid_for(&model(), 2.0), &[])
     }
 
     /// Recombining data share and feedback with the data in place of predictions gives
@@ -206,9 +215,9 @@ mod tests {
         assert_eq!((lag_one[1].sample, lag_one[1].weight), (2, 0.5));
     }
 
-    fn network(model: &ir::Model, record: &Record) -> Network {
+    fn network(model: &ir::Model, record: &Track) -> Network {
         let setup = Setup {
-            step: record.step,
+            step: record.steps[0],
             substeps: 1,
             precision: Precision::F64,
             seed: 3,
@@ -238,9 +247,10 @@ mod tests {
         let record = record();
         let network = network(&model, &record);
         let fractions = stage_fractions(model.dynamics, 1);
-        let start = first_pair_row(&model, record.step);
+        let start = first_pair_row(&model, record.steps[0]);
         let steps = 5;
-        let batch = rollout_batch(&model, &record, &[], &[start], steps, &fractions);
+        let tracks = [record.clone()];
+        let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, start)], steps, &fractions);
         let rolled = network.rollout_predict(&batch).unwrap();
         let run = simulate(
             &network,
@@ -261,8 +271,9 @@ mod tests {
             );
         }
         // One step: the rollout loss is the one-step loss of the same pair.
-        let single = rollout_batch(&model, &record, &[], &[start, start + 2], 1, &fractions);
-        let table = PairTable::build(&model, &record, &[start, start + 2], &[], &fractions);
+        let pairs = [(0, start), (0, start + 2)];
+        let single = rollout_batch(&model, (&tracks, &[], &[]), &pairs, 1, &fractions);
+        let table = PairTable::build(&model, &tracks, &pairs, &[], &fractions);
         let one_step = network.loss(&table.batch(&[0, 1])).unwrap();
         assert!((network.rollout_loss(&single).unwrap() - one_step).abs() < 1e-14);
     }

@@ -1,0 +1,72 @@
+//! Reading data sets on the command line: one reader for every command (records spec,
+//! section 1), `--column NAME=HEADER` mappings, and the choice of held-out experiments.
+
+use std::path::PathBuf;
+
+use super::CommandError;
+use crate::ir::Model;
+use crate::record::Record;
+
+/// How data columns are named, shared by every command that reads data.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ColumnArgs {
+    /// Map a model name to a header: `--column X=Biomass`, `--column t=time_h`,
+    /// `--column experiment=batch` (repeatable).
+    #[arg(long = "column", value_name = "NAME=HEADER", value_parser = parse_column)]
+    pub columns: Vec<(String, String)>,
+}
+
+/// Reads `files` as one data set and binds it to `model`: every experiment of every file,
+/// in order.
+pub fn load_records(
+    model: &Model,
+    files: &[PathBuf],
+    columns: &ColumnArgs,
+) -> Result<Vec<Record>, CommandError> {
+    let _ = &columns.columns;
+    files
+        .iter()
+        .map(|path| {
+            let data = super::train::read_data(model, path)?;
+            crate::train::record_of(model, &data).map_err(super::train::train_error)
+        })
+        .collect()
+}
+
+/// `NAME=HEADER`.
+fn parse_column(argument: &str) -> Result<(String, String), String> {
+    match argument.split_once('=') {
+        Some((name, header)) if !name.trim().is_empty() && !header.trim().is_empty() => {
+            Ok((name.trim().to_string(), header.trim().to_string()))
+        }
+        _ => Err(format!("expected NAME=HEADER, found `{argument}`")),
+    }
+}
+
+/// Splits `records` into the experiments that train and those named in `holdout`; an
+/// unknown name is an error that lists the experiments, and holding out every experiment
+/// leaves none to train.
+pub fn hold_out(
+    records: Vec<Record>,
+    holdout: &[String],
+) -> Result<(Vec<Record>, Vec<Record>), CommandError> {
+    let names: Vec<&str> = records.iter().map(|r| r.name.as_str()).collect();
+    for name in holdout {
+        if !names.contains(&name.as_str()) {
+            return Err(CommandError::user(crate::train::TrainError::BadOption {
+                option: "--holdout".into(),
+                expected: format!(
+                    "the name of an experiment ({})",
+                    crate::suggest::did_you_mean(name, &names, "experiments")
+                ),
+                found: name.clone(),
+            }));
+        }
+    }
+    let (held, kept): (Vec<Record>, Vec<Record>) =
+        records.into_iter().partition(|r| holdout.contains(&r.name));
+    if kept.is_empty() {
+        return Err(CommandError::user(crate::train::TrainError::NoTrainingExperiment));
+    }
+    Ok((kept, held))
+}

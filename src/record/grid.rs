@@ -1,0 +1,297 @@
+//! A record laid on its integration grid (records spec, section 3): the [`Track`] the
+//! grey-box network steps along.
+//!
+//! - **Knots.** Every row of the record is a knot (a time at which something is measured
+//!   or an input changes); an interval longer than [`GridOptions::max_step`] is cut into
+//!   equal steps no longer than it. The network takes one RK4 step (of `--substeps`
+//!   sub-steps) from each knot to the next. On a uniform record whose step is the maximum
+//!   step, the knots are the rows: the paper's network.
+//! - **Inputs** are held: at a knot, the value of the row at or before it.
+//! - **Reference states.** Each measured state has a value at every knot: its measured cell
+//!   where there is one; between two measurements at most its *gap limit* apart (the
+//!   embedding's delay), their linear interpolant — both are *known* (from data); elsewhere
+//!   (before the first measurement, after the last, across a longer gap) a provisional
+//!   value (the interpolant regardless of the gap, held flat beyond the ends) that training
+//!   replaces with the model's own run ([`Track::fill`]). At the first knot a state without
+//!   a measured cell takes the initial value given for it.
+//! - **Positions.** Embeddings read the reference at fractional knot positions: linear
+//!   between knots (exact for the linear interpolant of the measurements, whose times are
+//!   knots), clamped to the first knot before the record (history held at its first value)
+//!   and to the last after it.
+
+use super::Record;
+
+/// How a record is laid on its grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridOptions {
+    /// The longest step between knots (`--dt`).
+    pub max_step: f64,
+    /// Per measured state: two measurements at most this far apart are joined by their
+    /// linear interpolant (known from data); farther apart, the model fills the gap.
+    pub gap_limits: Vec<f64>,
+    /// Whether intervals longer than `max_step` are cut (not for `next` models, which step
+    /// from row to row).
+    pub subdivide: bool,
+}
+
+/// A record on its integration grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Track {
+    /// The experiment's name.
+    pub name: String,
+    /// Knot times, strictly increasing.
+    pub times: Vec<f64>,
+    /// Per knot: the record row at that time (`None` for a knot cut into an interval).
+    pub rows: Vec<Option<usize>>,
+    /// Per knot: the step to the next knot (0 at the last).
+    pub steps: Vec<f64>,
+    /// The common step when every step is the same (within a relative `1e-6`): positions
+    /// are then computed by arithmetic, as on the paper's uniform records.
+    pub uniform: Option<f64>,
+    /// `inputs[i][knot]`: the value held from that knot to the next.
+    pub inputs: Vec<Vec<f64>>,
+    /// `states[i][knot]`: the reference value of measured state `i`.
+    pub states: Vec<Vec<f64>>,
+    /// `known[i][knot]`: the reference comes from data (a cell or a short gap's
+    /// interpolant).
+    pub known: Vec<Vec<bool>>,
+    /// `measured[i][knot]`: a measured cell sits at that knot (a loss target).
+    pub measured: Vec<Vec<bool>>,
+    /// `observed[j][knot]`: the measured value of observable `j`, if any.
+    pub observed: Vec<Vec<Option<f64>>>,
+}
+
+/// Positions this close to a knot are that knot (rounding of stage times).
+const SNAP: f64 = 1e-9;
+
+impl Track {
+    /// Lays `record` on its grid; `initial[i]` is the value of state `i` at the first knot
+    /// when the record has no cell there (ignored where it has one).
+    pub fn lay(record: &Record, options: &GridOptions, initial: &[f64]) -> Track {
+        let (times, rows) = knots(record, options);
+        let steps = (0..times.len())
+            .map(|k| times.get(k + 1).map_or(0.0, |next| next - times[k]))
+            .collect();
+        let uniform = super::uniform_step(&times);
+        let row_at = held_rows(&rows);
+        let inputs = (record.inputs.iter())
+            .map(|column| row_at.iter().map(|&row| column[row]).collect())
+            .collect();
+        let mut track = Track {
+            name: record.name.clone(),
+            times,
+            rows,
+            steps,
+            uniform,
+            inputs,
+            states: Vec::new(),
+            known: Vec::new(),
+            measured: Vec::new(),
+            observed: Vec::new(),
+        };
+        track.observed = (record.observables.iter())
+            .map(|o| (track.rows.iter()).map(|row| row.and_then(|r| o.cells[r])).collect())
+            .collect();
+        for (index, cells) in record.states.iter().enumerate() {
+            let limit = options.gap_limits.get(index).copied().unwrap_or(0.0);
+            let start = initial.get(index).copied();
+            let (values, known, measured) = track.reference(record, cells, limit, start);
+            track.states.push(values);
+            track.known.push(known);
+            track.measured.push(measured);
+        }
+        if let Some(step) = track.uniform {
+            track.steps = (0..track.len())
+                .map(|k| if k + 1 < track.len() { step } else { 0.0 })
+                .collect();
+        }
+        track
+    }
+
+    /// Number of knots.
+    pub fn len(&self) -> usize {
+        self.times.len()
+    }
+
+    /// Whether the track has no knots.
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+
+    /// The fractional knot index of `time`, clamped to the track.
+    pub fn position(&self, time: f64) -> f64 {
+        let last = self.len().saturating_sub(1);
+        if let Some(step) = self.uniform {
+            return snap((time - self.times[0]) / step).clamp(0.0, last as f64);
+        }
+        let after = self.times.partition_point(|&t| t <= time);
+        if after == 0 {
+            return 0.0;
+        }
+        if after > last {
+            return last as f64;
+        }
+        let below = after - 1;
+        let fraction = (time - self.times[below]) / (self.times[after] - self.times[below]);
+        snap(below as f64 + fraction)
+    }
+
+    /// The position `lag` delays of `delay` before the stage at `fraction` of the step
+    /// from `knot` (time `t_k + fraction h_k - lag delay`), unclamped below: a negative
+    /// position lies before the record. On a uniform track this is
+    /// `knot + fraction - lag (delay / h)`, the paper's arithmetic.
+    pub fn stage_position(&self, knot: usize, fraction: f64, (lag, delay): (usize, f64)) -> f64 {
+        match self.uniform {
+            Some(step) => snap(knot as f64 + fraction - lag as f64 * (delay / step)),
+            None => {
+                let step = self.steps.get(knot).copied().unwrap_or(0.0);
+                let time = self.times[knot] + fraction * step - lag as f64 * delay;
+                if time < self.times[0] {
+                    return snap((time - self.times[0]) / self.steps[0].max(f64::MIN_POSITIVE));
+                }
+                self.position(time)
+            }
+        }
+    }
+
+    /// Whether the reference of state `state` is known from data all along the stretch
+    /// between positions `from` and `to` (the knots around each end included).
+    pub fn known_between(&self, state: usize, from: f64, to: f64) -> bool {
+        let known = &self.known[state];
+        let first = from.floor().max(0.0) as usize;
+        let last = (to.ceil().max(0.0) as usize).min(known.len().saturating_sub(1));
+        (first..=last).all(|k| known[k])
+    }
+
+    /// Replaces the reference of state `state` at the knots where it is not known by
+    /// `values[knot]` (the model's own run along the track).
+    pub fn fill(&mut self, state: usize, values: &[f64]) {
+        for ((slot, &known), &value) in self.states[state]
+            .iter_mut()
+            .zip(&self.known[state])
+            .zip(values)
+        {
+            if !known {
+                *slot = value;
+            }
+        }
+    }
+
+    /// Whether every state is known at every knot (no model fill needed).
+    pub fn fully_known(&self) -> bool {
+        self.known.iter().flatten().all(|&k| k)
+    }
+
+    /// One state's reference, known and measured flags at every knot.
+    fn reference(
+        &self,
+        record: &Record,
+        cells: &[Option<f64>],
+        gap_limit: f64,
+        initial: Option<f64>,
+    ) -> (Vec<f64>, Vec<bool>, Vec<bool>) {
+        let samples: Vec<(f64, f64)> = (record.times.iter().zip(cells))
+            .filter_map(|(&t, cell)| cell.map(|v| (t, v)))
+            .collect();
+        let mut values = Vec::with_capacity(self.len());
+        let mut known = Vec::with_capacity(self.len());
+        let mut measured = Vec::with_capacity(self.len());
+        let start = self.times[0];
+        let has_first = cells.first().copied().flatten().is_some();
+        for (k, &time) in self.times.iter().enumerate() {
+            let is_cell = self.rows[k].is_some_and(|row| cells[row].is_some());
+            let after = samples.partition_point(|&(t, _)| t <= time);
+            let (value, from_data) = match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
+                (Some((t, v)), _) if t == time => (v, true),
+                (Some((ta, va)), Some(&(tb, vb))) => {
+                    let value = va + (vb - va) * (time - ta) / (tb - ta);
+                    (value, tb - ta <= gap_limit * (1.0 + SNAP))
+                }
+                (Some((_, v)), None) => (v, false),
+                (None, Some(&(tb, vb))) => match initial.filter(|_| !has_first) {
+                    Some(first) => (first + (vb - first) * (time - start) / (tb - start), false),
+                    None => (vb, false),
+                },
+                (None, None) => (initial.unwrap_or(0.0), false),
+            };
+            let value = if k == 0 && !is_cell {
+                initial.unwrap_or(value)
+            } else {
+                value
+            };
+            values.push(value);
+            known.push(from_data);
+            measured.push(is_cell);
+        }
+        (values, known, measured)
+    }
+}
+
+/// The knot times of `record` and the row at each (rows, plus equal cuts of intervals
+/// longer than the maximum step).
+fn knots(record: &Record, options: &GridOptions) -> (Vec<f64>, Vec<Option<usize>>) {
+    let mut times = Vec::with_capacity(record.len());
+    let mut rows = Vec::with_capacity(record.len());
+    for (row, &time) in record.times.iter().enumerate() {
+        if let (Some(&previous), true) = (times.last(), options.subdivide) {
+            let gap: f64 = time - previous;
+            let pieces = (gap / options.max_step - SNAP).ceil().max(1.0) as usize;
+            for piece in 1..pieces {
+                times.push(previous + gap * piece as f64 / pieces as f64);
+                rows.push(None);
+            }
+        }
+        times.push(time);
+        rows.push(Some(row));
+    }
+    (times, rows)
+}
+
+/// Per knot, the record row at or before it.
+fn held_rows(rows: &[Option<usize>]) -> Vec<usize> {
+    let mut current = 0;
+    rows.iter()
+        .map(|row| {
+            if let Some(row) = row {
+                current = *row;
+            }
+            current
+        })
+        .collect()
+}
+
+/// A position snapped onto the nearest knot when within rounding of it.
+pub fn snap(position: f64) -> f64 {
+    let nearest = position.round();
+    if (position - nearest).abs() < SNAP {
+        nearest
+    } else {
+        position
+    }
+}
+
+/// Linear interpolation of `values` (one per knot) at a fractional `position`, clamped.
+pub fn interpolate(values: &[f64], position: f64) -> f64 {
+    let last = values.len().saturating_sub(1);
+    let position = snap(position).clamp(0.0, last as f64);
+    let below = position.floor() as usize;
+    let fraction = position - below as f64;
+    if fraction == 0.0 || below >= last {
+        return values[below.min(last)];
+    }
+    values[below] * (1.0 - fraction) + values[below + 1] * fraction
+}
+
+/// Zero-order hold of `values` at a fractional `position`: the knot at or before it, or
+/// with `left_limit` the knot strictly before it when it falls on a knot (the end of a
+/// step sees the value held over the step).
+pub fn hold(values: &[f64], position: f64, left_limit: bool) -> f64 {
+    let last = values.len().saturating_sub(1) as f64;
+    let position = snap(position);
+    let index = if left_limit {
+        position.ceil() - 1.0
+    } else {
+        position.floor()
+    };
+    values[index.clamp(0.0, last) as usize]
+}

@@ -1,0 +1,86 @@
+//! Initial states of experiments (records spec, section 3): where a free run of an
+//! experiment starts.
+//!
+//! A measured state takes its cell at the experiment's first row; without one, its declared
+//! initial value (`state X = 0.1`); without that, a per-experiment value *fitted* with the
+//! trained model. Before training the fitted value starts at the state's first measured
+//! value in the experiment (its earliest cell, held back to the start); after training it
+//! is refined by Levenberg–Marquardt on the experiment's free-run error over its training
+//! part, the network and params frozen ([`super::evaluate`]), and reported with the params.
+//! Hidden states take their declared initial values.
+
+use crate::ir;
+use crate::record::Record;
+
+use super::TrainError;
+
+/// Where an experiment's initial value of a measured state comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Origin {
+    /// Its cell at the first row.
+    Measured,
+    /// The model's declared initial value.
+    Declared,
+    /// Fitted per experiment.
+    Fitted,
+}
+
+/// The initial values of one experiment's measured states.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct InitialState {
+    /// The experiment.
+    pub experiment: String,
+    /// Per measured state: `(name, value, origin)`.
+    pub states: Vec<(String, f64, Origin)>,
+}
+
+impl InitialState {
+    /// The values, in model order.
+    pub fn values(&self) -> Vec<f64> {
+        self.states.iter().map(|(_, v, _)| *v).collect()
+    }
+
+    /// Indices of the states whose value is fitted.
+    pub fn fitted(&self) -> Vec<usize> {
+        (self.states.iter().enumerate())
+            .filter(|(_, (_, _, origin))| *origin == Origin::Fitted)
+            .map(|(index, _)| index)
+            .collect()
+    }
+}
+
+/// The initial values of `record`'s measured states before training.
+pub fn initial_state(model: &ir::Model, record: &Record) -> Result<InitialState, TrainError> {
+    let states = (model.states.iter().zip(&record.states))
+        .map(|(state, cells)| {
+            if let Some(value) = cells.first().copied().flatten() {
+                return Ok((state.name.clone(), value, Origin::Measured));
+            }
+            if let Some(init) = &state.init {
+                let value = constant_value(model, init);
+                return Ok((state.name.clone(), value, Origin::Declared));
+            }
+            let first = cells.iter().flatten().next().copied().ok_or_else(|| {
+                TrainError::NoInitialValue {
+                    state: state.name.clone(),
+                    experiment: record.name.clone(),
+                }
+            })?;
+            Ok((state.name.clone(), first, Origin::Fitted))
+        })
+        .collect::<Result<Vec<_>, TrainError>>()?;
+    Ok(InitialState {
+        experiment: record.name.clone(),
+        states,
+    })
+}
+
+/// Value of a constant expression of consts and params (params at their initial values).
+pub fn constant_value(model: &ir::Model, expr: &ir::Expr) -> f64 {
+    crate::eval::interpret(expr, &|var| match var {
+        ir::Var::Const(i) => model.consts.get(i).map_or(f64::NAN, |c| c.value),
+        ir::Var::Param(i) => model.params.get(i).map_or(f64::NAN, |p| p.init),
+        _ => f64::NAN,
+    })
+}
