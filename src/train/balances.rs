@@ -20,10 +20,11 @@
 //! (summing over a window averages measurement noise in the difference quotients; on
 //! noise-free data every window fits exactly whatever its length). The residuals, scaled by
 //! the spread of each state's window quotient, are minimised by Levenberg-Marquardt over
-//! `theta` and every `n_i` at once; the normal equations are block-arrow shaped (the
-//! outputs of different windows do not interact), so each step eliminates the outputs
-//! window by window and solves a `P x P` system for `theta` (Schur complement). Jacobians
-//! by central differences.
+//! `theta` and every `n_i` at once (the shared driver, [`crate::numeric::lm`]); the normal
+//! equations are block-arrow shaped (the outputs of different windows do not interact), so
+//! each step eliminates the outputs window by window and solves a `P x P` system for
+//! `theta` (Schur complement, every block by the shared [`Cholesky`]). Jacobians by central
+//! differences.
 //!
 //! Standard errors come from the same linearisation, `s^2 (Schur)^-1`, with `s^2` the
 //! residual sum of squares over the equations the outputs cannot absorb, mapped through each
@@ -34,15 +35,37 @@
 //! biased as well as uncertain: the error says how sharply the balances pin a param, not a
 //! confidence interval.
 
+use std::convert::Infallible;
+
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{initial_raw_params, BackendError};
 use crate::ir::{self, Dynamics};
+use crate::numeric::lm::{self, central_difference, difference_step};
+use crate::numeric::{mean_std, solve_spd, Cholesky, Damping, Settings};
 
 use super::pairs::Record;
-use super::polish::{solve, ParamEstimate, IDENTIFIABILITY_LIMIT};
+use super::polish::{ParamEstimate, IDENTIFIABILITY_LIMIT};
 
-/// Most Levenberg-Marquardt iterations.
+/// Most Levenberg-Marquardt trial steps.
 const MAX_ITERATIONS: usize = 200;
+/// The damping schedule: from `1e-3`, divided by 3 on success, multiplied by 5 on failure
+/// (10 on a singular system); it stops when a step gains at most `1e-12` of the cost, the
+/// cost is zero, or the damping passes `1e12`.
+const SETTINGS: Settings = Settings {
+    reject_factor: 5.0,
+    max_trials: MAX_ITERATIONS,
+    max_linearisations: MAX_ITERATIONS,
+    tolerance: 1e-12,
+    ..Settings::DEFAULT
+};
+/// Levenberg-Marquardt damping of each block, with a floor that keeps it invertible where
+/// an output does not move any balance (a growth rate while the biomass is zero, or the
+/// outputs of a window beyond what its equations fix).
+const BLOCK_DAMPING: Damping = Damping {
+    min_diagonal: 0.0,
+    jitter: 0.0,
+    relative_jitter: 1e-9,
+};
 /// Intervals per window: each window's equation sums the balances of this many
 /// consecutive intervals against the state change over all of them, which averages
 /// measurement noise in the difference quotients (noise-free data fit exactly either way).
@@ -156,15 +179,7 @@ impl Problem {
                 let column: Vec<f64> = (0..windows.len())
                     .map(|w| targets[w * measured + k])
                     .collect();
-                let mean = column.iter().sum::<f64>() / column.len() as f64;
-                let spread = (column.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
-                    / column.len() as f64)
-                    .sqrt();
-                if spread > 0.0 && spread.is_finite() {
-                    1.0 / spread
-                } else {
-                    1.0
-                }
+                1.0 / mean_std(&column).1
             })
             .collect();
         Some(Problem {
@@ -233,35 +248,41 @@ impl Problem {
     /// param, and per output slot `j` (slot `j` of every interval moved at once: an
     /// interval's balances read only its own outputs).
     fn jacobian(&self, point: &Point) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
-        let difference = |up: Point, down: Point, delta: f64| {
-            let (a, b) = (self.balances(&up), self.balances(&down));
-            a.iter()
-                .zip(&b)
-                .map(|(a, b)| (a - b) / (2.0 * delta))
-                .collect::<Vec<f64>>()
+        let difference = |shift: &dyn Fn(&mut Point, f64), delta: f64| {
+            let shifted = |by: f64| {
+                let mut moved = point.clone();
+                shift(&mut moved, by);
+                Ok::<_, Infallible>(self.balances(&moved))
+            };
+            let Ok(column) = central_difference(shifted, delta);
+            column
         };
         let params = (0..point.theta.len())
             .map(|p| {
-                let delta = 1e-6 * point.theta[p].abs().max(1.0);
-                let (mut up, mut down) = (point.clone(), point.clone());
-                up.theta[p] += delta;
-                down.theta[p] -= delta;
-                difference(up, down, delta)
+                let delta = difference_step(point.theta[p], 1e-6);
+                difference(&|moved, by| moved.theta[p] += by, delta)
             })
             .collect();
         let m = self.outputs_per_row();
         let slots = (0..m)
             .map(|j| {
-                let delta = 1e-6;
-                let (mut up, mut down) = (point.clone(), point.clone());
-                for r in 0..self.rows {
-                    up.outputs[r * m + j] += delta;
-                    down.outputs[r * m + j] -= delta;
-                }
-                difference(up, down, delta)
+                let shift = |moved: &mut Point, by: f64| {
+                    for r in 0..self.rows {
+                        moved.outputs[r * m + j] += by;
+                    }
+                };
+                difference(&shift, 1e-6)
             })
             .collect();
         (params, slots)
+    }
+
+    /// The unknowns of a point, raw params first.
+    fn point(&self, x: &[f64], params: usize) -> Point {
+        Point {
+            theta: x[..params].to_vec(),
+            outputs: x[params..].to_vec(),
+        }
     }
 
     /// The window blocks of the residuals' Jacobian: per window, `K x (intervals * m)` for
@@ -293,48 +314,14 @@ impl Problem {
 
     fn fit(&self, model: &ir::Model) -> Option<BalanceFit> {
         let (p, m, k) = (model.params.len(), self.outputs_per_row(), self.measured);
-        let mut point = Point {
-            theta: initial_raw_params(model),
-            outputs: vec![0.0; self.rows * m],
+        let mut start = initial_raw_params(model);
+        start.resize(p + self.rows * m, 0.0);
+        let mut unknowns = Unknowns {
+            problem: self,
+            params: p,
         };
-        let mut residuals = self.residuals(&point);
-        let mut cost = dot(&residuals, &residuals);
-        let (mut lambda, mut steps) = (1e-3, 0);
-        for _ in 0..MAX_ITERATIONS {
-            let system = Normal::build(&self.window_jacobians(&point), &residuals, k, p);
-            let Some((d_theta, d_windows)) = system.step(lambda) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let d_outputs: Vec<f64> = d_windows.into_iter().flatten().collect();
-            let trial = Point {
-                theta: point
-                    .theta
-                    .iter()
-                    .zip(&d_theta)
-                    .map(|(a, b)| a + b)
-                    .collect(),
-                outputs: (point.outputs.iter().zip(&d_outputs))
-                    .map(|(a, b)| a + b)
-                    .collect(),
-            };
-            let trial_residuals = self.residuals(&trial);
-            let trial_cost = dot(&trial_residuals, &trial_residuals);
-            if trial_cost.is_finite() && trial_cost < cost {
-                let converged = cost - trial_cost <= 1e-12 * cost;
-                (point, residuals, cost) = (trial, trial_residuals, trial_cost);
-                lambda = (lambda / 3.0).max(1e-12);
-                steps += 1;
-                if converged || cost == 0.0 {
-                    break;
-                }
-            } else {
-                lambda *= 5.0;
-                if lambda > 1e12 {
-                    break;
-                }
-            }
-        }
+        let Ok(outcome) = lm::minimise(&mut unknowns, start, &SETTINGS);
+        let (point, residuals, cost) = (self.point(&outcome.x, p), outcome.residuals, outcome.cost);
         let system = Normal::build(&self.window_jacobians(&point), &residuals, k, p);
         // Residual degrees of freedom: the windows' equations less what the outputs can
         // absorb (at most K - 1 of a window's K equations) and the params.
@@ -370,7 +357,7 @@ impl Problem {
         }
         Some(BalanceFit {
             intervals: self.rows,
-            steps,
+            steps: outcome.steps,
             rms_residual: (cost / residuals.len().max(1) as f64).sqrt(),
             estimates,
             raw: point.theta,
@@ -398,6 +385,31 @@ impl Problem {
         up[i] += delta;
         down[i] -= delta;
         (self.param_values(&up)[i] - self.param_values(&down)[i]) / (2.0 * delta)
+    }
+}
+
+/// The balance fit as a least-squares problem in the raw params followed by every
+/// interval's outputs.
+struct Unknowns<'a> {
+    problem: &'a Problem,
+    params: usize,
+}
+
+impl lm::Problem for Unknowns<'_> {
+    type Error = Infallible;
+    type Linear = Normal;
+
+    fn residuals(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, Infallible> {
+        let point = self.problem.point(x, self.params);
+        Ok(Some(self.problem.residuals(&point)))
+    }
+
+    fn linearise(&mut self, x: &[f64], residuals: &[f64]) -> Result<Normal, Infallible> {
+        let jacobians = self
+            .problem
+            .window_jacobians(&self.problem.point(x, self.params));
+        let k = self.problem.measured;
+        Ok(Normal::build(&jacobians, residuals, k, self.params))
     }
 }
 
@@ -485,38 +497,25 @@ impl Normal {
         }
     }
 
-    /// A block with Levenberg-Marquardt damping and a floor that keeps it invertible where
-    /// an output does not move any balance (a growth rate while the biomass is zero, or
-    /// the outputs of a window beyond what its equations fix).
-    fn damped(block: &[f64], n: usize, lambda: f64) -> Vec<f64> {
-        let trace = (0..n).map(|i| block[i * n + i]).sum::<f64>() / n.max(1) as f64;
-        let mut damped = block.to_vec();
-        for i in 0..n {
-            damped[i * n + i] += lambda * block[i * n + i] + 1e-9 * trace.max(1e-300);
-        }
-        damped
-    }
-
     /// `A^-1 [coupling | gradient]` of one window.
     fn eliminate(window: &WindowSystem, p: usize, lambda: f64) -> Option<(Vec<f64>, Vec<f64>)> {
         let n = window.width;
-        let block = Self::damped(&window.block, n, lambda);
+        let block = Cholesky::factor(&BLOCK_DAMPING.apply(&window.block, n, lambda), n)?;
         let mut inverse_coupling = vec![0.0; n * p];
         for q in 0..p {
             let column: Vec<f64> = (0..n).map(|a| window.coupling[a * p + q]).collect();
-            for (a, value) in solve(&block, &column, n)?.into_iter().enumerate() {
+            for (a, value) in block.solve(&column).into_iter().enumerate() {
                 inverse_coupling[a * p + q] = value;
             }
         }
-        let inverse_gradient = solve(&block, &window.gradient, n)?;
-        Some((inverse_coupling, inverse_gradient))
+        Some((inverse_coupling, block.solve(&window.gradient)))
     }
 
     /// The Schur complement `sum_w (C_w - B_w' A_w^-1 B_w)` (damped by `lambda`) and, with
     /// it, each window's eliminated blocks.
     fn schur(&self, lambda: f64) -> Option<Reduced> {
         let p = self.p;
-        let mut schur = Self::damped(&self.params, p, lambda);
+        let mut schur = BLOCK_DAMPING.apply(&self.params, p, lambda);
         let mut rhs: Vec<f64> = self.params_gradient.iter().map(|g| -g).collect();
         let mut eliminated = Vec::with_capacity(self.windows.len());
         for window in &self.windows {
@@ -538,13 +537,13 @@ impl Normal {
 
     /// The step `(d_theta, d_outputs per window)` of `(J'J + lambda diag) d = -J'r`;
     /// `None` when a system is not positive definite.
-    fn step(&self, lambda: f64) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+    fn eliminated_step(&self, lambda: f64) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
         let p = self.p;
         let (schur, rhs, eliminated) = self.schur(lambda)?;
         let d_theta = if p == 0 {
             Vec::new()
         } else {
-            solve(&schur, &rhs, p)?
+            solve_spd(&schur, &rhs)?
         };
         let d_windows = (self.windows.iter().zip(&eliminated))
             .map(|(window, (inverse_coupling, inverse_gradient))| {
@@ -568,12 +567,11 @@ impl Normal {
     fn param_covariance(&self) -> Option<Vec<f64>> {
         let p = self.p;
         let (schur, _, _) = self.schur(0.0)?;
-        let floor = Self::damped(&self.params, p, 0.0);
+        let floor = BLOCK_DAMPING.apply(&self.params, p, 0.0);
+        let factor = Cholesky::factor(&schur, p)?;
         let mut inverse = vec![0.0; p * p];
         for column in 0..p {
-            let mut unit = vec![0.0; p];
-            unit[column] = 1.0;
-            for (row, value) in solve(&schur, &unit, p)?.into_iter().enumerate() {
+            for (row, value) in factor.inverse_column(column).into_iter().enumerate() {
                 inverse[row * p + column] = value;
             }
         }
@@ -588,8 +586,18 @@ impl Normal {
     }
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+impl lm::Linearisation for Normal {
+    /// The eliminated step, flattened as the unknowns are: `d_theta`, then the outputs
+    /// window by window (the windows cover the intervals in order).
+    fn step(&self, damping: f64) -> Option<Vec<f64>> {
+        let (d_theta, d_windows) = self.eliminated_step(damping)?;
+        Some(
+            d_theta
+                .into_iter()
+                .chain(d_windows.into_iter().flatten())
+                .collect(),
+        )
+    }
 }
 
 #[cfg(test)]
@@ -737,7 +745,7 @@ mod tests {
         let residuals = draw(widths.len() * k);
         let lambda = 0.1;
         let (d_theta, d_windows) = Normal::build(&jacobians, &residuals, k, p)
-            .step(lambda)
+            .eliminated_step(lambda)
             .unwrap();
         // Dense J: rows = windows x K, columns = params then every window's outputs.
         let columns = p + widths.iter().sum::<usize>();
@@ -766,7 +774,7 @@ mod tests {
                 }
             }
         }
-        // The same damping as `Normal::damped`, block by block.
+        // The same damping as `BLOCK_DAMPING`, block by block.
         let mut blocks = vec![(0, p)];
         let mut start = p;
         for &w in &widths {
@@ -783,7 +791,7 @@ mod tests {
                 damped[i * columns + i] += lambda * normal[i * columns + i] + 1e-9 * trace;
             }
         }
-        let expected = solve(&damped, &gradient, columns).unwrap();
+        let expected = solve_spd(&damped, &gradient).unwrap();
         let found: Vec<f64> = d_theta
             .into_iter()
             .chain(d_windows.into_iter().flatten())

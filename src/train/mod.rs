@@ -506,19 +506,7 @@ pub fn normalise(record: &Record, rows: usize) -> Normalisation {
     let stats = |series: &Vec<Vec<f64>>| -> (Vec<f64>, Vec<f64>) {
         series
             .iter()
-            .map(|values| {
-                let values = &values[..rows.min(values.len())];
-                let count = values.len().max(1) as f64;
-                let mean = values.iter().sum::<f64>() / count;
-                let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
-                let std = variance.sqrt();
-                let std = if std > 1e-12 * mean.abs().max(1e-300) && std.is_finite() {
-                    std
-                } else {
-                    1.0
-                };
-                (mean, std)
-            })
+            .map(|values| crate::numeric::mean_std(&values[..rows.min(values.len())]))
             .unzip()
     };
     let (state_mean, state_std) = stats(&record.states);
