@@ -4,7 +4,8 @@
 //! validates it and collects every error, [`ir`] lowers it into a plain compiled model,
 //! [`eval`] turns its expressions into fast numeric programs, [`sim`] integrates models
 //! without closures, [`data`] reads measured records, [`backend`] builds the trainable
-//! grey-box network, and [`cli`] is the command-line edge that renders diagnostics.
+//! grey-box network, [`numeric`] holds the statistics, linear algebra and Levenberg–Marquardt
+//! driver they all share, and [`cli`] is the command-line edge that renders diagnostics.
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 

@@ -14,9 +14,10 @@ use std::time::Instant;
 use super::train::{read_data, train_error};
 use super::{CommandError, CommandResult};
 use crate::backend::Precision;
+use crate::numeric::median;
 use crate::signal::Signal;
 use crate::sim::SimOptions;
-use crate::train::bench::{bench, median, BenchOptions, BenchReport, Engine};
+use crate::train::bench::{bench, BenchOptions, BenchReport, Engine};
 use crate::train::{Part, Recipe, TrainOptions, TrainingData};
 
 /// A shipped model `gbc bench` times.
@@ -290,7 +291,7 @@ fn time_simulation(root: &Path) -> Result<SimulationRow, CommandError> {
         model: file.to_string(),
         hours: hours + dt,
         samples,
-        median_seconds: median(&seconds),
+        median_seconds: median(&seconds).unwrap_or(f64::NAN),
     })
 }
 

@@ -15,11 +15,11 @@
 
 use super::features::FeatureMap;
 use super::fit::{from_theta, to_theta};
-use super::linalg::Normal;
 use super::record::{Normalisation, Record};
 use super::simulate::{Run, Simulator};
 use crate::eval::Program;
 use crate::ir::Constraint;
+use crate::numeric::{dot, root_mean_square, NormalEquations};
 use crate::sim::IntegrationError;
 
 /// Ridge strengths tried (relative to the mean diagonal of the correction's block).
@@ -167,11 +167,6 @@ fn delta(corrected: &Corrected, pass: &Pass, record: &Record) -> f64 {
     }
 }
 
-/// `sqrt(mean(v^2))`.
-pub fn root_mean_square(values: &[f64]) -> f64 {
-    (values.iter().map(|v| v * v).sum::<f64>() / values.len().max(1) as f64).sqrt()
-}
-
 /// The embedded variables (inputs, then measured states) at each lag `1..dim` before `row`,
 /// lag-major, from the record's inputs and the measured `history` (rows before the start
 /// repeat row 0).
@@ -212,7 +207,7 @@ pub fn fit(
     let n = map.width();
     let folds = normal_equations(pass, map, record, norm);
     let ridge = choose_ridge(&folds, n)?;
-    let mut all = Normal::new(n);
+    let mut all = NormalEquations::new(n);
     folds.iter().for_each(|f| all.merge(&f.0));
     Some(Solution {
         weights: all.solve(ridge, n)?,
@@ -226,9 +221,10 @@ fn normal_equations(
     map: &FeatureMap,
     record: &Record,
     norm: &Normalisation,
-) -> Vec<(Normal, f64)> {
+) -> Vec<(NormalEquations, f64)> {
     let n = map.width();
-    let mut folds: Vec<(Normal, f64)> = (0..FOLDS).map(|_| (Normal::new(n), 0.0)).collect();
+    let mut folds: Vec<(NormalEquations, f64)> =
+        (0..FOLDS).map(|_| (NormalEquations::new(n), 0.0)).collect();
     let (mut phi, mut lag) = (Vec::new(), Vec::new());
     let data = |row: usize, k: usize| record.states[k][row];
     let weights: Vec<f64> = norm.std.iter().map(|s| 1.0 / (s * s)).collect();
@@ -249,12 +245,12 @@ fn normal_equations(
 }
 
 /// The ridge with the least cross-validated one-step loss.
-fn choose_ridge(folds: &[(Normal, f64)], penalised: usize) -> Option<f64> {
+fn choose_ridge(folds: &[(NormalEquations, f64)], penalised: usize) -> Option<f64> {
     let mut best: Option<(f64, f64)> = None;
     for ridge in RIDGES {
         let mut loss = 0.0;
         for held in 0..folds.len() {
-            let mut train = Normal::new(folds[held].0.n);
+            let mut train = NormalEquations::new(folds[held].0.n);
             (folds.iter().enumerate())
                 .filter(|(f, _)| *f != held)
                 .for_each(|(_, f)| train.merge(&f.0));
@@ -281,10 +277,6 @@ pub fn values_along(pass: &Pass, map: &FeatureMap, record: &Record, weights: &[f
             dot(&phi, weights)
         })
         .collect()
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// What a free-run refinement may change besides the params: a gain on the one-step
@@ -335,7 +327,7 @@ pub fn refine(
     start.push(1.0);
     start.extend(refinement.directions.iter().map(|_| 0.0));
     let (x, cost) = super::fit::levenberg_marquardt(&residuals, start.clone());
-    let before = residuals(&start).map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum());
+    let before = residuals(&start).map_or(f64::INFINITY, |r| dot(&r, &r));
     if cost < before {
         apply(&x)
     } else {

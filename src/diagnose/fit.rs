@@ -1,28 +1,43 @@
 //! Fitting a mechanistic model's params to a record: Levenberg–Marquardt on the z-scored
 //! free-run residuals of the training rows, with a forward-difference Jacobian through the
-//! simulator, in transformed coordinates so that constraints always hold (`positive`:
-//! `p = exp(theta)`; `in [lo, hi]`: `p = lo + (hi - lo) sigmoid(theta)`), from the given
-//! start and a few random restarts.
+//! simulator (the shared driver, [`crate::numeric::lm`]), in transformed coordinates so
+//! that constraints always hold (`positive`: `p = exp(theta)`; `in [lo, hi]`:
+//! `p = lo + (hi - lo) sigmoid(theta)`), from the given start and a few random restarts.
 
-use super::linalg::solve_spd;
 use super::record::{Normalisation, Record};
 use super::simulate::Simulator;
 use crate::eval::sigmoid;
 use crate::ir::Constraint;
+use crate::numeric::lm::{Function, Jacobian};
+use crate::numeric::{Damping, Settings};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use std::ops::Range;
 
-/// Most Levenberg–Marquardt iterations per start.
-const MAX_ITERATIONS: usize = 60;
-/// Relative cost decrease below which a start has converged.
-const CONVERGED: f64 = 1e-7;
+/// The damping schedule: from `1e-3`, divided by 3 on success (down to `1e-9`) and
+/// multiplied by 4 on failure, retried at the same Jacobian until the damping reaches
+/// `1e10`; at most 60 Jacobians per start; converged when a step gains at most `1e-7` of the
+/// cost; a transformed coordinate moves at most 3 in one step.
+const SETTINGS: Settings = Settings {
+    min_damping: 1e-9,
+    singular_factor: 4.0,
+    max_damping: 1e10,
+    max_trials: usize::MAX,
+    max_linearisations: 60,
+    tolerance: 1e-7,
+    max_move: 3.0,
+    ..Settings::DEFAULT
+};
+/// Marquardt's scaling, with floors for a coordinate no residual sees.
+const DAMPING: Damping = Damping {
+    min_diagonal: 1e-12,
+    jitter: 1e-14,
+    relative_jitter: 0.0,
+};
 /// Forward-difference step in transformed coordinates.
 const JACOBIAN_STEP: f64 = 1e-6;
-/// Largest change of a transformed coordinate in one iteration.
-const MAX_MOVE: f64 = 3.0;
 /// Spread of the random restarts in transformed coordinates.
 const RESTART_SPREAD: f64 = 0.7;
 
@@ -150,111 +165,22 @@ pub fn from_theta(constraint: Constraint, theta: f64) -> f64 {
     }
 }
 
-/// Minimises `|r(theta)|^2` from `theta`; returns the minimiser and the minimum (infinite
-/// when `r` fails at the start).
+/// Minimises `|r(theta)|^2` from `theta` with the diagnosis's settings (forward-difference
+/// Jacobian, columns in parallel); returns the minimiser and the minimum (infinite when `r`
+/// fails at the start).
 pub fn levenberg_marquardt(
     residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
-    mut theta: Vec<f64>,
+    theta: Vec<f64>,
 ) -> (Vec<f64>, f64) {
-    let Some(mut r) = residuals(&theta) else {
-        return (theta, f64::INFINITY);
+    let function = Function {
+        residuals,
+        jacobian: Jacobian::ForwardDifferences {
+            step: JACOBIAN_STEP,
+        },
+        damping: DAMPING,
     };
-    let mut cost = sum_squares(&r);
-    let mut damping = 1e-3;
-    let n = theta.len();
-    for _ in 0..MAX_ITERATIONS {
-        let jacobian = jacobian(residuals, &theta, &r);
-        let (hessian, gradient) = gauss_newton(&jacobian, &r, n);
-        let mut improved = None;
-        while damping < 1e10 {
-            if let Some(candidate) = damped_step(&hessian, &gradient, &theta, damping) {
-                if let Some(r_new) = residuals(&candidate) {
-                    let cost_new = sum_squares(&r_new);
-                    if cost_new < cost {
-                        improved = Some((candidate, r_new, cost_new));
-                        damping = (damping / 3.0).max(1e-9);
-                        break;
-                    }
-                }
-            }
-            damping *= 4.0;
-        }
-        let Some((candidate, r_new, cost_new)) = improved else {
-            break;
-        };
-        let decrease = cost - cost_new;
-        (theta, r, cost) = (candidate, r_new, cost_new);
-        if decrease <= CONVERGED * cost + 1e-300 {
-            break;
-        }
-    }
-    (theta, cost)
-}
-
-fn sum_squares(values: &[f64]) -> f64 {
-    values.iter().map(|v| v * v).sum()
-}
-
-/// Forward-difference Jacobian, one column per coordinate (columns computed in
-/// parallel); a column whose run fails tries the backward difference, then is zero.
-fn jacobian(
-    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
-    theta: &[f64],
-    r: &[f64],
-) -> Vec<Vec<f64>> {
-    (0..theta.len())
-        .into_par_iter()
-        .map(|j| {
-            let h = JACOBIAN_STEP * theta[j].abs().max(1.0);
-            let shifted = |sign: f64| {
-                let mut moved = theta.to_vec();
-                moved[j] += sign * h;
-                residuals(&moved)
-            };
-            if let Some(plus) = shifted(1.0) {
-                plus.iter().zip(r).map(|(p, r0)| (p - r0) / h).collect()
-            } else if let Some(minus) = shifted(-1.0) {
-                r.iter().zip(&minus).map(|(r0, m)| (r0 - m) / h).collect()
-            } else {
-                vec![0.0; r.len()]
-            }
-        })
-        .collect()
-}
-
-/// `J^T J` (row-major) and `J^T r` from Jacobian columns.
-fn gauss_newton(columns: &[Vec<f64>], r: &[f64], n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut hessian = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let value: f64 = columns[i].iter().zip(&columns[j]).map(|(a, b)| a * b).sum();
-            hessian[i * n + j] = value;
-            hessian[j * n + i] = value;
-        }
-    }
-    let gradient = columns
-        .iter()
-        .map(|c| c.iter().zip(r).map(|(a, b)| a * b).sum())
-        .collect();
-    (hessian, gradient)
-}
-
-/// `theta - (H + damping diag H)^-1 g`, each coordinate's move clipped to [`MAX_MOVE`].
-fn damped_step(hessian: &[f64], gradient: &[f64], theta: &[f64], damping: f64) -> Option<Vec<f64>> {
-    let n = theta.len();
-    let mut a = hessian.to_vec();
-    for i in 0..n {
-        a[i * n + i] += damping * hessian[i * n + i].max(1e-12) + 1e-14;
-    }
-    let minus_g: Vec<f64> = gradient.iter().map(|g| -g).collect();
-    let step = solve_spd(&a, &minus_g)?;
-    Some(
-        theta
-            .iter()
-            .zip(&step)
-            .map(|(t, s)| t + s.clamp(-MAX_MOVE, MAX_MOVE))
-            .collect(),
-    )
+    let outcome = function.minimise(theta, &SETTINGS);
+    (outcome.x, outcome.cost)
 }
 
 #[cfg(test)]
@@ -277,22 +203,5 @@ mod tests {
         assert!(from_theta(Constraint::Positive, -50.0) > 0.0);
         let bounded = from_theta(Constraint::Bounds(0.1, 10.0), 40.0);
         assert!((0.1..=10.0).contains(&bounded));
-    }
-
-    #[test]
-    fn levenberg_marquardt_fits_an_exponential_decay() {
-        // y = 2 exp(-0.3 t), fitted from (1, 1): Rosenbrock-like curvature in (a, k).
-        let times: Vec<f64> = (0..30).map(|k| k as f64 * 0.5).collect();
-        let data: Vec<f64> = times.iter().map(|t| 2.0 * (-0.3 * t).exp()).collect();
-        let residuals = |theta: &[f64]| -> Option<Vec<f64>> {
-            Some(
-                (times.iter().zip(&data))
-                    .map(|(t, y)| theta[0] * (-theta[1] * t).exp() - y)
-                    .collect(),
-            )
-        };
-        let (theta, cost) = levenberg_marquardt(&residuals, vec![1.0, 1.0]);
-        assert!(cost < 1e-16, "cost {cost}");
-        assert!((theta[0] - 2.0).abs() < 1e-6 && (theta[1] - 0.3).abs() < 1e-6);
     }
 }

@@ -18,11 +18,11 @@
 use super::correction::{self, Corrected, LocusValue, Pass, Solution};
 use super::evaluate::{indistinguishable, row_errors};
 use super::features::{FeatureMap, Lags};
-use super::record::mean_std;
 use super::report::{Locus, LocusKind};
 use super::simulate::{tolerances, Simulator};
 use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Model, Var};
+use crate::numeric::{mean_std, root_mean_square};
 use rayon::prelude::*;
 
 /// History must leave this many times less excess gap than the present alone.
@@ -333,7 +333,7 @@ fn refine(context: &Context, trial: &mut Trial, history: bool) {
             &split.train,
             &variant.solution.weights,
         );
-        let typical = correction::root_mean_square(&along);
+        let typical = root_mean_square(&along);
         let refinement = correction::Refinement {
             directions: variant.map.directions(),
             reference: if typical > 0.0 {
@@ -385,7 +385,7 @@ pub(super) fn feature_map(context: &Context, pass: &Pass, lags: Option<Lags>) ->
     let (center, scale) = (0..width)
         .map(|j| mean_std(&pass.present.iter().map(|p| p[j]).collect::<Vec<_>>()))
         .unzip();
-    let locus_scale = correction::root_mean_square(&pass.locus);
+    let locus_scale = root_mean_square(&pass.locus);
     FeatureMap {
         center,
         scale,

@@ -21,7 +21,6 @@ mod evaluate;
 mod features;
 mod fit;
 pub mod html;
-mod linalg;
 mod locus;
 mod noise;
 mod record;

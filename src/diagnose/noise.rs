@@ -71,7 +71,7 @@ mod tests {
         let column: Vec<f64> = (0..500).map(|k| (k as f64 * 0.01).exp()).collect();
         // Second differences of exp(0.01 k) are about 1e-4 exp(0.01 k): tiny against the
         // signal's spread (its std is about 36).
-        let (_, std) = super::super::record::mean_std(&column);
+        let (_, std) = crate::numeric::mean_std(&column);
         assert!(noise_variance(&column).sqrt() < 1e-3 * std);
     }
 }

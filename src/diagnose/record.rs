@@ -128,7 +128,7 @@ impl Split {
             .train
             .states
             .iter()
-            .map(|column| mean_std(&column[self.train_rows.clone()]))
+            .map(|column| crate::numeric::mean_std(&column[self.train_rows.clone()]))
             .unzip();
         Normalisation { mean, std }
     }
@@ -144,23 +144,6 @@ pub struct Normalisation {
     pub mean: Vec<f64>,
     /// Standard deviations (a constant column gets 1, so its errors stay in its units).
     pub std: Vec<f64>,
-}
-
-/// Mean and standard deviation (population) of `values`; a zero or non-finite deviation
-/// becomes 1.
-pub fn mean_std(values: &[f64]) -> (f64, f64) {
-    let count = values.len().max(1) as f64;
-    let mean = values.iter().sum::<f64>() / count;
-    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
-    let std = variance.sqrt();
-    (
-        mean,
-        if std > 0.0 && std.is_finite() {
-            std
-        } else {
-            1.0
-        },
-    )
 }
 
 #[cfg(test)]
@@ -196,10 +179,5 @@ mod tests {
             Err(DiagnoseError::TooFewRows { .. })
         ));
         assert!(Split::separate(record(12), record(5)).is_err());
-    }
-
-    #[test]
-    fn constant_columns_normalise_by_one() {
-        assert_eq!(mean_std(&[2.0, 2.0, 2.0]), (2.0, 1.0));
     }
 }

@@ -14,9 +14,9 @@
 //! half the unexplained variance of the smaller ones (and none after one reaching R^2
 //! 0.999).
 
-use super::linalg::{solve_spd, Normal};
 use super::locus::Along;
 use super::report::Formula;
+use crate::numeric::{order_statistic, root_mean_square, solve_spd, NormalEquations};
 
 /// Most terms in a formula.
 pub const MAX_TERMS: usize = 4;
@@ -95,8 +95,11 @@ struct Gram {
 impl Gram {
     fn new(library: &[Term], y: &[f64]) -> Gram {
         let size = library.len();
-        let scales: Vec<f64> = library.iter().map(|t| rms(&t.values).max(1e-300)).collect();
-        let mut normal = Normal::new(size);
+        let scales: Vec<f64> = library
+            .iter()
+            .map(|t| root_mean_square(&t.values).max(1e-300))
+            .collect();
+        let mut normal = NormalEquations::new(size);
         let mut row = vec![0.0; size];
         for (i, &target) in y.iter().enumerate() {
             for (slot, (term, scale)) in row.iter_mut().zip(library.iter().zip(&scales)) {
@@ -248,9 +251,7 @@ fn variable_terms(name: &str, x: &[f64]) -> Vec<Term> {
         terms.push(map(format!("1/(1 + {name})"), &|v| 1.0 / (1.0 + v)));
     }
     if x.iter().all(|&v| v >= 0.0) {
-        let mut sorted = x.to_vec();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
+        let median = order_statistic(x, 0.5).unwrap_or(0.0);
         if median > 0.0 {
             for multiple in K_MULTIPLES {
                 let k = round_significant(multiple * median, 2);
@@ -301,10 +302,6 @@ fn format_formula(library: &[Term], support: &[usize], coefficients: &[f64]) -> 
         }
     }
     text
-}
-
-fn rms(values: &[f64]) -> f64 {
-    (values.iter().map(|v| v * v).sum::<f64>() / values.len().max(1) as f64).sqrt()
 }
 
 /// `value` rounded to `digits` significant digits.

@@ -28,7 +28,7 @@ impl Simulated {
         let noisy = &self.data.columns[self.data.columns.len() - self.clean.len()..];
         let mut total = 0.0;
         for (column, clean) in noisy.iter().zip(&self.clean) {
-            let (_, std) = record::mean_std(&column.values[..first]);
+            let (_, std) = crate::numeric::mean_std(&column.values[..first]);
             total += (first..rows)
                 .map(|i| ((column.values[i] - clean[i]) / std).powi(2))
                 .sum::<f64>()

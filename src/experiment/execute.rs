@@ -11,11 +11,12 @@ use std::time::Instant;
 use sha2::{Digest, Sha256};
 
 use super::grid::RunSpec;
-use super::reference::{free_run, free_run_error, free_run_errors, mean_error, state_std};
+use super::reference::{free_run, free_run_error, free_run_errors, mean_error};
 use super::results::{self, Fingerprint, Measure, RunResult, RunStatus, StudyRecord};
 use super::{ExperimentError, ExperimentFailure, Study, Validation};
 use crate::data::{Column, Dataset, MinRows};
 use crate::ir;
+use crate::numeric::mean_std;
 use crate::train::pairs::first_pair_row;
 use crate::train::{self, artifacts, Event, TrainOptions, Trained};
 
@@ -262,7 +263,7 @@ impl Split {
             }
             if let Some(values) = self.source.column(&state.name) {
                 let window = &values[start.min(values.len())..];
-                scale.push((state.name.clone(), state_std(window)));
+                scale.push((state.name.clone(), mean_std(window).1));
             }
         }
         scale
@@ -538,7 +539,7 @@ fn evaluate(
     let reference = |name: &str, column: &[f64]| {
         (prepared.reference_scale.iter())
             .find(|(n, _)| n == name)
-            .map_or_else(|| state_std(column), |(_, s)| *s)
+            .map_or_else(|| mean_std(column).1, |(_, s)| *s)
     };
     let online = free_run_errors(&loaded.model, &run, &loaded.validation, &reference);
     let online_mse = results::finite(mean_error(&online));

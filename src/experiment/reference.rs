@@ -4,26 +4,13 @@
 use crate::backend::{Network, Setup};
 use crate::data::Dataset;
 use crate::ir;
+use crate::numeric::mean_std;
 use crate::signal::Signal;
 use crate::sim::{SimOptions, Tolerances};
 use crate::train::predict::{predict_in_range, Mode, PredictionTable};
 use crate::train::TrainError;
 
 use super::ExperimentFailure;
-
-/// Population standard deviation of `values`; 1 when it is zero or not finite (a constant
-/// column keeps its errors in its own units, as in training).
-pub fn state_std(values: &[f64]) -> f64 {
-    let count = values.len().max(1) as f64;
-    let mean = values.iter().sum::<f64>() / count;
-    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
-    let std = variance.sqrt();
-    if std > 0.0 && std.is_finite() {
-        std
-    } else {
-        1.0
-    }
-}
 
 /// The rows of a record a prediction table covers: it starts at the first row with a full
 /// embedding history and runs to the end.
@@ -89,7 +76,7 @@ pub fn free_run_error(
     data: &Dataset,
 ) -> Result<f64, TrainError> {
     let table = free_run(model, network, setup, data)?;
-    let errors = free_run_errors(model, &table, data, &|_, column| state_std(column));
+    let errors = free_run_errors(model, &table, data, &|_, column| mean_std(column).1);
     Ok(mean_error(&errors))
 }
 
@@ -153,7 +140,7 @@ pub fn truth_along(
     let mut deviation: f64 = 0.0;
     for (index, state) in truth.states.iter().enumerate() {
         if let Some(actual) = data.column(&state.name) {
-            let std = state_std(actual);
+            let (_, std) = mean_std(actual);
             let start = checked_from.min(rows);
             let pairs = run.states[index][start..rows]
                 .iter()

@@ -277,23 +277,12 @@ pub struct Spread {
 
 /// The spread of `values` (infinities included), `None` when empty.
 pub fn spread(values: &[f64]) -> Option<Spread> {
-    let mut sorted: Vec<f64> = values.iter().copied().filter(|v| !v.is_nan()).collect();
-    if sorted.is_empty() {
-        return None;
-    }
-    sorted.sort_by(f64::total_cmp);
-    let middle = sorted.len() / 2;
-    // Two equal middle values (infinities included) are the median as they are.
-    let (low, high) = (sorted[(sorted.len() - 1) / 2], sorted[middle]);
-    let median = if low == high {
-        high
-    } else {
-        (low + high) / 2.0
-    };
+    let median = crate::numeric::median(values)?;
+    let numbers = || values.iter().copied().filter(|v| !v.is_nan());
     Some(Spread {
         median,
-        min: sorted[0],
-        max: sorted[sorted.len() - 1],
+        min: numbers().fold(f64::INFINITY, f64::min),
+        max: numbers().fold(f64::NEG_INFINITY, f64::max),
     })
 }
 

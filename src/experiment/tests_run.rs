@@ -9,12 +9,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use super::execute::claim_directory;
 use super::figures::representative;
 use super::merge::{publish, weights_in, REPORT_FILE};
-use super::reference::{state_std, truth_along};
+use super::reference::truth_along;
 use super::results::{read_all, weights_dir};
 use super::tables::{RESULTS_CSV, SUMMARY_CSV};
 use super::tests::scratch_dir;
 use super::{execute, grid, merge, prepare, Prepared, Progress, Shard, Study, StudyModel};
 use crate::data::MinRows;
+use crate::numeric::mean_std;
 use crate::train::artifacts;
 use crate::train::predict::{predict_in_range, Mode};
 
@@ -209,7 +210,7 @@ fn validation_errors_match_an_independent_recomputation_on_the_common_scale() {
     let table = table.unwrap_or_else(|e| panic!("{e}"));
     let data = loaded.validation.column("S").unwrap_or_default();
     let window = &data[40..];
-    let scale = state_std(window);
+    let scale = mean_std(window).1;
     let predicted = &table.columns[1];
     let squared: f64 = (predicted.iter().zip(window).skip(1))
         .map(|(p, a)| ((p - a) / scale).powi(2))
@@ -261,7 +262,7 @@ fn the_truth_model_reproduces_the_rate_recorded_in_the_data() {
     );
     let simulated = run.closure_truth("r").unwrap_or_default();
     let recorded = data.column("r_true").unwrap_or_default();
-    let scale = state_std(recorded);
+    let scale = mean_std(recorded).1;
     let worst = (simulated.iter().zip(recorded).skip(200))
         .map(|(s, r)| (s - r).abs())
         .fold(0.0, f64::max);

@@ -27,6 +27,7 @@ use std::fmt;
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{initial_raw_params, BackendError};
 use crate::ir::{self, Dynamics, PriorKind};
+use crate::numeric::order_statistic;
 
 use crate::record::Track;
 
@@ -215,9 +216,8 @@ fn default_scale(
         let sensitivity: Vec<f64> = (0..probe.rows)
             .map(|r| (up[r * width + state] - down[r * width + state]) / (2.0 * delta))
             .collect();
-        let mut magnitudes: Vec<f64> = sensitivity.iter().map(|j| j.abs()).collect();
-        magnitudes.sort_by(f64::total_cmp);
-        let median = magnitudes.get(magnitudes.len() / 2).copied().unwrap_or(0.0);
+        let magnitudes: Vec<f64> = sensitivity.iter().map(|j| j.abs()).collect();
+        let median = order_statistic(&magnitudes, 0.5).unwrap_or(0.0);
         if !(median > 0.0 && median.is_finite()) {
             continue;
         }
@@ -272,7 +272,7 @@ pub fn stiffness(
         };
         let (up, down) = (perturbed(1.0), perturbed(-1.0));
         let floor = 1e-3 * typical.max(1e-300);
-        let mut rates: Vec<f64> = (0..probe.rows)
+        let rates: Vec<f64> = (0..probe.rows)
             .map(|r| {
                 let index = r * width + state;
                 let diagonal = (up[index] - down[index]) / (2.0 * delta);
@@ -285,11 +285,9 @@ pub fn stiffness(
             })
             .filter(|rate| rate.is_finite())
             .collect();
-        if rates.is_empty() {
+        let Some(eigenvalue) = order_statistic(&rates, 0.01) else {
             continue;
-        }
-        rates.sort_by(f64::total_cmp);
-        let eigenvalue = rates[rates.len() / 100];
+        };
         let step = probe.largest_step;
         if eigenvalue * step / (substeps as f64) < -RK4_STABILITY_LIMIT {
             let stable_step = RK4_STABILITY_LIMIT / -eigenvalue;

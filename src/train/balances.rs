@@ -20,10 +20,11 @@
 //! (summing over a window averages measurement noise in the difference quotients; on
 //! noise-free data every window fits exactly whatever its length). The residuals, scaled by
 //! the spread of each state's window quotient, are minimised by Levenberg-Marquardt over
-//! `theta` and every `n_i` at once; the normal equations are block-arrow shaped (the
-//! outputs of different windows do not interact), so each step eliminates the outputs
-//! window by window and solves a `P x P` system for `theta` (Schur complement). Jacobians
-//! by central differences.
+//! `theta` and every `n_i` at once (the shared driver, [`crate::numeric::lm`]); the normal
+//! equations are block-arrow shaped (the outputs of different windows do not interact), so
+//! each step eliminates the outputs window by window and solves a `P x P` system for
+//! `theta` (Schur complement, every block by the shared Cholesky: [`elimination`]). Jacobians by central
+//! differences.
 //!
 //! Standard errors come from the same linearisation, `s^2 (Schur)^-1`, with `s^2` the
 //! residual sum of squares over the equations the outputs cannot absorb, mapped through each
@@ -34,17 +35,35 @@
 //! biased as well as uncertain: the error says how sharply the balances pin a param, not a
 //! confidence interval.
 
+use std::convert::Infallible;
+
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{initial_raw_params, BackendError};
 use crate::ir::{self, Dynamics};
+use crate::numeric::lm::{self, central_difference, difference_step};
+use crate::numeric::{mean_std, Settings};
 
 use crate::record::Track;
 
 use super::pairs::PairAt;
-use super::polish::{solve, ParamEstimate, IDENTIFIABILITY_LIMIT};
+use super::polish::{ParamEstimate, IDENTIFIABILITY_LIMIT};
 
-/// Most Levenberg-Marquardt iterations.
+mod elimination;
+
+use elimination::{Normal, WindowJacobian};
+
+/// Most Levenberg-Marquardt trial steps.
 const MAX_ITERATIONS: usize = 200;
+/// The damping schedule: from `1e-3`, divided by 3 on success, multiplied by 5 on failure
+/// (10 on a singular system); it stops when a step gains at most `1e-12` of the cost, the
+/// cost is zero, or the damping passes `1e12`.
+const SETTINGS: Settings = Settings {
+    reject_factor: 5.0,
+    max_trials: MAX_ITERATIONS,
+    max_linearisations: MAX_ITERATIONS,
+    tolerance: 1e-12,
+    ..Settings::DEFAULT
+};
 /// Intervals per window: each window's equation sums the balances of this many
 /// consecutive intervals against the state change over all of them, which averages
 /// measurement noise in the difference quotients (noise-free data fit exactly either way).
@@ -178,15 +197,7 @@ impl Problem {
                 let column: Vec<f64> = (0..windows.len())
                     .map(|w| targets[w * measured + k])
                     .collect();
-                let mean = column.iter().sum::<f64>() / column.len() as f64;
-                let spread = (column.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
-                    / column.len() as f64)
-                    .sqrt();
-                if spread > 0.0 && spread.is_finite() {
-                    1.0 / spread
-                } else {
-                    1.0
-                }
+                1.0 / mean_std(&column).1
             })
             .collect();
         Some(Problem {
@@ -258,35 +269,41 @@ impl Problem {
     /// param, and per output slot `j` (slot `j` of every interval moved at once: an
     /// interval's balances read only its own outputs).
     fn jacobian(&self, point: &Point) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
-        let difference = |up: Point, down: Point, delta: f64| {
-            let (a, b) = (self.balances(&up), self.balances(&down));
-            a.iter()
-                .zip(&b)
-                .map(|(a, b)| (a - b) / (2.0 * delta))
-                .collect::<Vec<f64>>()
+        let difference = |shift: &dyn Fn(&mut Point, f64), delta: f64| {
+            let shifted = |by: f64| {
+                let mut moved = point.clone();
+                shift(&mut moved, by);
+                Ok::<_, Infallible>(self.balances(&moved))
+            };
+            let Ok(column) = central_difference(shifted, delta);
+            column
         };
         let params = (0..point.theta.len())
             .map(|p| {
-                let delta = 1e-6 * point.theta[p].abs().max(1.0);
-                let (mut up, mut down) = (point.clone(), point.clone());
-                up.theta[p] += delta;
-                down.theta[p] -= delta;
-                difference(up, down, delta)
+                let delta = difference_step(point.theta[p], 1e-6);
+                difference(&|moved, by| moved.theta[p] += by, delta)
             })
             .collect();
         let m = self.outputs_per_row();
         let slots = (0..m)
             .map(|j| {
-                let delta = 1e-6;
-                let (mut up, mut down) = (point.clone(), point.clone());
-                for r in 0..self.rows {
-                    up.outputs[r * m + j] += delta;
-                    down.outputs[r * m + j] -= delta;
-                }
-                difference(up, down, delta)
+                let shift = |moved: &mut Point, by: f64| {
+                    for r in 0..self.rows {
+                        moved.outputs[r * m + j] += by;
+                    }
+                };
+                difference(&shift, 1e-6)
             })
             .collect();
         (params, slots)
+    }
+
+    /// The unknowns of a point, raw params first.
+    fn point(&self, x: &[f64], params: usize) -> Point {
+        Point {
+            theta: x[..params].to_vec(),
+            outputs: x[params..].to_vec(),
+        }
     }
 
     /// The window blocks of the residuals' Jacobian: per window, `K x (intervals * m)` for
@@ -319,48 +336,14 @@ impl Problem {
 
     fn fit(&self, model: &ir::Model) -> Option<BalanceFit> {
         let (p, m, k) = (model.params.len(), self.outputs_per_row(), self.measured);
-        let mut point = Point {
-            theta: initial_raw_params(model),
-            outputs: vec![0.0; self.rows * m],
+        let mut start = initial_raw_params(model);
+        start.resize(p + self.rows * m, 0.0);
+        let mut unknowns = Unknowns {
+            problem: self,
+            params: p,
         };
-        let mut residuals = self.residuals(&point);
-        let mut cost = dot(&residuals, &residuals);
-        let (mut lambda, mut steps) = (1e-3, 0);
-        for _ in 0..MAX_ITERATIONS {
-            let system = Normal::build(&self.window_jacobians(&point), &residuals, k, p);
-            let Some((d_theta, d_windows)) = system.step(lambda) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let d_outputs: Vec<f64> = d_windows.into_iter().flatten().collect();
-            let trial = Point {
-                theta: point
-                    .theta
-                    .iter()
-                    .zip(&d_theta)
-                    .map(|(a, b)| a + b)
-                    .collect(),
-                outputs: (point.outputs.iter().zip(&d_outputs))
-                    .map(|(a, b)| a + b)
-                    .collect(),
-            };
-            let trial_residuals = self.residuals(&trial);
-            let trial_cost = dot(&trial_residuals, &trial_residuals);
-            if trial_cost.is_finite() && trial_cost < cost {
-                let converged = cost - trial_cost <= 1e-12 * cost;
-                (point, residuals, cost) = (trial, trial_residuals, trial_cost);
-                lambda = (lambda / 3.0).max(1e-12);
-                steps += 1;
-                if converged || cost == 0.0 {
-                    break;
-                }
-            } else {
-                lambda *= 5.0;
-                if lambda > 1e12 {
-                    break;
-                }
-            }
-        }
+        let Ok(outcome) = lm::minimise(&mut unknowns, start, &SETTINGS);
+        let (point, residuals, cost) = (self.point(&outcome.x, p), outcome.residuals, outcome.cost);
         let system = Normal::build(&self.window_jacobians(&point), &residuals, k, p);
         // Residual degrees of freedom: the windows' equations less what the outputs can
         // absorb (at most K - 1 of a window's K equations) and the params.
@@ -396,7 +379,7 @@ impl Problem {
         }
         Some(BalanceFit {
             intervals: self.rows,
-            steps,
+            steps: outcome.steps,
             rms_residual: (cost / residuals.len().max(1) as f64).sqrt(),
             estimates,
             raw: point.theta,
@@ -427,195 +410,29 @@ impl Problem {
     }
 }
 
-/// One window's Jacobian blocks, row-major with one row per measured state.
-struct WindowJacobian {
-    /// `K x (intervals * m)`.
-    outputs: Vec<f64>,
-    /// `K x P`.
-    params: Vec<f64>,
+/// The balance fit as a least-squares problem in the raw params followed by every
+/// interval's outputs.
+struct Unknowns<'a> {
+    problem: &'a Problem,
+    params: usize,
 }
 
-/// One window's share of the normal equations.
-struct WindowSystem {
-    /// Its unknown outputs.
-    width: usize,
-    /// `width x width`: `J_n' J_n`.
-    block: Vec<f64>,
-    /// `width x P`: `J_n' J_theta`.
-    coupling: Vec<f64>,
-    /// `width`: `J_n' r`.
-    gradient: Vec<f64>,
-}
+impl lm::Problem for Unknowns<'_> {
+    type Error = Infallible;
+    type Linear = Normal;
 
-/// The params' system after eliminating every window's outputs: the Schur complement
-/// (`P x P`), its right-hand side, and per window `A^-1 B` and `A^-1 g` for the back
-/// substitution.
-type Reduced = (Vec<f64>, Vec<f64>, Vec<(Vec<f64>, Vec<f64>)>);
-
-/// The block-arrow normal equations `J'J d = -J'r` of one Levenberg-Marquardt step.
-struct Normal {
-    p: usize,
-    /// `P x P`: `sum_w J_theta,w' J_theta,w`.
-    params: Vec<f64>,
-    /// `P`: `J_theta' r`.
-    params_gradient: Vec<f64>,
-    windows: Vec<WindowSystem>,
-}
-
-impl Normal {
-    fn build(jacobians: &[WindowJacobian], r: &[f64], k: usize, p: usize) -> Self {
-        let mut params = vec![0.0; p * p];
-        let mut params_gradient = vec![0.0; p];
-        let mut windows = Vec::with_capacity(jacobians.len());
-        for (w, jacobian) in jacobians.iter().enumerate() {
-            let width = jacobian.outputs.len() / k.max(1);
-            let jn = |state: usize, a: usize| jacobian.outputs[state * width + a];
-            let jp = |state: usize, q: usize| jacobian.params[state * p + q];
-            let mut block = vec![0.0; width * width];
-            let mut coupling = vec![0.0; width * p];
-            let mut gradient = vec![0.0; width];
-            for state in 0..k {
-                let residual = r[w * k + state];
-                for a in 0..width {
-                    let ja = jn(state, a);
-                    if ja == 0.0 {
-                        continue;
-                    }
-                    gradient[a] += ja * residual;
-                    for b in 0..width {
-                        block[a * width + b] += ja * jn(state, b);
-                    }
-                    for q in 0..p {
-                        coupling[a * p + q] += ja * jp(state, q);
-                    }
-                }
-                for q in 0..p {
-                    params_gradient[q] += jp(state, q) * residual;
-                    for s in 0..p {
-                        params[q * p + s] += jp(state, q) * jp(state, s);
-                    }
-                }
-            }
-            windows.push(WindowSystem {
-                width,
-                block,
-                coupling,
-                gradient,
-            });
-        }
-        Normal {
-            p,
-            params,
-            params_gradient,
-            windows,
-        }
+    fn residuals(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, Infallible> {
+        let point = self.problem.point(x, self.params);
+        Ok(Some(self.problem.residuals(&point)))
     }
 
-    /// A block with Levenberg-Marquardt damping and a floor that keeps it invertible where
-    /// an output does not move any balance (a growth rate while the biomass is zero, or
-    /// the outputs of a window beyond what its equations fix).
-    fn damped(block: &[f64], n: usize, lambda: f64) -> Vec<f64> {
-        let trace = (0..n).map(|i| block[i * n + i]).sum::<f64>() / n.max(1) as f64;
-        let mut damped = block.to_vec();
-        for i in 0..n {
-            damped[i * n + i] += lambda * block[i * n + i] + 1e-9 * trace.max(1e-300);
-        }
-        damped
+    fn linearise(&mut self, x: &[f64], residuals: &[f64]) -> Result<Normal, Infallible> {
+        let jacobians = self
+            .problem
+            .window_jacobians(&self.problem.point(x, self.params));
+        let k = self.problem.measured;
+        Ok(Normal::build(&jacobians, residuals, k, self.params))
     }
-
-    /// `A^-1 [coupling | gradient]` of one window.
-    fn eliminate(window: &WindowSystem, p: usize, lambda: f64) -> Option<(Vec<f64>, Vec<f64>)> {
-        let n = window.width;
-        let block = Self::damped(&window.block, n, lambda);
-        let mut inverse_coupling = vec![0.0; n * p];
-        for q in 0..p {
-            let column: Vec<f64> = (0..n).map(|a| window.coupling[a * p + q]).collect();
-            for (a, value) in solve(&block, &column, n)?.into_iter().enumerate() {
-                inverse_coupling[a * p + q] = value;
-            }
-        }
-        let inverse_gradient = solve(&block, &window.gradient, n)?;
-        Some((inverse_coupling, inverse_gradient))
-    }
-
-    /// The Schur complement `sum_w (C_w - B_w' A_w^-1 B_w)` (damped by `lambda`) and, with
-    /// it, each window's eliminated blocks.
-    fn schur(&self, lambda: f64) -> Option<Reduced> {
-        let p = self.p;
-        let mut schur = Self::damped(&self.params, p, lambda);
-        let mut rhs: Vec<f64> = self.params_gradient.iter().map(|g| -g).collect();
-        let mut eliminated = Vec::with_capacity(self.windows.len());
-        for window in &self.windows {
-            let (inverse_coupling, inverse_gradient) = Self::eliminate(window, p, lambda)?;
-            for q in 0..p {
-                for s in 0..p {
-                    schur[q * p + s] -= (0..window.width)
-                        .map(|a| window.coupling[a * p + q] * inverse_coupling[a * p + s])
-                        .sum::<f64>();
-                }
-                rhs[q] += (0..window.width)
-                    .map(|a| window.coupling[a * p + q] * inverse_gradient[a])
-                    .sum::<f64>();
-            }
-            eliminated.push((inverse_coupling, inverse_gradient));
-        }
-        Some((schur, rhs, eliminated))
-    }
-
-    /// The step `(d_theta, d_outputs per window)` of `(J'J + lambda diag) d = -J'r`;
-    /// `None` when a system is not positive definite.
-    fn step(&self, lambda: f64) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
-        let p = self.p;
-        let (schur, rhs, eliminated) = self.schur(lambda)?;
-        let d_theta = if p == 0 {
-            Vec::new()
-        } else {
-            solve(&schur, &rhs, p)?
-        };
-        let d_windows = (self.windows.iter().zip(&eliminated))
-            .map(|(window, (inverse_coupling, inverse_gradient))| {
-                (0..window.width)
-                    .map(|a| {
-                        let coupled: f64 = (0..p)
-                            .map(|q| inverse_coupling[a * p + q] * d_theta[q])
-                            .sum();
-                        -inverse_gradient[a] - coupled
-                    })
-                    .collect()
-            })
-            .collect();
-        Some((d_theta, d_windows))
-    }
-
-    /// `(Schur complement)^-1` without damping: the raw params' covariance up to `s^2`,
-    /// with an infinite variance for a param the balances do not determine (its column of
-    /// the Jacobian is zero, or the closure outputs and other params absorb it: its Schur
-    /// diagonal is nothing next to its own curvature).
-    fn param_covariance(&self) -> Option<Vec<f64>> {
-        let p = self.p;
-        let (schur, _, _) = self.schur(0.0)?;
-        let floor = Self::damped(&self.params, p, 0.0);
-        let mut inverse = vec![0.0; p * p];
-        for column in 0..p {
-            let mut unit = vec![0.0; p];
-            unit[column] = 1.0;
-            for (row, value) in solve(&schur, &unit, p)?.into_iter().enumerate() {
-                inverse[row * p + column] = value;
-            }
-        }
-        for q in 0..p {
-            let curvature = self.params[q * p + q];
-            let left = schur[q * p + q] - (floor[q * p + q] - curvature);
-            if !(curvature > 0.0 && left > 1e-8 * curvature) {
-                inverse[q * p + q] = f64::INFINITY;
-            }
-        }
-        Some(inverse)
-    }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 #[cfg(test)]
@@ -749,81 +566,5 @@ mod tests {
         let mut hidden = gb1.clone();
         hidden.hidden.push(hidden.states[0].clone());
         assert!(!applicable(&hidden));
-    }
-
-    #[test]
-    fn the_eliminated_step_solves_the_full_normal_equations() {
-        // Three windows of K = 3 equations, two outputs each, two params: solve the whole
-        // damped system densely and compare.
-        let (k, p, widths) = (3, 2, [2, 2, 2]);
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let unit = Gaussian::new(0.0, 1.0).unwrap();
-        let mut draw = |n: usize| -> Vec<f64> { (0..n).map(|_| unit.sample(&mut rng)).collect() };
-        let jacobians: Vec<WindowJacobian> = (widths.iter())
-            .map(|&w| WindowJacobian {
-                outputs: draw(k * w),
-                params: draw(k * p),
-            })
-            .collect();
-        let residuals = draw(widths.len() * k);
-        let lambda = 0.1;
-        let (d_theta, d_windows) = Normal::build(&jacobians, &residuals, k, p)
-            .step(lambda)
-            .unwrap();
-        // Dense J: rows = windows x K, columns = params then every window's outputs.
-        let columns = p + widths.iter().sum::<usize>();
-        let rows = widths.len() * k;
-        let mut dense = vec![0.0; rows * columns];
-        let mut offset = p;
-        for (w, jacobian) in jacobians.iter().enumerate() {
-            for state in 0..k {
-                let row = w * k + state;
-                for q in 0..p {
-                    dense[row * columns + q] = jacobian.params[state * p + q];
-                }
-                for a in 0..widths[w] {
-                    dense[row * columns + offset + a] = jacobian.outputs[state * widths[w] + a];
-                }
-            }
-            offset += widths[w];
-        }
-        let mut normal = vec![0.0; columns * columns];
-        let mut gradient = vec![0.0; columns];
-        for row in 0..rows {
-            for a in 0..columns {
-                gradient[a] -= dense[row * columns + a] * residuals[row];
-                for b in 0..columns {
-                    normal[a * columns + b] += dense[row * columns + a] * dense[row * columns + b];
-                }
-            }
-        }
-        // The same damping as `Normal::damped`, block by block.
-        let mut blocks = vec![(0, p)];
-        let mut start = p;
-        for &w in &widths {
-            blocks.push((start, w));
-            start += w;
-        }
-        let mut damped = normal.clone();
-        for &(start, n) in &blocks {
-            let trace = (start..start + n)
-                .map(|i| normal[i * columns + i])
-                .sum::<f64>()
-                / n as f64;
-            for i in start..start + n {
-                damped[i * columns + i] += lambda * normal[i * columns + i] + 1e-9 * trace;
-            }
-        }
-        let expected = solve(&damped, &gradient, columns).unwrap();
-        let found: Vec<f64> = d_theta
-            .into_iter()
-            .chain(d_windows.into_iter().flatten())
-            .collect();
-        for (a, b) in found.iter().zip(&expected) {
-            assert!(
-                (a - b).abs() < 1e-9 * b.abs().max(1.0),
-                "{found:?} vs {expected:?}"
-            );
-        }
     }
 }

@@ -123,7 +123,7 @@ pub fn bench(
         epoch_seconds.push(started.elapsed().as_secs_f64());
     }
     let steps_per_epoch = table.len().div_ceil(batch_size);
-    let median_epoch_seconds = median(&epoch_seconds);
+    let median_epoch_seconds = crate::numeric::median(&epoch_seconds).unwrap_or(f64::NAN);
     Ok(BenchReport {
         engine: options.engine,
         precision: options.precision,
@@ -135,17 +135,6 @@ pub fn bench(
         median_step_seconds: median_epoch_seconds / steps_per_epoch as f64,
         final_loss,
     })
-}
-
-/// The median of a non-empty list (NaN for an empty one).
-pub fn median(values: &[f64]) -> f64 {
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    match sorted.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => sorted[n / 2],
-        n => (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0,
-    }
 }
 
 /// The training step being timed (one value per benchmark: its size does not matter).
@@ -226,12 +215,5 @@ mod tests {
             ..options(Engine::Graph)
         };
         assert!(bench(&model, &data, &too_many).is_err());
-    }
-
-    #[test]
-    fn median_takes_the_middle_or_the_mean_of_the_two_middles() {
-        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
-        assert!(median(&[]).is_nan());
     }
 }

@@ -115,7 +115,7 @@ pub struct PairTable {
 
 impl PairTable {
     /// The pairs `pairs` of `tracks`; `hidden[track][knot]` holds the hidden-state
-    /// estimates (empty for models without hidden states). A pair at a track's last knot
+    /// estimates (empty for models without hidden states, or before they are run in). A pair at a track's last knot
     /// has no target (it is kept for prediction; its target repeats the current state,
     /// with weight 0).
     pub fn build(
@@ -143,8 +143,12 @@ impl PairTable {
             let track = &tracks[index];
             let next = (knot + 1).min(track.len() - 1);
             table.states.extend(track.states.iter().map(|s| s[knot]));
-            let estimates = hidden.get(index).and_then(|h| h.get(knot));
-            table.states.extend(estimates.into_iter().flatten());
+            // Hidden states not run in yet hold 0 until [`PairTable::set_hidden`].
+            let hidden_width = table.state_width - measured;
+            match hidden.get(index).and_then(|h| h.get(knot)) {
+                Some(values) if values.len() == hidden_width => table.states.extend(values),
+                _ => table.states.extend(std::iter::repeat_n(0.0, hidden_width)),
+            }
             table.inputs.extend(track.inputs.iter().map(|u| u[knot]));
             table.targets.extend(track.states.iter().map(|s| s[next]));
             let counts = next > knot;

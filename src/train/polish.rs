@@ -7,8 +7,10 @@
 //! by central differences in the raw (unconstrained) params.
 //!
 //! - **Polish**: damped Gauss-Newton steps `(J'J + lambda diag(J'J)) d = -J'r` in the raw
-//!   params alone, a step kept only when it lowers `|r|^2`.
-//! - **Uncertainty**: the linearised covariance `s^2 (J'J)^-1`, `s^2 = |r|^2 / (n - q)`,
+//!   params alone, a step kept only when it lowers `|r|^2` (the shared driver,
+//!   [`crate::numeric::lm`]).
+//! - **Uncertainty**: the linearised covariance `s^2 (J'J)^-1`, `s^2 = |r|^2 / (n - q)`
+//!   ([`crate::numeric::lm::standard_errors`]),
 //!   with `J` over the raw params *and* the output-layer biases of every closure (nuisance
 //!   parameters: a constant shift of each closure output that could absorb a change of a
 //!   param is allowed for). A param's standard error is its marginal one, mapped through
@@ -19,14 +21,31 @@
 
 use crate::backend::{NamedTensor, Network, Precision, Setup};
 use crate::ir;
+use crate::numeric::lm::{self, central_difference, difference_step, standard_errors};
+use crate::numeric::{Damping, GaussNewton, Settings};
 
 use super::pairs::PairTable;
 use super::TrainError;
 
 /// Relative standard error above which a param counts as poorly identified.
 pub const IDENTIFIABILITY_LIMIT: f64 = 0.05;
-/// Most Levenberg-Marquardt iterations of the polish.
+/// Most Levenberg-Marquardt trial steps of the polish.
 const MAX_ITERATIONS: usize = 30;
+/// The polish's damping schedule: from `1e-3`, divided by 3 on success and multiplied by 4
+/// on failure (10 on a singular system); it stops when a step gains less than `1e-9` of the
+/// cost or the damping passes `1e12`.
+const SETTINGS: Settings = Settings {
+    max_trials: MAX_ITERATIONS,
+    max_linearisations: MAX_ITERATIONS,
+    tolerance: 1e-9,
+    ..Settings::DEFAULT
+};
+/// Marquardt's scaling `(J'J + lambda diag(J'J))`, with a floor for a param no residual sees.
+const DAMPING: Damping = Damping {
+    min_diagonal: 0.0,
+    jitter: 1e-300,
+    relative_jitter: 0.0,
+};
 /// Pairs per prediction batch.
 const CHUNK: usize = 512;
 
@@ -165,74 +184,42 @@ impl<'a> Probe<'a> {
         &mut self.weights[tensor].values[entry]
     }
 
-    /// Columns `0..count` of the Jacobian of the residuals, column-major.
-    fn jacobian(&mut self, count: usize) -> Result<Vec<Vec<f64>>, TrainError> {
-        let mut columns = Vec::with_capacity(count);
-        for index in 0..count {
-            let centre = *self.coordinate(index);
-            let delta = 1e-6 * centre.abs().max(1.0);
-            *self.coordinate(index) = centre + delta;
-            let up = self.residuals()?;
-            *self.coordinate(index) = centre - delta;
-            let down = self.residuals()?;
-            *self.coordinate(index) = centre;
-            columns.push(
-                (up.iter().zip(&down))
-                    .map(|(u, d)| (u - d) / (2.0 * delta))
-                    .collect(),
-            );
+    /// Sets the raw params (the first coordinates).
+    fn set_params(&mut self, values: &[f64]) {
+        for (index, value) in values.iter().enumerate() {
+            *self.coordinate(index) = *value;
         }
-        Ok(columns)
+    }
+
+    /// Columns `0..count` of the Jacobian of the residuals (central differences).
+    fn jacobian(&mut self, count: usize) -> Result<Vec<Vec<f64>>, TrainError> {
+        (0..count)
+            .map(|index| {
+                let centre = *self.coordinate(index);
+                let column = central_difference(
+                    |shift| {
+                        *self.coordinate(index) = centre + shift;
+                        self.residuals()
+                    },
+                    difference_step(centre, 1e-6),
+                );
+                *self.coordinate(index) = centre;
+                column
+            })
+            .collect()
     }
 
     fn polish(&mut self) -> Result<PolishSummary, TrainError> {
         let params_before = self.network_param_values()?;
-        let mut residuals = self.residuals()?;
-        let loss_before = mean_square(&residuals);
-        let mut cost = loss_before;
-        let mut damping = 1e-3;
-        let mut steps = 0;
-        for _ in 0..MAX_ITERATIONS {
-            let jacobian = self.jacobian(self.params)?;
-            let (mut normal, gradient) = normal_equations(&jacobian, &residuals);
-            let n = self.params;
-            for i in 0..n {
-                normal[i * n + i] *= 1.0 + damping;
-                normal[i * n + i] += 1e-300;
-            }
-            let Some(step) = solve(&normal, &gradient, n) else {
-                damping *= 10.0;
-                continue;
-            };
-            let saved: Vec<f64> = (0..n).map(|i| *self.coordinate(i)).collect();
-            for (i, d) in step.iter().enumerate() {
-                *self.coordinate(i) -= d;
-            }
-            let trial = self.residuals()?;
-            let trial_cost = mean_square(&trial);
-            if trial_cost.is_finite() && trial_cost < cost {
-                let gain = (cost - trial_cost) / cost.max(1e-300);
-                (residuals, cost) = (trial, trial_cost);
-                damping = (damping / 3.0).max(1e-12);
-                steps += 1;
-                if gain < 1e-9 {
-                    break;
-                }
-            } else {
-                for (i, value) in saved.into_iter().enumerate() {
-                    *self.coordinate(i) = value;
-                }
-                damping *= 4.0;
-                if damping > 1e12 {
-                    break;
-                }
-            }
-        }
+        let start: Vec<f64> = (0..self.params).map(|i| *self.coordinate(i)).collect();
+        let outcome = lm::minimise(&mut Polish(self), start, &SETTINGS)?;
+        self.set_params(&outcome.x);
         self.network.set_weights(&self.weights)?;
+        let count = outcome.residuals.len().max(1) as f64;
         Ok(PolishSummary {
-            steps,
-            loss_before,
-            loss_after: cost,
+            steps: outcome.steps,
+            loss_before: outcome.initial_cost / count,
+            loss_after: outcome.cost / count,
             params_before,
         })
     }
@@ -249,20 +236,16 @@ impl<'a> Probe<'a> {
         values: Vec<f64>,
     ) -> Result<Vec<ParamEstimate>, TrainError> {
         let residuals = self.residuals()?;
-        let count = self.coordinates.len();
-        let jacobian = self.jacobian(count)?;
-        let (normal, _) = normal_equations(&jacobian, &residuals);
-        let dof = residuals.len().saturating_sub(count).max(1) as f64;
-        let variance = residuals.iter().map(|r| r * r).sum::<f64>() / dof;
+        let jacobian = self.jacobian(self.coordinates.len())?;
+        let raw_errors = standard_errors(&jacobian, &residuals, self.params);
         let slopes = self.transform_slopes()?;
         let mut estimates = Vec::with_capacity(self.params);
         for (index, (param, value)) in model.params.iter().zip(values).enumerate() {
-            let mut unit = vec![0.0; count];
-            unit[index] = 1.0;
-            let raw_variance = solve(&normal, &unit, count)
-                .map(|column| column[index] * variance)
-                .filter(|v| v.is_finite() && *v >= 0.0);
-            let std_error = raw_variance.map_or(f64::INFINITY, |v| v.sqrt() * slopes[index].abs());
+            let std_error = if raw_errors[index].is_finite() {
+                raw_errors[index] * slopes[index].abs()
+            } else {
+                f64::INFINITY
+            };
             let relative_error = std_error / value.abs().max(1e-300);
             estimates.push(ParamEstimate {
                 name: param.name.clone(),
@@ -280,16 +263,37 @@ impl<'a> Probe<'a> {
         let mut slopes = Vec::with_capacity(self.params);
         for index in 0..self.params {
             let centre = *self.coordinate(index);
-            let delta = 1e-6 * centre.abs().max(1.0);
-            *self.coordinate(index) = centre + delta;
-            let up = self.network_param_values()?[index];
-            *self.coordinate(index) = centre - delta;
-            let down = self.network_param_values()?[index];
+            let values = central_difference(
+                |shift| {
+                    *self.coordinate(index) = centre + shift;
+                    self.network_param_values()
+                },
+                difference_step(centre, 1e-6),
+            )?;
             *self.coordinate(index) = centre;
-            slopes.push((up - down) / (2.0 * delta));
+            slopes.push(values[index]);
         }
         self.network.set_weights(&self.weights)?;
         Ok(slopes)
+    }
+}
+
+/// The polish as a least-squares problem in the raw params (the network frozen).
+struct Polish<'p, 'a>(&'p mut Probe<'a>);
+
+impl lm::Problem for Polish<'_, '_> {
+    type Error = TrainError;
+    type Linear = GaussNewton;
+
+    fn residuals(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, TrainError> {
+        self.0.set_params(x);
+        self.0.residuals().map(Some)
+    }
+
+    fn linearise(&mut self, x: &[f64], residuals: &[f64]) -> Result<GaussNewton, TrainError> {
+        self.0.set_params(x);
+        let columns = self.0.jacobian(x.len())?;
+        Ok(GaussNewton::new(&columns, residuals, DAMPING))
     }
 }
 
@@ -306,70 +310,4 @@ fn output_biases(weights: &[NamedTensor]) -> Vec<usize> {
                 .is_none_or(|next| closure_of(&next.name) != own)
         })
         .collect()
-}
-
-fn mean_square(values: &[f64]) -> f64 {
-    values.iter().map(|v| v * v).sum::<f64>() / values.len().max(1) as f64
-}
-
-/// `J'J` (row-major) and `J'r` from column-major `J`.
-fn normal_equations(jacobian: &[Vec<f64>], residuals: &[f64]) -> (Vec<f64>, Vec<f64>) {
-    let n = jacobian.len();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut normal = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let value = dot(&jacobian[i], &jacobian[j]);
-            normal[i * n + j] = value;
-            normal[j * n + i] = value;
-        }
-    }
-    let gradient = jacobian.iter().map(|c| dot(c, residuals)).collect();
-    (normal, gradient)
-}
-
-/// Solves the symmetric positive definite system `a x = b` by Cholesky; `None` when `a` is
-/// not numerically positive definite.
-pub(super) fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut lower = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let mut sum = a[i * n + j];
-            for k in 0..j {
-                sum -= lower[i * n + k] * lower[j * n + k];
-            }
-            if i == j {
-                if !(sum > 1e-14 * a[i * n + i].abs() && sum.is_finite()) {
-                    return None;
-                }
-                lower[i * n + i] = sum.sqrt();
-            } else {
-                lower[i * n + j] = sum / lower[j * n + j];
-            }
-        }
-    }
-    let mut y = vec![0.0; n];
-    for i in 0..n {
-        let sum: f64 = (0..i).map(|k| lower[i * n + k] * y[k]).sum();
-        y[i] = (b[i] - sum) / lower[i * n + i];
-    }
-    let mut x = vec![0.0; n];
-    for i in (0..n).rev() {
-        let sum: f64 = (i + 1..n).map(|k| lower[k * n + i] * x[k]).sum();
-        x[i] = (y[i] - sum) / lower[i * n + i];
-    }
-    Some(x)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn cholesky_solves_a_known_system_and_refuses_a_singular_one() {
-        // a = [[4, 2], [2, 3]], x = [1, -2] -> b = [0, -4].
-        let x = solve(&[4.0, 2.0, 2.0, 3.0], &[0.0, -4.0], 2).unwrap();
-        assert!((x[0] - 1.0).abs() < 1e-12 && (x[1] + 2.0).abs() < 1e-12);
-        assert!(solve(&[1.0, 1.0, 1.0, 1.0], &[1.0, 1.0], 2).is_none());
-    }
 }

@@ -1,0 +1,370 @@
+//! One Levenberg–Marquardt driver for every nonlinear least-squares fit in gbc: the
+//! param polish after training, the params from the balances, and the diagnosis's fits
+//! through the simulator.
+//!
+//! It minimises `|r(x)|^2`. At the current point the [`Problem`] linearises (a Jacobian, or
+//! whatever structured normal equations it has); each trial solves the damped system
+//! `(J'J + lambda D) d = -J'r` ([`Linearisation::step`]) and is kept only when it lowers the
+//! cost. An accepted step divides the damping by [`Settings::accept_factor`] and asks for a
+//! new linearisation; a rejected one multiplies it by [`Settings::reject_factor`] and retries
+//! at the same linearisation (a singular system by [`Settings::singular_factor`]). The fit
+//! stops when an accepted step gains no more than [`Settings::tolerance`] of the cost, the
+//! cost is zero, the damping passes [`Settings::max_damping`], or a budget of trials or
+//! linearisations is spent.
+//!
+//! [`GaussNewton`] is the dense linearisation from Jacobian columns; [`Function`] wraps a
+//! residual closure with an analytic or forward-difference Jacobian; [`standard_errors`] is
+//! the linearised (Gauss–Newton) uncertainty `s^2 (J'J)^-1` at the end.
+
+use rayon::prelude::*;
+use std::convert::Infallible;
+
+use super::linalg::{dot, gauss_newton_system, Cholesky};
+
+/// The damping schedule and stopping rules.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Damping of the first trial.
+    pub initial_damping: f64,
+    /// An accepted step divides the damping by this ...
+    pub accept_factor: f64,
+    /// ... down to this.
+    pub min_damping: f64,
+    /// A rejected step (higher or non-finite cost, or residuals that fail) multiplies it.
+    pub reject_factor: f64,
+    /// A damped system that is not positive definite multiplies it.
+    pub singular_factor: f64,
+    /// The fit stops when the damping exceeds this (no step lowers the cost).
+    pub max_damping: f64,
+    /// Most trial steps (accepted, rejected and singular).
+    pub max_trials: usize,
+    /// Most linearisations (one at the start and one after each accepted step).
+    pub max_linearisations: usize,
+    /// The fit stops after an accepted step that lowers the cost by no more than this
+    /// fraction of it.
+    pub tolerance: f64,
+    /// Largest change of one unknown in one step (each coordinate of a step is clipped).
+    pub max_move: f64,
+}
+
+impl Settings {
+    /// Damping from `1e-3`, divided by 3 on success (down to `1e-12`), multiplied by 4 on
+    /// failure and 10 on a singular system, stopping beyond `1e12`; 100 trials; relative
+    /// tolerance `1e-9`; no step limit.
+    pub const DEFAULT: Settings = Settings {
+        initial_damping: 1e-3,
+        accept_factor: 3.0,
+        min_damping: 1e-12,
+        reject_factor: 4.0,
+        singular_factor: 10.0,
+        max_damping: 1e12,
+        max_trials: 100,
+        max_linearisations: 100,
+        tolerance: 1e-9,
+        max_move: f64::INFINITY,
+    };
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings::DEFAULT
+    }
+}
+
+/// A least-squares problem in unknowns `x`.
+pub trait Problem {
+    /// What can go wrong evaluating it (besides residuals that cannot be computed).
+    type Error;
+    /// The local model at a point, which solves damped steps.
+    type Linear: Linearisation;
+
+    /// The residuals at `x`; `Ok(None)` where they cannot be computed (a simulation that
+    /// fails): a trial step there is rejected.
+    fn residuals(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, Self::Error>;
+
+    /// The linearisation at `x`, whose residuals are `residuals`.
+    fn linearise(&mut self, x: &[f64], residuals: &[f64]) -> Result<Self::Linear, Self::Error>;
+}
+
+/// The normal equations at one point.
+pub trait Linearisation {
+    /// The step `d` of the damped system `(J'J + damping D) d = -J'r`; `None` when it is not
+    /// numerically positive definite.
+    fn step(&self, damping: f64) -> Option<Vec<f64>>;
+}
+
+/// How damping enters the diagonal of `J'J`: `a_ii + damping * max(a_ii, min_diagonal) +
+/// jitter + relative_jitter * mean(diag)`. The jitters keep the system invertible where an
+/// unknown moves no residual.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Damping {
+    /// The least diagonal entry the damping scales.
+    pub min_diagonal: f64,
+    /// Added to every diagonal entry.
+    pub jitter: f64,
+    /// Added to every diagonal entry, times the mean diagonal entry (at least `1e-300`).
+    pub relative_jitter: f64,
+}
+
+impl Damping {
+    /// `matrix` (`n x n`, row-major) with the damping on its diagonal.
+    pub fn apply(&self, matrix: &[f64], n: usize, damping: f64) -> Vec<f64> {
+        let mut jitter = self.jitter;
+        if self.relative_jitter != 0.0 {
+            let trace = (0..n).map(|i| matrix[i * n + i]).sum::<f64>() / n.max(1) as f64;
+            jitter += self.relative_jitter * trace.max(1e-300);
+        }
+        let mut damped = matrix.to_vec();
+        for i in 0..n {
+            damped[i * n + i] += damping * matrix[i * n + i].max(self.min_diagonal) + jitter;
+        }
+        damped
+    }
+}
+
+/// Dense normal equations `J'J`, `J'r` from the columns of a Jacobian.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GaussNewton {
+    n: usize,
+    /// `J'J`, row-major.
+    normal: Vec<f64>,
+    /// `J'r`.
+    gradient: Vec<f64>,
+    damping: Damping,
+}
+
+impl GaussNewton {
+    /// The system of Jacobian `columns` (one per unknown) and `residuals`.
+    pub fn new(columns: &[Vec<f64>], residuals: &[f64], damping: Damping) -> Self {
+        let (normal, gradient) = gauss_newton_system(columns, residuals);
+        GaussNewton {
+            n: columns.len(),
+            normal,
+            gradient,
+            damping,
+        }
+    }
+}
+
+impl Linearisation for GaussNewton {
+    fn step(&self, damping: f64) -> Option<Vec<f64>> {
+        let damped = self.damping.apply(&self.normal, self.n, damping);
+        let minus_gradient: Vec<f64> = self.gradient.iter().map(|g| -g).collect();
+        Some(Cholesky::factor(&damped, self.n)?.solve(&minus_gradient))
+    }
+}
+
+/// Where a fit ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// The minimiser found (the start when no step was accepted).
+    pub x: Vec<f64>,
+    /// The residuals there (empty when they could not be computed at the start).
+    pub residuals: Vec<f64>,
+    /// `|r|^2` there (infinite when the residuals could not be computed at the start).
+    pub cost: f64,
+    /// `|r|^2` at the start.
+    pub initial_cost: f64,
+    /// Accepted steps.
+    pub steps: usize,
+    /// Linearisations (Jacobians) computed.
+    pub linearisations: usize,
+}
+
+/// Minimises `|r(x)|^2` from `x` (see the module documentation).
+pub fn minimise<P: Problem + ?Sized>(
+    problem: &mut P,
+    x: Vec<f64>,
+    settings: &Settings,
+) -> Result<Outcome, P::Error> {
+    let Some(residuals) = problem.residuals(&x)? else {
+        return Ok(Outcome {
+            x,
+            residuals: Vec::new(),
+            cost: f64::INFINITY,
+            initial_cost: f64::INFINITY,
+            steps: 0,
+            linearisations: 0,
+        });
+    };
+    let cost = dot(&residuals, &residuals);
+    let mut state = Outcome {
+        x,
+        residuals,
+        cost,
+        initial_cost: cost,
+        steps: 0,
+        linearisations: 0,
+    };
+    let mut damping = settings.initial_damping;
+    let mut linear: Option<P::Linear> = None;
+    for _ in 0..settings.max_trials {
+        if linear.is_none() {
+            if state.linearisations >= settings.max_linearisations {
+                break;
+            }
+            state.linearisations += 1;
+            linear = Some(problem.linearise(&state.x, &state.residuals)?);
+        }
+        let Some(system) = &linear else { break };
+        let Some(step) = system.step(damping) else {
+            damping *= settings.singular_factor;
+            if damping > settings.max_damping {
+                break;
+            }
+            continue;
+        };
+        let trial: Vec<f64> = (state.x.iter().zip(&step))
+            .map(|(x, d)| x + d.clamp(-settings.max_move, settings.max_move))
+            .collect();
+        let improved = problem
+            .residuals(&trial)?
+            .map(|r| (dot(&r, &r), r))
+            .filter(|(cost, _)| cost.is_finite() && *cost < state.cost);
+        let Some((cost, residuals)) = improved else {
+            damping *= settings.reject_factor;
+            if damping > settings.max_damping {
+                break;
+            }
+            continue;
+        };
+        let decrease = state.cost - cost;
+        let converged = decrease <= settings.tolerance * state.cost || cost == 0.0;
+        (state.x, state.residuals, state.cost) = (trial, residuals, cost);
+        state.steps += 1;
+        linear = None;
+        damping = (damping / settings.accept_factor).max(settings.min_damping);
+        if converged {
+            break;
+        }
+    }
+    Ok(state)
+}
+
+/// A Jacobian for a [`Function`].
+#[derive(Clone, Copy)]
+pub enum Jacobian<'a> {
+    /// Forward differences with step `step * max(|x_j|, 1)`, columns in parallel; a column
+    /// whose shifted residuals fail tries the backward difference, then is zero.
+    ForwardDifferences {
+        /// Relative step.
+        step: f64,
+    },
+    /// The analytic Jacobian: its columns (one per unknown) at `x`.
+    Analytic(&'a (dyn Fn(&[f64]) -> Vec<Vec<f64>> + Sync)),
+}
+
+/// A least-squares problem given by a residual closure (`None` where the residuals cannot
+/// be computed) and its Jacobian, with dense Gauss–Newton steps.
+#[derive(Clone, Copy)]
+pub struct Function<'a> {
+    /// The residuals.
+    pub residuals: &'a (dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    /// Their Jacobian.
+    pub jacobian: Jacobian<'a>,
+    /// How damping enters the normal equations.
+    pub damping: Damping,
+}
+
+impl Function<'_> {
+    /// [`minimise`] from `x`.
+    pub fn minimise(&self, x: Vec<f64>, settings: &Settings) -> Outcome {
+        let mut problem = *self;
+        match minimise(&mut problem, x, settings) {
+            Ok(outcome) => outcome,
+            Err(never) => match never {},
+        }
+    }
+}
+
+impl Problem for Function<'_> {
+    type Error = Infallible;
+    type Linear = GaussNewton;
+
+    fn residuals(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, Infallible> {
+        Ok((self.residuals)(x))
+    }
+
+    fn linearise(&mut self, x: &[f64], residuals: &[f64]) -> Result<GaussNewton, Infallible> {
+        let columns = match self.jacobian {
+            Jacobian::ForwardDifferences { step } => {
+                forward_differences(self.residuals, x, residuals, step)
+            }
+            Jacobian::Analytic(jacobian) => jacobian(x),
+        };
+        Ok(GaussNewton::new(&columns, residuals, self.damping))
+    }
+}
+
+/// The difference step for an unknown at `x`: `relative * max(|x|, 1)`.
+pub fn difference_step(x: f64, relative: f64) -> f64 {
+    relative * x.abs().max(1.0)
+}
+
+/// Forward-difference Jacobian columns of `residuals` at `x` (whose residuals are `r`), one
+/// per unknown, computed in parallel: steps [`difference_step`]`(x_j, step)`; a column whose
+/// shifted residuals fail tries the backward difference, then is zero.
+pub fn forward_differences(
+    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    x: &[f64],
+    r: &[f64],
+    step: f64,
+) -> Vec<Vec<f64>> {
+    (0..x.len())
+        .into_par_iter()
+        .map(|j| {
+            let h = difference_step(x[j], step);
+            let shifted = |sign: f64| {
+                let mut moved = x.to_vec();
+                moved[j] += sign * h;
+                residuals(&moved)
+            };
+            if let Some(plus) = shifted(1.0) {
+                plus.iter().zip(r).map(|(p, r0)| (p - r0) / h).collect()
+            } else if let Some(minus) = shifted(-1.0) {
+                r.iter().zip(&minus).map(|(r0, m)| (r0 - m) / h).collect()
+            } else {
+                vec![0.0; r.len()]
+            }
+        })
+        .collect()
+}
+
+/// The central difference `(f(delta) - f(-delta)) / (2 delta)`, entry by entry, of a
+/// vector function of a shift.
+pub fn central_difference<E>(
+    mut shifted: impl FnMut(f64) -> Result<Vec<f64>, E>,
+    delta: f64,
+) -> Result<Vec<f64>, E> {
+    let up = shifted(delta)?;
+    let down = shifted(-delta)?;
+    Ok(up
+        .iter()
+        .zip(&down)
+        .map(|(u, d)| (u - d) / (2.0 * delta))
+        .collect())
+}
+
+/// Linearised (Gauss–Newton) standard errors of the first `count` unknowns of a fit with
+/// Jacobian `columns` (one per unknown; every unknown counts, the rest as nuisances) and
+/// residuals `residuals` at its minimum: `sqrt(s^2 [(J'J)^-1]_ii)` with
+/// `s^2 = |r|^2 / max(m - q, 1)` for `m` residuals and `q` unknowns. Every error is
+/// infinite when `J'J` is not numerically positive definite (some direction is not
+/// determined by the data), and an error is infinite where its variance is not a finite
+/// non-negative number.
+pub fn standard_errors(columns: &[Vec<f64>], residuals: &[f64], count: usize) -> Vec<f64> {
+    let unknowns = columns.len();
+    let (normal, _) = gauss_newton_system(columns, residuals);
+    let freedom = residuals.len().saturating_sub(unknowns).max(1) as f64;
+    let variance = dot(residuals, residuals) / freedom;
+    let factor = Cholesky::factor(&normal, unknowns);
+    (0..count.min(unknowns))
+        .map(|i| {
+            factor
+                .as_ref()
+                .map(|f| f.inverse_column(i)[i] * variance)
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .map_or(f64::INFINITY, f64::sqrt)
+        })
+        .collect()
+}

@@ -1,0 +1,255 @@
+//! The Levenberg–Marquardt driver on problems with known answers, its difference
+//! Jacobians against analytic ones, and its standard errors against closed forms.
+
+use super::lm::{central_difference, forward_differences, standard_errors, Function, Jacobian};
+use super::*;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal as Gaussian};
+
+const DAMPING: Damping = Damping {
+    min_diagonal: 1e-12,
+    jitter: 1e-14,
+    relative_jitter: 0.0,
+};
+
+fn times() -> Vec<f64> {
+    (0..30).map(|k| k as f64 * 0.5).collect()
+}
+
+/// `a exp(-k t) - y` for the data `y` at `times()`.
+fn decay_residuals(data: &[f64], theta: &[f64]) -> Vec<f64> {
+    (times().iter().zip(data))
+        .map(|(t, y)| theta[0] * (-theta[1] * t).exp() - y)
+        .collect()
+}
+
+/// Its analytic Jacobian: columns `exp(-k t)` and `-a t exp(-k t)`.
+fn decay_jacobian(theta: &[f64]) -> Vec<Vec<f64>> {
+    let decay: Vec<f64> = times().iter().map(|t| (-theta[1] * t).exp()).collect();
+    let slope = (times().iter().zip(&decay))
+        .map(|(t, e)| -theta[0] * t * e)
+        .collect();
+    vec![decay, slope]
+}
+
+fn truth() -> Vec<f64> {
+    decay_residuals(&[0.0; 30], &[2.0, 0.3])
+}
+
+#[test]
+fn an_exponential_decay_is_fitted_to_its_truth() {
+    // y = 2 exp(-0.3 t), fitted from (1, 1) with a forward-difference Jacobian.
+    let data = truth();
+    let residuals = |theta: &[f64]| Some(decay_residuals(&data, theta));
+    let function = Function {
+        residuals: &residuals,
+        jacobian: Jacobian::ForwardDifferences { step: 1e-6 },
+        damping: DAMPING,
+    };
+    let outcome = function.minimise(vec![1.0, 1.0], &Settings::DEFAULT);
+    assert!(outcome.cost < 1e-16, "{outcome:?}");
+    assert!((outcome.x[0] - 2.0).abs() < 1e-6 && (outcome.x[1] - 0.3).abs() < 1e-6);
+    assert!(outcome.initial_cost > 1.0 && outcome.steps > 0);
+    assert!(outcome.linearisations == outcome.steps || outcome.linearisations == outcome.steps + 1);
+    assert_eq!(outcome.residuals, decay_residuals(&data, &outcome.x));
+}
+
+#[test]
+fn the_difference_jacobian_matches_the_analytic_one_and_so_does_the_fit() {
+    let data = truth();
+    let residuals = |theta: &[f64]| Some(decay_residuals(&data, theta));
+    let at = [1.3, 0.7];
+    let r = decay_residuals(&data, &at);
+    let differences = forward_differences(&residuals, &at, &r, 1e-7);
+    for (column, analytic) in differences.iter().zip(decay_jacobian(&at)) {
+        for (d, a) in column.iter().zip(&analytic) {
+            assert!((d - a).abs() < 1e-5 * a.abs().max(1.0), "{d} vs {a}");
+        }
+    }
+    let central = central_difference(
+        |shift| Ok::<_, ()>(decay_residuals(&data, &[at[0], at[1] + shift])),
+        1e-5,
+    )
+    .unwrap();
+    for (c, a) in central.iter().zip(&decay_jacobian(&at)[1]) {
+        assert!((c - a).abs() < 1e-8 * a.abs().max(1.0), "{c} vs {a}");
+    }
+    // Noisy data: both Jacobians lead to the same least-squares minimum.
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let noise = Gaussian::new(0.0, 0.01).unwrap();
+    let noisy: Vec<f64> = data.iter().map(|y| y + noise.sample(&mut rng)).collect();
+    let residuals = |theta: &[f64]| Some(decay_residuals(&noisy, theta));
+    let fit = |jacobian| {
+        Function {
+            residuals: &residuals,
+            jacobian,
+            damping: DAMPING,
+        }
+        .minimise(vec![1.0, 1.0], &Settings::DEFAULT)
+    };
+    let by_differences = fit(Jacobian::ForwardDifferences { step: 1e-6 });
+    let analytic = fit(Jacobian::Analytic(&decay_jacobian));
+    for (d, a) in by_differences.x.iter().zip(&analytic.x) {
+        assert!((d - a).abs() < 1e-6, "{by_differences:?} vs {analytic:?}");
+    }
+    // At the minimum the gradient J'r vanishes.
+    for column in decay_jacobian(&analytic.x) {
+        assert!(
+            dot(&column, &analytic.residuals).abs() < 1e-9,
+            "{analytic:?}"
+        );
+    }
+}
+
+#[test]
+fn the_rosenbrock_valley_is_followed_to_its_minimum() {
+    // r = (10 (y - x^2), 1 - x): minimum 0 at (1, 1), from the classic start (-1.2, 1).
+    let residuals = |v: &[f64]| Some(vec![10.0 * (v[1] - v[0] * v[0]), 1.0 - v[0]]);
+    let jacobian = |v: &[f64]| vec![vec![-20.0 * v[0], -1.0], vec![10.0, 0.0]];
+    let settings = Settings {
+        tolerance: 0.0,
+        ..Settings::DEFAULT
+    };
+    for jacobian in [
+        Jacobian::Analytic(&jacobian),
+        Jacobian::ForwardDifferences { step: 1e-7 },
+    ] {
+        let outcome = Function {
+            residuals: &residuals,
+            jacobian,
+            damping: DAMPING,
+        }
+        .minimise(vec![-1.2, 1.0], &settings);
+        assert!(outcome.cost < 1e-20, "{outcome:?}");
+        assert!((outcome.x[0] - 1.0).abs() < 1e-9 && (outcome.x[1] - 1.0).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn standard_errors_match_linear_regression_and_are_infinite_where_undetermined() {
+    // y = 1 + 0.5 t + noise: the slope's error is s / sqrt(sum (t - mean)^2), the
+    // intercept's s sqrt(1/n + mean^2 / sum (t - mean)^2), s^2 = rss / (n - 2).
+    let t = times();
+    let n = t.len() as f64;
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let noise = Gaussian::new(0.0, 0.1).unwrap();
+    let y: Vec<f64> = t
+        .iter()
+        .map(|t| 1.0 + 0.5 * t + noise.sample(&mut rng))
+        .collect();
+    let residuals = |c: &[f64]| -> Option<Vec<f64>> {
+        Some(t.iter().zip(&y).map(|(t, y)| c[0] + c[1] * t - y).collect())
+    };
+    let outcome = Function {
+        residuals: &residuals,
+        jacobian: Jacobian::ForwardDifferences { step: 1e-6 },
+        damping: DAMPING,
+    }
+    .minimise(vec![0.0, 0.0], &Settings::DEFAULT);
+    let columns = vec![vec![1.0; t.len()], t.clone()];
+    let errors = standard_errors(&columns, &outcome.residuals, 2);
+    let mean = t.iter().sum::<f64>() / n;
+    let spread: f64 = t.iter().map(|t| (t - mean).powi(2)).sum();
+    let s = (dot(&outcome.residuals, &outcome.residuals) / (n - 2.0)).sqrt();
+    assert!(
+        (errors[1] / (s / spread.sqrt()) - 1.0).abs() < 1e-9,
+        "{errors:?}"
+    );
+    let intercept = s * (1.0 / n + mean * mean / spread).sqrt();
+    assert!((errors[0] / intercept - 1.0).abs() < 1e-9, "{errors:?}");
+    // Only the first `count` unknowns are reported (the rest are nuisances).
+    assert_eq!(
+        standard_errors(&columns, &outcome.residuals, 1),
+        errors[..1]
+    );
+    // y = (a + b) t: the data fix a + b, never a and b apart.
+    let rank_deficient = vec![t.clone(), t.clone()];
+    let errors = standard_errors(&rank_deficient, &outcome.residuals, 2);
+    assert!(errors.iter().all(|e| e.is_infinite()), "{errors:?}");
+}
+
+#[test]
+fn steps_are_clipped_and_budgets_respected() {
+    // r = x - 100 from 0: one trial moves x by at most max_move.
+    let residuals = |x: &[f64]| Some(vec![x[0] - 100.0]);
+    let function = Function {
+        residuals: &residuals,
+        jacobian: Jacobian::ForwardDifferences { step: 1e-6 },
+        damping: DAMPING,
+    };
+    let settings = Settings {
+        max_move: 3.0,
+        max_trials: 1,
+        ..Settings::DEFAULT
+    };
+    let outcome = function.minimise(vec![0.0], &settings);
+    assert_eq!(
+        (outcome.x[0], outcome.steps, outcome.linearisations),
+        (3.0, 1, 1)
+    );
+    let unclipped = function.minimise(vec![0.0], &Settings::DEFAULT);
+    assert!((unclipped.x[0] - 100.0).abs() < 1e-6, "{unclipped:?}");
+    // Residuals that fail at the start: nothing moves, the cost is infinite.
+    let failing = |_: &[f64]| None;
+    let outcome = Function {
+        residuals: &failing,
+        ..function
+    }
+    .minimise(vec![1.0], &Settings::DEFAULT);
+    assert!(outcome.cost.is_infinite() && outcome.x == [1.0] && outcome.steps == 0);
+}
+
+#[test]
+fn a_trial_where_residuals_fail_is_rejected_and_a_shorter_one_taken() {
+    // r = atan(x - 2) from 0: the Gauss-Newton step overshoots to 5.5, where the residuals
+    // are not defined (x >= 4); damped steps get to the root.
+    let residuals = |x: &[f64]| (x[0] < 4.0).then(|| vec![(x[0] - 2.0).atan()]);
+    let outcome = Function {
+        residuals: &residuals,
+        jacobian: Jacobian::ForwardDifferences { step: 1e-6 },
+        damping: DAMPING,
+    }
+    .minimise(vec![0.0], &Settings::DEFAULT);
+    assert!((outcome.x[0] - 2.0).abs() < 1e-6, "{outcome:?}");
+    // A forward difference across the edge falls back to the backward one: the slope of
+    // atan(x - 2) at 4 is 1 / 5.
+    let at = [4.0 - 1e-7];
+    let r = residuals(&at).unwrap();
+    let column = forward_differences(&residuals, &at, &r, 1e-6);
+    assert!((column[0][0] - 0.2).abs() < 1e-6, "{column:?}");
+    // With no side defined the column is zero.
+    let nowhere = |x: &[f64]| (x[0] == 1.0).then(|| vec![x[0]]);
+    assert_eq!(
+        forward_differences(&nowhere, &[1.0], &[1.0], 1e-6),
+        vec![vec![0.0]]
+    );
+}
+
+/// A problem whose evaluation fails after a number of calls.
+struct Failing {
+    calls: usize,
+}
+
+impl Problem for Failing {
+    type Error = String;
+    type Linear = GaussNewton;
+
+    fn residuals(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, String> {
+        self.calls += 1;
+        if self.calls > 2 {
+            return Err(format!("failed at call {}", self.calls));
+        }
+        Ok(Some(vec![x[0] - 1.0, 2.0 * x[0]]))
+    }
+
+    fn linearise(&mut self, _: &[f64], residuals: &[f64]) -> Result<GaussNewton, String> {
+        Ok(GaussNewton::new(&[vec![1.0, 2.0]], residuals, DAMPING))
+    }
+}
+
+#[test]
+fn an_evaluation_error_ends_the_fit() {
+    let error = minimise(&mut Failing { calls: 0 }, vec![5.0], &Settings::DEFAULT).unwrap_err();
+    assert_eq!(error, "failed at call 3");
+}
