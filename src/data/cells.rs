@@ -65,7 +65,9 @@ mod tests {
 
     #[test]
     fn every_spelling_of_not_measured() {
-        for text in ["", "NA", "na", "N/A", "n/a", "NaN", "nan", "NAN", "-nan", "+NaN"] {
+        for text in [
+            "", "NA", "na", "N/A", "n/a", "NaN", "nan", "NAN", "-nan", "+NaN",
+        ] {
             check(text, false, Cell::Missing);
             check(text, true, Cell::Missing);
         }

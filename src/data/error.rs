@@ -286,10 +286,14 @@ pub enum DataError {
         at: Box<Location>,
     },
     /// Two rows of one experiment at the same time.
-    #[error("two rows with time {time} in experiment `{experiment}`: {at} repeats row {first_row}")]
+    #[error(
+        "two rows with time {time} in experiment `{experiment}`: {at} repeats row {first_row}"
+    )]
     #[diagnostic(
         code(gbm::E0214),
-        help("remove or merge the repeated row (one row per time, with every value measured then)")
+        help(
+            "remove or merge the repeated row (one row per time, with every value measured then)"
+        )
     )]
     RepeatedTime {
         /// The file's text.

@@ -127,7 +127,11 @@ impl Origin {
     pub fn cell_text(&self, sample: usize, index: usize) -> &str {
         let span = self.span(sample, Some(index));
         let range = span.offset()..span.offset() + span.len();
-        self.source.inner().get(range).map(clean).unwrap_or_default()
+        self.source
+            .inner()
+            .get(range)
+            .map(clean)
+            .unwrap_or_default()
     }
     /// A location at `row` of this file.
     pub fn at(&self, row: usize, column: Option<ColumnRef>) -> Box<Location> {
@@ -178,7 +182,9 @@ impl Experiment {
                     found: self.len(),
                     reason: "two rows are needed to define the sampling step".to_string(),
                     experiment: self.name.clone(),
-                    at: self.origin.at(self.rows.get(last).copied().unwrap_or(1), None),
+                    at: self
+                        .origin
+                        .at(self.rows.get(last).copied().unwrap_or(1), None),
                 })
             }
             Err(Uneven { sample, expected }) => Err(DataError::UnevenStep {
@@ -270,7 +276,9 @@ fn step_defect(times: &[f64]) -> Result<Option<f64>, Uneven> {
             sample: index + 1,
             expected: typical,
         }),
-        None => Ok(Some((times[times.len() - 1] - times[0]) / steps.len() as f64)),
+        None => Ok(Some(
+            (times[times.len() - 1] - times[0]) / steps.len() as f64,
+        )),
     }
 }
 

@@ -6,8 +6,8 @@ use super::experiment::{Experiment, Origin, Series};
 use super::header::{Header, Layout};
 use super::sniff::{count_fields, sniff};
 use super::source::{
-    blank_line_between, clean, clean_range, column, delimiter_name, scan_record,
-    skip_line_breaks, span, Source,
+    blank_line_between, clean, clean_range, column, delimiter_name, scan_record, skip_line_breaks,
+    span, Source,
 };
 use super::Request;
 use std::collections::HashMap;
@@ -103,7 +103,10 @@ pub(super) fn read_rows(
     let mut by_name: HashMap<String, usize> = HashMap::new();
     let mut record = csv::StringRecord::new();
     let mut previous_end = opened.header.line.end;
-    while csv.read_record(&mut record).map_err(|error| unreadable(source, &error))? {
+    while csv
+        .read_record(&mut record)
+        .map_err(|error| unreadable(source, &error))?
+    {
         let offset = record.position().map_or(0, |p| p.byte() as usize);
         let start = skip_line_breaks(text, source.body + offset);
         let blank = record.len() == 1 && clean(&record[0]).is_empty();
@@ -208,7 +211,9 @@ impl Reader<'_> {
         let source = self.source();
         let delimiter = self.opened.delimiter;
         let other = DELIMITERS.into_iter().find(|&other| {
-            other != delimiter && expected >= 2 && count_fields(source.text(), line.start, other) == expected
+            other != delimiter
+                && expected >= 2
+                && count_fields(source.text(), line.start, other) == expected
         });
         if let Some(other) = other {
             return Err(DataError::MixedDelimiters {
@@ -352,10 +357,10 @@ impl Reader<'_> {
 
 /// The name of a file's only experiment: its stem.
 pub(super) fn stem(source: &Source) -> String {
-    source
-        .path
-        .file_stem()
-        .map_or_else(|| source.file.clone(), |stem| stem.to_string_lossy().into_owned())
+    source.path.file_stem().map_or_else(
+        || source.file.clone(),
+        |stem| stem.to_string_lossy().into_owned(),
+    )
 }
 
 /// A cell's text cut to a readable length for messages.

@@ -4,7 +4,7 @@
 use super::error::DataError;
 use super::source::{clean, clean_range, column, span, Source};
 use super::{Request, Role};
-use crate::suggest::{closest, did_you_mean};
+use crate::suggest::closest;
 use std::collections::HashMap;
 use std::ops::Range;
 
@@ -192,8 +192,29 @@ impl Header {
                 name: name.to_string(),
                 header: header.to_string(),
                 at: source.at(self.row, None),
-                help: did_you_mean(header, &self.texts(), "columns present"),
+                help: self.suggest(header),
             }),
+        }
+    }
+
+    /// A help line for a mapped header that is missing: the closest header (by its text or
+    /// its name without unit), then every header.
+    fn suggest(&self, header: &str) -> String {
+        let texts = self.texts();
+        let close = closest(header, texts.iter().copied()).or_else(|| {
+            let name = closest(
+                split_unit(header).0,
+                self.cells.iter().map(|c| c.name.as_str()),
+            );
+            name.and_then(|name| self.named(name))
+                .map(|position| texts[position])
+        });
+        match close {
+            Some(close) => format!(
+                "did you mean `{close}`? columns present: {}",
+                quoted_list(&texts)
+            ),
+            None => format!("columns present: {}", quoted_list(&texts)),
         }
     }
 
@@ -225,7 +246,10 @@ impl Header {
         } else {
             let both: Vec<&str> = candidates.iter().map(|&position| texts[position]).collect();
             (
-                format!("{}, each could be time", quoted_list(&both).replace(", ", " and ")),
+                format!(
+                    "{}, each could be time",
+                    quoted_list(&both).replace(", ", " and ")
+                ),
                 format!(
                     "name the time column with `--column t=HEADER`, e.g. `--column t={}`",
                     both[0]
@@ -246,9 +270,7 @@ impl Header {
         let texts = self.texts();
         let help = match closest(name, self.cells.iter().map(|cell| cell.name.as_str())) {
             Some(close) => {
-                let header = self
-                    .named(close)
-                    .map_or(close, |position| texts[position]);
+                let header = self.named(close).map_or(close, |position| texts[position]);
                 format!(
                     "did you mean `{header}`? map it with `--column {name}={header}`; columns \
                      present: {}",

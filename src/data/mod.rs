@@ -284,3 +284,7 @@ pub fn format_number(value: f64) -> String {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_set;
+#[cfg(test)]
+mod tests_set_errors;

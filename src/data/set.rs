@@ -62,10 +62,7 @@ pub(super) fn experiments(
     request: &Request,
 ) -> Result<Vec<Experiment>, DataError> {
     check_mapping(request)?;
-    let opened: Vec<Opened> = sources
-        .into_iter()
-        .map(open)
-        .collect::<Result<_, _>>()?;
+    let opened: Vec<Opened> = sources.into_iter().map(open).collect::<Result<_, _>>()?;
     let elsewhere = |header: &str| {
         opened
             .iter()
@@ -149,10 +146,7 @@ pub(super) fn check_times(experiment: &Experiment) -> Result<(), DataError> {
 fn duplicate(first: &Experiment, second: &Experiment) -> DataError {
     let place = |experiment: &Experiment| match &experiment.origin.experiment {
         Some(column) => (
-            format!(
-                "`{}` row {}",
-                experiment.origin.file, experiment.rows[0]
-            ),
+            format!("`{}` row {}", experiment.origin.file, experiment.rows[0]),
             Some(column.clone()),
         ),
         None => (format!("`{}`", experiment.origin.file), None),

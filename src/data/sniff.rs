@@ -30,7 +30,7 @@ pub(super) fn sniff(text: &str, body: usize) -> u8 {
             && rows
                 .iter()
                 .all(|&row| count_fields(text, row, delimiter) == fields);
-        let better = best.map_or(true, |(best_consistent, best_fields, _)| {
+        let better = best.is_none_or(|(best_consistent, best_fields, _)| {
             (consistent, fields) > (best_consistent, best_fields)
         });
         if better {
