@@ -1,4 +1,5 @@
-//! Defects of a data file, each naming the file, the row and the column.
+//! Defects of a data set: of a data file (each naming the file, the row and the column),
+//! of an experiment (naming it), or of the `--column` mapping.
 
 use miette::{Diagnostic, NamedSource, SourceSpan};
 use std::fmt;
@@ -42,8 +43,8 @@ impl fmt::Display for Location {
     }
 }
 
-/// A defect of a data file (spec section 4). Every variant but [`DataError::Unreadable`]
-/// carries the file's text and a label on the offending cell or line.
+/// A defect of a data set (records.md). Every variant but [`DataError::Unreadable`] and the
+/// `--column` defects carries the file's text and a label on the offending cell or line.
 #[derive(Debug, Clone, Error, Diagnostic)]
 pub enum DataError {
     /// The file could not be opened or read.
@@ -139,8 +140,8 @@ pub enum DataError {
         /// Where (the second occurrence).
         at: Box<Location>,
     },
-    /// The header has no time column `t`.
-    #[error("expected a time column `t` in the header at {at}, found none")]
+    /// The header has no time column: no `t`, no single `time`, no `--column t=HEADER`.
+    #[error("expected a time column `t` in the header at {at}, found {found}")]
     #[diagnostic(code(gbm::E0207))]
     MissingTime {
         /// The file's text.
@@ -149,6 +150,8 @@ pub enum DataError {
         /// The header line.
         #[label("no `t` here")]
         span: SourceSpan,
+        /// `none`, or the candidates when several headers could be time.
+        found: String,
         /// Where.
         at: Box<Location>,
         /// The columns present, with a suggestion.
@@ -175,10 +178,7 @@ pub enum DataError {
     },
     /// A row with more or fewer cells than the header.
     #[error("expected {expected} cells (one per header column), found {found} at {at}")]
-    #[diagnostic(
-        code(gbm::E0209),
-        help("every row needs one cell per header column, separated by commas")
-    )]
+    #[diagnostic(code(gbm::E0209))]
     RaggedRow {
         /// The file's text.
         #[source_code]
@@ -192,28 +192,40 @@ pub enum DataError {
         found: usize,
         /// Where.
         at: Box<Location>,
+        /// What to do, naming the file's delimiter.
+        #[help]
+        help: String,
     },
-    /// A cell the model reads is empty.
-    #[error("expected a number at {at}, found an empty cell")]
-    #[diagnostic(
-        code(gbm::E0210),
-        help("fill in the missing value; gaps in a record are not interpolated")
-    )]
+    /// A cell that must hold a value holds none: a time, an experiment name, or (for a
+    /// command that reads a complete record) a measured value.
+    #[error("expected {expected} at {at}, found {found}")]
+    #[diagnostic(code(gbm::E0210))]
     EmptyCell {
         /// The file's text.
         #[source_code]
         src: DataSource,
         /// The empty cell.
-        #[label("empty")]
+        #[label("no value")]
         span: SourceSpan,
+        /// What the cell must hold, e.g. "a number" or "a time".
+        expected: &'static str,
+        /// `an empty cell`, or the spelling of not measured (`NA`).
+        found: String,
         /// Where.
         at: Box<Location>,
+        /// What to do.
+        #[help]
+        help: String,
     },
     /// A cell the model reads is not a number.
     #[error("expected a number at {at}, found `{found}`")]
     #[diagnostic(
         code(gbm::E0211),
-        help("numbers are written like `20`, `0.05` or `1.5e-2`, with `.` as decimal point")
+        help(
+            "numbers are written like `20`, `0.05` or `1.5e-2` (a decimal comma such as `1,5` \
+             only in a file separated by `;` or tabs); leave the cell empty or write `NA` where \
+             nothing was measured"
+        )
     )]
     NotANumber {
         /// The file's text.
@@ -227,12 +239,10 @@ pub enum DataError {
         /// Where.
         at: Box<Location>,
     },
-    /// A cell is NaN or infinite (or overflows a 64-bit float).
+    /// A cell is infinite (or overflows a 64-bit float), or NaN where a command reads a
+    /// complete record.
     #[error("expected a finite number at {at}, found `{found}`")]
-    #[diagnostic(
-        code(gbm::E0212),
-        help("remove the row or replace the value; NaN and infinity cannot be fitted")
-    )]
+    #[diagnostic(code(gbm::E0212))]
     NotFinite {
         /// The file's text.
         #[source_code]
@@ -244,37 +254,64 @@ pub enum DataError {
         found: String,
         /// Where.
         at: Box<Location>,
+        /// What to do.
+        #[help]
+        help: String,
     },
-    /// Time goes backwards.
-    #[error("expected time to increase at {at}, found {found} after {previous}")]
-    #[diagnostic(code(gbm::E0213), help("sort the rows by the time column `t`"))]
+    /// Time goes backwards within an experiment.
+    #[error(
+        "expected time to increase in experiment `{experiment}` at {at}, found {found} after \
+         {previous} (row {previous_row})"
+    )]
+    #[diagnostic(
+        code(gbm::E0213),
+        help("sort the rows of each experiment by time (file order is time order)")
+    )]
     UnsortedTime {
         /// The file's text.
         #[source_code]
         src: DataSource,
         /// The time cell.
-        #[label("earlier than the row above")]
+        #[label("earlier than the experiment's row before")]
         span: SourceSpan,
-        /// The time of the row above.
+        /// The time of the experiment's row before.
         previous: f64,
         /// The time of this row.
         found: f64,
+        /// The experiment.
+        experiment: String,
+        /// The row of the earlier sample.
+        previous_row: usize,
         /// Where.
         at: Box<Location>,
     },
-    /// Two rows at the same time.
-    #[error("expected time to increase at {at}, found {time} again")]
-    #[diagnostic(code(gbm::E0214), help("remove or merge the repeated row"))]
+    /// Two rows of one experiment at the same time.
+    #[error(
+        "two rows with time {time} in experiment `{experiment}`: {at} repeats row {first_row}"
+    )]
+    #[diagnostic(
+        code(gbm::E0214),
+        help(
+            "remove or merge the repeated row (one row per time, with every value measured then)"
+        )
+    )]
     RepeatedTime {
         /// The file's text.
         #[source_code]
         src: DataSource,
-        /// The time cell.
-        #[label("same time as the row above")]
+        /// The second time cell.
+        #[label("same time again")]
         span: SourceSpan,
+        /// The first time cell.
+        #[label("first here")]
+        first_span: SourceSpan,
         /// The repeated time.
         time: f64,
-        /// Where.
+        /// The experiment.
+        experiment: String,
+        /// The row of the first sample at that time.
+        first_row: usize,
+        /// Where (the second row).
         at: Box<Location>,
     },
     /// The time step is not uniform (a gap, or irregular sampling).
@@ -299,11 +336,17 @@ pub enum DataError {
         /// Where.
         at: Box<Location>,
     },
-    /// Fewer data rows than the model needs.
-    #[error("expected at least {needed} data rows ({reason}), found {found}: {at} is the last")]
+    /// An experiment with fewer data rows than the model needs.
+    #[error(
+        "expected at least {needed} data rows ({reason}), found {found} in experiment \
+         `{experiment}`: {at} is its last"
+    )]
     #[diagnostic(
         code(gbm::E0216),
-        help("use a longer record, or a model needing less history (smaller `delay` or `dim`)")
+        help(
+            "use a longer record, drop the experiment, or a model needing less history \
+             (smaller `delay` or `dim`)"
+        )
     )]
     TooFewRows {
         /// The file's text.
@@ -318,16 +361,184 @@ pub enum DataError {
         found: usize,
         /// Why that many are needed.
         reason: String,
+        /// The experiment.
+        experiment: String,
         /// The last row.
+        at: Box<Location>,
+    },
+    /// Rows that do not split into the header's fields with its delimiter but do with
+    /// another one.
+    #[error(
+        "expected {expected} fields separated by {delimiter} at {at}, found {found}; the file \
+         mixes delimiters: the header is separated by {delimiter}, this row by {other}"
+    )]
+    #[diagnostic(
+        code(gbm::E0217),
+        help("use one delimiter throughout the file (export it again, or fix the header)")
+    )]
+    MixedDelimiters {
+        /// The file's text.
+        #[source_code]
+        src: DataSource,
+        /// The row.
+        #[label("separated by {other}")]
+        span: SourceSpan,
+        /// Number of header columns.
+        expected: usize,
+        /// Number of fields with the header's delimiter.
+        found: usize,
+        /// The header's delimiter, in words.
+        delimiter: &'static str,
+        /// The row's delimiter, in words.
+        other: &'static str,
+        /// Where.
+        at: Box<Location>,
+    },
+    /// A `--column NAME=HEADER` whose NAME the command does not read.
+    #[error("unknown `--column` name `{name}`")]
+    #[diagnostic(code(gbm::E0218))]
+    UnknownMapping {
+        /// The name given.
+        name: String,
+        /// The names that can be mapped, with a suggestion.
+        #[help]
+        help: String,
+    },
+    /// Two `--column` mappings for one name.
+    #[error("expected one `--column {name}=HEADER`, found two: `{first}` and `{second}`")]
+    #[diagnostic(code(gbm::E0219), help("keep one of the two mappings"))]
+    RepeatedMapping {
+        /// The mapped name.
+        name: String,
+        /// The first header.
+        first: String,
+        /// The second header.
+        second: String,
+    },
+    /// The header named by `--column NAME=HEADER` is not in the file.
+    #[error(
+        "expected a column `{header}` (from `--column {name}={header}`) in the header at {at}, \
+         found none"
+    )]
+    #[diagnostic(code(gbm::E0220))]
+    MissingMappedColumn {
+        /// The file's text.
+        #[source_code]
+        src: DataSource,
+        /// The header line.
+        #[label("no `{header}` here")]
+        span: SourceSpan,
+        /// The mapped name.
+        name: String,
+        /// The header asked for.
+        header: String,
+        /// Where.
+        at: Box<Location>,
+        /// The headers present, with a suggestion.
+        #[help]
+        help: String,
+    },
+    /// Two experiments of a data set with the same name.
+    #[error("two experiments named `{name}`: one in {first}, another at {at}")]
+    #[diagnostic(
+        code(gbm::E0221),
+        help(
+            "experiments are named by their file's stem or by their value in the experiment \
+             column: rename a file or a value, or drop one of the two"
+        )
+    )]
+    DuplicateExperiment {
+        /// The second experiment's file.
+        #[source_code]
+        src: DataSource,
+        /// Its first row, or its experiment cell.
+        #[label("`{name}` again")]
+        span: SourceSpan,
+        /// The name.
+        name: String,
+        /// Where the first one is, in words.
+        first: String,
+        /// Where the second one starts.
+        at: Box<Location>,
+    },
+    /// An input without a value at its experiment's first row.
+    #[error(
+        "expected a value of input `{input}` at the first row of experiment `{experiment}`, \
+         found none at {at}"
+    )]
+    #[diagnostic(
+        code(gbm::E0222),
+        help("give the input's value at the experiment's first row (inputs hold their last value until the next one)")
+    )]
+    InputMissingAtStart {
+        /// The file's text.
+        #[source_code]
+        src: DataSource,
+        /// The cell.
+        #[label("no value")]
+        span: SourceSpan,
+        /// The input.
+        input: String,
+        /// The experiment.
+        experiment: String,
+        /// Where.
+        at: Box<Location>,
+    },
+    /// A measured state with no value at all in an experiment.
+    #[error(
+        "expected at least one value of state `{state}` in experiment `{experiment}`, found \
+         none in its {rows} rows from {at}"
+    )]
+    #[diagnostic(code(gbm::E0223))]
+    StateNeverMeasured {
+        /// The file's text.
+        #[source_code]
+        src: DataSource,
+        /// The cell at the experiment's first row.
+        #[label("never measured")]
+        span: SourceSpan,
+        /// The state.
+        state: String,
+        /// The experiment.
+        experiment: String,
+        /// How many rows the experiment has.
+        rows: usize,
+        /// The experiment's first row, in that column.
+        at: Box<Location>,
+        /// What to do.
+        #[help]
+        help: String,
+    },
+    /// Several experiments where a command reads one record.
+    #[error("expected one record, found {count} experiments ({names}); the second starts at {at}")]
+    #[diagnostic(
+        code(gbm::E0224),
+        help("this command reads one record: give it one experiment (its own file)")
+    )]
+    SeveralExperiments {
+        /// The file's text.
+        #[source_code]
+        src: DataSource,
+        /// The second experiment's first row.
+        #[label("another experiment")]
+        span: SourceSpan,
+        /// How many experiments.
+        count: usize,
+        /// Their names, listed.
+        names: String,
+        /// Where the second one starts.
         at: Box<Location>,
     },
 }
 
 impl DataError {
-    /// Where the defect lies, for every variant but [`DataError::Unreadable`].
+    /// Where the defect lies in a file: for every variant but [`DataError::Unreadable`] and
+    /// the `--column` defects ([`DataError::UnknownMapping`], [`DataError::RepeatedMapping`]).
     pub fn location(&self) -> Option<&Location> {
         match self {
-            DataError::Unreadable { .. } => None,
+            DataError::Unreadable { .. }
+            | DataError::UnknownMapping { .. }
+            | DataError::RepeatedMapping { .. } => None,
             DataError::NotText { at, .. }
             | DataError::Empty { at, .. }
             | DataError::NoRows { at, .. }
@@ -342,7 +553,13 @@ impl DataError {
             | DataError::UnsortedTime { at, .. }
             | DataError::RepeatedTime { at, .. }
             | DataError::UnevenStep { at, .. }
-            | DataError::TooFewRows { at, .. } => Some(at),
+            | DataError::TooFewRows { at, .. }
+            | DataError::MixedDelimiters { at, .. }
+            | DataError::MissingMappedColumn { at, .. }
+            | DataError::DuplicateExperiment { at, .. }
+            | DataError::InputMissingAtStart { at, .. }
+            | DataError::StateNeverMeasured { at, .. }
+            | DataError::SeveralExperiments { at, .. } => Some(at),
         }
     }
 }

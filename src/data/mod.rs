@@ -1,49 +1,185 @@
-//! Measured data records: strict CSV reading (spec section 4) and CSV writing.
+//! Measured data: data sets of experiments read from CSV files (records.md), and CSV
+//! writing.
 //!
-//! A record is a CSV file with a header, a time column `t`, and one column per input and
-//! measured state, uniformly sampled. Every defect is a [`DataError`] naming file, row and
-//! column. The rules, in full:
+//! Every command that reads data goes through [`read_set`]: a list of files and a
+//! [`Request`] (the columns the model reads, with their [`Role`]s, the `--column`
+//! mappings, and how many rows an experiment needs) give a [`DataSet`] of [`Experiment`]s,
+//! each with its own time axis and its requested columns as [`Series`] of cells that may be
+//! missing. Every defect is a [`DataError`] with a code, naming file, row and column, with
+//! a label on the cell. The rules, in full:
 //!
-//! - The file is UTF-8 text (a leading byte-order mark is skipped); lines end in `\n` or
-//!   `\r\n`; blank lines at the end are ignored, a blank line anywhere else is an error.
-//! - The first line is the header: comma-separated column names, each non-empty and unique.
-//!   One column is named `t` (time); each name the model needs must be present; other
-//!   columns are ignored (never parsed).
-//! - Every later line is one sample with exactly one cell per header column. Cells are
-//!   trimmed of surrounding spaces and may be wrapped in double quotes; quoted commas are
-//!   not supported. The cells of `t` and of the needed columns are finite decimal numbers
-//!   (`20`, `-0.5`, `1.5e-2`); empty cells, `NaN` and infinities are errors.
-//! - Time strictly increases with a uniform step: every step lies within a relative
-//!   [`STEP_TOLERANCE`] of the median step (plus a few ulps of the largest time). The
-//!   dataset's [`Dataset::step`] is the mean step.
-//! - At least two data rows (to define the step), and at least as many as the model needs.
+//! - **Text.** A file is UTF-8 (a leading byte-order mark is skipped; a file that is not is
+//!   an error at its first bad byte); lines end in `\n` or `\r\n`; blank lines before the
+//!   header and at the end are ignored, a blank line among the data rows is an error.
+//! - **Delimiter.** `,`, `;` or tab, sniffed from the header and the first data rows: the
+//!   one that splits the header into the most fields and each of those rows into as many
+//!   (ties go to tab, then `;`). Fields may be quoted with `"` (a quoted field may hold the
+//!   delimiter; `""` is a quote). A row that does not split into the header's fields is an
+//!   error; one that would with another delimiter is reported as a file mixing delimiters.
+//! - **Header.** The first line that is not blank: every cell named, no name twice. A
+//!   header `X [g/L]` names column `X`, with unit `g/L` (kept for labels); two headers with
+//!   the same name are an error even with different units. Columns nobody asks for are
+//!   never parsed.
+//! - **Time column.** The header named by `--column t=HEADER`; else the column `t` (`t [h]`
+//!   included); else the single column named `time` in any case (`Time [h]`); else an error
+//!   whose help lists the headers.
+//! - **Experiments.** A file is one experiment named by its stem, unless it has an
+//!   experiment column (the header `experiment`, or the one named by `--column
+//!   experiment=HEADER`): then each distinct value of that column is an experiment, in the
+//!   order of its first row; its rows need not be contiguous, and their file order is their
+//!   time order. Files with and without an experiment column may be mixed. Two experiments
+//!   of a set with the same name are an error naming both places.
+//! - **Columns.** A requested column is the header with its name, or the header named by
+//!   `--column NAME=HEADER` (matched as written, or without its unit). A mapping whose NAME
+//!   is not requested (nor `t` or `experiment`), or given twice, is an error. A mapped
+//!   header missing from a file is an error there, unless the column is optional (or is
+//!   the experiment column) and another file of the set has it. An input or a state the
+//!   file lacks is an error; an optional column it lacks is simply absent.
+//! - **Cells.** Cells are trimmed of spaces. A number is a finite decimal (`20`, `-0.5`,
+//!   `1.5e-2`); in a file separated by `;` or tabs a decimal comma is accepted (`1,5` is
+//!   1.5). An empty cell, `NA`, `N/A` or `NaN` (any case) means *not measured* (`None`).
+//!   Infinity (`inf`, `Infinity`, `1e999`) and text are errors; so is a time or an
+//!   experiment name that is not given.
+//! - **Time.** Strictly increasing within an experiment, with any spacing, from any start:
+//!   two rows at the same time are an error naming both rows, time going back is an error.
+//! - **Roles.** An [`Role::Input`] has a value at its experiment's first row (it holds its
+//!   last value until the next: zero-order hold is the consumer's business). A
+//!   [`Role::State`] has at least one value in each experiment. A [`Role::Optional`] column
+//!   may be absent or empty.
+//! - **Length.** Each experiment has at least [`Request::min_rows`] rows; the error says
+//!   how many it has, how many are needed, and why.
 //!
-//! Rows are numbered like lines, the header being row 1; columns from 1.
+//! Rows are numbered like lines, the header being row 1 (in a file with leading blank
+//! lines, the header's own line); columns from 1. [`read`] and [`read_str`] are the
+//! single-record view (one experiment, complete, uniform step) that the commands use until
+//! they move to data sets.
 
+mod cells;
 mod error;
-mod read;
+mod experiment;
+mod file;
+mod header;
+mod legacy;
+mod set;
+mod sniff;
+mod source;
 
 pub use error::{ColumnRef, DataError, DataSource, Location};
-pub use read::STEP_TOLERANCE;
+pub use experiment::{DataSet, Experiment, Origin, Series, STEP_TOLERANCE};
+pub use legacy::{read, read_str};
+pub use set::{read_set, read_set_str};
 
 use crate::io::{write_atomic, IoError};
 use std::path::{Path, PathBuf};
 
-/// One named column of a record.
+/// What a command needs from the data: the columns the model reads, with their roles, the
+/// `--column` mappings, and how many rows an experiment needs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Request {
+    /// The columns, in the order the model wants them.
+    pub columns: Vec<Wanted>,
+    /// `--column NAME=HEADER` mappings, in the order given: NAME is a requested column,
+    /// `t` or `experiment`.
+    pub mapping: Vec<(String, String)>,
+    /// How many rows each experiment needs.
+    pub min_rows: MinRows,
+}
+
+impl Request {
+    /// A request for `columns`, with no mapping and no need beyond one row.
+    pub fn new(columns: Vec<Wanted>) -> Self {
+        Request {
+            columns,
+            mapping: Vec::new(),
+            min_rows: MinRows::new(1, "an experiment has at least one row"),
+        }
+    }
+    /// The same request with `--column` mappings.
+    pub fn with_mapping(mut self, mapping: Vec<(String, String)>) -> Self {
+        self.mapping = mapping;
+        self
+    }
+    /// The same request, needing `min_rows` rows per experiment.
+    pub fn with_min_rows(mut self, min_rows: impl Into<MinRows>) -> Self {
+        self.min_rows = min_rows.into();
+        self
+    }
+}
+
+/// Parses the argument of `--column`, `NAME=HEADER` (split at the first `=`, both sides
+/// trimmed, neither empty); the error says what was expected.
+pub fn parse_mapping(argument: &str) -> Result<(String, String), String> {
+    match argument.split_once('=') {
+        Some((name, header)) if !name.trim().is_empty() && !header.trim().is_empty() => {
+            Ok((name.trim().to_string(), header.trim().to_string()))
+        }
+        _ => Err(format!(
+            "expected NAME=HEADER (e.g. `X=Biomass`), found `{argument}`"
+        )),
+    }
+}
+
+/// A column the model reads, and what it is to the model.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Wanted {
+    /// The model's name for it (a header, or the NAME of a `--column` mapping).
+    pub name: String,
+    /// What it is.
+    pub role: Role,
+}
+
+impl Wanted {
+    /// An input column.
+    pub fn input(name: impl Into<String>) -> Self {
+        Wanted {
+            name: name.into(),
+            role: Role::Input,
+        }
+    }
+    /// A measured-state column.
+    pub fn state(name: impl Into<String>) -> Self {
+        Wanted {
+            name: name.into(),
+            role: Role::State,
+        }
+    }
+    /// An optional column.
+    pub fn optional(name: impl Into<String>) -> Self {
+        Wanted {
+            name: name.into(),
+            role: Role::Optional,
+        }
+    }
+}
+
+/// What a requested column is to the model, which decides what the reader demands of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// An input: a required column with a value at each experiment's first row. It holds
+    /// its last value until the next one (zero-order hold, applied by the consumer).
+    Input,
+    /// A measured state: a required column with at least one value in each experiment.
+    State,
+    /// Read if present (e.g. an observable that may be measured); absent or empty is fine.
+    Optional,
+}
+
+/// One named column of a single record.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Column {
-    /// Header name.
+    /// The requested name.
     pub name: String,
     /// Values, one per row.
     pub values: Vec<f64>,
 }
 
-/// A uniformly sampled record read from a CSV file.
+/// A single uniformly sampled, complete record: what [`read`] gives (the single-record
+/// view, retired once the commands read [`DataSet`]s).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dataset {
     /// Where it was read from (for messages).
     pub path: PathBuf,
-    /// The time column `t`.
+    /// The time column.
     pub times: Vec<f64>,
     /// The sampling step (uniform).
     pub step: f64,
@@ -69,7 +205,8 @@ impl Dataset {
     }
 }
 
-/// How many data rows a model needs, and why (for the message when a file has fewer).
+/// How many data rows a model needs, and why (for the message when an experiment has
+/// fewer).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MinRows {
     /// The least number of data rows (header excluded).
@@ -93,34 +230,6 @@ impl From<usize> for MinRows {
     fn from(rows: usize) -> Self {
         MinRows::new(rows, format!("the model needs {rows}"))
     }
-}
-
-/// Reads the data file at `path`, keeping the time column and the `required` columns (in
-/// that order), and checking every rule of the module documentation. `min_rows` is the
-/// number of data rows the model needs: a bare number, or a [`MinRows`] saying why.
-pub fn read(
-    path: &Path,
-    required: &[&str],
-    min_rows: impl Into<MinRows>,
-) -> Result<Dataset, DataError> {
-    let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|error| DataError::Unreadable {
-        file: file.clone(),
-        reason: crate::io::describe(&error),
-    })?;
-    let mut dataset = read::read_bytes(&file, bytes, required, &min_rows.into())?;
-    dataset.path = path.to_path_buf();
-    Ok(dataset)
-}
-
-/// Reads a data file from `text`, named `name` in messages; otherwise as [`read`].
-pub fn read_str(
-    name: &str,
-    text: &str,
-    required: &[&str],
-    min_rows: impl Into<MinRows>,
-) -> Result<Dataset, DataError> {
-    read::read_text(name, text.to_string(), required, &min_rows.into())
 }
 
 /// Writes a table as CSV, atomically: a header line, then one line per row. Numbers are
@@ -175,3 +284,7 @@ pub fn format_number(value: f64) -> String {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_set;
+#[cfg(test)]
+mod tests_set_errors;

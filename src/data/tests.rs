@@ -128,7 +128,7 @@ fn duplicate_column() {
 
 #[test]
 fn missing_time_column() {
-    check_error("time,u,X\n0,0,0\n", "gbm::E0207", 1, None);
+    check_error("when,u,X\n0,0,0\n", "gbm::E0207", 1, None);
 }
 
 #[test]
@@ -259,11 +259,9 @@ fn missing_column_help_lists_columns_and_suggests_near_misses() {
         .unwrap_or_default();
     assert!(help.contains("did you mean `x`?"), "{help}");
     assert!(help.contains("`t`, `u`, `x`, `Xs`"), "{help}");
-    let error = read_ux("Time,u,X\n0,0,0\n", 0).err();
+    let error = read_ux("T,u,X\n0,0,0\n", 0).err();
     let help = error.as_ref().and_then(|e| e.help()).map(|h| h.to_string());
-    assert!(help
-        .unwrap_or_default()
-        .contains("rename column `Time` to `t`"));
+    assert!(help.unwrap_or_default().contains("`--column t=T`"));
 }
 
 #[test]

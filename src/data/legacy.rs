@@ -1,0 +1,94 @@
+//! The single-record view: one file, one experiment, uniformly sampled and complete, as the
+//! commands read data before data sets. Built on the data-set reader, so both accept the
+//! same files (delimiters, units, `time`, quotes), then checked for what a single record
+//! needs on top.
+
+use super::error::DataError;
+use super::set::{check_length, check_times, experiments, load};
+use super::source::Source;
+use super::{Column, Dataset, MinRows, Request, Wanted};
+use std::path::{Path, PathBuf};
+
+/// Reads the data file at `path`, keeping the time column and the `required` columns (in
+/// that order): one experiment, every requested cell measured, a uniform time step, and
+/// at least `min_rows` rows (at least two, to define the step). `min_rows` is a bare
+/// number, or a [`MinRows`] saying why.
+///
+/// This is the single-record view of [`read_set`](super::read_set), kept while the
+/// commands move to data sets; it will be retired once they have.
+pub fn read(
+    path: &Path,
+    required: &[&str],
+    min_rows: impl Into<MinRows>,
+) -> Result<Dataset, DataError> {
+    record(load(path)?, required, &min_rows.into())
+}
+
+/// Reads a data file from `text`, named `name` in messages; otherwise as [`read`] (and
+/// retired with it).
+pub fn read_str(
+    name: &str,
+    text: &str,
+    required: &[&str],
+    min_rows: impl Into<MinRows>,
+) -> Result<Dataset, DataError> {
+    let source = Source::new(name, PathBuf::from(name), text.to_string());
+    record(source, required, &min_rows.into())
+}
+
+/// Reads `source` as one complete, uniformly sampled record.
+fn record(source: Source, required: &[&str], min_rows: &MinRows) -> Result<Dataset, DataError> {
+    let path = source.path.clone();
+    let request = Request::new(required.iter().map(|name| Wanted::state(*name)).collect());
+    let mut read = experiments(vec![source], &request)?.into_iter();
+    let Some(experiment) = read.next() else {
+        // A file with data rows has an experiment; this is defensive.
+        return Err(DataError::Unreadable {
+            file: path.display().to_string(),
+            reason: "expected an experiment, found none".to_string(),
+        });
+    };
+    if let Some(second) = read.next() {
+        let names: Vec<String> = std::iter::once(&experiment)
+            .chain(std::iter::once(&second))
+            .chain(read.as_slice())
+            .map(|e| format!("`{}`", e.name))
+            .collect();
+        let origin = &second.origin;
+        let column = origin.experiment.clone();
+        return Err(DataError::SeveralExperiments {
+            src: origin.source.clone(),
+            span: origin.span(0, column.as_ref().map(|c| c.index)),
+            count: names.len(),
+            names: names.join(", "),
+            at: origin.at(second.rows[0], column),
+        });
+    }
+    experiment.require_complete()?;
+    check_times(&experiment)?;
+    let step = match experiment.len() {
+        0 | 1 => 0.0,
+        _ => experiment.require_uniform_step()?,
+    };
+    let needed = if min_rows.rows >= 2 {
+        min_rows.clone()
+    } else {
+        MinRows::new(2, "two rows are needed to define the sampling step")
+    };
+    check_length(&experiment, &needed)?;
+    Ok(Dataset {
+        path,
+        times: experiment.times,
+        step,
+        columns: experiment
+            .columns
+            .into_iter()
+            .map(|series| Column {
+                name: series.name,
+                values: (series.values.into_iter())
+                    .map(|value| value.unwrap_or(f64::NAN))
+                    .collect(),
+            })
+            .collect(),
+    })
+}
