@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use super::CommandError;
+use crate::data::{parse_mapping, MinRows};
 use crate::ir::Model;
 use crate::record::Record;
 
@@ -12,7 +13,7 @@ use crate::record::Record;
 pub struct ColumnArgs {
     /// Map a model name to a header: `--column X=Biomass`, `--column t=time_h`,
     /// `--column experiment=batch` (repeatable).
-    #[arg(long = "column", value_name = "NAME=HEADER", value_parser = parse_column)]
+    #[arg(long = "column", value_name = "NAME=HEADER", value_parser = parse_mapping)]
     pub columns: Vec<(String, String)>,
 }
 
@@ -23,24 +24,16 @@ pub fn load_records(
     files: &[PathBuf],
     columns: &ColumnArgs,
 ) -> Result<Vec<Record>, CommandError> {
-    let _ = &columns.columns;
-    files
-        .iter()
-        .map(|path| {
-            let data = super::train::read_data(model, path)?;
-            crate::train::record_of(model, &data).map_err(super::train::train_error)
-        })
-        .collect()
-}
-
-/// `NAME=HEADER`.
-fn parse_column(argument: &str) -> Result<(String, String), String> {
-    match argument.split_once('=') {
-        Some((name, header)) if !name.trim().is_empty() && !header.trim().is_empty() => {
-            Ok((name.trim().to_string(), header.trim().to_string()))
-        }
-        _ => Err(format!("expected NAME=HEADER, found `{argument}`")),
+    if files.is_empty() {
+        return Ok(Vec::new());
     }
+    let request = crate::record::request(
+        model,
+        &columns.columns,
+        MinRows::new(2, "one step needs two rows"),
+    );
+    let data = crate::data::read_set(files, &request).map_err(CommandError::user)?;
+    crate::record::bind(model, &data).map_err(CommandError::user)
 }
 
 /// Splits `records` into the experiments that train and those named in `holdout`; an

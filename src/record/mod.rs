@@ -6,10 +6,12 @@
 //! Training lays each record on its integration grid ([`grid::Track`]); the diagnosis runs
 //! its simulator along the record's own rows. Both read data through this one type.
 
+pub mod bind;
 pub mod grid;
 #[cfg(test)]
 mod tests;
 
+pub use bind::{bind, request, BindError};
 pub use grid::{GridOptions, Track};
 
 /// One column of cells: `None` where nothing was measured at that row.
