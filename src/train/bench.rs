@@ -94,13 +94,13 @@ pub fn bench(
         precision: options.precision,
         seed: options.seed,
         normalisation: layout.normalisation.clone(),
-        scales: analysis::closure_scales(model, &layout.tracks, &layout.pairs, &hidden_init)?,
+        scales: analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?,
     };
     let network = Network::build(model, &setup)?;
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let weights = vec![1.0; model.states.len()];
     let mut course = Course::new(model, layout.tracks, (&layout.pairs, &weights), &fractions);
-    refresh(&network, model, &mut course, &fractions, &hidden_init)?;
+    refresh(&network, model, &mut course, (&fractions, false), &hidden_init)?;
     let table = course.table;
     let mut step = Step::new(options.engine, network, model, &setup)?;
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);

@@ -66,16 +66,13 @@ impl Fit<'_> {
         let mut losses = Vec::with_capacity(options.epochs);
         let mut engines = Engines::new(network, options.engine, self.model, self.setup)?;
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
-        let mut rollout_epochs = 0;
         for epoch in 1..=options.epochs {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
-            let fill_due = needs_fill && horizon > 1 && rollout_epochs % FILL_REFRESH == 0;
+            let fill_due = needs_fill && (epoch - 1) % FILL_REFRESH == 0;
             if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
                 let current = engines.current_weights()?;
-                refresh(current, self.model, training, &fractions, self.hidden_init)?;
-            }
-            if horizon > 1 {
-                rollout_epochs += 1;
+                let how = (fractions.as_slice(), fill_due);
+                refresh(current, self.model, training, how, self.hidden_init)?;
             }
             let loss = self
                 .epoch(&mut engines, training, (horizon, &fractions), &mut rng)

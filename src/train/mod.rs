@@ -17,8 +17,8 @@
 //!   knot and are integrated along it with the measured states reset to the data wherever
 //!   the data know them; where they do not (long gaps, before the first cell) the run goes
 //!   free and its values fill the reference. Both are refreshed with the current network
-//!   (hidden states every epoch, the fill every [`FILL_REFRESH`] rollout epochs); no
-//!   gradient flows through them.
+//!   (hidden states every epoch, the fill every [`FILL_REFRESH`] epochs); no gradient flows
+//!   through them.
 //! - **Online error**: a free run per validation experiment ([`split`] says from where),
 //!   driven by the data's inputs, over `--online-horizon` (default: to the end).
 
@@ -62,7 +62,7 @@ pub use recipe::{Engine, Objective, ParamSource, Recipe};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
 use validation::{refresh, validate, Course};
 
-/// Rollout epochs between refreshes of the model's fill of unknown stretches.
+/// Epochs between refreshes of the model's fill of unknown stretches.
 pub const FILL_REFRESH: usize = 10;
 
 /// Options of a training run.
@@ -239,11 +239,12 @@ pub fn train_with(
     let layout = Layout::new(model, &data, options)?;
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
-    let scales = analysis::closure_scales(model, &layout.tracks, &layout.pairs, &hidden_init)?;
+    let scales =
+        analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
     let warnings = analysis::stiffness(
         model,
         &scales,
-        (&layout.tracks, &layout.pairs),
+        (&layout.tracks, &layout.intervals),
         &hidden_init,
         options.substeps,
     )?;
@@ -251,7 +252,7 @@ pub fn train_with(
         on_event(Event::Warning(warning));
     }
     let balance_fit = if recipe.params_from_balances() {
-        balances::estimate(model, &scales, &layout.tracks, &layout.pairs)?
+        balances::estimate(model, &scales, &layout.tracks, &layout.intervals)?
     } else {
         None
     };
@@ -284,7 +285,7 @@ pub fn train_with(
         (&layout.pairs, &weights),
         &fractions,
     );
-    refresh(&network, model, &mut training, &fractions, &hidden_init)?;
+    refresh(&network, model, &mut training, (&fractions, false), &hidden_init)?;
     let mut validating = Course::new(
         model,
         layout.validation_tracks.clone(),
@@ -321,7 +322,7 @@ pub fn train_with(
         trainings: &layout.trainings,
     };
     let losses = fit.run(&mut network, &mut training, on_event)?;
-    refresh(&network, model, &mut training, &fractions, &hidden_init)?;
+    refresh(&network, model, &mut training, (&fractions, true), &hidden_init)?;
     let (polish, estimates) = match &balance_fit {
         Some(fit) => (None, fit.estimates.clone()),
         None => polish::polish_and_estimate(

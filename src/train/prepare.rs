@@ -8,7 +8,7 @@ use crate::record::{GridOptions, Normalisation, Part as Rows, Record, Track};
 use super::initial::{initial_state, InitialState};
 use super::pairs::{stage_fractions, PairAt};
 use super::split::{
-    split_training, training_pairs, whole_experiments, Scoring, Training, TrainingData,
+    known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training, TrainingData,
 };
 use super::{TrainError, TrainOptions};
 
@@ -24,6 +24,9 @@ pub struct Layout {
     pub trainings: Vec<Training>,
     /// The one-step pairs that train.
     pub pairs: Vec<PairAt>,
+    /// The steps of the training part known from data at both ends (magnitudes,
+    /// stiffness, params from the balances).
+    pub intervals: Vec<PairAt>,
     /// The validation tracks: the training tracks again when part of them validates, then
     /// the whole validation experiments.
     pub validation_tracks: Vec<Track>,
@@ -64,7 +67,8 @@ impl Layout {
             (data.part, !data.validation.is_empty(), options.history),
             &fractions,
         )?;
-        let pairs = training_pairs(model, &tracks, &trainings, &fractions);
+        let pairs = training_pairs(model, &tracks, &trainings);
+        let intervals = known_intervals(model, &tracks, &trainings);
         let mut validation_tracks = if scorings.is_empty() {
             Vec::new()
         } else {
@@ -92,6 +96,7 @@ impl Layout {
             tracks,
             trainings,
             pairs,
+            intervals,
             validation_tracks,
             scorings,
             normalisation,

@@ -275,18 +275,31 @@ pub fn whole_experiments(
         .collect()
 }
 
-/// The pairs of `tracks` that train: eligible pairs inside each training range, in track
-/// order.
-pub fn training_pairs(
-    model: &ir::Model,
-    tracks: &[Track],
-    trainings: &[Training],
-    fractions: &[f64],
-) -> Vec<PairAt> {
+/// The pairs of `tracks` that train: inside each training range, every step whose start
+/// states are known from data and whose end has a measured cell. Their embeddings read the
+/// reference, the model's fill included where the data are too sparse (records spec,
+/// section 3); on a complete record these are exactly the pairs of measured history.
+pub fn training_pairs(model: &ir::Model, tracks: &[Track], trainings: &[Training]) -> Vec<PairAt> {
+    let measured = model.states.len();
     let mut pairs = Vec::new();
     for (index, (track, training)) in tracks.iter().zip(trainings).enumerate() {
-        let knots = eligible_pairs(model, track, training.knots.clone(), fractions);
-        pairs.extend(knots.into_iter().map(|k| (index, k)));
+        let knots = (training.knots.clone())
+            .filter(|&k| has_target(track, k) && (0..measured).all(|i| track.known[i][k]));
+        pairs.extend(knots.map(|k| (index, k)));
     }
     pairs
+}
+
+/// The steps inside each training range whose two ends are known from data for every
+/// measured state: the intervals the balances see.
+pub fn known_intervals(model: &ir::Model, tracks: &[Track], trainings: &[Training]) -> Vec<PairAt> {
+    let measured = model.states.len();
+    let mut intervals = Vec::new();
+    for (index, (track, training)) in tracks.iter().zip(trainings).enumerate() {
+        let knots = (training.knots.clone()).filter(|&k| {
+            k + 1 < track.len() && (0..measured).all(|i| track.known[i][k] && track.known[i][k + 1])
+        });
+        intervals.extend(knots.map(|k| (index, k)));
+    }
+    intervals
 }

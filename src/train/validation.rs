@@ -46,24 +46,27 @@ impl Course {
     }
 }
 
-/// Re-runs the hidden states and the fill of unknown stretches along every track of
-/// `course` with the current network (nothing to do for a model without hidden states on
-/// fully known tracks).
+/// Re-runs the hidden states and (with `fill`) the model's fill of unknown stretches
+/// along every track of `course` with the current network (nothing to do for a model
+/// without hidden states on fully known tracks). Before the first fill the unknown
+/// stretches hold the data's provisional interpolant.
 pub(super) fn refresh(
     network: &Network,
     model: &ir::Model,
     course: &mut Course,
-    fractions: &[f64],
+    (fractions, fill): (&[f64], bool),
     hidden_init: &[f64],
 ) -> Result<(), TrainError> {
     let mut changed = false;
     for (track, hidden) in course.tracks.iter_mut().zip(&mut course.hidden) {
-        if model.hidden.is_empty() && track.fully_known() {
+        if model.hidden.is_empty() && (track.fully_known() || !fill) {
             continue;
         }
         let run = run_in(network, model, track, fractions, hidden_init)?;
-        for (state, values) in run.states.iter().enumerate() {
-            track.fill(state, values);
+        if fill {
+            for (state, values) in run.states.iter().enumerate() {
+                track.fill(state, values);
+            }
         }
         if !model.hidden.is_empty() {
             *hidden = run.hidden;
@@ -86,7 +89,7 @@ pub(super) fn validate(
     hidden_init: &[f64],
 ) -> Result<(Option<ErrorSet>, Option<ErrorSet>, Vec<ValidationErrors>), TrainError> {
     let fractions = stage_fractions(model.dynamics, setup.substeps);
-    refresh(network, model, course, &fractions, hidden_init)?;
+    refresh(network, model, course, (&fractions, true), hidden_init)?;
     let norm = &setup.normalisation;
     let measured = model.states.len();
     let (mut offline_all, mut online_all) = (ErrorSum::new(measured), ErrorSum::new(measured));
