@@ -27,3 +27,4 @@ pub mod sim;
 pub mod suggest;
 pub mod syntax;
 pub mod train;
+pub mod units;
