@@ -186,7 +186,8 @@ impl Checker<'_> {
     }
 
     fn unknown_unit(&mut self, symbol: &str, span: Span) {
-        let help = match super::closest(symbol, SYMBOL_NAMES) {
+        let alias = ALIASES.iter().find(|(word, _)| word.eq_ignore_ascii_case(symbol));
+        let help = match alias.map(|(_, unit)| *unit).or(super::closest(symbol, SYMBOL_NAMES)) {
             Some(best) => format!("did you mean `{best}`?"),
             None => format!(
                 "units are products of {} with SI prefixes (`mg`, `mmol`, `mL`, `ms`), or `-`",
@@ -263,16 +264,27 @@ impl Checker<'_> {
             return;
         };
         let origin = match &site.target {
-            Target::Name(key) | Target::Rate(key) => {
-                self.table.names.get(key).map(|entry| entry.origin)
-            }
-            Target::Dimensionless | Target::Time => None,
+            Target::Name(key) => self.table.names.get(key).map(|entry| entry.origin),
+            Target::Rate(_) | Target::Dimensionless | Target::Time => None,
         };
         if matches!(site.target, Target::Dimensionless) {
             self.dimensionless(&site.context, site.expr.span, &found);
             return;
         }
+        let before = self.errors.len();
         self.mismatch(&site.context, &expected, origin, &found, site.expr.span);
+        if let (Target::Rate(key), Some(time)) = (&site.target, &self.table.time) {
+            let note = match self.table.names.get(key) {
+                Some(state) => format!(
+                    "a balance has the unit of its state ({}: {}) per time unit ({time}); ",
+                    key.1, state.text
+                ),
+                None => String::new(),
+            };
+            if let Some(error) = self.errors.get_mut(before) {
+                prepend_help(error, &note);
+            }
+        }
     }
 
     /// Reports `found` at `span` where `expected` was needed, if they differ.
@@ -336,6 +348,33 @@ impl Checker<'_> {
                  a pure number"
             ),
         });
+    }
+}
+
+/// Words people write for units, and the symbol gbc reads.
+const ALIASES: [(&str, &str); 16] = [
+    ("gram", "g"),
+    ("grams", "g"),
+    ("hr", "h"),
+    ("hrs", "h"),
+    ("hour", "h"),
+    ("hours", "h"),
+    ("l", "L"),
+    ("liter", "L"),
+    ("litre", "L"),
+    ("sec", "s"),
+    ("second", "s"),
+    ("minute", "min"),
+    ("mole", "mol"),
+    ("day", "d"),
+    ("kelvin", "K"),
+    ("M", "mol/L"),
+];
+
+/// Puts `note` in front of the help line of a unit mismatch.
+fn prepend_help(error: &mut CheckError, note: &str) {
+    if let CheckError::UnitMismatch { help, .. } | CheckError::UnitScale { help, .. } = error {
+        help.insert_str(0, note);
     }
 }
 

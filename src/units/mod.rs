@@ -262,7 +262,7 @@ pub fn format_factor(factor: f64) -> String {
     if (factor - factor.round()).abs() <= 1e-9 * factor.abs() && factor.abs() < 1e15 {
         format!("{}", factor.round() as i64)
     } else {
-        let text = format!("{factor:.6e}");
+        let text = format!("{factor:.5e}");
         match text.split_once('e') {
             Some((mantissa, exponent)) => {
                 let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
