@@ -441,7 +441,11 @@ impl fmt::Display for UnitExpr {
             }
             UnitExpr::Mul(lhs, rhs) | UnitExpr::Div(lhs, rhs) => {
                 write_unit_operand(f, &lhs.node, false)?;
-                let separator = if matches!(self, UnitExpr::Mul(..)) { " " } else { "/" };
+                let separator = if matches!(self, UnitExpr::Mul(..)) {
+                    " "
+                } else {
+                    "/"
+                };
                 write!(f, "{separator}")?;
                 let grouped = matches!(rhs.node, UnitExpr::Mul(..) | UnitExpr::Div(..));
                 write_unit_operand(f, &rhs.node, grouped)

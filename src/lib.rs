@@ -18,6 +18,7 @@ pub mod diagnostics;
 pub mod driver;
 pub mod eval;
 pub mod experiment;
+pub mod format;
 pub mod fused;
 pub mod io;
 pub mod ir;

@@ -48,7 +48,8 @@ pub struct UnitTable {
 impl UnitTable {
     /// The entry of `name` as seen from `scope`.
     pub fn get(&self, symbols: &Symbols, scope: Scope, name: &str) -> Option<&UnitEntry> {
-        self.names.get(&(owner(symbols, scope, name), name.to_string()))
+        self.names
+            .get(&(owner(symbols, scope, name), name.to_string()))
     }
 }
 
@@ -186,8 +187,13 @@ impl Checker<'_> {
     }
 
     fn unknown_unit(&mut self, symbol: &str, span: Span) {
-        let alias = ALIASES.iter().find(|(word, _)| word.eq_ignore_ascii_case(symbol));
-        let help = match alias.map(|(_, unit)| *unit).or(super::closest(symbol, SYMBOL_NAMES)) {
+        let alias = ALIASES
+            .iter()
+            .find(|(word, _)| word.eq_ignore_ascii_case(symbol));
+        let help = match alias
+            .map(|(_, unit)| *unit)
+            .or(super::closest(symbol, SYMBOL_NAMES))
+        {
             Some(best) => format!("did you mean `{best}`?"),
             None => format!(
                 "units are products of {} with SI prefixes (`mg`, `mmol`, `mL`, `ms`), or `-`",
@@ -213,7 +219,11 @@ impl Checker<'_> {
     fn infer(&mut self, key: Key, unit: Unit, origin: Span) {
         let declared = match key.0 {
             Scope::Model => self.symbols.model.contains_key(&key.1),
-            Scope::Effect(i) => self.symbols.effects.get(i).is_some_and(|e| e.contains_key(&key.1)),
+            Scope::Effect(i) => self
+                .symbols
+                .effects
+                .get(i)
+                .is_some_and(|e| e.contains_key(&key.1)),
         };
         if !declared || self.table.names.contains_key(&key) {
             return;

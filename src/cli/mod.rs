@@ -10,6 +10,7 @@ mod compile;
 mod demo;
 mod diagnose;
 mod experiment;
+mod fmt;
 mod predict;
 mod simulate;
 mod train;
@@ -77,6 +78,8 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// Time training steps, epochs and simulation of the shipped models on this machine.
     Bench(bench::BenchArgs),
+    /// Rewrite model files in the canonical layout (`--check`: only report).
+    Fmt(fmt::FmtArgs),
 }
 
 /// Runs one parsed command line.
@@ -91,6 +94,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Experiment(args) => experiment::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Fmt(args) => fmt::run(args),
     }
 }
 

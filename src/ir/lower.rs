@@ -531,7 +531,11 @@ impl<'a> Lowerer<'a> {
                 Scope::Effect(index) if !applied.contains(scope) => {
                     if let Some(effect) = self.effects.get(*index) {
                         let effect = effect.name.node.clone();
-                        units.effects.entry(effect).or_default().insert(name.clone(), unit);
+                        units
+                            .effects
+                            .entry(effect)
+                            .or_default()
+                            .insert(name.clone(), unit);
                     }
                 }
                 _ => {
@@ -580,7 +584,12 @@ fn effect_lines(kind: &ItemKind) -> Vec<String> {
         list.iter()
             .map(|b| match &b.value {
                 Some(value) => {
-                    format!("{keyword} {}{} = {}", b.name.node, unit(&b.unit), value.node)
+                    format!(
+                        "{keyword} {}{} = {}",
+                        b.name.node,
+                        unit(&b.unit),
+                        value.node
+                    )
                 }
                 None => format!("{keyword} {}{}", b.name.node, unit(&b.unit)),
             })

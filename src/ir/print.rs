@@ -121,7 +121,12 @@ fn write_model(out: &mut String, model: &Model) -> std::fmt::Result {
 fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
     writeln!(out, "\ninputs ({})", model.inputs.len())?;
     for (i, input) in model.inputs.iter().enumerate() {
-        write!(out, "  u{i} {}{}", input.name, unit_text(model.unit(&input.name)))?;
+        write!(
+            out,
+            "  u{i} {}{}",
+            input.name,
+            unit_text(model.unit(&input.name))
+        )?;
         if let Some((lo, hi)) = input.bounds {
             write!(out, " in [{}, {}]", format_number(lo), format_number(hi))?;
         }
@@ -133,7 +138,12 @@ fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
     ] {
         writeln!(out, "\n{title} ({})", states.len())?;
         for (i, state) in states.iter().enumerate() {
-            write!(out, "  {prefix}{i} {}{}", state.name, unit_text(model.unit(&state.name)))?;
+            write!(
+                out,
+                "  {prefix}{i} {}{}",
+                state.name,
+                unit_text(model.unit(&state.name))
+            )?;
             if let Some(init) = &state.init {
                 write!(out, " = {}", expr_text(model, init))?;
             }

@@ -17,9 +17,33 @@ static PRATT: LazyLock<PrattParser<Rule>> = LazyLock::new(|| {
         .op(Op::infix(Rule::pow, Assoc::Right))
 });
 
-fn span_of(pair: &Pair<Rule>) -> Span {
-    let s = pair.as_span();
-    Span::new(s.start(), s.end())
+/// The span of a pair without the spaces and comments pest's implicit whitespace leaves at
+/// its end (after a trailing optional part that is absent, `X = 1 # note` would otherwise
+/// end at the end of the comment).
+pub(super) fn span_of(pair: &Pair<Rule>) -> Span {
+    let start = pair.as_span().start();
+    Span::new(start, start + significant_len(pair.as_str()))
+}
+
+/// The length of `text` without trailing blanks, comments and `\` line continuations.
+fn significant_len(text: &str) -> usize {
+    let mut end = text.len();
+    loop {
+        let trimmed = text[..end].trim_end_matches([' ', '\t', '\u{feff}']);
+        let line_start = trimmed.rfind('\n').map_or(0, |i| i + 1);
+        let next = if let Some(at) = super::comment_start(&trimmed[line_start..]) {
+            line_start + at
+        } else if let Some(rest) = trimmed.strip_suffix('\n') {
+            let rest = rest.strip_suffix('\r').unwrap_or(rest);
+            rest.strip_suffix('\\').map_or(trimmed.len(), str::len)
+        } else {
+            trimmed.len()
+        };
+        if next == end {
+            return end;
+        }
+        end = next;
+    }
 }
 
 fn ident(pair: Pair<Rule>) -> Ident {
@@ -76,9 +100,13 @@ fn string_text(pair: &Pair<Rule>) -> String {
         .unwrap_or_default()
 }
 
-/// The `##` lines directly above byte offset `start`, joined, without the markers.
+/// The `##` lines directly above byte offset `start`, joined, without the markers, when
+/// the declaration at `start` is the first thing on its line.
 fn doc_above(source: &str, start: usize) -> Option<String> {
     let line_start = source[..start].rfind('\n').map_or(0, |i| i + 1);
+    if !source[line_start..start].trim().is_empty() {
+        return None;
+    }
     let mut lines = Vec::new();
     let mut end = line_start;
     while end > 0 {
@@ -160,8 +188,7 @@ fn entry_parts<'a>(pair: &Pair<'a, Rule>) -> Result<EntryParts<'a>> {
                         span: unit.span.into(),
                         what: "a second unit".to_string(),
                         place: format!("on `{}`", parts.name.node),
-                        help: "write the unit once, after the name or after the value"
-                            .to_string(),
+                        help: "write the unit once, after the name or after the value".to_string(),
                     });
                 }
                 parts.unit = Some(unit);
@@ -213,7 +240,11 @@ fn constraint(pair: Pair<Rule>) -> Result<Constraint> {
 
 fn param_entry(pair: Pair<Rule>) -> Result<ParamDecl> {
     let parts = entry_parts(&pair)?;
-    let init = parts.exprs.into_iter().next().ok_or_else(|| unexpected_shape(&pair))?;
+    let init = parts
+        .exprs
+        .into_iter()
+        .next()
+        .ok_or_else(|| unexpected_shape(&pair))?;
     let constraint = parts.rest.into_iter().next().map(constraint).transpose()?;
     Ok(ParamDecl {
         name: parts.name,
@@ -226,7 +257,11 @@ fn param_entry(pair: Pair<Rule>) -> Result<ParamDecl> {
 /// `NAME [op] expr` where the operator (if any) is skipped.
 fn equation(pair: &Pair<Rule>) -> Result<Equation> {
     let parts = entry_parts(pair)?;
-    let rhs = parts.exprs.into_iter().next().ok_or_else(|| unexpected_shape(pair))?;
+    let rhs = parts
+        .exprs
+        .into_iter()
+        .next()
+        .ok_or_else(|| unexpected_shape(pair))?;
     Ok(Equation {
         name: parts.name,
         unit: parts.unit,

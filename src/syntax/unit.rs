@@ -1,7 +1,7 @@
 //! Unit annotations (`[g/L]`, `[g L^-1]`, `[-]`) from the `unit` rule into [`UnitExpr`] trees.
 
 use super::{Rule, SyntaxError};
-use crate::ast::{SUnit, Span, Spanned, UnitExpr};
+use crate::ast::{SUnit, Spanned, UnitExpr};
 use pest::iterators::Pair;
 
 type Result<T> = std::result::Result<T, SyntaxError>;
@@ -9,10 +9,7 @@ type Result<T> = std::result::Result<T, SyntaxError>;
 /// The largest exponent magnitude a unit may carry.
 const MAX_EXPONENT: i32 = 99;
 
-fn span_of(pair: &Pair<Rule>) -> Span {
-    let s = pair.as_span();
-    Span::new(s.start(), s.end())
-}
+use super::build::span_of;
 
 fn shape_error(pair: &Pair<Rule>) -> SyntaxError {
     SyntaxError::internal(pair.as_span().start(), "unexpected unit parse tree shape")
@@ -62,7 +59,9 @@ fn factor(pair: &Pair<Rule>) -> Result<SUnit> {
     let atom = children.next().ok_or_else(|| shape_error(pair))?;
     let base = match atom.as_rule() {
         Rule::unit_one => Spanned::new(UnitExpr::One, span_of(&atom)),
-        Rule::unit_symbol => Spanned::new(UnitExpr::Symbol(atom.as_str().to_string()), span_of(&atom)),
+        Rule::unit_symbol => {
+            Spanned::new(UnitExpr::Symbol(atom.as_str().to_string()), span_of(&atom))
+        }
         Rule::unit_group => {
             let inner = atom
                 .clone()

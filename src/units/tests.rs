@@ -48,7 +48,11 @@ fn scale_mismatches_carry_the_factor() {
 #[test]
 fn different_dimensions_are_incompatible() {
     for (a, b) in [("g/L", "mol/L"), ("1/h", "-"), ("g", "g/L"), ("K", "s")] {
-        assert_eq!(unit(a).compare(&unit(b)), Comparison::Incompatible, "{a} vs {b}");
+        assert_eq!(
+            unit(a).compare(&unit(b)),
+            Comparison::Incompatible,
+            "{a} vs {b}"
+        );
     }
 }
 
@@ -83,7 +87,10 @@ fn products_powers_and_roots() {
     assert!(hill.div(&unit("g/L").powf(2.7).expect("same")).is_one());
     assert_eq!(unit("g").powf(1.0 / 7.0), None);
     assert!(unit("h/min").is_dimensionless());
-    assert_eq!(unit("h/min").compare(&Unit::dimensionless()), Comparison::Scale(60.0));
+    assert_eq!(
+        unit("h/min").compare(&Unit::dimensionless()),
+        Comparison::Scale(60.0)
+    );
 }
 
 #[test]
@@ -118,7 +125,10 @@ fn factors_and_conversions_in_words() {
 #[test]
 fn dimensions_in_words() {
     assert_eq!(unit("g/L").dimension_words(), "mass per volume");
-    assert_eq!(unit("mol/L/s").dimension_words(), "amount per volume per time");
+    assert_eq!(
+        unit("mol/L/s").dimension_words(),
+        "amount per volume per time"
+    );
     assert_eq!(unit("1/h").dimension_words(), "1 per time");
     assert_eq!(unit("m^2").dimension_words(), "length^2");
     assert_eq!(unit("-").dimension_words(), "dimensionless");
@@ -133,6 +143,9 @@ fn unknown_symbols_are_reported_with_their_spans() {
     };
     let unit = consts[0].unit.as_ref().expect("a unit");
     let unknown = resolve(unit).expect_err("unknown symbols");
-    let texts: Vec<&str> = unknown.iter().map(|(span, _)| &source[span.start..span.end]).collect();
+    let texts: Vec<&str> = unknown
+        .iter()
+        .map(|(span, _)| &source[span.start..span.end])
+        .collect();
     assert_eq!(texts, ["gram", "Lx"]);
 }

@@ -60,12 +60,18 @@ fn ir_cases() -> Vec<(PathBuf, PathBuf)> {
             if path.is_dir() {
                 stack.push(path);
             } else if path.extension().is_some_and(|e| e == "gbm") && dir != models {
-                let relative = path.strip_prefix(&models).unwrap_or(&path).with_extension("");
+                let relative = path
+                    .strip_prefix(&models)
+                    .unwrap_or(&path)
+                    .with_extension("");
                 let parts: Vec<String> = relative
                     .components()
                     .map(|c| c.as_os_str().to_string_lossy().to_string())
                     .collect();
-                cases.push((path.clone(), golden.join(format!("{}.ir", parts.join("__")))));
+                cases.push((
+                    path.clone(),
+                    golden.join(format!("{}.ir", parts.join("__"))),
+                ));
             }
         }
     }

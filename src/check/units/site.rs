@@ -56,7 +56,10 @@ struct Collector<'a, 'b> {
 
 impl<'a> Collector<'a, '_> {
     fn key(&self, name: &str) -> Key {
-        (super::owner(self.symbols, self.scope, name), name.to_string())
+        (
+            super::owner(self.symbols, self.scope, name),
+            name.to_string(),
+        )
     }
 
     fn push(&mut self, expr: &'a SExpr, target: Target, context: String) {
@@ -82,7 +85,11 @@ impl<'a> Collector<'a, '_> {
 }
 
 fn item_sites<'a>(item: &'a ast::Item, scope: Scope, symbols: &Symbols, out: &mut Vec<Site<'a>>) {
-    let mut c = Collector { scope, symbols, out };
+    let mut c = Collector {
+        scope,
+        symbols,
+        out,
+    };
     match &item.kind {
         ItemKind::Input(inputs) => {
             for input in inputs {

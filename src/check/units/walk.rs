@@ -49,7 +49,8 @@ impl Checker<'_> {
                 Some(Func::Abs) => args.iter().for_each(|a| self.push(a, scope, expected)),
                 Some(Func::Sqrt) => {
                     let squared = expected.map(|e| e.powi(2));
-                    args.iter().for_each(|a| self.push(a, scope, squared.as_ref()));
+                    args.iter()
+                        .for_each(|a| self.push(a, scope, squared.as_ref()));
                 }
                 Some(Func::Pow) => {
                     if let [base, exponent] = args.as_slice() {
@@ -75,7 +76,13 @@ impl Checker<'_> {
         }
     }
 
-    fn push_power(&mut self, base: &SExpr, exponent: &SExpr, scope: Scope, expected: Option<&Unit>) {
+    fn push_power(
+        &mut self,
+        base: &SExpr,
+        exponent: &SExpr,
+        scope: Scope,
+        expected: Option<&Unit>,
+    ) {
         self.push(exponent, scope, Some(&Unit::dimensionless()));
         let root = match (expected, self.exponent(exponent, scope)) {
             (Some(unit), Some(n)) if n != 0.0 => unit.powf(1.0 / n),
@@ -120,7 +127,13 @@ impl Checker<'_> {
         }
     }
 
-    fn eval_call(&mut self, name: &str, args: &[SExpr], scope: Scope, report: bool) -> Option<Unit> {
+    fn eval_call(
+        &mut self,
+        name: &str,
+        args: &[SExpr],
+        scope: Scope,
+        report: bool,
+    ) -> Option<Unit> {
         match Func::from_name(name)? {
             Func::Min | Func::Max => {
                 let operands: Vec<&SExpr> = args.iter().collect();
@@ -153,8 +166,14 @@ impl Checker<'_> {
         scope: Scope,
         report: bool,
     ) -> Option<Unit> {
-        let units: Vec<Option<Unit>> = operands.iter().map(|o| self.eval(o, scope, report)).collect();
-        let (first_index, first) = units.iter().enumerate().find_map(|(i, u)| Some((i, u.clone()?)))?;
+        let units: Vec<Option<Unit>> = operands
+            .iter()
+            .map(|o| self.eval(o, scope, report))
+            .collect();
+        let (first_index, first) = units
+            .iter()
+            .enumerate()
+            .find_map(|(i, u)| Some((i, u.clone()?)))?;
         for (operand, unit) in operands.iter().zip(&units).skip(first_index + 1) {
             let Some(unit) = unit else { continue };
             if !unit.same(&first) {
@@ -168,7 +187,13 @@ impl Checker<'_> {
         Some(first)
     }
 
-    fn eval_power(&mut self, base: &SExpr, exponent: &SExpr, scope: Scope, report: bool) -> Option<Unit> {
+    fn eval_power(
+        &mut self,
+        base: &SExpr,
+        exponent: &SExpr,
+        scope: Scope,
+        report: bool,
+    ) -> Option<Unit> {
         let exponent_unit = self.eval(exponent, scope, report);
         if let (Some(unit), true) = (exponent_unit, report) {
             self.dimensionless("an exponent", exponent.span, &unit);
