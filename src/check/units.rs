@@ -398,6 +398,8 @@ fn shown(unit: &Unit) -> String {
 }
 
 mod site;
+#[cfg(test)]
+mod tests;
 mod walk;
 
 use site::{sites, Site, Target};
