@@ -7,10 +7,13 @@
 mod bench;
 mod check;
 mod compile;
+mod completions;
 mod demo;
 mod diagnose;
 mod experiment;
+mod explain;
 mod fmt;
+mod init;
 mod predict;
 mod simulate;
 mod train;
@@ -80,6 +83,12 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// Rewrite model files in the canonical layout (`--check`: only report).
     Fmt(fmt::FmtArgs),
+    /// Start a new model from a template, with a README of the commands to run.
+    Init(init::InitArgs),
+    /// Print the catalogue entry of a diagnostic code (e.g. `gbc explain E0152`).
+    Explain(explain::ExplainArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(completions::CompletionsArgs),
 }
 
 /// Runs one parsed command line.
@@ -95,6 +104,9 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Demo(args) => demo::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Fmt(args) => fmt::run(args),
+        Command::Init(args) => init::run(args),
+        Command::Explain(args) => explain::run(args),
+        Command::Completions(args) => completions::run(args),
     }
 }
 

@@ -1,5 +1,6 @@
 //! Integration tests: one binary, a module per feature.
 
+mod authoring;
 mod cli;
 mod format;
 mod golden;

@@ -12,7 +12,10 @@ fn errors(source: &str) -> Vec<CheckError> {
 
 fn unit_text(source: &str, name: &str) -> (String, bool) {
     let compiled = crate::driver::compile("t.gbm", source, &[]).expect("compiles");
-    let unit = compiled.model.unit(name).unwrap_or_else(|| panic!("{name} has a unit"));
+    let unit = compiled
+        .model
+        .unit(name)
+        .unwrap_or_else(|| panic!("{name} has a unit"));
     (unit.text.clone(), unit.inferred)
 }
 
@@ -62,14 +65,18 @@ fn roots_and_powers_keep_units() {
               param h = 2 [-] positive\nlet hill [-] = S^n / (a^n + S^n)\n\
               let other = S^h / (a^h + S^h)\n\
               der S = (sqrt(S^2 + a^2) - S) * hill * other / (1 [s])\n";
-    assert!(crate::syntax::parse(ok).is_err(), "a unit is not an expression");
+    assert!(
+        crate::syntax::parse(ok).is_err(),
+        "a unit is not an expression"
+    );
     let ok = ok.replace(" / (1 [s])", "");
     let found = errors(&ok);
     assert!(
         matches!(&found[..], [CheckError::UnitMismatch { context, .. }] if context == "balance of `S`"),
         "{found:#?}"
     );
-    let ok = ok.replace("const a = 1 [mol/L]", "const a = 1 [mol/L], tau = 1 [s]")
+    let ok = ok
+        .replace("const a = 1 [mol/L]", "const a = 1 [mol/L], tau = 1 [s]")
         .replace("* other\n", "* other / tau\n");
     checked(&ok);
 }
@@ -78,7 +85,10 @@ fn roots_and_powers_keep_units() {
 fn next_updates_keep_the_unit_of_their_state() {
     let source = "model m\nstate X [g/L] = 1\nconst dX = 0.1 [mg/L]\nnext X = X + dX\n";
     let found = errors(source);
-    assert!(matches!(&found[..], [CheckError::UnitScale { .. }]), "{found:#?}");
+    assert!(
+        matches!(&found[..], [CheckError::UnitScale { .. }]),
+        "{found:#?}"
+    );
     let fixed = source.replace("[mg/L]", "[g/L]");
     checked(&fixed);
 }
