@@ -21,6 +21,7 @@ pub mod experiment;
 pub mod explain;
 pub mod format;
 pub mod fused;
+pub mod ide;
 pub mod init;
 pub mod io;
 pub mod ir;

@@ -14,6 +14,7 @@ mod experiment;
 mod explain;
 mod fmt;
 mod init;
+mod lsp;
 mod predict;
 mod simulate;
 mod train;
@@ -89,6 +90,8 @@ pub enum Command {
     Explain(explain::ExplainArgs),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
     Completions(completions::CompletionsArgs),
+    /// Run the language server on stdin/stdout (diagnostics, definition, hover, format).
+    Lsp(lsp::LspArgs),
 }
 
 /// Runs one parsed command line.
@@ -107,6 +110,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Init(args) => init::run(args),
         Command::Explain(args) => explain::run(args),
         Command::Completions(args) => completions::run(args),
+        Command::Lsp(args) => lsp::run(args),
     }
 }
 

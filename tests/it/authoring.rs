@@ -212,6 +212,7 @@ fn completions_cover_every_subcommand() {
         ] {
             assert!(script.contains(command), "{shell} script lacks `{command}`");
         }
-        assert!(script.contains("--template"), "{shell}: subcommand options");
+        assert!(script.contains("template"), "{shell}: subcommand options");
+        assert!(script.contains("fedbatch"), "{shell}: option values");
     }
 }

@@ -4,4 +4,5 @@ mod authoring;
 mod cli;
 mod format;
 mod golden;
+mod lsp;
 mod parser;
