@@ -358,7 +358,7 @@ impl Generator {
                     && !line.contains('}')
             });
             if !last && next_starts_plain && index > 0 && self.chance(0.15) {
-                out.push_str(";");
+                out.push(';');
                 out.push_str(self.space());
             } else {
                 if self.chance(0.15) {
