@@ -137,6 +137,27 @@ impl PatchOp {
     }
 }
 
+/// A unit of measure as written between brackets (`[g/L]`, `[g L^-1]`, `[1/h]`, `[-]`).
+/// Symbols are kept as text; [`crate::units`] resolves them.
+#[derive(Debug, Clone, PartialEq)]
+pub enum UnitExpr {
+    /// `-`: dimensionless.
+    Dimensionless,
+    /// `1`, as in `1/h`.
+    One,
+    /// A prefixed symbol such as `g`, `mg`, `mol`, `L`, `h`.
+    Symbol(String),
+    /// `factor^n`.
+    Pow(Box<SUnit>, i32),
+    /// `a b` or `a * b`.
+    Mul(Box<SUnit>, Box<SUnit>),
+    /// `a / b`.
+    Div(Box<SUnit>, Box<SUnit>),
+}
+
+/// A unit annotation with its span (the span of the whole `[...]` at the top).
+pub type SUnit = Spanned<UnitExpr>;
+
 /// A value constraint on a param or closure output.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Constraint {
@@ -175,6 +196,8 @@ pub struct Item {
 pub struct Binding {
     /// The declared name.
     pub name: Ident,
+    /// Its unit, if declared.
+    pub unit: Option<SUnit>,
     /// Its value or initial value, if written.
     pub value: Option<SExpr>,
 }
@@ -184,6 +207,8 @@ pub struct Binding {
 pub struct InputDecl {
     /// The input's name (a data column).
     pub name: Ident,
+    /// Its unit, if declared.
+    pub unit: Option<SUnit>,
     /// `in [lo, hi]`, used by input generators.
     pub bounds: Option<(SExpr, SExpr)>,
 }
@@ -193,6 +218,8 @@ pub struct InputDecl {
 pub struct ParamDecl {
     /// The param's name.
     pub name: Ident,
+    /// Its unit, if declared.
+    pub unit: Option<SUnit>,
     /// Initial guess.
     pub init: SExpr,
     /// Optional constraint.
@@ -204,6 +231,8 @@ pub struct ParamDecl {
 pub struct Equation {
     /// The defined or targeted name.
     pub name: Ident,
+    /// The declared unit (`let` and `output` only).
+    pub unit: Option<SUnit>,
     /// The right-hand side.
     pub expr: SExpr,
 }
@@ -259,6 +288,8 @@ pub struct Patch {
 pub struct ClosureOutputDecl {
     /// The output's name.
     pub name: Ident,
+    /// Its unit, if declared.
+    pub unit: Option<SUnit>,
     /// `~ v`: typical magnitude.
     pub scale: Option<SExpr>,
     /// Optional constraint on the output's value.
@@ -393,5 +424,44 @@ pub fn format_number(v: f64) -> String {
         format!("{}", v as i64)
     } else {
         format!("{v:?}")
+    }
+}
+
+impl fmt::Display for UnitExpr {
+    /// Prints the unit (without brackets) so that it re-parses to the same tree: factors by
+    /// juxtaposition, `/` for division, parentheses only where the tree needs them.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            UnitExpr::Dimensionless => write!(f, "-"),
+            UnitExpr::One => write!(f, "1"),
+            UnitExpr::Symbol(symbol) => write!(f, "{symbol}"),
+            UnitExpr::Pow(base, exponent) => {
+                write_unit_operand(f, &base.node, !is_unit_atom(&base.node))?;
+                write!(f, "^{exponent}")
+            }
+            UnitExpr::Mul(lhs, rhs) | UnitExpr::Div(lhs, rhs) => {
+                write_unit_operand(f, &lhs.node, false)?;
+                let separator = if matches!(self, UnitExpr::Mul(..)) {
+                    " "
+                } else {
+                    "/"
+                };
+                write!(f, "{separator}")?;
+                let grouped = matches!(rhs.node, UnitExpr::Mul(..) | UnitExpr::Div(..));
+                write_unit_operand(f, &rhs.node, grouped)
+            }
+        }
+    }
+}
+
+fn is_unit_atom(unit: &UnitExpr) -> bool {
+    matches!(unit, UnitExpr::One | UnitExpr::Symbol(_))
+}
+
+fn write_unit_operand(f: &mut fmt::Formatter<'_>, unit: &UnitExpr, grouped: bool) -> fmt::Result {
+    if grouped {
+        write!(f, "({unit})")
+    } else {
+        write!(f, "{unit}")
     }
 }

@@ -344,4 +344,74 @@ pub enum CheckError {
         #[label("this model")]
         span: SourceSpan,
     },
+    /// A unit symbol gbc does not know (in a `[...]` annotation or after `time`).
+    #[error("unknown unit `{symbol}`")]
+    #[diagnostic(code(gbm::E0150))]
+    UnknownUnit {
+        /// The symbol as written.
+        symbol: String,
+        /// Where.
+        #[label("not a unit")]
+        span: SourceSpan,
+        /// Suggestion, or the known symbols.
+        #[help]
+        help: String,
+    },
+    /// Two units of different dimensions where one unit is needed.
+    #[error("{context}: expected {expected}, found {found}")]
+    #[diagnostic(code(gbm::E0151))]
+    UnitMismatch {
+        /// What must agree, in words (`operands of `+``, `balance of `X``).
+        context: String,
+        /// The unit the place needs.
+        expected: String,
+        /// The unit found.
+        found: String,
+        /// The expression with the wrong unit.
+        #[label("{found}")]
+        span: SourceSpan,
+        /// Where the expected unit comes from, if it is written somewhere.
+        #[label("{expected}")]
+        origin: Option<SourceSpan>,
+        /// Both units and their dimensions.
+        #[help]
+        help: String,
+    },
+    /// Two units of one dimension but different scales (`g/L` and `mg/L`, `1/h` and `1/min`).
+    #[error("{context}: expected {expected}, found {found}, a factor of {factor} apart")]
+    #[diagnostic(code(gbm::E0152))]
+    UnitScale {
+        /// What must agree, in words.
+        context: String,
+        /// The unit the place needs.
+        expected: String,
+        /// The unit found.
+        found: String,
+        /// The conversion factor between them.
+        factor: String,
+        /// The expression with the wrong unit.
+        #[label("{found}")]
+        span: SourceSpan,
+        /// Where the expected unit comes from, if it is written somewhere.
+        #[label("{expected}")]
+        origin: Option<SourceSpan>,
+        /// The conversion, e.g. `1 g/L = 1000 mg/L`.
+        #[help]
+        help: String,
+    },
+    /// A function argument, an exponent or a `*=` factor that must be dimensionless is not.
+    #[error("{context} must be dimensionless, found {found}")]
+    #[diagnostic(code(gbm::E0153))]
+    NotDimensionless {
+        /// What must be dimensionless, in words.
+        context: String,
+        /// The unit found.
+        found: String,
+        /// Where.
+        #[label("{found}")]
+        span: SourceSpan,
+        /// How to fix.
+        #[help]
+        help: String,
+    },
 }

@@ -3,12 +3,14 @@
 //! into one [`Sink`] and every error of a file is reported in one run.
 //!
 //! Families: [`symbols`] (declarations, duplicates), [`exprs`] (names, functions, constant
-//! expressions, cycles), [`structure`] (balances, closures, params, effects).
+//! expressions, cycles), [`structure`] (balances, closures, params, effects), [`units`]
+//! (units of measure: inference and agreement).
 
 mod error;
 pub mod exprs;
 mod structure;
 pub mod symbols;
+pub mod units;
 
 pub use error::CheckError;
 pub use symbols::{Kind, Scope, Symbol, Symbols};
@@ -39,6 +41,8 @@ pub struct Checked {
     pub symbols: Symbols,
     /// Values of consts and initial values of params, by scope and name.
     pub values: HashMap<(Scope, String), f64>,
+    /// Units of measure, declared and inferred (empty for a model without units).
+    pub units: units::UnitTable,
 }
 
 impl Checked {
@@ -67,11 +71,13 @@ pub fn check(model: ast::Model) -> Result<Checked, Vec<CheckError>> {
     exprs::check_cycles(&model, &symbols, &mut sink);
     let values = exprs::evaluate_constants(&model, &symbols, &mut sink);
     structure::check_all(&model, &symbols, &values, &mut sink);
+    let units = units::check_units(&model, &symbols, &values, &mut sink);
     if sink.errors.is_empty() {
         Ok(Checked {
             ast: model,
             symbols,
             values,
+            units,
         })
     } else {
         sink.errors.sort_by_key(first_offset);

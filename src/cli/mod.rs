@@ -7,10 +7,15 @@
 mod bench;
 mod check;
 mod compile;
+mod completions;
 mod data;
 mod demo;
 mod diagnose;
 mod experiment;
+mod explain;
+mod fmt;
+mod init;
+mod lsp;
 mod predict;
 mod simulate;
 mod train;
@@ -78,6 +83,16 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// Time training steps, epochs and simulation of the shipped models on this machine.
     Bench(bench::BenchArgs),
+    /// Rewrite model files in the canonical layout (`--check`: only report).
+    Fmt(fmt::FmtArgs),
+    /// Start a new model from a template, with a README of the commands to run.
+    Init(init::InitArgs),
+    /// Print the catalogue entry of a diagnostic code (e.g. `gbc explain E0152`).
+    Explain(explain::ExplainArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(completions::CompletionsArgs),
+    /// Run the language server on stdin/stdout (diagnostics, definition, hover, format).
+    Lsp(lsp::LspArgs),
 }
 
 /// Runs one parsed command line.
@@ -92,6 +107,11 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Experiment(args) => experiment::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Fmt(args) => fmt::run(args),
+        Command::Init(args) => init::run(args),
+        Command::Explain(args) => explain::run(args),
+        Command::Completions(args) => completions::run(args),
+        Command::Lsp(args) => lsp::run(args),
     }
 }
 

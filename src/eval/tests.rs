@@ -73,6 +73,7 @@ fn small_model() -> Model {
         dynamics: Dynamics::Continuous,
         balances: vec![],
         effects: vec![],
+        units: Default::default(),
     }
 }
 

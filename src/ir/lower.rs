@@ -291,6 +291,7 @@ impl<'a> Lowerer<'a> {
             dynamics: Dynamics::Continuous,
             balances: Vec::new(),
             effects: Vec::new(),
+            units: Units::default(),
         };
         let mut balance_items: HashMap<String, (Scope, &ast::Equation)> = HashMap::new();
         let mut balance_patches: Vec<(Scope, &ast::Equation)> = Vec::new();
@@ -351,6 +352,7 @@ impl<'a> Lowerer<'a> {
         }
         model.balances = self.balances(&model, &balance_items, &balance_patches)?;
         model.effects = self.effects();
+        model.units = self.units();
         Ok(model)
     }
 
@@ -510,6 +512,40 @@ impl<'a> Lowerer<'a> {
         Ok(balances)
     }
 
+    /// The units of the model's names and of its applied effects' names; those of the
+    /// other effects by effect.
+    fn units(&self) -> Units {
+        let table = &self.checked.units;
+        let mut units = Units {
+            time: table.time.clone(),
+            ..Units::default()
+        };
+        let applied: Vec<Scope> = self.items.iter().map(|(scope, _)| *scope).collect();
+        for ((scope, name), entry) in &table.names {
+            let unit = QuantityUnit {
+                unit: entry.unit.clone(),
+                text: entry.text.clone(),
+                inferred: entry.inferred,
+            };
+            match scope {
+                Scope::Effect(index) if !applied.contains(scope) => {
+                    if let Some(effect) = self.effects.get(*index) {
+                        let effect = effect.name.node.clone();
+                        units
+                            .effects
+                            .entry(effect)
+                            .or_default()
+                            .insert(name.clone(), unit);
+                    }
+                }
+                _ => {
+                    units.names.insert(name.clone(), unit);
+                }
+            }
+        }
+        units
+    }
+
     /// Every effect of the model, in printable form (not applied).
     fn effects(&self) -> Vec<Effect> {
         self.effects
@@ -540,18 +576,34 @@ impl<'a> Lowerer<'a> {
 
 /// Canonical source lines of one effect declaration.
 fn effect_lines(kind: &ItemKind) -> Vec<String> {
+    let unit = |annotation: &Option<ast::SUnit>| match annotation {
+        Some(unit) => format!(" [{}]", unit.node),
+        None => String::new(),
+    };
     let bindings = |keyword: &str, list: &[ast::Binding]| -> Vec<String> {
         list.iter()
             .map(|b| match &b.value {
-                Some(value) => format!("{keyword} {} = {}", b.name.node, value.node),
-                None => format!("{keyword} {}", b.name.node),
+                Some(value) => {
+                    format!(
+                        "{keyword} {}{} = {}",
+                        b.name.node,
+                        unit(&b.unit),
+                        value.node
+                    )
+                }
+                None => format!("{keyword} {}{}", b.name.node, unit(&b.unit)),
             })
             .collect()
     };
     match kind {
         ItemKind::Hidden(list) => bindings("hidden", list),
         ItemKind::Const(list) => bindings("const", list),
-        ItemKind::Let(eq) => vec![format!("let {} = {}", eq.name.node, eq.expr.node)],
+        ItemKind::Let(eq) => vec![format!(
+            "let {}{} = {}",
+            eq.name.node,
+            unit(&eq.unit),
+            eq.expr.node
+        )],
         ItemKind::Der(eq) => vec![format!("der {} = {}", eq.name.node, eq.expr.node)],
         ItemKind::DerPatch(eq) => vec![format!("der {} += {}", eq.name.node, eq.expr.node)],
         ItemKind::Patch(patch) => vec![format!(

@@ -7,6 +7,9 @@
 //! depends on how it is executed.
 
 pub use crate::ast::BinOp;
+pub use crate::units::Unit;
+
+use std::collections::BTreeMap;
 
 mod lower;
 mod print;
@@ -368,6 +371,31 @@ pub struct Effect {
     pub lines: Vec<String>,
 }
 
+/// The unit of measure of one named quantity.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QuantityUnit {
+    /// The unit, for comparison and arithmetic.
+    pub unit: Unit,
+    /// How to show it (as written where declared, e.g. `g/g`; canonical where inferred):
+    /// the text for an axis label or a column header.
+    pub text: String,
+    /// Whether gbc inferred it from the equations (not written in the model).
+    pub inferred: bool,
+}
+
+/// Units of measure of the model's quantities, as plain data. Empty for a model that
+/// declares no unit.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Units {
+    /// The time unit (`time h`), when the model uses units.
+    pub time: Option<Unit>,
+    /// Declared and inferred units by name: inputs, states, hidden states, consts, params,
+    /// `let`s, `output`s and closure outputs (and the names of applied effects).
+    pub names: BTreeMap<String, QuantityUnit>,
+    /// Units of the names declared inside each effect that is not applied, by effect name.
+    pub effects: BTreeMap<String, BTreeMap<String, QuantityUnit>>,
+}
+
 /// A compiled model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Model {
@@ -399,4 +427,19 @@ pub struct Model {
     pub balances: Vec<Balance>,
     /// Effects declared in the model (applied ones are already folded into the above).
     pub effects: Vec<Effect>,
+    /// Units of measure of the named quantities (empty when the model declares none).
+    pub units: Units,
+}
+
+impl Model {
+    /// The unit of a named quantity (input, state, const, param, `let`, `output`, closure
+    /// output), if the model declares or implies one.
+    pub fn unit(&self, name: &str) -> Option<&QuantityUnit> {
+        self.units.names.get(name)
+    }
+
+    /// The unit of a variable, if known.
+    pub fn unit_of(&self, var: Var) -> Option<&QuantityUnit> {
+        self.unit(print::var_name(self, var))
+    }
 }

@@ -46,6 +46,15 @@ fn to_ast(model: &Model, expr: &Expr) -> ast::Expr {
     }
 }
 
+/// ` [unit]` (or ` [unit, inferred]`) after a name, or nothing.
+fn unit_text(unit: Option<&QuantityUnit>) -> String {
+    match unit {
+        Some(unit) if unit.inferred => format!(" [{}, inferred]", unit.text),
+        Some(unit) => format!(" [{}]", unit.text),
+        None => String::new(),
+    }
+}
+
 fn constraint_text(constraint: Constraint) -> String {
     match constraint {
         Constraint::Free => String::new(),
@@ -95,10 +104,12 @@ fn write_model(out: &mut String, model: &Model) -> std::fmt::Result {
             write!(out, " \"{description}\"")?;
         }
         writeln!(out)?;
+        let effect_units = model.units.effects.get(&effect.name);
         for param in &effect.params {
             let constraint = constraint_text(param.constraint);
             let init = format_number(param.init);
-            writeln!(out, "  param {} = {init}{constraint}", param.name)?;
+            let unit = unit_text(effect_units.and_then(|units| units.get(&param.name)));
+            writeln!(out, "  param {}{unit} = {init}{constraint}", param.name)?;
         }
         for line in &effect.lines {
             writeln!(out, "  {line}")?;
@@ -110,7 +121,12 @@ fn write_model(out: &mut String, model: &Model) -> std::fmt::Result {
 fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
     writeln!(out, "\ninputs ({})", model.inputs.len())?;
     for (i, input) in model.inputs.iter().enumerate() {
-        write!(out, "  u{i} {}", input.name)?;
+        write!(
+            out,
+            "  u{i} {}{}",
+            input.name,
+            unit_text(model.unit(&input.name))
+        )?;
         if let Some((lo, hi)) = input.bounds {
             write!(out, " in [{}, {}]", format_number(lo), format_number(hi))?;
         }
@@ -122,7 +138,12 @@ fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
     ] {
         writeln!(out, "\n{title} ({})", states.len())?;
         for (i, state) in states.iter().enumerate() {
-            write!(out, "  {prefix}{i} {}", state.name)?;
+            write!(
+                out,
+                "  {prefix}{i} {}{}",
+                state.name,
+                unit_text(model.unit(&state.name))
+            )?;
             if let Some(init) = &state.init {
                 write!(out, " = {}", expr_text(model, init))?;
             }
@@ -132,13 +153,15 @@ fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
     writeln!(out, "\nconsts ({})", model.consts.len())?;
     for (i, constant) in model.consts.iter().enumerate() {
         let value = format_number(constant.value);
-        writeln!(out, "  c{i} {} = {value}", constant.name)?;
+        let unit = unit_text(model.unit(&constant.name));
+        writeln!(out, "  c{i} {}{unit} = {value}", constant.name)?;
     }
     writeln!(out, "\nparams ({})", model.params.len())?;
     for (i, param) in model.params.iter().enumerate() {
         let constraint = constraint_text(param.constraint);
         let init = format_number(param.init);
-        writeln!(out, "  p{i} {} = {init}{constraint}", param.name)?;
+        let unit = unit_text(model.unit(&param.name));
+        writeln!(out, "  p{i} {}{unit} = {init}{constraint}", param.name)?;
     }
     Ok(())
 }
@@ -197,9 +220,10 @@ fn write_closure(
                 }
             }
         };
+        let unit = unit_text(model.unit(&output.name));
         writeln!(
             out,
-            "  out {k}: {} ~ {scale}{constraint}; {form}",
+            "  out {k}: {}{unit} ~ {scale}{constraint}; {form}",
             output.name
         )?;
     }
@@ -219,8 +243,9 @@ fn write_definitions(
     for definition in list {
         writeln!(
             out,
-            "  {} = {}",
+            "  {}{} = {}",
             definition.name,
+            unit_text(model.unit(&definition.name)),
             expr_text(model, &definition.expr)
         )?;
     }

@@ -17,9 +17,33 @@ static PRATT: LazyLock<PrattParser<Rule>> = LazyLock::new(|| {
         .op(Op::infix(Rule::pow, Assoc::Right))
 });
 
-fn span_of(pair: &Pair<Rule>) -> Span {
-    let s = pair.as_span();
-    Span::new(s.start(), s.end())
+/// The span of a pair without the spaces and comments pest's implicit whitespace leaves at
+/// its end (after a trailing optional part that is absent, `X = 1 # note` would otherwise
+/// end at the end of the comment).
+pub(super) fn span_of(pair: &Pair<Rule>) -> Span {
+    let start = pair.as_span().start();
+    Span::new(start, start + significant_len(pair.as_str()))
+}
+
+/// The length of `text` without trailing blanks, comments and `\` line continuations.
+fn significant_len(text: &str) -> usize {
+    let mut end = text.len();
+    loop {
+        let trimmed = text[..end].trim_end_matches([' ', '\t', '\u{feff}']);
+        let line_start = trimmed.rfind('\n').map_or(0, |i| i + 1);
+        let next = if let Some(at) = super::comment_start(&trimmed[line_start..]) {
+            line_start + at
+        } else if let Some(rest) = trimmed.strip_suffix('\n') {
+            let rest = rest.strip_suffix('\r').unwrap_or(rest);
+            rest.strip_suffix('\\').map_or(trimmed.len(), str::len)
+        } else {
+            trimmed.len()
+        };
+        if next == end {
+            return end;
+        }
+        end = next;
+    }
 }
 
 fn ident(pair: Pair<Rule>) -> Ident {
@@ -76,9 +100,13 @@ fn string_text(pair: &Pair<Rule>) -> String {
         .unwrap_or_default()
 }
 
-/// The `##` lines directly above byte offset `start`, joined, without the markers.
+/// The `##` lines directly above byte offset `start`, joined, without the markers, when
+/// the declaration at `start` is the first thing on its line.
 fn doc_above(source: &str, start: usize) -> Option<String> {
     let line_start = source[..start].rfind('\n').map_or(0, |i| i + 1);
+    if !source[line_start..start].trim().is_empty() {
+        return None;
+    }
     let mut lines = Vec::new();
     let mut end = line_start;
     while end > 0 {
@@ -132,11 +160,54 @@ fn each_child<T>(pair: &Pair<Rule>, build: fn(Pair<Rule>) -> Result<T>) -> Resul
     pair.clone().into_inner().map(build).collect()
 }
 
-fn input_entry(pair: Pair<Rule>) -> Result<InputDecl> {
+/// The children of an entry rule (`X [g/L] = 1`, `k = 1 [1/h] positive`), by kind.
+struct EntryParts<'a> {
+    name: Ident,
+    unit: Option<SUnit>,
+    exprs: Vec<Pair<'a, Rule>>,
+    rest: Vec<Pair<'a, Rule>>,
+}
+
+/// Splits an entry into its name, its unit (at most one, before or after the value) and
+/// the other children in order.
+fn entry_parts<'a>(pair: &Pair<'a, Rule>) -> Result<EntryParts<'a>> {
     let mut children = pair.clone().into_inner();
-    let name = ident(next(&mut children, &pair)?);
-    let bounds = children.next().map(|b| bounds(&b)).transpose()?;
-    Ok(InputDecl { name, bounds })
+    let name = ident(next(&mut children, pair)?);
+    let mut parts = EntryParts {
+        name,
+        unit: None,
+        exprs: Vec::new(),
+        rest: Vec::new(),
+    };
+    for child in children {
+        match child.as_rule() {
+            Rule::unit => {
+                let unit = super::unit::unit(&child)?;
+                if parts.unit.is_some() {
+                    return Err(SyntaxError::Misplaced {
+                        span: unit.span.into(),
+                        what: "a second unit".to_string(),
+                        place: format!("on `{}`", parts.name.node),
+                        help: "write the unit once, after the name or after the value".to_string(),
+                    });
+                }
+                parts.unit = Some(unit);
+            }
+            Rule::expr => parts.exprs.push(child),
+            _ => parts.rest.push(child),
+        }
+    }
+    Ok(parts)
+}
+
+fn input_entry(pair: Pair<Rule>) -> Result<InputDecl> {
+    let parts = entry_parts(&pair)?;
+    let bounds = parts.rest.first().map(bounds).transpose()?;
+    Ok(InputDecl {
+        name: parts.name,
+        unit: parts.unit,
+        bounds,
+    })
 }
 
 fn bounds(pair: &Pair<Rule>) -> Result<(SExpr, SExpr)> {
@@ -147,10 +218,13 @@ fn bounds(pair: &Pair<Rule>) -> Result<(SExpr, SExpr)> {
 }
 
 fn binding(pair: Pair<Rule>) -> Result<Binding> {
-    let mut children = pair.clone().into_inner();
-    let name = ident(next(&mut children, &pair)?);
-    let value = children.next().map(expr).transpose()?;
-    Ok(Binding { name, value })
+    let parts = entry_parts(&pair)?;
+    let value = parts.exprs.into_iter().next().map(expr).transpose()?;
+    Ok(Binding {
+        name: parts.name,
+        unit: parts.unit,
+        value,
+    })
 }
 
 fn constraint(pair: Pair<Rule>) -> Result<Constraint> {
@@ -165,27 +239,32 @@ fn constraint(pair: Pair<Rule>) -> Result<Constraint> {
 }
 
 fn param_entry(pair: Pair<Rule>) -> Result<ParamDecl> {
-    let mut children = pair.clone().into_inner();
-    let name = ident(next(&mut children, &pair)?);
-    let init = expr(next(&mut children, &pair)?)?;
-    let constraint = children.next().map(constraint).transpose()?;
+    let parts = entry_parts(&pair)?;
+    let init = parts
+        .exprs
+        .into_iter()
+        .next()
+        .ok_or_else(|| unexpected_shape(&pair))?;
+    let constraint = parts.rest.into_iter().next().map(constraint).transpose()?;
     Ok(ParamDecl {
-        name,
-        init,
+        name: parts.name,
+        unit: parts.unit,
+        init: expr(init)?,
         constraint,
     })
 }
 
 /// `NAME [op] expr` where the operator (if any) is skipped.
 fn equation(pair: &Pair<Rule>) -> Result<Equation> {
-    let mut children = pair.clone().into_inner();
-    let name = ident(next(&mut children, pair)?);
-    let mut rhs = next(&mut children, pair)?;
-    if rhs.as_rule() != Rule::expr {
-        rhs = next(&mut children, pair)?;
-    }
+    let parts = entry_parts(pair)?;
+    let rhs = parts
+        .exprs
+        .into_iter()
+        .next()
+        .ok_or_else(|| unexpected_shape(pair))?;
     Ok(Equation {
-        name,
+        name: parts.name,
+        unit: parts.unit,
         expr: expr(rhs)?,
     })
 }
@@ -297,19 +376,14 @@ fn closure_item(pair: &Pair<Rule>) -> Result<ClosureItem> {
 }
 
 fn closure_output(pair: Pair<Rule>) -> Result<ClosureOutputDecl> {
-    let mut children = pair.clone().into_inner();
-    let name = ident(next(&mut children, &pair)?);
-    let (mut scale, mut constraint_decl) = (None, None);
-    for child in children {
-        match child.as_rule() {
-            Rule::expr => scale = Some(expr(child)?),
-            _ => constraint_decl = Some(constraint(child)?),
-        }
-    }
+    let parts = entry_parts(&pair)?;
+    let scale = parts.exprs.into_iter().next().map(expr).transpose()?;
+    let constraint = parts.rest.into_iter().next().map(constraint).transpose()?;
     Ok(ClosureOutputDecl {
-        name,
+        name: parts.name,
+        unit: parts.unit,
         scale,
-        constraint: constraint_decl,
+        constraint,
     })
 }
 
@@ -388,6 +462,11 @@ fn primary(pair: Pair<Rule>) -> Result<SExpr> {
             Ok(Spanned::new(Expr::Call(name, args), span))
         }
         Rule::expr => expr(pair),
+        Rule::paren => {
+            // The node keeps the span of its parentheses (the formatter keeps them).
+            let inner = expr(first_child(&pair)?)?;
+            Ok(Spanned::new(inner.node, span))
+        }
         _ => Err(unexpected_shape(&pair)),
     }
 }

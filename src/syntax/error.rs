@@ -43,12 +43,13 @@ pub enum SyntaxError {
         /// The limit.
         limit: usize,
     },
-    /// A number that does not fit a 64-bit float (or a whole number that is too large).
+    /// A number that does not fit a 64-bit float (or a whole number or unit exponent that is
+    /// too large).
     #[error("number out of range: `{text}`")]
     #[diagnostic(
         code(gbm::E0004),
         help(
-            "numbers must be finite 64-bit floats; whole numbers in `dim` and `hidden` below 2^32"
+            "numbers must be finite 64-bit floats; whole numbers in `dim` and `hidden` below 2^32; unit exponents between -99 and 99"
         )
     )]
     BadNumber {
@@ -192,6 +193,17 @@ fn describe_rule(rule: Rule) -> &'static str {
         Rule::set_assign => "`:=`",
         Rule::input_entry | Rule::init_entry | Rule::value_entry | Rule::param_entry => "a name",
         Rule::keyword => "a keyword",
+        Rule::paren => "an expression",
+        Rule::unit
+        | Rule::unit_none
+        | Rule::unit_product
+        | Rule::unit_mul
+        | Rule::unit_div
+        | Rule::unit_factor
+        | Rule::unit_group
+        | Rule::unit_one
+        | Rule::unit_symbol => "a unit such as `[g/L]`",
+        Rule::unit_exponent => "a whole exponent",
         Rule::EOI => "end of file",
         Rule::file => "a model file",
         _ => "a declaration",

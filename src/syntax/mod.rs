@@ -7,6 +7,7 @@
 mod build;
 mod error;
 mod guard;
+mod unit;
 
 pub use error::SyntaxError;
 
@@ -34,6 +35,19 @@ pub fn parse(source: &str) -> Result<ast::Model, SyntaxError> {
         .next()
         .ok_or_else(|| SyntaxError::internal(source.len(), "empty parse tree"))?;
     build::model(source, file)
+}
+
+/// Where the comment of a line starts, if it has one (`#` outside a string).
+pub fn comment_start(line: &str) -> Option<usize> {
+    let mut in_string = false;
+    for (index, byte) in line.bytes().enumerate() {
+        match byte {
+            b'"' => in_string = !in_string,
+            b'#' if !in_string => return Some(index),
+            _ => {}
+        }
+    }
+    None
 }
 
 /// Parses one expression (used by tests and tools that take expressions on the command line).

@@ -70,6 +70,7 @@ impl ModelBuilder {
                 dynamics: Dynamics::Continuous,
                 balances: Vec::new(),
                 effects: Vec::new(),
+                units: Default::default(),
             },
             names: HashMap::new(),
             lets: HashMap::new(),

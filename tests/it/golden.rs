@@ -47,30 +47,35 @@ fn files(dir: &Path, extension: &str) -> Vec<PathBuf> {
     out
 }
 
-/// Every shipped model and every model under tests/golden/, with its golden name.
+/// Every shipped model (models/ searched recursively; `models/a/b/c.gbm` is golden
+/// `a__b__c.ir`) and every model under tests/golden/, with its golden name.
 fn ir_cases() -> Vec<(PathBuf, PathBuf)> {
     let golden = root().join("tests/golden");
-    let mut cases = Vec::new();
     let models = root().join("models");
-    let mut systems: Vec<PathBuf> = std::fs::read_dir(&models)
-        .map(|entries| entries.filter_map(|e| e.ok()).map(|e| e.path()).collect())
-        .unwrap_or_default();
-    systems.sort();
-    for system in systems.iter().filter(|p| p.is_dir()) {
-        let system_name = system
-            .file_name()
-            .unwrap_or_default()
-            .to_string_lossy()
-            .to_string();
-        for model in files(system, "gbm") {
-            let stem = model
-                .file_stem()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .to_string();
-            cases.push((model, golden.join(format!("{system_name}__{stem}.ir"))));
+    let mut cases = Vec::new();
+    let mut stack = vec![models.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "gbm") && dir != models {
+                let relative = path
+                    .strip_prefix(&models)
+                    .unwrap_or(&path)
+                    .with_extension("");
+                let parts: Vec<String> = relative
+                    .components()
+                    .map(|c| c.as_os_str().to_string_lossy().to_string())
+                    .collect();
+                cases.push((
+                    path.clone(),
+                    golden.join(format!("{}.ir", parts.join("__"))),
+                ));
+            }
         }
     }
+    cases.sort();
     for model in files(&golden, "gbm") {
         cases.push((model.clone(), model.with_extension("ir")));
     }
@@ -81,7 +86,7 @@ fn ir_cases() -> Vec<(PathBuf, PathBuf)> {
 fn compiled_ir_matches_golden_files() {
     let cases = ir_cases();
     assert!(
-        cases.len() >= 7,
+        cases.len() >= 19,
         "expected the shipped models, found {}",
         cases.len()
     );

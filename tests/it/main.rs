@@ -1,5 +1,9 @@
 //! Integration tests: one binary, a module per feature.
 
+mod authoring;
 mod cli;
+mod editor;
+mod format;
 mod golden;
+mod lsp;
 mod parser;

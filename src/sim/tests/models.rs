@@ -74,6 +74,7 @@ pub fn empty_model(name: &str, dynamics: Dynamics) -> Model {
         dynamics,
         balances: vec![],
         effects: vec![],
+        units: Default::default(),
     }
 }
 
