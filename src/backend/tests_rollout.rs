@@ -100,7 +100,7 @@ fn assert_rollout_gradient_matches(substeps: usize, irregular: bool) {
     let tracks = [record(irregular)];
     let network = network(&model, substeps);
     let fractions = stage_fractions(model.dynamics, substeps);
-    let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, 3), (0, 5)], 6, &fractions);
+    let batch = rollout_batch(&model, (&tracks, &[], &[], &[]), &[(0, 3), (0, 5)], 6, &fractions);
     if irregular {
         let steps: Vec<f64> = batch.step_sizes.iter().flatten().copied().collect();
         assert!(steps.iter().any(|&h| (h - 1.0).abs() > 0.05), "{steps:?}");
@@ -166,7 +166,7 @@ fn params_train_at_their_own_rate() {
     let model = model();
     let tracks = [record(false)];
     let fractions = stage_fractions(model.dynamics, 1);
-    let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, 3), (0, 5)], 4, &fractions);
+    let batch = rollout_batch(&model, (&tracks, &[], &[], &[]), &[(0, 3), (0, 5)], 4, &fractions);
     let mut network = network(&model, 1);
     let before = network.weights();
     let settings = StepSettings {

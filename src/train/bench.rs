@@ -99,7 +99,9 @@ pub fn bench(
     let network = Network::build(model, &setup)?;
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let weights = vec![1.0; model.states.len()];
-    let mut course = Course::new(model, layout.tracks, (&layout.pairs, &weights), &fractions);
+    let observables = layout.normalisation.observables.clone();
+    let pairs = (layout.pairs.as_slice(), weights.as_slice(), observables.as_slice());
+    let mut course = Course::new(model, layout.tracks, pairs, &fractions);
     refresh(&network, model, &mut course, (&fractions, false), &hidden_init)?;
     let table = course.table;
     let mut step = Step::new(options.engine, network, model, &setup)?;

@@ -217,8 +217,8 @@ pub enum TrainError {
     },
     /// A `next` model on data without one uniform step.
     #[error(
-        "expected rows every {step} time units for a `next` model, found irregular times in \
-         experiment `{experiment}`"
+        "expected one uniform time step for a `next` model, found {found} in experiment \
+         `{experiment}`"
     )]
     #[diagnostic(
         code(gbm::E0425),
@@ -231,8 +231,8 @@ pub enum TrainError {
     IrregularForNext {
         /// The first experiment that is irregular (or sampled at another step).
         experiment: String,
-        /// The step of the grid.
-        step: f64,
+        /// What its times look like, e.g. "steps from 0.2 to 4" or "a step of 2 (others 1)".
+        found: String,
     },
     /// A state that an experiment never measures, with no declared initial value.
     #[error(

@@ -41,6 +41,8 @@ pub mod split;
 mod tests;
 #[cfg(test)]
 mod tests_recipe;
+#[cfg(test)]
+mod tests_records;
 mod validation;
 pub mod windows;
 
@@ -282,14 +284,14 @@ pub fn train_with(
     let mut training = Course::new(
         model,
         layout.tracks.clone(),
-        (&layout.pairs, &weights),
+        (&layout.pairs, &weights, &layout.normalisation.observables),
         &fractions,
     );
     refresh(&network, model, &mut training, (&fractions, false), &hidden_init)?;
     let mut validating = Course::new(
         model,
         layout.validation_tracks.clone(),
-        (&[], &weights),
+        (&[], &weights, &layout.normalisation.observables),
         &fractions,
     );
     let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();

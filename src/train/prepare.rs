@@ -198,13 +198,20 @@ fn densest_spacing(records: &[Record]) -> f64 {
 /// A `next` model steps from row to row: every experiment must share one uniform step.
 fn check_uniform(records: &[&Record], step: f64) -> Result<(), TrainError> {
     for record in records {
-        let uniform = record.uniform_step();
-        if uniform.is_none_or(|h| (h - step).abs() > 1e-6 * step) {
-            return Err(TrainError::IrregularForNext {
-                experiment: record.name.clone(),
-                step,
-            });
-        }
+        let found = match record.uniform_step() {
+            Some(h) if (h - step).abs() <= 1e-6 * step => continue,
+            Some(h) => format!("a step of {h:.6} where others step {step:.6}"),
+            None => {
+                let steps: Vec<f64> = record.times.windows(2).map(|w| w[1] - w[0]).collect();
+                let low = steps.iter().copied().fold(f64::INFINITY, f64::min);
+                let high = steps.iter().copied().fold(0.0, f64::max);
+                format!("irregular times (steps from {low:.6} to {high:.6})")
+            }
+        };
+        return Err(TrainError::IrregularForNext {
+            experiment: record.name.clone(),
+            found,
+        });
     }
     Ok(())
 }

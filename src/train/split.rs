@@ -276,15 +276,20 @@ pub fn whole_experiments(
 }
 
 /// The pairs of `tracks` that train: inside each training range, every step whose start
-/// states are known from data and whose end has a measured cell. Their embeddings read the
+/// states are known from data (those the experiment measures at all) and whose end has a
+/// measured cell. Their embeddings read the
 /// reference, the model's fill included where the data are too sparse (records spec,
 /// section 3); on a complete record these are exactly the pairs of measured history.
 pub fn training_pairs(model: &ir::Model, tracks: &[Track], trainings: &[Training]) -> Vec<PairAt> {
     let measured = model.states.len();
     let mut pairs = Vec::new();
     for (index, (track, training)) in tracks.iter().zip(trainings).enumerate() {
+        // A state the experiment never measures starts from the model's own run.
+        let observed: Vec<usize> = (0..measured)
+            .filter(|&i| track.measured[i].iter().any(|&m| m))
+            .collect();
         let knots = (training.knots.clone())
-            .filter(|&k| has_target(track, k) && (0..measured).all(|i| track.known[i][k]));
+            .filter(|&k| has_target(track, k) && observed.iter().all(|&i| track.known[i][k]));
         pairs.extend(knots.map(|k| (index, k)));
     }
     pairs
