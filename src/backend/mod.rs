@@ -229,7 +229,10 @@ pub enum BackendError {
     Internal(String),
     /// A model the chosen engine cannot run.
     #[error("expected a model the {engine} engine runs, found {what}")]
-    #[diagnostic(code(gbm::E0402), help("train with `--engine graph`, which runs every model"))]
+    #[diagnostic(
+        code(gbm::E0402),
+        help("train with `--engine graph`, which runs every model")
+    )]
     Unsupported {
         /// The engine.
         engine: String,

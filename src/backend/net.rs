@@ -81,7 +81,9 @@ where
             })
             .collect::<Result<Vec<_>, _>>()?;
         if norm.observable_std.len() != observables.len() {
-            return Err(BackendError::internal("observables without their statistics"));
+            return Err(BackendError::internal(
+                "observables without their statistics",
+            ));
         }
         let observable_inverse_std = (norm.observable_std.iter())
             .map(|&s| E::from_double(1.0 / s))
@@ -472,7 +474,8 @@ where
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
         let start = (history.last())
             .ok_or_else(|| BackendError::internal("a step without a start state"))?;
-        let (first, values) = self.stage(graph, tensors, batch, (start, history), (0, &self.balances))?;
+        let (first, values) =
+            self.stage(graph, tensors, batch, (start, history), (0, &self.balances))?;
         if self.dynamics == Dynamics::Discrete {
             return Ok((first, values));
         }
@@ -490,20 +493,44 @@ where
             let offset = 2 * substep;
             if substep > 0 {
                 k1 = self
-                    .stage(graph, tensors, batch, (&state, history), (offset, &self.balances))?
+                    .stage(
+                        graph,
+                        tensors,
+                        batch,
+                        (&state, history),
+                        (offset, &self.balances),
+                    )?
                     .0;
             }
             let x2 = graph.axpy_rows(&state, &half, &k1)?;
             let k2 = self
-                .stage(graph, tensors, batch, (&x2, history), (offset + 1, &self.balances))?
+                .stage(
+                    graph,
+                    tensors,
+                    batch,
+                    (&x2, history),
+                    (offset + 1, &self.balances),
+                )?
                 .0;
             let x3 = graph.axpy_rows(&state, &half, &k2)?;
             let k3 = self
-                .stage(graph, tensors, batch, (&x3, history), (offset + 1, &self.balances))?
+                .stage(
+                    graph,
+                    tensors,
+                    batch,
+                    (&x3, history),
+                    (offset + 1, &self.balances),
+                )?
                 .0;
             let x4 = graph.axpy_rows(&state, &whole, &k3)?;
             let k4 = self
-                .stage(graph, tensors, batch, (&x4, history), (offset + 2, &self.balances))?
+                .stage(
+                    graph,
+                    tensors,
+                    batch,
+                    (&x4, history),
+                    (offset + 2, &self.balances),
+                )?
                 .0;
             let sum = graph.axpy(&k1, 2.0, &k2)?;
             let sum = graph.axpy(&sum, 2.0, &k3)?;
@@ -522,7 +549,10 @@ where
         batch: &PreparedStep<E>,
         (state, history): (&Matrix<E>, &[Matrix<E>]),
     ) -> Result<Matrix<E>, BackendError> {
-        let last = batch.constants.first().map_or(0, |c| c.len().saturating_sub(1));
+        let last = batch
+            .constants
+            .first()
+            .map_or(0, |c| c.len().saturating_sub(1));
         let targets = Arc::clone(&self.observables);
         Ok(self
             .stage(graph, tensors, batch, (state, history), (last, &targets))?

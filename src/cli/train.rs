@@ -14,7 +14,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::data::{hold_out, load_records, ColumnArgs};
+use super::data::{hold_out, load_records, ColumnArgs, HistoryArg};
 use super::{CommandError, CommandResult};
 use crate::backend::Precision;
 use crate::data::MinRows;
@@ -24,8 +24,8 @@ use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, Engine, ErrorSet, Event, History, Objective, ParamSource, Part, Recipe,
-    TrainError, TrainOptions, Trained, TrainingData,
+    self, artifacts, Engine, ErrorSet, Event, Objective, ParamSource, Part, Recipe, TrainError,
+    TrainOptions, Trained, TrainingData,
 };
 
 /// The loss training minimises.
@@ -94,15 +94,6 @@ impl From<EngineArg> for Engine {
             EngineArg::Fused => Engine::Fused,
         }
     }
-}
-
-/// Where whole-experiment free runs and training windows start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum HistoryArg {
-    /// At each experiment's first row, the history before it held at the first values.
-    Held,
-    /// At the first row whose whole embedding lies inside the experiment (the paper's).
-    Measured,
 }
 
 /// Arguments of `gbc train`.
@@ -234,10 +225,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         online_horizon: args.online_horizon,
         engine: args.engine.into(),
         dt: args.dt,
-        history: match args.history {
-            HistoryArg::Held => History::Held,
-            HistoryArg::Measured => History::Measured,
-        },
+        history: args.history.into(),
         column_weights: args.weight.clone(),
     };
     let recipe = recipe_of(args);
@@ -331,16 +319,23 @@ fn cross_validate(
         &mut |fold, folds| {
             progress.borrow_mut().finish();
             let name = &records[fold].name;
-            eprintln!("cross-validation fold {}/{folds}: holding out `{name}`", fold + 1);
+            eprintln!(
+                "cross-validation fold {}/{folds}: holding out `{name}`",
+                fold + 1
+            );
         },
         &mut |event| progress.borrow_mut().observe(event, epochs),
     );
     progress.borrow_mut().finish();
     let result = result.map_err(train_error)?;
-    println!("leave-one-experiment-out cross-validation ({} folds):", result.folds.len());
+    println!(
+        "leave-one-experiment-out cross-validation ({} folds):",
+        result.folds.len()
+    );
     println!("  {:<24} {:>12} {:>12}", "held out", "offline", "online");
     for fold in &result.folds {
-        let overall = |set: &Option<ErrorSet>| set.as_ref().map_or("-".into(), |s| error(s.overall));
+        let overall =
+            |set: &Option<ErrorSet>| set.as_ref().map_or("-".into(), |s| error(s.overall));
         println!(
             "  {:<24} {:>12} {:>12}",
             fold.held_out,
@@ -524,10 +519,19 @@ fn print_errors(offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
             .map_or("-".to_string(), |(_, e)| error(*e))
     };
     for name in names {
-        println!("  {name:<16} {:>12} {:>12}", of(offline, name), of(online, name));
+        println!(
+            "  {name:<16} {:>12} {:>12}",
+            of(offline, name),
+            of(online, name)
+        );
     }
     let overall = |set: Option<&ErrorSet>| set.map_or("-".to_string(), |s| error(s.overall));
-    println!("  {:<16} {:>12} {:>12}", "overall", overall(offline), overall(online));
+    println!(
+        "  {:<16} {:>12} {:>12}",
+        "overall",
+        overall(offline),
+        overall(online)
+    );
     if let Some(divergence) = online.and_then(|s| s.divergence.as_ref()) {
         println!("  {divergence}");
     }

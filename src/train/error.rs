@@ -201,7 +201,7 @@ pub enum TrainError {
     )]
     #[diagnostic(
         code(gbm::E0424),
-        help("use a --val-fraction that leaves both parts {needed} rows, or hold out whole experiments")
+        help("use a --val-fraction that leaves both parts at least {needed} rows, or hold out whole experiments")
     )]
     SplitTooSmall {
         /// The experiment.
@@ -248,6 +248,26 @@ pub enum TrainError {
         state: String,
         /// The experiment.
         experiment: String,
+    },
+    /// An experiment shorter than the embedding's history under `--history measured`.
+    #[error(
+        "expected experiment `{experiment}` to span more than {needed} time units (the \
+         embedding's history, with --history measured), found {found}"
+    )]
+    #[diagnostic(
+        code(gbm::E0428),
+        help(
+            "drop the experiment, use a shorter embedding, or --history held (the history \
+             before the first row held at the first values)"
+        )
+    )]
+    ExperimentTooShort {
+        /// The experiment.
+        experiment: String,
+        /// The embedding's span.
+        needed: f64,
+        /// The experiment's span.
+        found: f64,
     },
     /// Nothing left to train on.
     #[error("expected at least one training experiment, found none")]

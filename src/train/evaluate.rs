@@ -249,7 +249,14 @@ pub fn run_in(
     let needed = !model.hidden.is_empty() || !track.fully_known();
     if !needed || track.is_empty() {
         return Ok(RunIn {
-            hidden: vec![Vec::new(); if model.hidden.is_empty() { track.len() } else { 0 }],
+            hidden: vec![
+                Vec::new();
+                if model.hidden.is_empty() {
+                    track.len()
+                } else {
+                    0
+                }
+            ],
             states: track.states.clone(),
         });
     }
@@ -262,7 +269,9 @@ pub fn run_in(
         initial,
         (Feed::Data, None),
     )?;
-    let hidden = (run.states.iter()).map(|s| s[measured..].to_vec()).collect();
+    let hidden = (run.states.iter())
+        .map(|s| s[measured..].to_vec())
+        .collect();
     let states = (0..measured)
         .map(|index| run.states.iter().map(|s| s[index]).collect())
         .collect();
@@ -465,8 +474,7 @@ pub fn online_error(
         let outputs = run.outputs.get(offset + 1);
         for (index, &output) in normalisation.observables.iter().enumerate() {
             let predicted = outputs.and_then(|o| o.get(output));
-            if let (Some(value), Some(predicted)) = (track.observed_cell(output, knot), predicted)
-            {
+            if let (Some(value), Some(predicted)) = (track.observed_cell(output, knot), predicted) {
                 let std = normalisation.observable_std[index];
                 sum.add(measured + index, ((predicted - value) / std).powi(2));
             }
@@ -475,4 +483,3 @@ pub fn online_error(
     }
     sum
 }
-

@@ -68,8 +68,8 @@ impl Fit<'_> {
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
         // A state an experiment never measures is all fill: its estimate is the model's own
         // run, refreshed every epoch.
-        let unmeasured = (training.tracks.iter())
-            .any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
+        let unmeasured =
+            (training.tracks.iter()).any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
         let every = if unmeasured { 1 } else { FILL_REFRESH };
         for epoch in 1..=options.epochs {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);

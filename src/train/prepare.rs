@@ -8,9 +8,10 @@ use crate::record::{GridOptions, Normalisation, Part as Rows, Record, Track};
 use super::initial::{initial_state, InitialState};
 use super::pairs::{stage_fractions, PairAt};
 use super::split::{
-    known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training, TrainingData,
+    known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training,
+    TrainingData,
 };
-use super::{TrainError, TrainOptions};
+use super::{History, TrainError, TrainOptions};
 
 /// Everything the data fix before training.
 pub struct Layout {
@@ -54,9 +55,8 @@ impl Layout {
         let initial = (all.iter())
             .map(|record| initial_state(model, record))
             .collect::<Result<Vec<_>, _>>()?;
-        let lay = |record: &Record, start: &InitialState| {
-            Track::lay(record, &grid, &start.values())
-        };
+        let lay =
+            |record: &Record, start: &InitialState| Track::lay(record, &grid, &start.values());
         let tracks: Vec<Track> = (data.train.iter().zip(&initial))
             .map(|(r, i)| lay(r, i))
             .collect();
@@ -85,6 +85,11 @@ impl Layout {
             (offset, options.history),
             &fractions,
         ));
+        if options.history == History::Measured {
+            for track in tracks.iter().chain(&held_out) {
+                check_long_enough(model, track)?;
+            }
+        }
         validation_tracks.extend(held_out);
         let parts: Vec<Rows> = (data.train.iter().zip(&trainings))
             .map(|(record, training)| (record, training.rows.clone()))
@@ -192,6 +197,26 @@ fn densest_spacing(records: &[Record]) -> f64 {
             .flat_map(|r| r.times.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
             .collect();
         crate::numeric::median(&spacings).unwrap_or(f64::NAN)
+    })
+}
+
+/// Under `--history measured` an experiment must outlast the embedding's history by a step.
+fn check_long_enough(model: &ir::Model, track: &Track) -> Result<(), TrainError> {
+    if super::split::first_inside(model, track) + 1 < track.len() {
+        return Ok(());
+    }
+    let span = (model.closures.iter())
+        .map(|c| c.embedding.span())
+        .fold(0.0, f64::max);
+    let found = track
+        .times
+        .last()
+        .zip(track.times.first())
+        .map_or(0.0, |(b, a)| b - a);
+    Err(TrainError::ExperimentTooShort {
+        experiment: track.name.clone(),
+        needed: span,
+        found,
     })
 }
 

@@ -14,7 +14,9 @@ fn absorbance_model(start: f64) -> ir::Model {
          embed delay 10 dim 5\n  network hidden [16, 16] softplus\n}}\n\
          output absorbance = 2 * S\nder S = (S0 - S) / theta + r\n"
     );
-    crate::driver::compile("absorbance.gbm", &source, &[]).unwrap().model
+    crate::driver::compile("absorbance.gbm", &source, &[])
+        .unwrap()
+        .model
 }
 
 /// `data` with `S` replaced by the sensor reading `2 S`, named `name`.
@@ -64,7 +66,11 @@ fn a_measured_output_trains_a_model_whose_state_is_not_measured() {
     let names: Vec<&str> = online.per_state.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(names, vec!["absorbance"], "only the sensor has cells");
     let before = metrics.initial_online.as_ref().unwrap().overall;
-    assert!(online.overall < before / 5.0, "online {before} -> {}", online.overall);
+    assert!(
+        online.overall < before / 5.0,
+        "online {before} -> {}",
+        online.overall
+    );
     assert!(online.overall < 1.0, "{}", online.overall);
     assert!(trained.report.train_pairs > 250);
     // The free run's S is the sensor's reading over 2 (within the fit).
@@ -124,7 +130,12 @@ fn a_tail_split_scores_each_experiment_on_its_tail() {
         ..data
     };
     match train_with(&model, &too_small, &options, &Recipe::paper(), &mut quiet) {
-        Err(TrainError::SplitTooSmall { train, test, needed, .. }) => {
+        Err(TrainError::SplitTooSmall {
+            train,
+            test,
+            needed,
+            ..
+        }) => {
             assert_eq!((train, test, needed), (150, 0, 2));
         }
         Err(other) => panic!("expected a split too small, found {other}"),
@@ -164,7 +175,13 @@ fn cross_validation_holds_out_each_experiment_once() {
         .collect();
     online.sort_by(f64::total_cmp);
     assert_eq!(result.median_online, Some(online[1]));
-    let alone = cv::cross_validate(&model, &records[..1], (&options, &Recipe::paper()), &mut |_, _| {}, &mut quiet);
+    let alone = cv::cross_validate(
+        &model,
+        &records[..1],
+        (&options, &Recipe::paper()),
+        &mut |_, _| {},
+        &mut quiet,
+    );
     assert!(matches!(alone, Err(TrainError::BadOption { .. })));
 }
 
@@ -197,10 +214,67 @@ fn a_column_weight_scales_its_cells_in_the_loss() {
         ..options(1, 60)
     };
     match train_with(&model, &data, &bad, &Recipe::paper(), &mut quiet) {
-        Err(TrainError::BadOption { option, expected, .. }) => {
+        Err(TrainError::BadOption {
+            option, expected, ..
+        }) => {
             assert_eq!(option, "--weight");
             assert!(expected.contains("measured state"), "{expected}");
         }
         _ => panic!("expected a bad --weight"),
     }
+}
+
+/// A state without a cell at the first row and without a declared value starts at its
+/// first measured value, then is fitted with the trained model: here the exact law, so the
+/// fit recovers the true initial substrate that the first measured cell misses.
+#[test]
+fn an_unmeasured_initial_state_is_fitted_per_experiment() {
+    use crate::train::fixtures::ModelBuilder;
+    let (data, _) = chemostat::data(120, (0.002, 0.02), 9);
+    let inlet = data.column("E0").unwrap()[0];
+    let model = ModelBuilder::new("exact")
+        .input("E0")
+        .state("S")
+        .hidden("E", inlet)
+        .constant("S0", chemostat::S0)
+        .constant("theta", chemostat::THETA)
+        .constant("K_M", chemostat::K_M)
+        .param("kcat", chemostat::KCAT, crate::ir::Constraint::Positive)
+        .define("r", "kcat * E * S / (K_M + S)")
+        .der("S", "(S0 - S) / theta - r")
+        .der("E", "(E0 - E) / theta")
+        .build();
+    let mut thinned = record(&model, &data);
+    let truth = thinned.states[0][0].unwrap();
+    // Hide the cells until S has moved 2 %: the first one left is a poor start.
+    let cut = (thinned.states[0].iter())
+        .position(|c| (c.unwrap() / truth - 1.0).abs() > 0.02)
+        .unwrap();
+    assert!(cut < 100, "{cut}");
+    for cell in &mut thinned.states[0][..cut] {
+        *cell = None;
+    }
+    let train = [thinned];
+    let data = TrainingData {
+        train: &train,
+        validation: &[],
+        part: Part::All,
+    };
+    let options = TrainOptions {
+        train_points: None,
+        precision: crate::backend::Precision::F64,
+        ..options(0, 1)
+    };
+    let recipe = Recipe {
+        params: ParamSource::Train,
+        ..Recipe::paper()
+    };
+    let trained = train_with(&model, &data, &options, &recipe, &mut quiet).unwrap();
+    let start = &trained.report.initial_states[0];
+    let (name, value, origin) = &start.states[0];
+    assert_eq!((name.as_str(), *origin), ("S", Origin::Fitted));
+    assert!(
+        (value / truth - 1.0).abs() < 1e-4,
+        "fitted {value}, truth {truth}"
+    );
 }

@@ -95,7 +95,8 @@ pub(super) fn validate(
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     refresh(network, model, course, (&fractions, true), hidden_init)?;
     let norm = &setup.normalisation;
-    let (mut offline_all, mut online_all) = (ErrorSum::new(model, norm), ErrorSum::new(model, norm));
+    let (mut offline_all, mut online_all) =
+        (ErrorSum::new(model, norm), ErrorSum::new(model, norm));
     let mut each = Vec::new();
     for scoring in scorings {
         let pairs: Vec<PairAt> = scoring.pairs.iter().map(|&k| (scoring.track, k)).collect();

@@ -7,3 +7,4 @@ mod format;
 mod golden;
 mod lsp;
 mod parser;
+mod records;
