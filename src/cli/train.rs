@@ -142,9 +142,9 @@ pub struct TrainArgs {
     /// Adam learning rate.
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
-    /// The paper's protocol on one experiment: train on its first N one-step pairs; the
-    /// pairs after them validate when nothing else does (default with one experiment and no
-    /// other split: the first 70 %).
+    /// The paper's protocol: train on the first N one-step pairs after the embedding's
+    /// history (experiments in order); with one experiment and nothing else validating,
+    /// the pairs after them validate (default then: the first 70 %).
     #[arg(long, value_name = "N")]
     pub train_points: Option<usize>,
     /// Seed of the initialisation and the shuffling (same seed, same result).

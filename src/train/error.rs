@@ -56,7 +56,9 @@ pub enum TrainError {
     #[error("expected --train-points of at most {available}, found {requested}")]
     #[diagnostic(
         code(gbm::E0413),
-        help("the record yields {available} training pairs after the embedding's history")
+        help(
+            "the data yield {available} training pairs after each experiment's embedding history"
+        )
     )]
     TooManyTrainPoints {
         /// Pairs available.
@@ -177,22 +179,6 @@ pub enum TrainError {
     ParamsFromBalances {
         /// The model's name.
         model: String,
-    },
-    /// `--train-points` (the paper's protocol) with several training experiments.
-    #[error(
-        "expected one training experiment for --train-points (the first pairs of one record), \
-         found {experiments}"
-    )]
-    #[diagnostic(
-        code(gbm::E0423),
-        help(
-            "with several experiments hold out whole ones (--holdout NAME, --val FILE) or the \
-             tail of each (--val-fraction F)"
-        )
-    )]
-    TrainPointsOnSeveral {
-        /// Training experiments given.
-        experiments: usize,
     },
     /// A tail split that leaves a part too small.
     #[error(
