@@ -255,6 +255,16 @@ pub enum TrainError {
         /// The experiment's span.
         found: f64,
     },
+    /// `gbc train -o DIR` onto a directory that already holds files.
+    #[error("expected an empty or new run directory, found files in `{directory}`")]
+    #[diagnostic(
+        code(gbm::E0429),
+        help("choose another -o DIR, or pass --force to replace the run in it")
+    )]
+    RunExists {
+        /// The directory.
+        directory: String,
+    },
     /// Nothing left to train on.
     #[error("expected at least one training experiment, found none")]
     #[diagnostic(

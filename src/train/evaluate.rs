@@ -464,9 +464,9 @@ pub fn online_error(
         if track.times[knot] < scored_from {
             continue;
         }
-        for state in 0..measured {
+        for (state, &value) in next.iter().enumerate().take(measured) {
             if track.measured[state][knot] {
-                let error = next[state] - track.states[state][knot];
+                let error = value - track.states[state][knot];
                 sum.add(state, (error / normalisation.state_std[state]).powi(2));
             }
         }

@@ -199,6 +199,8 @@ pub struct TrainReport {
     pub initial_states: Vec<InitialState>,
     /// The grid's longest step.
     pub dt: f64,
+    /// The Adam learning rate of the network weights.
+    pub learning_rate: f64,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -391,6 +393,7 @@ pub fn train_with(
         balance_fit,
         initial_states,
         dt: layout.grid.max_step,
+        learning_rate: options.learning_rate,
     };
     Ok(Trained {
         network,

@@ -83,6 +83,9 @@ pub(super) fn refresh(
     Ok(())
 }
 
+/// Offline and online errors pooled over all scorings, and the errors of each.
+pub(super) type Validated = (Option<ErrorSet>, Option<ErrorSet>, Vec<ValidationErrors>);
+
 /// Offline and online errors pooled over `scorings`, and per scoring, with the current
 /// network (hidden states and fill run in first).
 pub(super) fn validate(
@@ -91,7 +94,7 @@ pub(super) fn validate(
     (course, scorings): (&mut Course, &[Scoring]),
     (setup, options, range): (&Setup, &TrainOptions, Option<&PhysicalRange>),
     hidden_init: &[f64],
-) -> Result<(Option<ErrorSet>, Option<ErrorSet>, Vec<ValidationErrors>), TrainError> {
+) -> Result<Validated, TrainError> {
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     refresh(network, model, course, (&fractions, true), hidden_init)?;
     let norm = &setup.normalisation;

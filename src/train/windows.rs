@@ -72,13 +72,17 @@ pub fn window_embedding(
     (raw, feedback)
 }
 
+/// What rollouts read: the tracks, the hidden-state estimates per track and knot, the
+/// column weights and the measured model outputs.
+pub type RolloutData<'a> = (&'a [Track], &'a [Vec<Vec<f64>>], &'a [f64], &'a [usize]);
+
 /// A batch of `steps`-step windows starting at `starts` (track and knot; every
 /// `start + steps` must be a knot of its track); `hidden[track][knot]` holds the
 /// hidden-state estimates; each measured cell weighs its column's `weights[state]` (empty:
 /// 1); `observables` are the measured model outputs (the normalisation's).
 pub fn rollout_batch(
     model: &ir::Model,
-    (tracks, hidden, weights, observables): (&[Track], &[Vec<Vec<f64>>], &[f64], &[usize]),
+    (tracks, hidden, weights, observables): RolloutData,
     starts: &[PairAt],
     steps: usize,
     fractions: &[f64],
