@@ -68,7 +68,8 @@ fn training_on_several_irregular_experiments_validates_the_held_out_one() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert!(stdout.contains("validation on c ("), "{stdout}");
     // Without a choice, the last experiment validates and the user is told.
-    let out = gbc(&["train", MODEL, &a, &b, &c, "--epochs", "1"]);
+    let second = dir.join("run2").display().to_string();
+    let out = gbc(&["train", MODEL, &a, &b, &c, "--epochs", "1", "-o", &second]);
     assert!(text(&out.stderr).contains("validating on experiment `c`"));
     // Predictions of two experiments in one file, each row labelled.
     let predictions = dir.join("p.csv").display().to_string();
@@ -90,7 +91,10 @@ fn training_on_several_irregular_experiments_validates_the_held_out_one() {
     assert_eq!(table.lines().filter(|l| l.starts_with("a,")).count(), 90);
     assert_eq!(table.lines().filter(|l| l.starts_with("b,")).count(), 80);
     // Cross-validation reports each fold and the median.
-    let out = gbc(&["train", MODEL, &a, &b, &c, "--cv", "--epochs", "1"]);
+    let folds = dir.join("cv").display().to_string();
+    let out = gbc(&[
+        "train", MODEL, &a, &b, &c, "--cv", "--epochs", "1", "-o", &folds,
+    ]);
     let stdout = text(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert!(stdout.contains("cross-validation (3 folds)"), "{stdout}");
