@@ -20,8 +20,8 @@ use crate::experiment::results::summarise;
 use crate::experiment::study::Training;
 use crate::experiment::study::{parse_model_argument, parse_sizes};
 use crate::experiment::{
-    execute, grid, prepare, ExperimentError, ExperimentFailure, Prepared, Progress, RunResult,
-    RunSpec, Shard, Study, Validation,
+    execute, grid, prepare, DataFiles, ExperimentError, ExperimentFailure, Prepared, Progress,
+    RunResult, RunSpec, Shard, Study, Validation,
 };
 use crate::train::Engine;
 
@@ -86,9 +86,13 @@ pub struct RunArgs {
     /// A model to train, as `LABEL=PATH` or `PATH` (labelled by its file stem); repeat.
     #[arg(long = "model", value_name = "[LABEL=]PATH")]
     pub models: Vec<String>,
-    /// The training record.
+    /// The training record; with --holdout, the files of a data set (repeat).
     #[arg(long, value_name = "CSV")]
-    pub data: Option<PathBuf>,
+    pub data: Vec<PathBuf>,
+    /// Hold out the experiment NAME of the data set (a file stem or a value of its
+    /// experiment column) and free-run it whole; every other experiment trains (repeat).
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["val", "val_from"])]
+    pub holdout: Vec<String>,
     /// A separate validation record (every row of --data may then train).
     #[arg(long, value_name = "CSV", conflicts_with = "val_from")]
     pub val: Option<PathBuf>,
@@ -204,14 +208,18 @@ fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
             found: "none (and no --preset or --config)".into(),
         })
     };
-    let data = args
-        .data
-        .clone()
-        .ok_or_else(|| missing("--data", "a training record"))?;
-    let validation = match (&args.val, args.val_from) {
-        (Some(path), _) => Validation::File(path.clone()),
-        (None, Some(row)) => Validation::FromRow(row),
-        (None, None) => return Err(missing("--val/--val-from", "a validation record or row")),
+    if args.data.is_empty() {
+        return Err(missing("--data", "a training record"));
+    }
+    let data = DataFiles::from_paths(args.data.clone());
+    let validation = match (&args.val, args.val_from, args.holdout.is_empty()) {
+        (_, _, false) => Validation::Holdout(args.holdout.clone()),
+        (Some(path), _, _) => Validation::File(path.clone()),
+        (None, Some(row), _) => Validation::FromRow(row),
+        (None, None, true) => {
+            let expected = "a validation record, row or held-out experiment";
+            return Err(missing("--val/--val-from/--holdout", expected));
+        }
     };
     let sizes = args
         .sizes
@@ -240,13 +248,14 @@ fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
 }
 
 fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandError> {
-    if let Some(data) = &args.data {
-        study.data = data.clone();
+    if !args.data.is_empty() {
+        study.data = DataFiles::from_paths(args.data.clone());
     }
-    match (&args.val, args.val_from) {
-        (Some(path), _) => study.validation = Validation::File(path.clone()),
-        (None, Some(row)) => study.validation = Validation::FromRow(row),
-        (None, None) => {}
+    match (&args.val, args.val_from, args.holdout.is_empty()) {
+        (_, _, false) => study.validation = Validation::Holdout(args.holdout.clone()),
+        (Some(path), _, _) => study.validation = Validation::File(path.clone()),
+        (None, Some(row), _) => study.validation = Validation::FromRow(row),
+        (None, None, true) => {}
     }
     if let Some(sizes) = &args.sizes {
         study.sizes = parse_sizes(sizes).map_err(user)?;

@@ -13,6 +13,7 @@ use sha2::{Digest, Sha256};
 use super::grid::RunSpec;
 use super::reference::{free_run, free_run_error, free_run_errors, mean_error};
 use super::results::{self, Fingerprint, Measure, RunResult, RunStatus, StudyRecord};
+use super::set::{self, SetSplit};
 use super::{ExperimentError, ExperimentFailure, Study, Validation};
 use crate::data::{Column, Dataset, MinRows};
 use crate::ir;
@@ -37,6 +38,8 @@ pub struct LoadedModel {
     pub available: usize,
     /// The row of [`Prepared::validation_source`] its validation record starts at.
     pub offset: usize,
+    /// On a data set: its training and held-out experiments (then `validation` is empty).
+    pub set: Option<SetSplit>,
 }
 
 /// A study with everything loaded and checked.
@@ -98,25 +101,22 @@ pub fn prepare(study: &Study) -> Result<Prepared, ExperimentFailure> {
     if !reports.is_empty() {
         return Err(ExperimentFailure::User(reports));
     }
+    if study.on_data_set() {
+        return prepare_set(study, compiled, truth);
+    }
     let required = required_columns(&compiled, truth.as_ref());
-    let data = read_record(&study.data, &required)?;
+    let data = read_record(study.data.paths()[0], &required)?;
     let split = Split::new(study, &data, &required)?;
     let mut models = Vec::new();
     for (spec, model) in study.models.iter().zip(compiled) {
         let history = first_pair_row(&model, data.step);
         let (validation, available, offset) = split.for_model(&spec.label, history)?;
-        if let Some(size) = study.sizes.iter().copied().find(|s| *s > available) {
-            return Err(ExperimentError::BadOption {
-                option: "--sizes".into(),
-                expected: format!(
-                    "sizes of at most {available} (the training pairs of `{}` before the \
-                     validation window)",
-                    spec.label
-                ),
-                found: size.to_string(),
-            }
-            .into());
-        }
+        check_sizes(
+            study,
+            &spec.label,
+            available,
+            "before the validation window",
+        )?;
         models.push(LoadedModel {
             label: spec.label.clone(),
             path: spec.path.clone(),
@@ -125,6 +125,7 @@ pub fn prepare(study: &Study) -> Result<Prepared, ExperimentFailure> {
             validation,
             available,
             offset,
+            set: None,
         });
     }
     let generalisation = (study.generalisation.iter())
@@ -140,6 +141,68 @@ pub fn prepare(study: &Study) -> Result<Prepared, ExperimentFailure> {
         generalisation,
         truth,
     })
+}
+
+/// A study on a data set: each model binds the experiments to its own columns.
+fn prepare_set(
+    study: &Study,
+    compiled: Vec<ir::Model>,
+    truth: Option<ir::Model>,
+) -> Result<Prepared, ExperimentFailure> {
+    let first = study.data.paths()[0].to_path_buf();
+    let empty = Dataset {
+        path: first,
+        times: Vec::new(),
+        step: 0.0,
+        columns: Vec::new(),
+    };
+    let mut models = Vec::new();
+    for (spec, model) in study.models.iter().zip(compiled) {
+        let split = set::load(study, &model)?;
+        let available = set::available_pairs(&model, &split, &study_options(study))?;
+        check_sizes(study, &spec.label, available, "in the training experiments")?;
+        models.push(LoadedModel {
+            label: spec.label.clone(),
+            path: spec.path.clone(),
+            source: std::fs::read_to_string(&spec.path).unwrap_or_default(),
+            model,
+            validation: empty.clone(),
+            available,
+            offset: 0,
+            set: Some(split),
+        });
+    }
+    Ok(Prepared {
+        record: study_record(study)?,
+        study: study.clone(),
+        reference_scale: set::reference_scale(&models),
+        training: empty.clone(),
+        validation_source: empty,
+        models,
+        generalisation: Vec::new(),
+        truth,
+    })
+}
+
+/// Refuses a size above the `available` training pairs of model `label` (`where_`: where
+/// they come from).
+fn check_sizes(
+    study: &Study,
+    label: &str,
+    available: usize,
+    where_: &str,
+) -> Result<(), ExperimentFailure> {
+    match study.sizes.iter().copied().find(|s| *s > available) {
+        Some(size) => Err(ExperimentError::BadOption {
+            option: "--sizes".into(),
+            expected: format!(
+                "sizes of at most {available} (the training pairs of `{label}` {where_})"
+            ),
+            found: size.to_string(),
+        }
+        .into()),
+        None => Ok(()),
+    }
 }
 
 /// Every column the models (and the truth's inputs) read.
@@ -211,6 +274,9 @@ impl Split {
                 start: 0,
                 separate: true,
             }),
+            Validation::Holdout(_) => Err(ExperimentFailure::Internal(
+                "a uniform split asked of a study on a data set".into(),
+            )),
         }
     }
 
@@ -422,16 +488,28 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// The training options of a run.
 pub fn options_of(study: &Study, spec: &RunSpec) -> TrainOptions {
     TrainOptions {
+        train_points: Some(spec.size),
+        seed: spec.seed,
+        ..study_options(study)
+    }
+}
+
+/// The training options every run of `study` shares.
+fn study_options(study: &Study) -> TrainOptions {
+    TrainOptions {
         epochs: study.epochs,
         batch_size: study.batch_size,
         learning_rate: study.learning_rate,
-        train_points: Some(spec.size),
-        seed: spec.seed,
         precision: study.precision,
         substeps: study.substeps,
         engine: study.engine,
-        // The paper's protocol: validation runs start from measured history.
-        history: train::History::Measured,
+        // The paper's protocol: validation runs start from measured history. On a data
+        // set, each experiment starts at its first row (as `gbc train` does).
+        history: if study.on_data_set() {
+            train::History::Held
+        } else {
+            train::History::Measured
+        },
         // The free run covers the whole validation window (the default).
         ..TrainOptions::default()
     }
@@ -447,18 +525,10 @@ fn run_one(
     let loaded = &prepared.models[spec.model];
     let options = options_of(&prepared.study, spec);
     let started = Instant::now();
-    let training = train::record_of(&loaded.model, &prepared.training);
-    let validation = train::record_of(&loaded.model, &loaded.validation);
-    let trained = training.and_then(|training| {
-        let validation = validation?;
-        let data = train::TrainingData {
-            train: std::slice::from_ref(&training),
-            validation: std::slice::from_ref(&validation),
-            part: train::Part::All,
-        };
+    let train_on = |data: &train::TrainingData| {
         train::train_with(
             &loaded.model,
-            &data,
+            data,
             &options,
             &prepared.study.training.recipe(),
             &mut |event| {
@@ -467,7 +537,18 @@ fn run_one(
                 }
             },
         )
-    });
+    };
+    let trained = match &loaded.set {
+        Some(set) => train_on(&set.training_data()),
+        None => train::record_of(&loaded.model, &prepared.training).and_then(|training| {
+            let validation = train::record_of(&loaded.model, &loaded.validation)?;
+            train_on(&train::TrainingData {
+                train: std::slice::from_ref(&training),
+                validation: std::slice::from_ref(&validation),
+                part: train::Part::All,
+            })
+        }),
+    };
     let result = match trained.and_then(|trained| {
         let result = evaluate(prepared, loaded, spec, &trained, started)?;
         save_weights(
@@ -530,23 +611,15 @@ fn evaluate(
         (results::finite(mean), per_state)
     };
     let (offline_mse, offline_per_state) = rescale(&report.metrics.offline);
-    let run = free_run(
-        &loaded.model,
-        &trained.network,
-        &trained.setup,
-        &loaded.validation,
-    )?;
-    let reference = |name: &str, column: &[f64]| {
-        (prepared.reference_scale.iter())
-            .find(|(n, _)| n == name)
-            .map_or_else(|| mean_std(column).1, |(_, s)| *s)
-    };
-    let online = free_run_errors(&loaded.model, &run, &loaded.validation, &reference);
-    let online_mse = results::finite(mean_error(&online));
-    let online_per_state = online.iter().map(|(n, e)| Measure::new(n, *e)).collect();
     let left_range = (report.metrics.online.as_ref())
         .and_then(|set| set.divergence.as_ref())
         .map(ToString::to_string);
+    // On a data set the held-out experiments' free runs are training's own online error.
+    let (online_mse, online_per_state) = if loaded.set.is_some() {
+        rescale(&report.metrics.online)
+    } else {
+        uniform_online(prepared, loaded, trained)?
+    };
     let mut generalisation = Vec::new();
     for data in &prepared.generalisation {
         let error = free_run_error(&loaded.model, &trained.network, &trained.setup, data)?;
@@ -580,6 +653,30 @@ fn evaluate(
     })
 }
 
+/// The online error of a run on the paper's protocol: one free run over the validation
+/// window, on the study's common scale.
+fn uniform_online(
+    prepared: &Prepared,
+    loaded: &LoadedModel,
+    trained: &Trained,
+) -> Result<(Option<f64>, Vec<Measure>), train::TrainError> {
+    let run = free_run(
+        &loaded.model,
+        &trained.network,
+        &trained.setup,
+        &loaded.validation,
+    )?;
+    let reference = |name: &str, column: &[f64]| {
+        (prepared.reference_scale.iter())
+            .find(|(n, _)| n == name)
+            .map_or_else(|| mean_std(column).1, |(_, s)| *s)
+    };
+    let online = free_run_errors(&loaded.model, &run, &loaded.validation, &reference);
+    let online_mse = results::finite(mean_error(&online));
+    let online_per_state = online.iter().map(|(n, e)| Measure::new(n, *e)).collect();
+    Ok((online_mse, online_per_state))
+}
+
 fn save_weights(
     prepared: &Prepared,
     loaded: &LoadedModel,
@@ -588,7 +685,7 @@ fn save_weights(
     directory: &Path,
 ) -> Result<(), train::TrainError> {
     let model_path = loaded.path.display().to_string();
-    let data_path = prepared.study.data.display().to_string();
+    let data_path = prepared.study.data.describe();
     let mut info = artifacts::run_info(
         &loaded.model,
         (&model_path, &loaded.source),

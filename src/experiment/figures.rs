@@ -69,8 +69,17 @@ pub fn draw(
             Err(note) => notes.push(note),
         }
     }
-    figures.extend(trajectory_figures(prepared, &trained, size, &mut notes));
-    figures.extend(closure_figures(prepared, &trained, size, &mut notes));
+    if prepared.study.on_data_set() {
+        figures.extend(super::set::held_out_figures(prepared, &trained, size));
+        notes.push(
+            "the closure figures need one uniform record along which the truth runs: left out \
+             on a data set"
+                .into(),
+        );
+    } else {
+        figures.extend(trajectory_figures(prepared, &trained, size, &mut notes));
+        figures.extend(closure_figures(prepared, &trained, size, &mut notes));
+    }
     figures.extend(params_figure(prepared, results, size));
     for data in &prepared.generalisation {
         figures.extend(generalisation_figures(
@@ -98,7 +107,8 @@ pub enum Metric {
     Online,
 }
 
-fn color(index: usize) -> &'static str {
+/// The colour of the model at `index` in the study.
+pub fn color(index: usize) -> &'static str {
     PALETTE[index % PALETTE.len()]
 }
 
@@ -195,7 +205,8 @@ fn restore_representative(
     Ok((network, setup, run.id.clone()))
 }
 
-type TrainedModel = (usize, Network, Setup, String);
+/// A model's index in the study, its representative network and setup, and the run id.
+pub type TrainedModel = (usize, Network, Setup, String);
 
 /// Predictions of every restored model along `data`, with the notes of those that failed.
 fn predictions<'a>(

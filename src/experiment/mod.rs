@@ -25,6 +25,7 @@ pub mod merge;
 pub mod reference;
 pub mod report;
 pub mod results;
+pub mod set;
 pub mod study;
 pub mod tables;
 #[cfg(test)]
@@ -37,7 +38,7 @@ pub use execute::{execute, prepare, LoadedModel, Prepared, Progress};
 pub use grid::{grid, RunSpec, Shard};
 pub use merge::merge;
 pub use results::{RunResult, RunStatus, StudyRecord};
-pub use study::{Study, StudyModel, Validation};
+pub use study::{DataFiles, Study, StudyModel, Validation};
 
 use crate::ir;
 

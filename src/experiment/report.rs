@@ -99,13 +99,18 @@ pub fn describe(study: &Study) -> String {
             "<code>{}</code> validates",
             escape(&path.display().to_string())
         ),
+        Validation::Holdout(names) => format!(
+            "experiments {} are held out and free-run whole; the first pairs of the others, \
+             in data-set order, train",
+            escape(&names.join(", "))
+        ),
     };
     format!(
         "<p>Models {}. Data <code>{}</code>: {validation}. Sizes {:?} training pairs, {} \
          replicates (seeds {}..), {} epochs, batch {}, learning rate {}, {:?}, training \
          recipe <code>{}</code>.</p>",
         models.join(", "),
-        escape(&study.data.display().to_string()),
+        escape(&study.data.describe()),
         study.sorted_sizes(),
         study.replicates,
         study.first_seed,

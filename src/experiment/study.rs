@@ -31,6 +31,53 @@ pub enum Validation {
     FromRow(usize),
     /// Every row of the training file may train; this whole file validates.
     File(PathBuf),
+    /// The study runs on a data set (records spec): the experiments named here (file
+    /// stems or values of the experiment column) are held out and free-run whole; every
+    /// other experiment trains, its first pairs in data-set order making up a size.
+    Holdout(Vec<String>),
+}
+
+/// The training data of a study: one record, or the files of a data set.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum DataFiles {
+    /// One CSV file (written as a string: the paper's studies).
+    One(PathBuf),
+    /// Several files read as one data set (written as a list).
+    Many(Vec<PathBuf>),
+}
+
+impl DataFiles {
+    /// The files, in order.
+    pub fn paths(&self) -> Vec<&Path> {
+        match self {
+            DataFiles::One(path) => vec![path.as_path()],
+            DataFiles::Many(paths) => paths.iter().map(PathBuf::as_path).collect(),
+        }
+    }
+
+    /// The files for messages and reports, comma-separated.
+    pub fn describe(&self) -> String {
+        let names: Vec<String> = (self.paths().iter())
+            .map(|p| p.display().to_string())
+            .collect();
+        names.join(", ")
+    }
+
+    /// One file as [`DataFiles::One`], several as [`DataFiles::Many`].
+    pub fn from_paths(mut paths: Vec<PathBuf>) -> DataFiles {
+        if paths.len() == 1 {
+            DataFiles::One(paths.remove(0))
+        } else {
+            DataFiles::Many(paths)
+        }
+    }
+}
+
+impl From<PathBuf> for DataFiles {
+    fn from(path: PathBuf) -> Self {
+        DataFiles::One(path)
+    }
 }
 
 /// How every run of a study trains.
@@ -75,8 +122,8 @@ pub struct Study {
     pub title: String,
     /// The models, in legend order.
     pub models: Vec<StudyModel>,
-    /// The training record.
-    pub data: PathBuf,
+    /// The training record, or the files of a data set (with [`Validation::Holdout`]).
+    pub data: DataFiles,
     /// The validation split.
     pub validation: Validation,
     /// Training sizes (number of training pairs, the first ones of the record).
@@ -146,7 +193,7 @@ impl Study {
             name: "chemostat".into(),
             title: "Chemostat with one enzyme reaction (paper section 3.1, Fig. 2)".into(),
             models: models(dir, &["greybox", "blackbox", "blackbox_residual"]),
-            data: dir.join("data/steps.csv"),
+            data: dir.join("data/steps.csv").into(),
             validation: Validation::FromRow(1550),
             sizes: vec![100, 200, 500, 1000, 1500],
             replicates: 20,
@@ -173,7 +220,7 @@ impl Study {
             name: "bioreactor".into(),
             title: "Light-controlled bioreactor (paper section 3.2, Fig. 3)".into(),
             models: models(dir, &["gb1", "gb2", "blackbox", "blackbox_residual"]),
-            data: dir.join("data/steps.csv"),
+            data: dir.join("data/steps.csv").into(),
             validation: Validation::FromRow(2100),
             sizes: vec![100, 200, 500, 1000, 2000],
             replicates: 10,
@@ -213,7 +260,7 @@ impl Study {
     /// fingerprints.
     pub fn files(&self) -> Vec<&Path> {
         let mut paths: Vec<&Path> = self.models.iter().map(|m| m.path.as_path()).collect();
-        paths.push(&self.data);
+        paths.extend(self.data.paths());
         if let Validation::File(path) = &self.validation {
             paths.push(path);
         }
@@ -314,7 +361,32 @@ impl Study {
         if let Validation::FromRow(0) = self.validation {
             return bad("--val-from", "a row after the first", "0".into());
         }
+        match (&self.validation, &self.data) {
+            (Validation::Holdout(names), _) if names.is_empty() => {
+                return bad("--holdout", "the name of an experiment", "none".into());
+            }
+            (Validation::Holdout(_), _) if !self.generalisation.is_empty() => {
+                let expected = "no --generalisation record on a data set (hold the \
+                                experiment out with --holdout instead)";
+                return bad(
+                    "--generalisation",
+                    expected,
+                    self.generalisation.len().to_string(),
+                );
+            }
+            (Validation::FromRow(_) | Validation::File(_), DataFiles::Many(paths)) => {
+                let expected = "one training record, or --holdout NAME to validate on whole \
+                                experiments of a data set";
+                return bad("--data", expected, format!("{} files", paths.len()));
+            }
+            _ => {}
+        }
         Ok(())
+    }
+
+    /// Whether the study runs on a data set of experiments (held-out validation).
+    pub fn on_data_set(&self) -> bool {
+        matches!(self.validation, Validation::Holdout(_))
     }
 
     /// The size the trajectory, closure and param figures show: the representative size if

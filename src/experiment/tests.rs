@@ -421,3 +421,49 @@ fn long_series_are_thinned_to_every_kth_point_and_the_last() {
     assert_eq!(kept.last().map(|p| p.0), Some(2.0 * MAX_POINTS as f64));
     assert!(kept.windows(2).all(|w| w[1].0 - w[0].0 <= 3.0));
 }
+
+#[test]
+fn studies_on_data_sets_read_back_and_one_file_stays_a_string() {
+    // The paper's studies keep `"data": "path"`, so existing experiment directories keep
+    // their identity; a data set is a list with held-out experiments.
+    let json = Study::chemostat().to_json();
+    assert!(json.contains("\"data\": \"models/"), "{json}");
+    let lab = Study::load(Path::new("experiments/lab.json")).map_err(|e| e.to_string());
+    let lab = lab.expect("the shipped lab study reads");
+    assert!(lab.on_data_set());
+    assert_eq!(lab.data.paths().len(), 4);
+    assert_eq!(lab.validation, Validation::Holdout(vec!["run4".into()]));
+    for file in lab.files() {
+        assert!(file.is_file(), "{} is shipped", file.display());
+    }
+    assert_eq!(
+        Study::parse("lab.json", &lab.to_json()).ok(),
+        Some(lab.clone())
+    );
+    // Several files need held-out experiments; a data set has no generalisation records.
+    let refused = |study: Study, option: &str| match study.check() {
+        Err(ExperimentError::BadOption { option: found, .. }) => assert_eq!(found, option),
+        other => panic!("expected {option} refused, found {other:?}"),
+    };
+    refused(
+        Study {
+            validation: Validation::FromRow(100),
+            ..lab.clone()
+        },
+        "--data",
+    );
+    refused(
+        Study {
+            generalisation: vec!["x.csv".into()],
+            ..lab.clone()
+        },
+        "--generalisation",
+    );
+    refused(
+        Study {
+            validation: Validation::Holdout(Vec::new()),
+            ..lab
+        },
+        "--holdout",
+    );
+}

@@ -504,6 +504,20 @@ fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
     Ok(())
 }
 
+/// How many one-step pairs `data`'s training experiments offer `model` (the largest
+/// `train_points`), under `options`' grid and history.
+pub fn available_pairs(
+    model: &ir::Model,
+    data: &TrainingData,
+    options: &TrainOptions,
+) -> Result<usize, TrainError> {
+    let data = TrainingData {
+        part: Part::FirstPairs(None),
+        ..*data
+    };
+    Ok(Layout::new(model, &data, options)?.pairs.len())
+}
+
 /// The measured states and inputs of `model` from a complete record `data`, as a
 /// [`crate::record::Record`].
 pub fn record_of(

@@ -142,7 +142,12 @@ pub fn split_training(
                     fractions,
                 )?;
                 if let Some(left) = left.as_mut() {
-                    *left -= training.knots.len();
+                    *left -= training_pairs(
+                        model,
+                        std::slice::from_ref(track),
+                        std::slice::from_ref(&training),
+                    )
+                    .len();
                 }
                 trainings.push(training);
                 scorings.extend(scoring.map(|s| Scoring { track: index, ..s }));
@@ -207,12 +212,22 @@ fn first_pairs(
         });
     }
     let available = track.len() - 1 - first;
-    let count = match count {
-        Some(requested) => requested.min(available),
-        None if !validate_rest => available,
-        None => ((available as f64 * DEFAULT_TRAIN_SHARE).round() as usize).clamp(1, available),
+    let end = match count {
+        // A size counts the pairs that train (on a complete uniform record, every knot).
+        Some(requested) => {
+            let observed = observed_states(model, track);
+            let pair_knots = (first..track.len() - 1)
+                .filter(|&k| trains_at(track, &observed, k))
+                .take(requested);
+            pair_knots.last().map_or(first, |k| k + 1)
+        }
+        None if !validate_rest => first + available,
+        None => {
+            let share = (available as f64 * DEFAULT_TRAIN_SHARE).round() as usize;
+            first + share.clamp(1, available)
+        }
     };
-    let end = first + count;
+    let count = end - first;
     let last_row = if count == 0 {
         0
     } else {
@@ -304,18 +319,27 @@ pub fn whole_experiments(
 /// reference, the model's fill included where the data are too sparse (records spec,
 /// section 3); on a complete record these are exactly the pairs of measured history.
 pub fn training_pairs(model: &ir::Model, tracks: &[Track], trainings: &[Training]) -> Vec<PairAt> {
-    let measured = model.states.len();
     let mut pairs = Vec::new();
     for (index, (track, training)) in tracks.iter().zip(trainings).enumerate() {
-        // A state the experiment never measures starts from the model's own run.
-        let observed: Vec<usize> = (0..measured)
-            .filter(|&i| track.measured[i].iter().any(|&m| m))
-            .collect();
-        let knots = (training.knots.clone())
-            .filter(|&k| has_target(track, k) && observed.iter().all(|&i| track.known[i][k]));
+        let observed = observed_states(model, track);
+        let knots = (training.knots.clone()).filter(|&k| trains_at(track, &observed, k));
         pairs.extend(knots.map(|k| (index, k)));
     }
     pairs
+}
+
+/// The states `track` measures at all (a state never measured starts from the model's own
+/// run, so it does not hold a step back from training).
+fn observed_states(model: &ir::Model, track: &Track) -> Vec<usize> {
+    (0..model.states.len())
+        .filter(|&i| track.measured[i].iter().any(|&m| m))
+        .collect()
+}
+
+/// Whether the step at `knot` trains: its end has a measured cell and its start is known
+/// from data for every `observed` state.
+fn trains_at(track: &Track, observed: &[usize], knot: usize) -> bool {
+    has_target(track, knot) && observed.iter().all(|&i| track.known[i][knot])
 }
 
 /// The steps inside each training range whose two ends are known from data for every

@@ -157,3 +157,105 @@ fn bad_data_sets_are_refused_naming_file_row_and_column() {
         &["E0425", "blackbox_ode.gbm"],
     );
 }
+
+/// A study on a data set: the held-out experiment free-runs whole, a size counts training
+/// pairs over the training experiments, and each run trains exactly what `gbc train` trains
+/// on the same experiments (the same final loss, bit for bit); bad splits are refused.
+#[test]
+fn experiment_on_a_data_set_holds_out_whole_experiments() {
+    let dir = scratch("records-study");
+    let a = write(&dir, "a.csv", &experiment(90, 0.0));
+    let b = write(&dir, "b.csv", &experiment(80, 5.0));
+    let c = write(&dir, "c.csv", &experiment(70, 9.0));
+    let model = format!("gb={MODEL}");
+    let study = |extra: &[&str], out: &str| {
+        let mut args = vec![
+            "experiment",
+            "--model",
+            &model,
+            "--data",
+            &a,
+            "--data",
+            &b,
+            "--data",
+            &c,
+            "--replicates",
+            "1",
+            "--epochs",
+            "2",
+            "--training",
+            "multi-step",
+            "--jobs",
+            "1",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        gbc(&args)
+    };
+    let out_dir = dir.join("study").display().to_string();
+    let out = study(&["--holdout", "c", "--sizes", "40"], &out_dir);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let results: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("study/results.json")).expect("results"),
+    )
+    .expect("json");
+    let run = &results[0];
+    assert_eq!(run["train_pairs"], 40, "{run}");
+    assert!(
+        run["online_mse"].as_f64().is_some_and(f64::is_finite),
+        "{run}"
+    );
+    assert!(dir.join("study/figures/heldout_c_S.svg").exists());
+    // The same training through `gbc train`.
+    let json = dir.join("train.json").display().to_string();
+    let run_dir = dir.join("train-run").display().to_string();
+    let out = gbc(&[
+        "train",
+        MODEL,
+        &a,
+        &b,
+        &c,
+        "--holdout",
+        "c",
+        "--train-points",
+        "40",
+        "--epochs",
+        "2",
+        "--seed",
+        "1",
+        "--json",
+        &json,
+        "-o",
+        &run_dir,
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let trained: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("json");
+    assert_eq!(trained["training"]["train_pairs"], 40);
+    assert_eq!(
+        trained["training"]["final_loss"].as_f64(),
+        run["final_loss"].as_f64()
+    );
+    assert_eq!(
+        trained["training"]["validation_pairs"],
+        run["validation_pairs"]
+    );
+    // An unknown experiment, a size above the pairs there are, several files without
+    // held-out experiments: each refused with exit code 1.
+    let bad = |extra: &[&str], expected: &str| {
+        let out = study(extra, &dir.join("bad").display().to_string());
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{extra:?}\n{stderr}");
+        assert!(
+            stderr.contains(expected),
+            "missing `{expected}` in:\n{stderr}"
+        );
+    };
+    bad(&["--holdout", "d", "--sizes", "40"], "experiments");
+    bad(
+        &["--holdout", "c", "--sizes", "100000"],
+        "training pairs of `gb`",
+    );
+    bad(&["--val-from", "50", "--sizes", "40"], "--holdout NAME");
+}
