@@ -235,7 +235,9 @@ impl Chart {
             .series
             .iter()
             .flat_map(|s| s.points.iter().map(|p| p.0));
-        let x = Axis::new(xs, self.x_log, MARGIN_LEFT, width - MARGIN_RIGHT);
+        // The legend sits right of the plot, never over the data.
+        let right = width - MARGIN_RIGHT - legend_width(self.series.iter().map(|s| &s.name));
+        let x = Axis::new(xs, self.x_log, MARGIN_LEFT, right);
         let y = Axis::new(all(), self.y_log, height - MARGIN_BOTTOM, MARGIN_TOP);
         let mut svg = String::new();
         let _ = self.write_frame(&mut svg, (&x, true), &y, width, height);
@@ -246,7 +248,14 @@ impl Chart {
                 .unwrap_or_else(|| PALETTE[index % PALETTE.len()].to_string());
             let _ = write_series(&mut svg, series, &color, &x, &y);
         }
-        let _ = self.write_legend(&mut svg, width);
+        let entries: Vec<(&str, String, Style)> = (self.series.iter().enumerate())
+            .map(|(index, series)| {
+                let color = (series.color.clone())
+                    .unwrap_or_else(|| PALETTE[index % PALETTE.len()].to_string());
+                (series.name.as_str(), color, series.style)
+            })
+            .collect();
+        let _ = write_legend(&mut svg, &entries, right + LEGEND_GAP);
         svg.push_str("</svg>\n");
         svg
     }
@@ -318,28 +327,55 @@ impl Chart {
             escape(&self.y_label)
         )
     }
+}
 
-    fn write_legend(&self, svg: &mut String, width: f64) -> std::fmt::Result {
-        let mut y = MARGIN_TOP + 14.0;
-        for (index, series) in self.series.iter().enumerate() {
-            let color = series
-                .color
-                .clone()
-                .unwrap_or_else(|| PALETTE[index % PALETTE.len()].to_string());
-            let x = width - MARGIN_RIGHT - 150.0;
+/// Space between the plot and its legend, in pixels.
+const LEGEND_GAP: f64 = 12.0;
+
+/// Width of a legend of `names` (sample line, gap, text at about 6.5 pixels a character),
+/// plus the gap before it; zero without names.
+fn legend_width<'a>(names: impl Iterator<Item = &'a String>) -> f64 {
+    let longest = names.map(|n| n.chars().count()).max();
+    longest.map_or(0.0, |chars| {
+        (26.0 + 6.5 * chars as f64).clamp(60.0, 220.0) + LEGEND_GAP
+    })
+}
+
+/// The legend at `x` (right of the plot): each entry's sample drawn as its series is (a
+/// dashed line dashed, markers as a dot), then its name.
+fn write_legend(svg: &mut String, entries: &[(&str, String, Style)], x: f64) -> std::fmt::Result {
+    let mut y = MARGIN_TOP + 10.0;
+    for (name, color, style) in entries {
+        let dash = if *style == Style::Dashed {
+            r#" stroke-dasharray="5,3""#
+        } else {
+            ""
+        };
+        if *style != Style::Markers {
             writeln!(
                 svg,
-                r#"<line x1="{x}" y1="{0}" x2="{1}" y2="{0}" stroke="{color}" stroke-width="2"/><text x="{2}" y="{3}">{4}</text>"#,
+                r#"<line x1="{x}" y1="{0}" x2="{1}" y2="{0}" stroke="{color}" stroke-width="2"{dash}/>"#,
                 y - 4.0,
-                x + 18.0,
-                x + 22.0,
-                y,
-                escape(&series.name)
+                x + 20.0,
             )?;
-            y += 14.0;
         }
-        Ok(())
+        if matches!(style, Style::Markers | Style::LineMarkers) {
+            writeln!(
+                svg,
+                r#"<circle cx="{}" cy="{}" r="3" fill="{color}"/>"#,
+                x + 10.0,
+                y - 4.0
+            )?;
+        }
+        writeln!(
+            svg,
+            r#"<text x="{}" y="{y}">{}</text>"#,
+            x + 26.0,
+            escape(name)
+        )?;
+        y += 15.0;
     }
+    Ok(())
 }
 
 fn write_series(
@@ -431,12 +467,8 @@ impl BarChart {
             .flat_map(|(_, v)| v.iter().copied())
             .chain([0.0]);
         let y = Axis::new(values, false, height - MARGIN_BOTTOM - 20.0, MARGIN_TOP);
-        let x = Axis::new(
-            [0.0, 1.0].into_iter(),
-            false,
-            MARGIN_LEFT,
-            width - MARGIN_RIGHT,
-        );
+        let right = width - MARGIN_RIGHT - legend_width(self.groups.iter().map(|(n, _)| n));
+        let x = Axis::new([0.0, 1.0].into_iter(), false, MARGIN_LEFT, right);
         let chart = Chart::new(&self.title, "", &self.y_label);
         let mut svg = String::new();
         // The x axis only places the bars: no numeric ticks under the category names.
@@ -447,7 +479,7 @@ impl BarChart {
             width,
             height,
         );
-        let plot_width = width - MARGIN_LEFT - MARGIN_RIGHT;
+        let plot_width = right - MARGIN_LEFT;
         let slot = plot_width / self.categories.len().max(1) as f64;
         let bar = slot * 0.8 / self.groups.len().max(1) as f64;
         let zero = y.pixel(0.0);
@@ -477,15 +509,10 @@ impl BarChart {
                 escape(category)
             );
         }
-        let legend = Chart {
-            series: self
-                .groups
-                .iter()
-                .map(|(name, _)| Series::line(name, Vec::new()))
-                .collect(),
-            ..Chart::default()
-        };
-        let _ = legend.write_legend(&mut svg, width);
+        let entries: Vec<(&str, String, Style)> = (self.groups.iter().enumerate())
+            .map(|(g, (name, _))| (name.as_str(), PALETTE[g % PALETTE.len()].to_string(), Style::Line))
+            .collect();
+        let _ = write_legend(&mut svg, &entries, right + LEGEND_GAP);
         svg.push_str("</svg>\n");
         svg
     }

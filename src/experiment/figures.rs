@@ -107,6 +107,17 @@ pub enum Metric {
     Online,
 }
 
+/// The time axis title and the value axis title of quantity `name`, with units from the
+/// first model of the study that gives `name` one.
+pub fn axis_titles(prepared: &Prepared, name: &str) -> (String, String) {
+    let models = prepared.models.iter().map(|m| &m.model);
+    let time = (models.clone().find(|m| m.time_unit.is_some()))
+        .map_or_else(|| "time".to_string(), |m| m.time_label());
+    let axis = (models.clone().find(|m| m.units.names.contains_key(name)))
+        .map_or_else(|| name.to_string(), |m| m.axis_label(name));
+    (time, axis)
+}
+
 /// The colour of the model at `index` in the study.
 pub fn color(index: usize) -> &'static str {
     PALETTE[index % PALETTE.len()]
@@ -268,7 +279,8 @@ fn state_charts(
             .zip(actual[first..].iter().copied())
             .collect();
         let range = widened_range(&actual[first..]);
-        let mut chart = Chart::new(&format!("{title}: {state}"), "time", state)
+        let (time, axis) = axis_titles(prepared, state);
+        let mut chart = Chart::new(&format!("{title}: {state}"), &time, &axis)
             .with(Series::line("data", thin(truth)).colored(DATA_COLOR));
         for ((index, ..), table) in tables {
             let Some(values) = column(table, state) else {
@@ -434,7 +446,8 @@ fn closure_figure(
         "{}: closure output {output} ({size} training points)",
         prepared.study.name
     );
-    let mut chart = Chart::new(&title, "time", output);
+    let (time, axis) = axis_titles(prepared, output);
+    let mut chart = Chart::new(&title, &time, &axis);
     let mut truth_added = false;
     for ((index, ..), table) in tables {
         let Some(values) = column(table, output) else {
@@ -506,6 +519,7 @@ fn params_figure(prepared: &Prepared, results: &[RunResult], size: usize) -> Opt
             .collect();
         groups.push((loaded.label.clone(), row));
     }
+    let names = cut_off_scale(names, &mut groups);
     let chart = BarChart {
         title: format!(
             "{}: trained params ({size} training points, median)",
@@ -524,6 +538,31 @@ fn params_figure(prepared: &Prepared, results: &[RunResult], size: usize) -> Opt
         svg: chart.to_svg(WIDTH, HEIGHT),
     })
 }
+
+/// Bars more than [`PARAM_CEILING`] times the truth's largest value (a param the data leave
+/// unidentified) are cut there, so the others stay readable; their category says the value.
+fn cut_off_scale(mut names: Vec<String>, groups: &mut [(String, Vec<f64>)]) -> Vec<String> {
+    let Some((_, truth)) = groups.iter().find(|(name, _)| name == "truth") else {
+        return names;
+    };
+    let largest = truth.iter().map(|v| v.abs()).filter(|v| v.is_finite()).fold(0.0, f64::max);
+    if largest <= 0.0 {
+        return names;
+    }
+    let ceiling = PARAM_CEILING * largest;
+    for (_, values) in groups.iter_mut() {
+        for (index, value) in values.iter_mut().enumerate() {
+            if value.abs() > ceiling {
+                names[index] = format!("{} ({}, cut)", names[index], crate::plot::tick_label(*value));
+                *value = ceiling.copysign(*value);
+            }
+        }
+    }
+    names
+}
+
+/// How far above the truth's largest param a bar is drawn before it is cut.
+pub const PARAM_CEILING: f64 = 3.0;
 
 fn generalisation_figures(
     prepared: &Prepared,

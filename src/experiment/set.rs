@@ -143,7 +143,8 @@ pub fn held_out_figures(
                 "{}: free run of held-out {} ({size} training points): {}",
                 prepared.study.name, record.name, state.name
             );
-            let mut chart = Chart::new(&title, "time", &state.name).with(
+            let (time, axis) = super::figures::axis_titles(prepared, &state.name);
+            let mut chart = Chart::new(&title, &time, &axis).with(
                 Series::line("data", cells)
                     .styled(Style::Markers)
                     .colored(DATA_COLOR),

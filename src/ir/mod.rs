@@ -300,3 +300,22 @@ impl Model {
         self.unit(print::var_name(self, var))
     }
 }
+
+impl Model {
+    /// An axis title for the quantity `name`: `X [g/L]` where the model gives it a unit,
+    /// else the name alone.
+    pub fn axis_label(&self, name: &str) -> String {
+        match self.units.names.get(name) {
+            Some(unit) if !unit.text.is_empty() => format!("{name} [{}]", unit.text),
+            _ => name.to_string(),
+        }
+    }
+
+    /// The time axis title: `time [h]` where the model names a time unit.
+    pub fn time_label(&self) -> String {
+        match &self.time_unit {
+            Some(unit) if !unit.is_empty() => format!("time [{unit}]"),
+            _ => "time".to_string(),
+        }
+    }
+}
