@@ -21,13 +21,11 @@
 //! Params are trained unconstrained: `positive` through softplus (initialised at the
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
 
-mod adam;
 mod elementwise;
 mod graph;
-mod layout;
+pub mod layout;
 mod net;
 pub mod program;
-pub mod real;
 
 #[cfg(test)]
 mod tests;
@@ -36,9 +34,11 @@ mod tests_irregular;
 #[cfg(test)]
 mod tests_rollout;
 
+use std::ops::Range;
+
 use crate::ir;
 
-pub use adam::AdamState;
+pub use crate::numeric::AdamState;
 pub use net::INIT_LAST_LAYER;
 
 /// The unconstrained starting values of the model's params (their transforms give the
@@ -191,6 +191,19 @@ impl StepSettings {
             learning_rate,
             param_learning_rate: learning_rate,
             max_gradient_norm: None,
+        }
+    }
+
+    /// The optimiser's groups over `size` weights back to back: the params (at `params`,
+    /// when the model has any) at their own rate, everything else at the network's.
+    pub fn groups(&self, size: usize, params: Option<Range<usize>>) -> Vec<(Range<usize>, f64)> {
+        match params {
+            Some(params) => vec![
+                (0..params.start, self.learning_rate),
+                (params.start..params.end, self.param_learning_rate),
+                (params.end..size, self.learning_rate),
+            ],
+            None => vec![(0..size, self.learning_rate)],
         }
     }
 }
