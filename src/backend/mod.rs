@@ -52,14 +52,34 @@ pub fn initial_raw_params(model: &ir::Model) -> Vec<f64> {
 }
 
 /// The element type the network trains in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
-    /// 32-bit floats.
+    /// 32-bit floats (faster).
     #[default]
     F32,
     /// 64-bit floats.
     F64,
+}
+
+impl Precision {
+    /// The name in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
 }
 
 pub use crate::record::Normalisation;

@@ -16,6 +16,7 @@ mod explain;
 mod fmt;
 mod init;
 mod lsp;
+mod options;
 mod predict;
 mod simulate;
 mod train;

@@ -422,18 +422,12 @@ fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// The training options of a run.
 pub fn options_of(study: &Study, spec: &RunSpec) -> TrainOptions {
     TrainOptions {
-        epochs: study.epochs,
-        batch_size: study.batch_size,
-        learning_rate: study.learning_rate,
         train_points: Some(spec.size),
         seed: spec.seed,
-        precision: study.precision,
-        substeps: study.substeps,
-        engine: study.engine,
         // The paper's protocol: validation runs start from measured history.
         history: train::History::Measured,
         // The free run covers the whole validation window (the default).
-        ..TrainOptions::default()
+        ..TrainOptions::with(&study.settings)
     }
 }
 
@@ -558,7 +552,7 @@ fn evaluate(
         size: spec.size,
         replicate: spec.replicate,
         seed: spec.seed,
-        epochs: prepared.study.epochs,
+        epochs: prepared.study.settings.epochs,
         status: RunStatus::Ok,
         error: None,
         offline_mse,
