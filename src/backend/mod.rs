@@ -257,9 +257,9 @@ pub struct NamedTensor {
 #[derive(Debug, thiserror::Error, miette::Diagnostic)]
 pub enum BackendError {
     /// A bug: inconsistent model or batch.
-    #[error("internal error in the trainable network: {0}")]
-    #[diagnostic(code(gbm::E0400), help("this is a bug in gbc; please report it"))]
-    Internal(String),
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Internal(#[from] crate::error::Bug),
     /// A model the chosen engine cannot run.
     #[error("expected a model the {engine} engine runs, found {what}")]
     #[diagnostic(
@@ -284,7 +284,7 @@ pub enum BackendError {
 impl BackendError {
     /// An internal error with a message.
     pub fn internal(message: impl Into<String>) -> Self {
-        BackendError::Internal(message.into())
+        BackendError::Internal(crate::error::Bug::new("the trainable network", message))
     }
 }
 

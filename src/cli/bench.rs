@@ -293,13 +293,8 @@ fn time_simulation(root: &Path) -> Result<SimulationRow, CommandError> {
     let mut samples = 0;
     for _ in 0..3 {
         let started = Instant::now();
-        let trajectory = crate::sim::simulate(&model, &signals, &options).map_err(|error| {
-            if error.is_internal() {
-                CommandError::Internal(error.to_string())
-            } else {
-                CommandError::user(error)
-            }
-        })?;
+        let trajectory =
+            crate::sim::simulate(&model, &signals, &options).map_err(CommandError::user)?;
         seconds.push(started.elapsed().as_secs_f64());
         samples = trajectory.times.len();
     }

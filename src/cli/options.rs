@@ -155,6 +155,20 @@ mod tests {
     }
 
     #[test]
+    fn a_bug_from_any_stage_is_an_internal_error_and_bad_input_is_not() {
+        let bug = crate::backend::BackendError::internal("rows differ");
+        assert!(
+            matches!(CommandError::user(TrainError::from(bug)), CommandError::Internal(m) if m.contains("rows differ"))
+        );
+        let input = TrainError::BadOption {
+            option: "--batch".into(),
+            expected: "a positive batch size".into(),
+            found: "0".into(),
+        };
+        assert!(matches!(CommandError::user(input), CommandError::User(_)));
+    }
+
+    #[test]
     fn library_fields_become_flags() {
         let error = with_flag(TrainError::BadOption {
             option: "max_gradient_norm".into(),

@@ -443,12 +443,7 @@ pub fn read_data(model: &Model, path: &Path) -> Result<crate::data::Dataset, Com
 
 /// A training or prediction error as a command error.
 pub fn train_error(error: TrainError) -> CommandError {
-    let error = super::options::with_flag(error);
-    if error.is_internal() {
-        CommandError::Internal(error.to_string())
-    } else {
-        CommandError::user(error)
-    }
+    CommandError::user(super::options::with_flag(error))
 }
 
 /// The progress bar and warnings on stderr.

@@ -475,7 +475,7 @@ fn run_one(
     }) {
         Ok(result) => result,
         Err(error) => {
-            let message = if error.is_internal() {
+            let message = if crate::error::is_bug(&error) {
                 format!("internal error (a bug in gbc): {error}")
             } else {
                 error.to_string()
