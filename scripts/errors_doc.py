@@ -13,7 +13,6 @@ DESCRIPTIONS = {
     "E0005": ("syntax", "A declaration in a place it is not allowed: `der X += ...` outside an effect, an effect inside an effect."),
     "E0006": ("file", "The model file is not UTF-8 text (binary data). Tested in tests/it/cli.rs."),
     "E0008": ("file", "The model file cannot be read (missing, permissions). Tested in tests/it/cli.rs."),
-    "E0009": ("internal", "The parser produced a tree the AST builder did not expect: a bug in gbc (exit code 2 would be more apt; it is reported with the source location to help the bug report)."),
     "E0101": ("check", "A name that is not declared. The help line suggests the nearest declared name."),
     "E0102": ("check", "A name declared twice (all names of a model share one namespace; effects may not reuse top-level names)."),
     "E0103": ("check", "A state (measured or hidden) without a `der` or `next` equation."),

@@ -52,14 +52,9 @@ pub enum IoError {
         input: String,
     },
     /// A table whose columns do not match its header or each other.
-    #[error("cannot write `{path}`: {detail}")]
-    #[diagnostic(code(gbm::E0253), help("this is a bug in gbc: please report it"))]
-    MalformedTable {
-        /// The output file.
-        path: String,
-        /// What is wrong, as "expected X, found Y".
-        detail: String,
-    },
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    MalformedTable(#[from] crate::error::Bug),
 }
 
 /// The path that means standard output wherever gbc writes a file.

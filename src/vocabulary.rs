@@ -2,6 +2,8 @@
 //! activations. It sits below both the checks (`crate::check`, which resolves names to them)
 //! and the IR (`crate::ir`, which carries them), so neither imports the other for it.
 
+use crate::numeric::Real;
+
 /// A built-in function.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Func {
@@ -130,18 +132,14 @@ impl Activation {
     }
 }
 
-/// `log(1 + exp(x))` without overflow for large `x` or loss of precision for very negative `x`.
+/// `log(1 + exp(x))` without overflow for large `x` or loss of precision for very negative `x`
+/// ([`Real::softplus`], the one definition).
 pub fn softplus(x: f64) -> f64 {
-    x.max(0.0) + (-x.abs()).exp().ln_1p()
+    Real::softplus(x)
 }
 
 /// `1 / (1 + exp(-x))`, evaluated through `exp(-|x|)` so neither tail overflows and the
-/// negative tail keeps full relative accuracy.
+/// negative tail keeps full relative accuracy ([`Real::sigmoid`]).
 pub fn sigmoid(x: f64) -> f64 {
-    let decay = (-x.abs()).exp();
-    if x >= 0.0 {
-        1.0 / (1.0 + decay)
-    } else {
-        decay / (1.0 + decay)
-    }
+    Real::sigmoid(x)
 }

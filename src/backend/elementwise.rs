@@ -1,7 +1,7 @@
 //! Elementwise operations of the physics program and their derivatives, shared by the
 //! forward evaluation, the reverse sweep and compile-time constant folding.
 
-use super::real::Real;
+use crate::numeric::Real;
 
 /// A one-argument operation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -21,9 +21,9 @@ use dfdx::tensor::{
 use dfdx::tensor_ops::{Backward, BroadcastTo, Device, TryAdd, TryMatMul, TryMul};
 
 use super::program::{Program, ProgramInputs};
-use super::real::Real;
 use super::BackendError;
 use crate::ir::Activation;
+use crate::numeric::Real;
 
 /// An element type the graph can run in: the backend's [`Real`] and dfdx's `Dtype`.
 pub trait Element: Real + dfdx::shapes::Dtype {}
@@ -206,20 +206,13 @@ where
 
     /// Elementwise softplus, safe for large |x| in value and gradient (dfdx has none).
     pub fn softplus(&mut self, input: &Matrix<E>) -> Result<Matrix<E>, BackendError> {
-        // softplus(x) = max(x, 0) + ln(1 + e), sigmoid(x) = 1/(1 + e) or e/(1 + e) with
-        // e = exp(-|x|): one exponential per element serves both passes.
+        // One exponential per element serves both passes (`Real::softplus_and_slope`).
         let mut slopes = input.as_vec();
         let mut output = Vec::with_capacity(slopes.len());
         for x in slopes.iter_mut() {
-            let decay = (-x.abs()).exp();
-            let positive_part = if *x > E::ZERO { *x } else { E::ZERO };
-            output.push(positive_part + decay.ln_one_plus());
-            let denominator = <E as Real>::ONE + decay;
-            *x = if *x >= E::ZERO {
-                <E as Real>::ONE / denominator
-            } else {
-                decay / denominator
-            };
+            let (value, slope) = x.softplus_and_slope();
+            output.push(value);
+            *x = slope;
         }
         let result = self.device.try_tensor_from_vec(output, *input.shape())?;
         let (input_ghost, result_ghost) = (input.ghost(), result.ghost());

@@ -10,11 +10,12 @@ use dfdx::tensor_ops::Device;
 
 use super::graph::{Element, EmbedColumns, EmbedEntry, GradientBuffer, Graph, Matrix};
 use super::program::state_index;
-use super::real::{inverse_softplus, logit};
 use super::{BackendError, Batch, RolloutBatch, Setup};
 use crate::ir::{self, Activation, Constraint, Var};
+use crate::numeric::real::{inverse_softplus, logit, Real};
 
 /// The network-side description of one closure.
+#[derive(Debug, Clone)]
 pub struct ClosureLayout {
     /// Network input width.
     pub width: usize,
@@ -68,6 +69,14 @@ impl ClosureLayout {
     /// `state / std` in [`Graph::embed`] completes the z-score.
     pub fn normalise<E: Element>(&self, raw: &[f64]) -> Vec<E> {
         let mut values = Vec::with_capacity(raw.len());
+        self.normalise_into(raw, &mut values);
+        values
+    }
+
+    /// [`ClosureLayout::normalise`] into a buffer kept by the caller (cleared first): the
+    /// one embedding normalisation of training, which the fused step calls too.
+    pub fn normalise_into<E: Real>(&self, raw: &[f64], values: &mut Vec<E>) {
+        values.clear();
         for (index, &value) in raw.iter().enumerate() {
             let column = index % self.width;
             let (mean, std) = (self.column_mean[column], self.column_std[column]);
@@ -78,7 +87,6 @@ impl ClosureLayout {
             };
             values.push(E::from_double((source - mean) / std));
         }
-        values
     }
 
     /// The stage-estimate entries plus a rollout's feedback entries (each for its own

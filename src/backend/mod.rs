@@ -21,13 +21,11 @@
 //! Params are trained unconstrained: `positive` through softplus (initialised at the
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
 
-mod adam;
 mod elementwise;
 mod graph;
-mod layout;
+pub mod layout;
 mod net;
 pub mod program;
-pub mod real;
 
 #[cfg(test)]
 mod tests;
@@ -36,9 +34,11 @@ mod tests_irregular;
 #[cfg(test)]
 mod tests_rollout;
 
+use std::ops::Range;
+
 use crate::ir;
 
-pub use adam::AdamState;
+pub use crate::numeric::AdamState;
 pub use net::INIT_LAST_LAYER;
 
 /// The unconstrained starting values of the model's params (their transforms give the
@@ -52,14 +52,34 @@ pub fn initial_raw_params(model: &ir::Model) -> Vec<f64> {
 }
 
 /// The element type the network trains in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
-    /// 32-bit floats.
+    /// 32-bit floats (faster).
     #[default]
     F32,
     /// 64-bit floats.
     F64,
+}
+
+impl Precision {
+    /// The name in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
 }
 
 pub use crate::record::Normalisation;
@@ -193,6 +213,19 @@ impl StepSettings {
             max_gradient_norm: None,
         }
     }
+
+    /// The optimiser's groups over `size` weights back to back: the params (at `params`,
+    /// when the model has any) at their own rate, everything else at the network's.
+    pub fn groups(&self, size: usize, params: Option<Range<usize>>) -> Vec<(Range<usize>, f64)> {
+        match params {
+            Some(params) => vec![
+                (0..params.start, self.learning_rate),
+                (params.start..params.end, self.param_learning_rate),
+                (params.end..size, self.learning_rate),
+            ],
+            None => vec![(0..size, self.learning_rate)],
+        }
+    }
 }
 
 /// One-step predictions for a batch.
@@ -224,9 +257,9 @@ pub struct NamedTensor {
 #[derive(Debug, thiserror::Error, miette::Diagnostic)]
 pub enum BackendError {
     /// A bug: inconsistent model or batch.
-    #[error("internal error in the trainable network: {0}")]
-    #[diagnostic(code(gbm::E0400), help("this is a bug in gbc; please report it"))]
-    Internal(String),
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Internal(#[from] crate::error::Bug),
     /// A model the chosen engine cannot run.
     #[error("expected a model the {engine} engine runs, found {what}")]
     #[diagnostic(
@@ -251,7 +284,7 @@ pub enum BackendError {
 impl BackendError {
     /// An internal error with a message.
     pub fn internal(message: impl Into<String>) -> Self {
-        BackendError::Internal(message.into())
+        BackendError::Internal(crate::error::Bug::new("the trainable network", message))
     }
 }
 

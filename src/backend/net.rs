@@ -10,8 +10,6 @@ use dfdx::tensor_ops::Device;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::adam::Adam;
-use super::adam::AdamState;
 use super::graph::{
     gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix, Scalar, Vector,
 };
@@ -24,6 +22,7 @@ use super::{
     BackendError, Batch, NamedTensor, Network, Prediction, RolloutBatch, Setup, StepSettings,
 };
 use crate::ir::{self, Dynamics};
+use crate::numeric::{Adam, AdamState, Update};
 
 /// Scale of the last layer's initial weights relative to Glorot's: small, so that a model
 /// starts as its priors (spec section 3).
@@ -120,7 +119,7 @@ where
             shapes.push(vec![model.params.len()]);
             weights.push(model.params.iter().map(raw_initial_value::<E>).collect());
         }
-        let adam = Adam::new(weights.iter().map(Vec::len));
+        let adam = Adam::new(weights.iter().map(Vec::len).sum());
         let inverse_std = (setup.normalisation.state_std.iter())
             .map(|&s| E::from_double(1.0 / s))
             .collect();
@@ -166,29 +165,25 @@ where
     }
 
     /// Clips the gradient's global norm (when asked) and takes the Adam step, params at
-    /// their own learning rate.
-    fn update(&mut self, mut gradients: Vec<Vec<E>>, settings: &StepSettings) {
-        if let Some(limit) = settings.max_gradient_norm {
-            let norm = (gradients.iter().flatten())
-                .map(|g| g.to_double().powi(2))
-                .sum::<f64>()
-                .sqrt();
-            if norm > limit && norm.is_finite() {
-                let factor = E::from_double(limit / norm);
-                gradients.iter_mut().flatten().for_each(|g| *g *= factor);
-            }
+    /// their own learning rate ([`crate::numeric::Adam`], on the tensors back to back).
+    fn update(&mut self, gradients: Vec<Vec<E>>, settings: &StepSettings) {
+        let size: usize = self.weights.iter().map(Vec::len).sum();
+        let params = (self.names.last())
+            .filter(|n| *n == "params")
+            .and_then(|_| self.weights.last())
+            .map(|p| size - p.len()..size);
+        let groups = settings.groups(size, params);
+        let mut flat = self.weights.concat();
+        let mut gradient = gradients.concat();
+        let update = Update {
+            groups: &groups,
+            max_gradient_norm: settings.max_gradient_norm,
+        };
+        self.adam.step(&mut flat, &mut gradient, &update);
+        let mut values = flat.into_iter();
+        for tensor in &mut self.weights {
+            tensor.iter_mut().zip(&mut values).for_each(|(w, v)| *w = v);
         }
-        let has_params = self.names.last().is_some_and(|n| n == "params");
-        let rates: Vec<f64> = (0..self.weights.len())
-            .map(|index| {
-                if has_params && index + 1 == self.weights.len() {
-                    settings.param_learning_rate
-                } else {
-                    settings.learning_rate
-                }
-            })
-            .collect();
-        self.adam.update(&mut self.weights, &gradients, &rates);
     }
 
     /// The loss of a one-step batch.
@@ -360,12 +355,16 @@ where
 
     /// Adam's step count and moments.
     pub fn adam_state(&self) -> AdamState {
-        self.adam.state()
+        self.adam.state(&self.lengths())
+    }
+
+    fn lengths(&self) -> Vec<usize> {
+        self.weights.iter().map(Vec::len).collect()
     }
 
     /// Replaces Adam's step count and moments.
     pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
-        self.adam.set_state(state)
+        (self.adam.set_state(state, &self.lengths())).map_err(BackendError::WeightsMismatch)
     }
 
     /// Constrained param values.

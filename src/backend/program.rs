@@ -11,9 +11,9 @@
 use std::collections::HashMap;
 
 use super::elementwise::{binary, binary_derivatives, unary, unary_derivative, Binary, Unary};
-use super::real::Real;
 use super::BackendError;
 use crate::ir::{self, BinOp, Constraint, Func, PriorKind, Var};
+use crate::numeric::Real;
 
 /// One instruction; operands are earlier registers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -354,7 +354,10 @@ fn closure_outputs_follow_the_prior_and_scale_rules() {
     let program = program::Program::compile(&model, &scales).unwrap();
     let (x, s, e, u) = (1.5, 0.8, 0.3, 0.6);
     let nets = [0.25, -0.5, 2.0];
-    let raw_params = [real::inverse_softplus(0.5), real::logit((1.5 - 0.5) / 2.5)];
+    let raw_params = [
+        crate::numeric::real::inverse_softplus(0.5),
+        crate::numeric::real::logit((1.5 - 0.5) / 2.5),
+    ];
     let values = program.forward(&program::ProgramInputs {
         rows: 1,
         states: &[x, s, e],

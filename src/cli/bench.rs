@@ -11,14 +11,18 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::options::TrainingFlags;
 use super::train::{read_data, train_error};
 use super::{CommandError, CommandResult};
 use crate::backend::Precision;
 use crate::numeric::median;
 use crate::signal::Signal;
 use crate::sim::SimOptions;
-use crate::train::bench::{bench, BenchOptions, BenchReport, Engine};
-use crate::train::{Part, Recipe, TrainOptions, TrainingData};
+use crate::train::bench::{bench, BenchReport, Engine};
+use crate::train::{Part, Recipe, Settings, TrainOptions, TrainingData};
+
+/// Timed epochs per measurement when `--epochs` is left out.
+const BENCH_EPOCHS: usize = 20;
 
 /// A shipped model `gbc bench` times.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -65,28 +69,6 @@ impl BenchModel {
     }
 }
 
-/// Element types to time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum PrecisionChoice {
-    /// 32-bit floats only.
-    F32,
-    /// 64-bit floats only.
-    F64,
-    /// Both.
-    Both,
-}
-
-/// Step implementations to time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum EngineChoice {
-    /// The graph backend (dfdx), as `gbc train` runs.
-    Graph,
-    /// The hand-fused step.
-    Fused,
-    /// Both.
-    Both,
-}
-
 /// Arguments of `gbc bench`.
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
@@ -96,15 +78,10 @@ pub struct BenchArgs {
     /// Time only these models (repeatable; default: all).
     #[arg(long = "model", value_enum, value_name = "MODEL")]
     pub models: Vec<BenchModel>,
-    /// Element types.
-    #[arg(long, value_enum, default_value_t = PrecisionChoice::Both)]
-    pub precision: PrecisionChoice,
-    /// Step implementations.
-    #[arg(long, value_enum, default_value_t = EngineChoice::Both)]
-    pub engine: EngineChoice,
-    /// Timed epochs per measurement (after one warm-up epoch); the median is reported.
-    #[arg(long, default_value_t = 20)]
-    pub epochs: usize,
+    /// Timed epochs (after one warm-up), batch, learning rate, precision and engine (each
+    /// left out: both precisions, both engines, 20 epochs), shared with `gbc train`.
+    #[command(flatten)]
+    pub settings: TrainingFlags,
     /// Do not time the simulation of the bioreactor truth model.
     #[arg(long)]
     pub no_simulation: bool,
@@ -207,10 +184,7 @@ pub fn run(args: &BenchArgs) -> CommandResult {
 
 fn print_row(row: &TrainingRow) {
     let report = &row.report;
-    let precision = match report.precision {
-        Precision::F32 => "f32",
-        Precision::F64 => "f64",
-    };
+    let precision = report.precision.name();
     println!(
         "{:<52} {:>6} {:>5} {:>6} {:>9.3} {:>10.2}",
         row.model,
@@ -269,27 +243,29 @@ fn time_case(
     (data, train_points): (&TrainingData, Option<usize>),
     args: &BenchArgs,
 ) -> Result<Vec<TrainingRow>, CommandError> {
-    let precisions: &[Precision] = match args.precision {
-        PrecisionChoice::F32 => &[Precision::F32],
-        PrecisionChoice::F64 => &[Precision::F64],
-        PrecisionChoice::Both => &[Precision::F32, Precision::F64],
+    let precisions = match args.settings.precision {
+        Some(precision) => vec![precision],
+        None => vec![Precision::F32, Precision::F64],
     };
-    let engines: &[Engine] = match args.engine {
-        EngineChoice::Graph => &[Engine::Graph],
-        EngineChoice::Fused => &[Engine::Fused],
-        EngineChoice::Both => &[Engine::Graph, Engine::Fused],
+    let engines = match args.settings.engine {
+        Some(engine) => vec![engine],
+        None => vec![Engine::Graph, Engine::Fused],
     };
+    let flags = TrainingFlags {
+        epochs: Some(args.settings.epochs.unwrap_or(BENCH_EPOCHS)),
+        ..args.settings.clone()
+    };
+    let settings = flags.settings()?;
     let mut rows = Vec::new();
-    for &precision in precisions {
-        for &engine in engines {
-            let options = BenchOptions {
+    for &precision in &precisions {
+        for &engine in &engines {
+            let options = TrainOptions {
                 train_points,
-                batch_size: 50,
-                epochs: args.epochs,
-                precision,
-                substeps: 1,
-                seed: 0,
-                engine,
+                ..TrainOptions::with(&Settings {
+                    precision,
+                    engine,
+                    ..settings
+                })
             };
             let report = bench(model, data, &options).map_err(train_error)?;
             rows.push(TrainingRow {
@@ -317,13 +293,8 @@ fn time_simulation(root: &Path) -> Result<SimulationRow, CommandError> {
     let mut samples = 0;
     for _ in 0..3 {
         let started = Instant::now();
-        let trajectory = crate::sim::simulate(&model, &signals, &options).map_err(|error| {
-            if error.is_internal() {
-                CommandError::Internal(error.to_string())
-            } else {
-                CommandError::user(error)
-            }
-        })?;
+        let trajectory =
+            crate::sim::simulate(&model, &signals, &options).map_err(CommandError::user)?;
         seconds.push(started.elapsed().as_secs_f64());
         samples = trajectory.times.len();
     }
@@ -387,9 +358,10 @@ mod tests {
         let args = BenchArgs {
             root: root(),
             models: vec![BenchModel::Chemostat],
-            precision: PrecisionChoice::Both,
-            engine: EngineChoice::Both,
-            epochs: 1,
+            settings: TrainingFlags {
+                epochs: Some(1),
+                ..TrainingFlags::default()
+            },
             no_simulation: true,
             full: false,
             full_epochs: 1,

@@ -4,7 +4,7 @@
 //! `--html` reports.
 
 use super::{CommandError, CommandResult};
-use crate::diagnose::{self, DiagnoseError, Options, Problem, Progress};
+use crate::diagnose::{self, Options, Problem, Progress};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -88,10 +88,7 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     let bar = ProgressReporter::new();
     let outcome = diagnose::diagnose(&problem, &options, &|event| bar.update(event));
     bar.finish();
-    let report = outcome.map_err(|error| match error {
-        DiagnoseError::Internal(_) => CommandError::Internal(error.to_string()),
-        other => CommandError::user(other),
-    })?;
+    let report = outcome.map_err(CommandError::user)?;
     print!("{}", diagnose::render::text(&report));
     if let Some(path) = &args.json {
         let json = serde_json::to_string_pretty(&report)

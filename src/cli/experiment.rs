@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use crate::cli::train::{EngineArg, PrecisionArg};
+use crate::cli::options::TrainingFlags;
 use crate::cli::{CommandError, CommandResult};
 use crate::experiment::merge::{publish, weights_in, Published};
 use crate::experiment::report::{compare, number};
@@ -23,7 +23,6 @@ use crate::experiment::{
     execute, grid, prepare, DataFiles, ExperimentError, ExperimentFailure, Prepared, Progress,
     RunResult, RunSpec, Shard, Study, Validation,
 };
-use crate::train::Engine;
 
 /// How every run trains.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -108,28 +107,13 @@ pub struct RunArgs {
     /// Seed of the first replicate.
     #[arg(long, value_name = "SEED")]
     pub first_seed: Option<u64>,
-    /// Passes over the training pairs.
-    #[arg(long)]
-    pub epochs: Option<usize>,
-    /// Pairs per Adam step.
-    #[arg(long)]
-    pub batch: Option<usize>,
-    /// Adam learning rate.
-    #[arg(long)]
-    pub lr: Option<f64>,
-    /// Element type of training.
-    #[arg(long, value_enum)]
-    pub precision: Option<PrecisionArg>,
-    /// RK4 sub-steps per sample.
-    #[arg(long, value_name = "K")]
-    pub substeps: Option<usize>,
+    /// Epochs, batch, learning rate, precision, sub-steps, engine (shared with `gbc train`
+    /// and `gbc bench`; each given overrides the study's).
+    #[command(flatten)]
+    pub settings: TrainingFlags,
     /// Training recipe: the paper's one-step loss, or gbc's multi-step rollouts.
     #[arg(long, value_enum)]
     pub training: Option<TrainingArg>,
-    /// What runs the one-step epochs: the graph backend (default), or the hand-fused step
-    /// (same results up to rounding, about 2x faster per one-step epoch).
-    #[arg(long, value_enum)]
-    pub engine: Option<EngineArg>,
     /// The mechanistic model behind the data (true rates and params for the figures).
     #[arg(long, value_name = "GBM")]
     pub truth: Option<PathBuf>,
@@ -196,8 +180,39 @@ pub fn study_of(args: &RunArgs) -> Result<Study, CommandError> {
             .map_err(user)?;
     }
     override_settings(&mut study, args)?;
-    study.check().map_err(user)?;
+    args.settings.check(&study.settings)?;
+    study
+        .check()
+        .map_err(|error| user(named_as_given(error, args)))?;
     Ok(study)
+}
+
+/// A bad study field the user gave by its flag named as that flag; one from a study file
+/// keeps its field name.
+fn named_as_given(error: ExperimentError, args: &RunArgs) -> ExperimentError {
+    let ExperimentError::BadOption {
+        option,
+        expected,
+        found,
+    } = error
+    else {
+        return error;
+    };
+    let flag = match option.as_str() {
+        "models" if !args.models.is_empty() || (args.preset.is_none() && args.config.is_none()) => {
+            Some("--model")
+        }
+        "sizes" if args.sizes.is_some() => Some("--sizes"),
+        "replicates" if args.replicates.is_some() => Some("--replicates"),
+        "epochs" if args.settings.epochs.is_some() => Some("--epochs"),
+        "validation" if args.val_from.is_some() => Some("--val-from"),
+        _ => None,
+    };
+    ExperimentError::BadOption {
+        option: flag.map_or(option, str::to_string),
+        expected,
+        found,
+    }
 }
 
 fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
@@ -234,13 +249,8 @@ fn from_flags(args: &RunArgs) -> Result<Study, CommandError> {
         sizes: parse_sizes(sizes).map_err(user)?,
         replicates: 1,
         first_seed: 1,
-        epochs: 100,
-        batch_size: 50,
-        learning_rate: 1e-3,
-        precision: crate::backend::Precision::F32,
-        substeps: 1,
+        settings: crate::train::Settings::default(),
         training: Training::Paper,
-        engine: Engine::Graph,
         truth: None,
         generalisation: Vec::new(),
         representative_size: None,
@@ -262,14 +272,9 @@ fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandErr
     }
     let set = |target: &mut usize, value: Option<usize>| *target = value.unwrap_or(*target);
     set(&mut study.replicates, args.replicates);
-    set(&mut study.epochs, args.epochs);
-    set(&mut study.batch_size, args.batch);
-    set(&mut study.substeps, args.substeps);
     study.first_seed = args.first_seed.unwrap_or(study.first_seed);
-    study.learning_rate = args.lr.unwrap_or(study.learning_rate);
-    study.precision = args.precision.map_or(study.precision, Into::into);
+    args.settings.apply(&mut study.settings);
     study.training = args.training.map_or(study.training, Into::into);
-    study.engine = args.engine.map_or(study.engine, Into::into);
     if args.truth.is_some() {
         study.truth = args.truth.clone();
     }
@@ -421,7 +426,7 @@ impl ProgressBar {
         for (prepared, runs, dir) in studies {
             for spec in runs.iter() {
                 if crate::experiment::results::read_result(dir, &spec.id).is_none() {
-                    work += spec.cost(prepared.study.epochs);
+                    work += spec.cost(prepared.study.settings.epochs);
                     total += 1;
                 }
             }
@@ -455,8 +460,10 @@ impl ProgressBar {
             Progress::Finished(spec, _) => {
                 // A run that failed stopped early: count the epochs it did not train.
                 let done = counted.remove(&spec.id).unwrap_or(0);
-                self.bar
-                    .inc(spec.cost(prepared.study.epochs).saturating_sub(done));
+                self.bar.inc(
+                    spec.cost(prepared.study.settings.epochs)
+                        .saturating_sub(done),
+                );
                 let finished = self.finished.fetch_add(1, Ordering::Relaxed) + 1;
                 self.bar
                     .set_message(format!("{finished}/{} runs", self.total));

@@ -16,6 +16,7 @@ mod explain;
 mod fmt;
 mod init;
 mod lsp;
+mod options;
 mod predict;
 mod simulate;
 mod train;
@@ -35,15 +36,19 @@ pub enum CommandError {
 }
 
 impl CommandError {
-    /// A user error from one diagnostic.
+    /// The error of one diagnostic: a user error, or an internal one (exit code 2) when it
+    /// is a [`crate::error::Bug`]. The one place that tells the two apart.
     pub fn user(diagnostic: impl miette::Diagnostic + Send + Sync + 'static) -> Self {
-        CommandError::User(vec![miette::Report::new(diagnostic)])
+        CommandError::from(vec![miette::Report::new(diagnostic)])
     }
 }
 
 impl From<Vec<miette::Report>> for CommandError {
     fn from(reports: Vec<miette::Report>) -> Self {
-        CommandError::User(reports)
+        match reports.iter().find(|r| crate::error::is_bug(r.as_ref())) {
+            Some(bug) => CommandError::Internal(bug.to_string()),
+            None => CommandError::User(reports),
+        }
     }
 }
 

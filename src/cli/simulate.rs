@@ -121,13 +121,7 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
-    let mut trajectory = simulated.map_err(|error| {
-        if error.is_internal() {
-            CommandError::Internal(error.to_string())
-        } else {
-            CommandError::user(error)
-        }
-    })?;
+    let mut trajectory = simulated.map_err(CommandError::user)?;
     add_noise(&mut trajectory, args.noise, args.seed);
     let table = csv_table(&model, &trajectory, args.hidden, &args.output)?;
     crate::io::write_atomic(&args.output, &table).map_err(CommandError::user)?;

@@ -24,8 +24,8 @@ use std::io::IsTerminal;
 use std::time::Instant;
 
 use super::data::{hold_out, load_records, ColumnArgs, HistoryArg};
+use super::options::TrainingFlags;
 use super::{CommandError, CommandResult};
-use crate::backend::Precision;
 use crate::data::MinRows;
 use crate::ir::Model;
 use crate::record::Record;
@@ -33,7 +33,7 @@ use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, Engine, ErrorSet, Event, Objective, ParamSource, Part, Recipe, TrainError,
+    self, artifacts, ErrorSet, Event, Objective, ParamSource, Part, Recipe, TrainError,
     TrainOptions, Trained, TrainingData,
 };
 
@@ -66,43 +66,6 @@ pub enum ParamsArg {
     Balances,
     /// Trained with the network by Adam, then polished (the paper's way).
     Train,
-}
-
-/// Element type of training.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum PrecisionArg {
-    /// 32-bit floats (faster).
-    F32,
-    /// 64-bit floats.
-    F64,
-}
-
-impl From<PrecisionArg> for Precision {
-    fn from(precision: PrecisionArg) -> Self {
-        match precision {
-            PrecisionArg::F32 => Precision::F32,
-            PrecisionArg::F64 => Precision::F64,
-        }
-    }
-}
-
-/// Which implementation runs the one-step epochs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum EngineArg {
-    /// The graph backend (dfdx) for every epoch.
-    Graph,
-    /// The hand-fused one-step step: the same results up to rounding, about 2x faster per
-    /// one-step epoch (rollouts, polish and evaluation stay on the graph backend).
-    Fused,
-}
-
-impl From<EngineArg> for Engine {
-    fn from(engine: EngineArg) -> Self {
-        match engine {
-            EngineArg::Graph => Engine::Graph,
-            EngineArg::Fused => Engine::Fused,
-        }
-    }
 }
 
 /// Arguments of `gbc train`.
@@ -142,15 +105,10 @@ pub struct TrainArgs {
     /// How data columns are named.
     #[command(flatten)]
     pub columns: ColumnArgs,
-    /// Passes over the training pairs.
-    #[arg(long, default_value_t = 100)]
-    pub epochs: usize,
-    /// Pairs per Adam step.
-    #[arg(long, default_value_t = 50)]
-    pub batch: usize,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 1e-3)]
-    pub lr: f64,
+    /// Epochs, batch, learning rate, precision, sub-steps, engine (shared with
+    /// `gbc experiment` and `gbc bench`).
+    #[command(flatten)]
+    pub settings: TrainingFlags,
     /// The paper's protocol: train on the first N one-step pairs after the embedding's
     /// history (experiments in order); with one experiment and nothing else validating,
     /// the pairs after them validate (default then: the first 70 %).
@@ -159,20 +117,9 @@ pub struct TrainArgs {
     /// Seed of the initialisation and the shuffling (same seed, same result).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Element type.
-    #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
-    pub precision: PrecisionArg,
-    /// RK4 sub-steps per sample (for stiff balances).
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub substeps: usize,
     /// Length (model time) of the online free run (default: to the end of the validation data).
     #[arg(long, value_name = "T")]
     pub online_horizon: Option<f64>,
-    /// What runs the one-step epochs: the graph backend, or the hand-fused step (same
-    /// results up to rounding, about 2x faster per one-step epoch; rollouts, polish and
-    /// evaluation stay on the graph backend).
-    #[arg(long, value_enum, default_value_t = EngineArg::Graph)]
-    pub engine: EngineArg,
     /// Training loss: free-run rollouts (multi-step) or the paper's one-step loss.
     #[arg(long, value_enum, default_value_t = ObjectiveArg::MultiStep)]
     pub objective: ObjectiveArg,
@@ -229,18 +176,13 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     validation.extend(load_records(&model, &args.val, &args.columns)?);
     let part = part_of(args, &mut train_records, &mut validation)?;
     let options = TrainOptions {
-        epochs: args.epochs,
-        batch_size: args.batch,
-        learning_rate: args.lr,
         train_points: args.train_points,
         seed: args.seed,
-        precision: args.precision.into(),
-        substeps: args.substeps,
         online_horizon: args.online_horizon,
-        engine: args.engine.into(),
         dt: args.dt,
         history: args.history.into(),
         column_weights: args.weight.clone(),
+        ..TrainOptions::with(&args.settings.settings()?)
     };
     let recipe = recipe_of(args);
     let directory = run_directory(args)?;
@@ -501,11 +443,7 @@ pub fn read_data(model: &Model, path: &Path) -> Result<crate::data::Dataset, Com
 
 /// A training or prediction error as a command error.
 pub fn train_error(error: TrainError) -> CommandError {
-    if error.is_internal() {
-        CommandError::Internal(error.to_string())
-    } else {
-        CommandError::user(error)
-    }
+    CommandError::user(super::options::with_flag(error))
 }
 
 /// The progress bar and warnings on stderr.
@@ -627,7 +565,7 @@ fn summary(
         "trained `{}` on {} pairs for {} epochs ({}) in {seconds:.1} s (final loss {})",
         model.name,
         report.train_pairs,
-        args.epochs,
+        (args.settings.epochs).unwrap_or(crate::train::Settings::default().epochs),
         report.recipe.objective.name(),
         report
             .losses

@@ -248,9 +248,11 @@ pub fn write_table(
     header: &[String],
     columns: &[Vec<f64>],
 ) -> Result<(), IoError> {
-    let malformed = |detail: String| IoError::MalformedTable {
-        path: path.display().to_string(),
-        detail,
+    let malformed = |detail: String| {
+        IoError::MalformedTable(crate::error::Bug::new(
+            "a table writer",
+            format!("cannot write `{}`: {detail}", path.display()),
+        ))
     };
     if header.len() != columns.len() {
         return Err(malformed(format!(

@@ -86,14 +86,14 @@ pub enum DiagnoseError {
         column: String,
     },
     /// A bug: a synthesised model did not compile, or expressions do not fit their layout.
-    #[error("internal error in the diagnosis: {0}")]
-    #[diagnostic(code(gbm::E0809), help("this is a bug in gbc; please report it"))]
-    Internal(String),
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Internal(#[from] crate::error::Bug),
 }
 
 impl DiagnoseError {
-    /// Whether this is a bug in gbc rather than a problem with the inputs.
-    pub fn is_internal(&self) -> bool {
-        matches!(self, DiagnoseError::Internal(_))
+    /// An internal error of the diagnosis.
+    pub fn internal(message: impl Into<String>) -> Self {
+        DiagnoseError::Internal(crate::error::Bug::new("the diagnosis", message))
     }
 }

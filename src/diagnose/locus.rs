@@ -240,7 +240,7 @@ pub(super) fn synthesise(
     let compiled =
         crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
             let messages: Vec<String> = reports.iter().map(|r| r.to_string()).collect();
-            DiagnoseError::Internal(format!(
+            DiagnoseError::internal(format!(
                 "correction at `{}` does not compile: {}",
                 target.name,
                 messages.join("; ")
@@ -248,9 +248,7 @@ pub(super) fn synthesise(
         })?;
     let model = compiled.model;
     let Some(closure) = model.closures.iter().position(|c| c.name == CLOSURE) else {
-        return Err(DiagnoseError::Internal(
-            "synthesised closure missing".into(),
-        ));
+        return Err(DiagnoseError::internal("synthesised closure missing"));
     };
     if !model.balances.iter().any(|b| ir::uses_closure(&b.expr)) {
         return Ok(None);
@@ -262,13 +260,13 @@ pub(super) fn synthesise(
         LocusKind::Balance => {
             let index = (model.states.iter().chain(&model.hidden))
                 .position(|s| s.name == target.name)
-                .ok_or_else(|| DiagnoseError::Internal(format!("no state `{}`", target.name)))?;
+                .ok_or_else(|| DiagnoseError::internal(format!("no state `{}`", target.name)))?;
             LocusValue::State(index)
         }
         _ => {
             let definition = (context.model.lets.iter())
                 .find(|l| l.name == target.name)
-                .ok_or_else(|| DiagnoseError::Internal(format!("no let `{}`", target.name)))?;
+                .ok_or_else(|| DiagnoseError::internal(format!("no let `{}`", target.name)))?;
             LocusValue::Let(simulator.compile(&definition.expr)?)
         }
     };

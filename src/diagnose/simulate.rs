@@ -60,7 +60,7 @@ impl Simulator {
         correction: Option<Var>,
         tolerances: Tolerances,
     ) -> Result<Self, DiagnoseError> {
-        let internal = |e: crate::eval::CompileError| DiagnoseError::Internal(e.to_string());
+        let internal = |e: crate::eval::CompileError| DiagnoseError::internal(e.to_string());
         let system = ModelSystem::new(model).map_err(internal)?;
         let hidden_init = (model.hidden.iter())
             .map(|state| match &state.init {
@@ -85,7 +85,7 @@ impl Simulator {
     /// Compiles an expression of this model (e.g. a let's value) against its slots.
     pub fn compile(&self, expr: &crate::ir::Expr) -> Result<Program, DiagnoseError> {
         Program::compile(expr, self.system.layout())
-            .map_err(|e| DiagnoseError::Internal(e.to_string()))
+            .map_err(|e| DiagnoseError::internal(e.to_string()))
     }
 
     /// Sets the params (constrained values, declaration order).

@@ -111,6 +111,9 @@ pub enum ExperimentFailure {
 impl ExperimentFailure {
     /// A user failure from one diagnostic.
     pub fn user(diagnostic: impl Diagnostic + Send + Sync + 'static) -> Self {
+        if crate::error::is_bug(&diagnostic) {
+            return ExperimentFailure::Internal(diagnostic.to_string());
+        }
         ExperimentFailure::User(vec![miette::Report::new(diagnostic)])
     }
 }
@@ -123,10 +126,7 @@ impl From<ExperimentError> for ExperimentFailure {
 
 impl From<IoError> for ExperimentFailure {
     fn from(error: IoError) -> Self {
-        match error {
-            IoError::MalformedTable { .. } => ExperimentFailure::Internal(error.to_string()),
-            other => ExperimentFailure::user(other),
-        }
+        ExperimentFailure::user(error)
     }
 }
 
@@ -138,21 +138,13 @@ impl From<DataError> for ExperimentFailure {
 
 impl From<TrainError> for ExperimentFailure {
     fn from(error: TrainError) -> Self {
-        if error.is_internal() {
-            ExperimentFailure::Internal(error.to_string())
-        } else {
-            ExperimentFailure::user(error)
-        }
+        ExperimentFailure::user(error)
     }
 }
 
 impl From<SimError> for ExperimentFailure {
     fn from(error: SimError) -> Self {
-        if error.is_internal() {
-            ExperimentFailure::Internal(error.to_string())
-        } else {
-            ExperimentFailure::user(error)
-        }
+        ExperimentFailure::user(error)
     }
 }
 

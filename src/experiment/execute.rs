@@ -497,12 +497,6 @@ pub fn options_of(study: &Study, spec: &RunSpec) -> TrainOptions {
 /// The training options every run of `study` shares.
 fn study_options(study: &Study) -> TrainOptions {
     TrainOptions {
-        epochs: study.epochs,
-        batch_size: study.batch_size,
-        learning_rate: study.learning_rate,
-        precision: study.precision,
-        substeps: study.substeps,
-        engine: study.engine,
         // The paper's protocol: validation runs start from measured history. On a data
         // set, each experiment starts at its first row (as `gbc train` does).
         history: if study.on_data_set() {
@@ -511,7 +505,7 @@ fn study_options(study: &Study) -> TrainOptions {
             train::History::Measured
         },
         // The free run covers the whole validation window (the default).
-        ..TrainOptions::default()
+        ..TrainOptions::with(&study.settings)
     }
 }
 
@@ -562,7 +556,7 @@ fn run_one(
     }) {
         Ok(result) => result,
         Err(error) => {
-            let message = if error.is_internal() {
+            let message = if crate::error::is_bug(&error) {
                 format!("internal error (a bug in gbc): {error}")
             } else {
                 error.to_string()
@@ -631,7 +625,7 @@ fn evaluate(
         size: spec.size,
         replicate: spec.replicate,
         seed: spec.seed,
-        epochs: prepared.study.epochs,
+        epochs: prepared.study.settings.epochs,
         status: RunStatus::Ok,
         error: None,
         offline_mse,

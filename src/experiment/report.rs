@@ -114,10 +114,10 @@ pub fn describe(study: &Study) -> String {
         study.sorted_sizes(),
         study.replicates,
         study.first_seed,
-        study.epochs,
-        study.batch_size,
-        study.learning_rate,
-        study.precision,
+        study.settings.epochs,
+        study.settings.batch_size,
+        study.settings.learning_rate,
+        study.settings.precision,
         study.training.name(),
     )
 }

@@ -9,8 +9,7 @@ use std::sync::Arc;
 use miette::{NamedSource, SourceSpan};
 
 use super::ExperimentError;
-use crate::backend::Precision;
-use crate::train::{Engine, Recipe};
+use crate::train::{Recipe, Settings};
 
 /// One model of a study.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -113,7 +112,6 @@ impl Training {
 
 /// A grid of training runs: every model x training size x replicate.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct Study {
     /// Name (file and section names).
     pub name: String,
@@ -133,27 +131,14 @@ pub struct Study {
     /// Seed of replicate 0.
     #[serde(default = "default_first_seed")]
     pub first_seed: u64,
-    /// Passes over the training pairs.
-    pub epochs: usize,
-    /// Pairs per Adam step.
-    #[serde(default = "default_batch_size")]
-    pub batch_size: usize,
-    /// Adam learning rate.
-    #[serde(default = "default_learning_rate")]
-    pub learning_rate: f64,
-    /// Element type of training.
-    #[serde(default)]
-    pub precision: Precision,
-    /// RK4 sub-steps per sample.
-    #[serde(default = "default_substeps")]
-    pub substeps: usize,
+    /// The training settings shared with `gbc train` (epochs, batch size, learning rate,
+    /// precision, sub-steps, engine), flattened into the file; each left out takes the
+    /// default of [`Settings`].
+    #[serde(flatten)]
+    pub settings: Settings,
     /// The training recipe (default: the paper's).
     #[serde(default)]
     pub training: Training,
-    /// What runs the one-step epochs (default, and left out of the file: the graph
-    /// backend; `fused`: the hand-fused step, the same results up to rounding).
-    #[serde(default, skip_serializing_if = "Engine::is_graph")]
-    pub engine: Engine,
     /// The mechanistic model that made the data: true closure values (its outputs named
     /// `<output>_true` or its lets named `<output>`) and true param values (its consts).
     #[serde(default)]
@@ -170,16 +155,6 @@ pub struct Study {
 fn default_first_seed() -> u64 {
     1
 }
-fn default_batch_size() -> usize {
-    50
-}
-fn default_learning_rate() -> f64 {
-    1e-3
-}
-fn default_substeps() -> usize {
-    1
-}
-
 /// The size the paper shows trajectories for.
 pub const PAPER_REPRESENTATIVE_SIZE: usize = 500;
 
@@ -198,13 +173,8 @@ impl Study {
             sizes: vec![100, 200, 500, 1000, 1500],
             replicates: 20,
             first_seed: 1,
-            epochs: 100,
-            batch_size: 50,
-            learning_rate: 1e-3,
-            precision: Precision::F32,
-            substeps: 1,
+            settings: Settings::default(),
             training: Training::Paper,
-            engine: Engine::Graph,
             truth: Some(dir.join("truth.gbm")),
             generalisation: vec![dir.join("data/chirp.csv")],
             representative_size: Some(PAPER_REPRESENTATIVE_SIZE),
@@ -225,13 +195,11 @@ impl Study {
             sizes: vec![100, 200, 500, 1000, 2000],
             replicates: 10,
             first_seed: 1,
-            epochs: 1000,
-            batch_size: 50,
-            learning_rate: 1e-3,
-            precision: Precision::F32,
-            substeps: 1,
+            settings: Settings {
+                epochs: 1000,
+                ..Settings::default()
+            },
             training: Training::Paper,
-            engine: Engine::Graph,
             truth: Some(dir.join("truth.gbm")),
             generalisation: vec![dir.join("data/steps_seed2.csv")],
             representative_size: Some(PAPER_REPRESENTATIVE_SIZE),
@@ -249,10 +217,14 @@ impl Study {
     /// The bioreactor study scaled down for `gbc demo`: 3 replicates instead of 10 and 300
     /// epochs instead of 1000.
     pub fn bioreactor_demo() -> Study {
+        let full = Study::bioreactor();
         Study {
             replicates: 3,
-            epochs: 300,
-            ..Study::bioreactor()
+            settings: Settings {
+                epochs: 300,
+                ..full.settings
+            },
+            ..full
         }
     }
 
@@ -294,6 +266,7 @@ impl Study {
 
     /// Parses a study from JSON text named `name` in messages, and checks it.
     pub fn parse(name: &str, text: &str) -> Result<Study, ExperimentError> {
+        refuse_unknown_fields(name, text)?;
         let study: Study = serde_json::from_str(text).map_err(|error| {
             let offset = byte_offset(text, error.line(), error.column());
             ExperimentError::BadStudy {
@@ -323,43 +296,36 @@ impl Study {
             })
         };
         if self.models.is_empty() {
-            return bad("--model", "at least one model", "none".into());
+            return bad("models", "at least one model", "none".into());
         }
         for (index, model) in self.models.iter().enumerate() {
             if !valid_label(&model.label) {
                 let expected = "a label of letters, digits, `_` and `-`";
-                return bad("--model", expected, format!("`{}`", model.label));
+                return bad("models", expected, format!("`{}`", model.label));
             }
             if self.models[..index].iter().any(|m| m.label == model.label) {
                 let expected = "distinct model labels";
-                return bad("--model", expected, format!("`{}` twice", model.label));
+                return bad("models", expected, format!("`{}` twice", model.label));
             }
         }
         if self.sizes.is_empty() || self.sizes.contains(&0) {
             return bad(
-                "--sizes",
+                "sizes",
                 "positive training sizes",
                 format!("{:?}", self.sizes),
             );
         }
         if self.replicates == 0 {
-            return bad("--replicates", "at least one replicate", "0".into());
+            return bad("replicates", "at least one replicate", "0".into());
         }
-        if self.epochs == 0 {
-            return bad("--epochs", "at least one epoch", "0".into());
+        if self.settings.epochs == 0 {
+            return bad("epochs", "at least one epoch", "0".into());
         }
-        if self.batch_size == 0 || self.substeps == 0 {
-            return bad("--batch/--substeps", "positive values", "0".into());
-        }
-        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return bad(
-                "--lr",
-                "a positive learning rate",
-                self.learning_rate.to_string(),
-            );
+        if let Err(setting) = self.settings.check() {
+            return bad(setting.field, setting.expected, setting.found);
         }
         if let Validation::FromRow(0) = self.validation {
-            return bad("--val-from", "a row after the first", "0".into());
+            return bad("validation", "a row after the first", "0".into());
         }
         match (&self.validation, &self.data) {
             (Validation::Holdout(names), _) if names.is_empty() => {
@@ -438,6 +404,32 @@ fn models(dir: &Path, names: &[&str]) -> Vec<StudyModel> {
 /// Whether a label is safe inside file names and run ids.
 pub fn valid_label(label: &str) -> bool {
     !label.is_empty() && (label.chars()).all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+/// Refuses a top-level key of the file that names no field of [`Study`] (serde cannot deny
+/// unknown fields next to the flattened [`Settings`]): a study written out holds every
+/// field, so a key it lacks is unknown.
+fn refuse_unknown_fields(name: &str, text: &str) -> Result<(), ExperimentError> {
+    let written = serde_json::to_value(Study::chemostat()).unwrap_or_default();
+    let read: serde_json::Value = serde_json::from_str(text).unwrap_or_default();
+    let (Some(written), Some(read)) = (written.as_object(), read.as_object()) else {
+        return Ok(());
+    };
+    let Some(unknown) = read.keys().find(|key| !written.contains_key(*key)) else {
+        return Ok(());
+    };
+    let mut known: Vec<&str> = written.keys().map(String::as_str).collect();
+    known.sort_unstable();
+    let offset = text.find(&format!("\"{unknown}\"")).unwrap_or(0);
+    Err(ExperimentError::BadStudy {
+        path: name.to_string(),
+        reason: format!(
+            "unknown field `{unknown}`, {}",
+            crate::suggest::did_you_mean(unknown, &known, "fields")
+        ),
+        source_code: Some(Arc::new(NamedSource::new(name, text.to_string()))),
+        span: Some(SourceSpan::from((offset, unknown.len() + 2))),
+    })
 }
 
 /// Byte offset of a 1-based line and column in `text` (clamped to its length).

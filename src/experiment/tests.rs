@@ -232,6 +232,39 @@ fn studies_read_back_from_json_and_errors_point_into_the_file() {
     }
 }
 
+/// The training settings sit flat in the file; a bad one is named by its field, never by
+/// a flag, and a misspelt one is refused.
+#[test]
+fn study_files_name_bad_settings_by_their_field() {
+    let mut value = serde_json::to_value(Study::chemostat()).unwrap();
+    value["batch_size"] = serde_json::json!(0);
+    let text = serde_json::to_string_pretty(&value).unwrap();
+    let message = Study::parse("study.json", &text).unwrap_err().to_string();
+    assert!(
+        message.contains("batch_size") && !message.contains("--batch"),
+        "{message}"
+    );
+    let object = value.as_object_mut().unwrap();
+    object.remove("batch_size");
+    object.remove("learning_rate");
+    object.insert("precision".into(), serde_json::json!("f64"));
+    let study = Study::parse("study.json", &serde_json::to_string(&value).unwrap()).unwrap();
+    let defaults = crate::train::Settings::default();
+    assert_eq!(study.settings.batch_size, defaults.batch_size);
+    assert_eq!(study.settings.learning_rate, defaults.learning_rate);
+    assert_eq!(study.settings.precision, crate::backend::Precision::F64);
+    value["batch"] = serde_json::json!(10);
+    match Study::parse("study.json", &serde_json::to_string(&value).unwrap()) {
+        Err(ExperimentError::BadStudy { reason, .. }) => {
+            assert!(
+                reason.contains("`batch`") && reason.contains("batch_size"),
+                "{reason}"
+            )
+        }
+        other => panic!("expected an unknown field, found {other:?}"),
+    }
+}
+
 #[test]
 fn study_checks_refuse_bad_settings() {
     let refused = |study: Study, needle: &str| {
@@ -247,42 +280,48 @@ fn study_checks_refuse_bad_settings() {
             sizes: vec![],
             ..Study::chemostat()
         },
-        "--sizes",
+        "sizes",
     );
     refused(
         Study {
             sizes: vec![100, 0],
             ..Study::chemostat()
         },
-        "--sizes",
+        "sizes",
     );
     refused(
         Study {
             replicates: 0,
             ..Study::chemostat()
         },
-        "--replicates",
+        "replicates",
     );
     refused(
         Study {
-            epochs: 0,
+            settings: crate::train::Settings {
+                epochs: 0,
+                ..Default::default()
+            },
             ..Study::chemostat()
         },
-        "--epochs",
+        "epochs",
     );
     refused(
         Study {
-            learning_rate: -1.0,
+            settings: crate::train::Settings {
+                learning_rate: -1.0,
+                ..Default::default()
+            },
             ..Study::chemostat()
         },
-        "--lr",
+        "learning_rate",
     );
     refused(
         Study {
             validation: Validation::FromRow(0),
             ..Study::chemostat()
         },
-        "--val-from",
+        "validation",
     );
     let mut twice = Study::chemostat();
     twice.models[1].label = "greybox".into();
@@ -302,7 +341,10 @@ fn identity_ignores_the_grid_extent_but_not_training_settings() {
     };
     assert_eq!(study.identity(), wider.identity());
     let longer = Study {
-        epochs: 101,
+        settings: crate::train::Settings {
+            epochs: 101,
+            ..study.settings
+        },
         ..study.clone()
     };
     assert_ne!(study.identity(), longer.identity());

@@ -35,7 +35,10 @@ fn tiny_study() -> Study {
         ],
         sizes: vec![40, 80],
         replicates: 1,
-        epochs: 2,
+        settings: crate::train::Settings {
+            epochs: 2,
+            ..Default::default()
+        },
         ..Study::chemostat()
     }
 }
@@ -163,9 +166,13 @@ fn a_sharded_experiment_reruns_nothing_and_merges_into_tables_figures_and_report
     );
     assert!(report.contains("<table>") && report.contains("below <b>blackbox</b>"));
 
+    let study = tiny_study();
     let changed = prepare(&Study {
-        epochs: 3,
-        ..tiny_study()
+        settings: crate::train::Settings {
+            epochs: 3,
+            ..study.settings
+        },
+        ..study
     })
     .map(|p| p.record);
     let refused = changed.map(|record| claim_directory(&left, &record).is_err());

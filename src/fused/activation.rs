@@ -4,10 +4,11 @@
 //! training step (about 12,000 evaluations per GB2 step). In `f32` it runs through
 //! branch-free polynomial versions of `exp` and `ln(1 + e)` that the compiler vectorises
 //! (the libm calls it replaces cannot be), one exponential shared by the value and the slope;
-//! `f64` keeps the libm functions of [`Real`].
+//! `f64` (and the graph backend in both precisions) uses [`Real::softplus_and_slope`], the
+//! one definition; the `f32` lane approximates it within the bound its tests state.
 
-use crate::backend::real::Real;
 use crate::ir::Activation;
+use crate::numeric::Real;
 
 /// An element type with a whole-layer softplus.
 pub trait Lane: Real {
@@ -19,11 +20,7 @@ pub trait Lane: Real {
 impl Lane for f64 {
     fn softplus_with_slope(values: &mut [f64], slopes: &mut [f64]) {
         for (value, slope) in values.iter_mut().zip(slopes.iter_mut()) {
-            let z = *value;
-            let decay = (-z.abs()).exp();
-            let numerator = if z >= 0.0 { 1.0 } else { decay };
-            *slope = numerator / (1.0 + decay);
-            *value = z.max(0.0) + decay.ln_one_plus();
+            (*value, *slope) = value.softplus_and_slope();
         }
     }
 }

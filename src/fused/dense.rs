@@ -7,7 +7,7 @@
 //! (`dW += a^T delta`); the transposes are only strides of a [`View`], resolved by the
 //! packing.
 
-use crate::backend::real::Real;
+use crate::numeric::Real;
 
 /// Output rows computed together, sharing each load of `rhs`.
 const BLOCK: usize = 4;

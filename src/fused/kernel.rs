@@ -11,19 +11,15 @@
 //! saves two of the eight large products of a GB2 step.
 
 use crate::backend::program::{Program, ProgramInputs};
-use crate::backend::real::Real;
 use crate::backend::{BackendError, Batch, Setup, StepSettings};
 use crate::ir::{self, Dynamics};
+use crate::numeric::Real;
 
 use super::activation::{activate, Lane};
 use super::dense::{Gemm, View};
 use super::plan::{ClosurePlan, Plan};
 use super::reverse::Scratch;
-use crate::backend::AdamState;
-
-const BETA1: f64 = 0.9;
-const BETA2: f64 = 0.999;
-const EPSILON: f64 = 1e-8;
+use crate::numeric::{Adam, AdamState, Update};
 
 /// What one stage evaluation keeps for the reverse pass.
 #[derive(Debug, Default)]
@@ -56,9 +52,7 @@ pub struct Kernel<E: Lane> {
     pub weights: Vec<E>,
     /// The gradient of the last [`Kernel::loss_and_gradient`], same layout.
     pub gradient: Vec<E>,
-    first_moment: Vec<E>,
-    second_moment: Vec<E>,
-    adam_steps: i32,
+    adam: Adam<E>,
     pub(super) rows: usize,
     /// The sub-step `h / K` of each row of the loaded batch.
     substep_sizes: Vec<f64>,
@@ -102,9 +96,7 @@ impl<E: Lane> Kernel<E> {
             inverse_std,
             weights,
             gradient: vec![E::ZERO; size],
-            first_moment: vec![E::ZERO; size],
-            second_moment: vec![E::ZERO; size],
-            adam_steps: 0,
+            adam: Adam::new(size),
             rows: 0,
             substep_sizes: Vec::new(),
             loss_weights: Vec::new(),
@@ -131,34 +123,29 @@ impl<E: Lane> Kernel<E> {
         settings: &StepSettings,
     ) -> Result<f64, BackendError> {
         let loss = self.loss_and_gradient(batch)?;
-        if let Some(limit) = settings.max_gradient_norm {
-            self.clip_gradient(limit);
-        }
-        self.adam(settings);
+        let (start, length) = self.plan.params;
+        let groups = settings.groups(self.weights.len(), Some(start..start + length));
+        let update = Update {
+            groups: &groups,
+            max_gradient_norm: settings.max_gradient_norm,
+        };
+        self.adam
+            .step(&mut self.weights, &mut self.gradient, &update);
         Ok(loss)
+    }
+
+    fn lengths(&self) -> Vec<usize> {
+        self.plan.tensors.iter().map(|&(_, n)| n).collect()
     }
 
     /// Adam's step count and moments, cut into the plan's tensors.
     pub fn adam_state(&self) -> AdamState {
-        AdamState {
-            steps: u64::try_from(self.adam_steps).unwrap_or(0),
-            first: super::split(&self.plan, &self.first_moment),
-            second: super::split(&self.plan, &self.second_moment),
-        }
+        self.adam.state(&self.lengths())
     }
 
     /// Replaces Adam's step count and moments.
     pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
-        let lengths: Vec<usize> = self.plan.tensors.iter().map(|&(_, n)| n).collect();
-        self.adam_steps = state.check(&lengths)?;
-        let flatten = |moments: &[Vec<f64>]| -> Vec<E> {
-            (moments.iter().flatten())
-                .map(|&v| E::from_double(v))
-                .collect()
-        };
-        self.first_moment = flatten(&state.first);
-        self.second_moment = flatten(&state.second);
-        Ok(())
+        (self.adam.set_state(state, &self.lengths())).map_err(BackendError::WeightsMismatch)
     }
 
     /// The normalised one-step loss of the batch; its gradient is left in
@@ -213,7 +200,7 @@ impl<E: Lane> Kernel<E> {
             }
             normalised.resize_with(offsets, Vec::new);
             for (out, values) in normalised.iter_mut().zip(raw) {
-                normalise(closure, values, out);
+                closure.layout.normalise_into(values, out);
             }
         }
         let first = &mut self.stages[0].state;
@@ -456,92 +443,6 @@ impl<E: Lane> Kernel<E> {
                 sum.resize(self.rows * closure.widths[1], E::ZERO);
             }
         }
-    }
-
-    /// Rescales the gradient to Euclidean norm `limit` when it is longer (and finite), as
-    /// the graph backend does: the norm summed in `f64` in tensor order.
-    fn clip_gradient(&mut self, limit: f64) {
-        let norm = (self.gradient.iter())
-            .map(|g| g.to_double().powi(2))
-            .sum::<f64>()
-            .sqrt();
-        if norm > limit && norm.is_finite() {
-            let factor = E::from_double(limit / norm);
-            self.gradient.iter_mut().for_each(|g| *g = *g * factor);
-        }
-    }
-
-    /// One bias-corrected Adam update along [`Kernel::gradient`] (Kingma & Ba 2015), the
-    /// params at `settings.param_learning_rate` and everything else at
-    /// `settings.learning_rate`.
-    fn adam(&mut self, settings: &StepSettings) {
-        self.adam_steps += 1;
-        let correction1 = 1.0 - BETA1.powi(self.adam_steps);
-        let correction2 = 1.0 - BETA2.powi(self.adam_steps);
-        let step_of = |rate: f64| E::from_double(rate * correction2.sqrt() / correction1);
-        let moments = Moments {
-            epsilon: E::from_double(EPSILON * correction2.sqrt()),
-            beta: (E::from_double(BETA1), E::from_double(BETA2)),
-            keep: (E::from_double(1.0 - BETA1), E::from_double(1.0 - BETA2)),
-        };
-        let (start, length) = self.plan.params;
-        let ranges = [
-            (0..start, settings.learning_rate),
-            (start..start + length, settings.param_learning_rate),
-            (start + length..self.weights.len(), settings.learning_rate),
-        ];
-        for (range, rate) in ranges {
-            moments.update(
-                &mut self.weights[range.clone()],
-                &self.gradient[range.clone()],
-                (
-                    &mut self.first_moment[range.clone()],
-                    &mut self.second_moment[range],
-                ),
-                step_of(rate),
-            );
-        }
-    }
-}
-
-/// The constants of one Adam step.
-struct Moments<E> {
-    epsilon: E,
-    beta: (E, E),
-    keep: (E, E),
-}
-
-impl<E: Real> Moments<E> {
-    /// Updates the moments of a run of weights and moves the weights by `step` along them.
-    fn update(
-        &self,
-        weights: &mut [E],
-        gradient: &[E],
-        (first, second): (&mut [E], &mut [E]),
-        step: E,
-    ) {
-        let (beta1, beta2) = self.beta;
-        let (keep1, keep2) = self.keep;
-        for (((weight, &g), first), second) in
-            (weights.iter_mut()).zip(gradient).zip(first).zip(second)
-        {
-            *first = beta1 * *first + keep1 * g;
-            *second = beta2 * *second + keep2 * g * g;
-            *weight = *weight - step * *first / (second.sqrt() + self.epsilon);
-        }
-    }
-}
-
-/// Normalises raw embedding rows as the graph backend does: the z-score of each column,
-/// `-mean / std` in the lag-0 state columns.
-fn normalise<E: Real>(closure: &ClosurePlan, raw: &[f64], out: &mut Vec<E>) {
-    out.clear();
-    for row in raw.chunks_exact(closure.width()) {
-        out.extend(
-            (row.iter().zip(&closure.column_scale))
-                .zip(&closure.column_shift)
-                .map(|((&value, &scale), &shift)| E::from_double(value * scale + shift)),
-        );
     }
 }
 

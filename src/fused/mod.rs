@@ -37,11 +37,11 @@ mod reverse;
 #[cfg(test)]
 mod tests;
 
-use crate::backend::real::Real;
 use crate::backend::{
     dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, Setup, StepSettings,
 };
 use crate::ir;
+use crate::numeric::Real;
 
 use kernel::Kernel;
 use plan::Plan;

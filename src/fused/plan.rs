@@ -3,9 +3,9 @@
 //! estimate. Built once from the model and the [`Setup`], the same way the graph backend
 //! builds its network, so the two read the same [`NamedTensor`] lists.
 
-use crate::backend::program::state_index;
+use crate::backend::layout::{closure_layout, ClosureLayout};
 use crate::backend::{BackendError, NamedTensor, Setup};
-use crate::ir::{self, Activation, Var};
+use crate::ir::{self, Activation};
 
 /// One closure network's place in the step.
 #[derive(Debug, Clone)]
@@ -19,11 +19,9 @@ pub struct ClosurePlan {
     pub weight_at: Vec<usize>,
     /// Start of each layer's bias.
     pub bias_at: Vec<usize>,
-    /// Per embedding column, the factor of the z-score `raw * scale + shift`: `1 / std`,
-    /// or 0 for a lag-0 state (its raw value is replaced by the stage estimate).
-    pub column_scale: Vec<f64>,
-    /// Per embedding column, `-mean / std`.
-    pub column_shift: Vec<f64>,
+    /// The graph backend's layout of the closure: its embedding normalisation
+    /// ([`ClosureLayout::normalise_into`]) is the fused step's too.
+    pub layout: ClosureLayout,
     /// `(column, state index, 1 / std)` of every lag-0 state column.
     pub stage_columns: Vec<(usize, usize, f64)>,
 }
@@ -123,30 +121,16 @@ fn closure_plan(
         weight_at.push(weight.0);
         bias_at.push(bias.0);
     }
-    let norm = &setup.normalisation;
-    let (mut column_scale, mut column_shift) = (Vec::new(), Vec::new());
-    let mut stage_columns = Vec::new();
-    for (column, (var, lag)) in closure.embedding.layout().into_iter().enumerate() {
-        let (mean, std) = match var {
-            Var::Input(i) => norm.input_mean.get(i).zip(norm.input_std.get(i)),
-            Var::State(i) => norm.state_mean.get(i).zip(norm.state_std.get(i)),
-            _ => None,
-        }
-        .ok_or_else(|| BackendError::internal(format!("no normalisation for {var:?}")))?;
-        let stage_state = matches!(var, Var::State(_)) && lag == 0;
-        if stage_state {
-            stage_columns.push((column, state_index(model, var)?, 1.0 / std));
-        }
-        column_scale.push(if stage_state { 0.0 } else { 1.0 / std });
-        column_shift.push(-mean / std);
-    }
+    let layout = closure_layout(model, closure, setup, first_tensor)?;
+    let stage_columns = (layout.state_columns.entries.iter())
+        .map(|entry| (entry.column, entry.state, entry.factor))
+        .collect();
     Ok(ClosurePlan {
         widths,
         activation: closure.network.activation,
         weight_at,
         bias_at,
-        column_scale,
-        column_shift,
+        layout,
         stage_columns,
     })
 }

@@ -128,14 +128,32 @@ fn gradients_match_the_backend_with_substeps_and_for_next_models() {
 /// The shipped GB2 model, a batch of the first `rows` pairs of its shipped record, and the
 /// setup `gbc train` would use for them in `precision`.
 fn bioreactor_gb2(rows: usize, precision: Precision) -> (ir::Model, Batch, Setup) {
+    shipped(
+        "models/bioreactor/gb2.gbm",
+        "models/bioreactor/data/steps.csv",
+        rows,
+        precision,
+    )
+}
+
+/// A shipped model, a batch of the first `rows` pairs of a shipped record, and the setup
+/// `gbc train` would use for them in `precision`.
+fn shipped(
+    model: &str,
+    data: &str,
+    rows: usize,
+    precision: Precision,
+) -> (ir::Model, Batch, Setup) {
     use crate::train::pairs::{first_pair_row, stage_fractions, PairTable};
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let model = crate::driver::compile_file(&root.join("models/bioreactor/gb2.gbm"), &[])
+    let model = crate::driver::compile_file(&root.join(model), &[])
         .unwrap()
         .model;
-    let names = ["u", "X", "A", "B", "S"];
+    let names: Vec<&str> = (model.inputs.iter().map(|v| v.name.as_str()))
+        .chain(model.states.iter().map(|v| v.name.as_str()))
+        .collect();
     let data = crate::data::read(
-        &root.join("models/bioreactor/data/steps.csv"),
+        &root.join(data),
         &names,
         crate::data::MinRows::new(2, "one step"),
     )
@@ -154,9 +172,44 @@ fn bioreactor_gb2(rows: usize, precision: Precision) -> (ir::Model, Batch, Setup
         precision,
         seed: 0,
         normalisation: crate::train::fixtures::normalise(&record, first + rows + 1),
-        scales: vec![vec![1.0; 3]],
+        scales: (model.closures.iter())
+            .map(|c| vec![1.0; c.outputs.len()])
+            .collect(),
     };
     (model, batch, setup)
+}
+
+/// Every shipped trainable model on its shipped record, in `f64` at the initial weights:
+/// the fused step's loss and gradient are the graph backend's to 1e-9 (relative).
+#[test]
+fn every_shipped_model_agrees_with_the_backend_in_f64() {
+    let models = [
+        ("bioreactor/gb1", "bioreactor/data/steps.csv"),
+        ("bioreactor/gb2", "bioreactor/data/steps.csv"),
+        ("bioreactor/blackbox", "bioreactor/data/steps.csv"),
+        ("bioreactor/blackbox_ode", "bioreactor/data/steps.csv"),
+        ("bioreactor/blackbox_residual", "bioreactor/data/steps.csv"),
+        ("mm_chemostat/greybox", "mm_chemostat/data/steps.csv"),
+        (
+            "mm_chemostat/greybox_positive",
+            "mm_chemostat/data/steps.csv",
+        ),
+        ("mm_chemostat/blackbox", "mm_chemostat/data/steps.csv"),
+        ("mm_chemostat/blackbox_ode", "mm_chemostat/data/steps.csv"),
+        (
+            "mm_chemostat/blackbox_residual",
+            "mm_chemostat/data/steps.csv",
+        ),
+    ];
+    for (model, data) in models {
+        let (model, batch, setup) = shipped(
+            &format!("models/{model}.gbm"),
+            &format!("models/{data}"),
+            30,
+            Precision::F64,
+        );
+        assert_matches_backend(&model, &setup, &batch, 1e-9, true);
+    }
 }
 
 /// The shipped GB2 model on pairs of its shipped record, with the normalisation `gbc train`

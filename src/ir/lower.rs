@@ -83,7 +83,7 @@ pub fn lower(checked: &Checked, effects: &[&str]) -> Result<Model, LowerError> {
             Some(index) => applied.push(index),
             None => {
                 let names = effect_decls.iter().map(|e| e.name.node.as_str());
-                let help = match crate::check::closest(name, names.clone()) {
+                let help = match crate::suggest::closest(name, names.clone()) {
                     Some(best) => format!("did you mean `{best}`?"),
                     None => format!(
                         "the model's effects are: {}",

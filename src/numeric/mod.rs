@@ -1,13 +1,18 @@
 //! The numeric helpers every stage shares: statistics ([`stats`]), dense linear algebra
-//! ([`linalg`]: Cholesky, normal equations) and one Levenberg–Marquardt driver ([`lm`]).
+//! ([`linalg`]: Cholesky, normal equations), one Levenberg–Marquardt driver ([`lm`]), the
+//! training element types with the one safe softplus ([`real`]) and the one optimiser of
+//! training, Adam with clipping ([`adam`]).
 //!
 //! Training (`train::polish`, `train::balances`), the gap diagnosis (`diagnose::fit`,
 //! `diagnose::correction`, `diagnose::symbolic`) and the experiments all call these; none
-//! keeps a copy of its own. Everything here is plain `f64` on slices, row-major matrices,
+//! keeps a copy of its own. Everything here works on slices (plain `f64`, or the training
+//! element types of [`real`]), row-major matrices,
 //! and never prints.
 
+pub mod adam;
 pub mod linalg;
 pub mod lm;
+pub mod real;
 pub mod stats;
 
 #[cfg(test)]
@@ -15,6 +20,8 @@ mod tests;
 #[cfg(test)]
 mod tests_lm;
 
+pub use adam::{clip, Adam, AdamState, Update};
 pub use linalg::{dot, solve_spd, Cholesky, NormalEquations};
 pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Settings};
+pub use real::Real;
 pub use stats::{mean_std, median, order_statistic, root_mean_square};

@@ -286,14 +286,9 @@ pub enum SignalError {
         found: String,
     },
     /// Break times and values that do not make a piecewise-constant signal.
-    #[error("expected {expected}, found {found}")]
-    #[diagnostic(code(gbm::E0316), help("this is a bug in gbc: please report it"))]
-    InvalidSignal {
-        /// The invariant.
-        expected: String,
-        /// What breaks it.
-        found: String,
-    },
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    InvalidSignal(#[from] crate::error::Bug),
     /// The CSV file of a `csv(...)` program is defective.
     #[error(transparent)]
     #[diagnostic(transparent)]

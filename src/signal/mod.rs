@@ -68,9 +68,11 @@ impl Signal {
 
     /// A signal from switch times and values, checking the invariant.
     pub fn new(breaks: Vec<f64>, values: Vec<f64>) -> Result<Self, SignalError> {
-        let invalid = |expected: &str, found: String| SignalError::InvalidSignal {
-            expected: expected.to_string(),
-            found,
+        let invalid = |expected: &str, found: String| {
+            SignalError::InvalidSignal(crate::error::Bug::new(
+                "a signal",
+                format!("expected {expected}, found {found}"),
+            ))
         };
         if breaks.is_empty() || breaks.len() != values.len() {
             let found = format!("{} breaks and {} values", breaks.len(), values.len());

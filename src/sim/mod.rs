@@ -148,12 +148,12 @@ pub enum SimError {
     Integration(#[from] IntegrationError),
     /// A bug: the model's expressions do not fit its own layout.
     #[error(transparent)]
-    Compile(#[from] CompileError),
+    #[diagnostic(transparent)]
+    Compile(#[from] crate::error::Bug),
 }
 
-impl SimError {
-    /// Whether this is a bug in gbc rather than a problem with the model or options.
-    pub fn is_internal(&self) -> bool {
-        matches!(self, SimError::Compile(_))
+impl From<CompileError> for SimError {
+    fn from(error: CompileError) -> Self {
+        SimError::Compile(crate::error::Bug::new("the simulator", error.to_string()))
     }
 }

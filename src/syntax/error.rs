@@ -75,24 +75,18 @@ pub enum SyntaxError {
         help: String,
     },
     /// The parser produced a tree it should not have: a bug in gbc.
-    #[error("internal parser error: {message} (this is a bug in gbc)")]
-    #[diagnostic(code(gbm::E0009))]
-    Internal {
-        /// Where.
-        #[label("here")]
-        span: SourceSpan,
-        /// What went wrong.
-        message: String,
-    },
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Internal(#[from] crate::error::Bug),
 }
 
 impl SyntaxError {
     /// An internal error at byte `at`.
     pub(crate) fn internal(at: usize, message: &str) -> Self {
-        SyntaxError::Internal {
-            span: Span::new(at, at).into(),
-            message: message.to_string(),
-        }
+        SyntaxError::Internal(crate::error::Bug::new(
+            "the parser",
+            format!("{message} (at byte {at})"),
+        ))
     }
 }
 

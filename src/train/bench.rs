@@ -25,26 +25,6 @@ use super::{analysis, hidden_initial_values, Part, TrainError, TrainOptions, Tra
 
 pub use super::Engine;
 
-/// What to time.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BenchOptions {
-    /// Training pairs (the first ones of a single record; `None`: every pair of every
-    /// experiment).
-    pub train_points: Option<usize>,
-    /// Pairs per Adam step.
-    pub batch_size: usize,
-    /// Epochs timed (after one untimed warm-up epoch).
-    pub epochs: usize,
-    /// Element type.
-    pub precision: Precision,
-    /// RK4 sub-steps per sample.
-    pub substeps: usize,
-    /// Seed of the weights and the shuffles.
-    pub seed: u64,
-    /// The step implementation.
-    pub engine: Engine,
-}
-
 /// Measured throughput.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct BenchReport {
@@ -69,11 +49,12 @@ pub struct BenchReport {
 }
 
 /// Times training of `model` on the one-step pairs of `data` (the first `train_points` of
-/// a single record, or every pair of every experiment).
+/// a single record, or every pair of every experiment) with the batch size, learning rate,
+/// precision, sub-steps, seed and engine of `options`; `options.epochs` epochs are timed.
 pub fn bench(
     model: &ir::Model,
     data: &TrainingData,
-    options: &BenchOptions,
+    options: &TrainOptions,
 ) -> Result<BenchReport, TrainError> {
     let part = options
         .train_points
@@ -89,6 +70,7 @@ pub fn bench(
         ..TrainOptions::default()
     };
     let layout = Layout::new(model, &TrainingData { part, ..*data }, &train_options)?;
+    let learning_rate = options.learning_rate;
     let hidden_init = hidden_initial_values(model)?;
     let setup = Setup {
         step: layout.grid.max_step,
@@ -124,7 +106,7 @@ pub fn bench(
         order.shuffle(&mut rng);
         let mut total = 0.0;
         for chunk in order.chunks(batch_size) {
-            total += step.train(&table.batch(chunk))? * chunk.len() as f64;
+            total += step.train(&table.batch(chunk), learning_rate)? * chunk.len() as f64;
         }
         Ok(total / order.len().max(1) as f64)
     };
@@ -171,11 +153,11 @@ impl Step {
         })
     }
 
-    /// One Adam step (learning rate 1e-3, as in the paper); the loss before it.
-    fn train(&mut self, batch: &Batch) -> Result<f64, TrainError> {
+    /// One Adam step at `learning_rate`; the loss before it.
+    fn train(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, TrainError> {
         Ok(match self {
-            Step::Graph(network) => network.train_step(batch, 1e-3)?,
-            Step::Fused(fused) => fused.train_step(batch, 1e-3)?,
+            Step::Graph(network) => network.train_step(batch, learning_rate)?,
+            Step::Fused(fused) => fused.train_step(batch, learning_rate)?,
         })
     }
 }
@@ -185,15 +167,12 @@ mod tests {
     use super::*;
     use crate::train::fixtures::chemostat;
 
-    fn options(engine: Engine) -> BenchOptions {
-        BenchOptions {
+    fn options(engine: Engine) -> TrainOptions {
+        TrainOptions {
             train_points: Some(120),
-            batch_size: 50,
             epochs: 3,
-            precision: Precision::F32,
-            substeps: 1,
-            seed: 0,
             engine,
+            ..TrainOptions::default()
         }
     }
 
@@ -224,7 +203,7 @@ mod tests {
             fused.final_loss,
             graph.final_loss
         );
-        let too_many = BenchOptions {
+        let too_many = TrainOptions {
             train_points: Some(1000),
             ..options(Engine::Graph)
         };

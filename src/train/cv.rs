@@ -45,7 +45,7 @@ pub fn cross_validate(
 ) -> Result<CrossValidation, TrainError> {
     if records.len() < 2 {
         return Err(TrainError::BadOption {
-            option: "--cv".into(),
+            option: "cv".into(),
             expected: "at least two experiments (each fold trains on the others)".into(),
             found: format!("{} experiment", records.len()),
         });

@@ -281,10 +281,3 @@ pub enum TrainError {
     #[diagnostic(transparent)]
     Io(#[from] IoError),
 }
-
-impl TrainError {
-    /// Whether this is a bug in gbc rather than a problem with the user's input.
-    pub fn is_internal(&self) -> bool {
-        matches!(self, TrainError::Backend(BackendError::Internal(_)))
-    }
-}

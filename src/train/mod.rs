@@ -36,6 +36,7 @@ pub mod polish;
 pub mod predict;
 pub(crate) mod prepare;
 pub mod recipe;
+pub mod settings;
 pub mod split;
 #[cfg(test)]
 mod tests;
@@ -61,6 +62,7 @@ use pairs::stage_fractions;
 pub use polish::{ParamEstimate, PolishSummary};
 use prepare::Layout;
 pub use recipe::{Engine, Objective, ParamSource, Recipe};
+pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
 use validation::{refresh, validate, Course};
 
@@ -98,19 +100,39 @@ pub struct TrainOptions {
 
 impl Default for TrainOptions {
     fn default() -> Self {
+        TrainOptions::with(&Settings::default())
+    }
+}
+
+impl TrainOptions {
+    /// The options of `settings` (the rest at their defaults: no train-point limit, seed 0,
+    /// the whole online run, the grid's own step, held history, every cell weighing 1).
+    pub fn with(settings: &Settings) -> Self {
         TrainOptions {
-            epochs: 100,
-            batch_size: 50,
-            learning_rate: 1e-3,
+            epochs: settings.epochs,
+            batch_size: settings.batch_size,
+            learning_rate: settings.learning_rate,
             train_points: None,
             seed: 0,
-            precision: Precision::F32,
-            substeps: 1,
+            precision: settings.precision,
+            substeps: settings.substeps,
             online_horizon: None,
-            engine: Engine::Graph,
+            engine: settings.engine,
             dt: None,
             history: History::Held,
             column_weights: Vec::new(),
+        }
+    }
+
+    /// The shared settings among the options.
+    pub fn settings(&self) -> Settings {
+        Settings {
+            epochs: self.epochs,
+            batch_size: self.batch_size,
+            learning_rate: self.learning_rate,
+            precision: self.precision,
+            substeps: self.substeps,
+            engine: self.engine,
         }
     }
 }
@@ -411,7 +433,7 @@ fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>,
             .iter()
             .position(|n| n == name)
             .ok_or_else(|| TrainError::BadOption {
-                option: "--weight".into(),
+                option: "column_weights".into(),
                 expected: format!(
                     "a measured state ({})",
                     crate::suggest::did_you_mean(name, &names, "measured states")
@@ -420,7 +442,7 @@ fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>,
             })?;
         if !(*weight > 0.0 && weight.is_finite()) {
             return Err(TrainError::BadOption {
-                option: "--weight".into(),
+                option: "column_weights".into(),
                 expected: "a positive weight".into(),
                 found: format!("{name}={weight}"),
             });
@@ -430,6 +452,8 @@ fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>,
     Ok(weights)
 }
 
+/// Checks the options; errors name the field (`batch_size`, `max_gradient_norm`), which the
+/// command line turns into its flag.
 fn check_options(options: &TrainOptions, recipe: &Recipe) -> Result<(), TrainError> {
     let bad = |option: &str, expected: &str, found: String| {
         Err(TrainError::BadOption {
@@ -438,29 +462,23 @@ fn check_options(options: &TrainOptions, recipe: &Recipe) -> Result<(), TrainErr
             found,
         })
     };
-    if options.batch_size == 0 {
-        return bad("--batch", "a positive batch size", "0".into());
-    }
-    if options.substeps == 0 {
-        return bad("--substeps", "a positive number of sub-steps", "0".into());
-    }
-    if !(options.learning_rate > 0.0 && options.learning_rate.is_finite()) {
-        return bad(
-            "--lr",
-            "a positive learning rate",
-            options.learning_rate.to_string(),
-        );
+    if let Err(setting) = options.settings().check() {
+        return bad(setting.field, setting.expected, setting.found);
     }
     let rate = recipe.param_learning_rate.unwrap_or(1.0);
     if !(rate > 0.0 && rate.is_finite()) {
-        return bad("--param-lr", "a positive learning rate", rate.to_string());
+        return bad(
+            "param_learning_rate",
+            "a positive learning rate",
+            rate.to_string(),
+        );
     }
     if recipe.horizon == 0 {
-        return bad("--horizon", "a positive number of steps", "0".into());
+        return bad("horizon", "a positive number of steps", "0".into());
     }
     if !(recipe.range_factor >= 1.0 && recipe.range_factor.is_finite()) {
         return bad(
-            "--range-factor",
+            "range_factor",
             "a factor of at least 1",
             recipe.range_factor.to_string(),
         );
@@ -469,25 +487,29 @@ fn check_options(options: &TrainOptions, recipe: &Recipe) -> Result<(), TrainErr
         .max_gradient_norm
         .filter(|n| !(*n > 0.0 && n.is_finite()))
     {
-        return bad("--clip", "a positive gradient norm", norm.to_string());
-    }
-    let shares = [recipe.warmup_share, recipe.ramp_share];
-    if let Some(share) = shares.into_iter().find(|s| !(0.0..=1.0).contains(s)) {
         return bad(
-            "--warmup/--ramp",
-            "a share between 0 and 1",
-            share.to_string(),
+            "max_gradient_norm",
+            "a positive gradient norm",
+            norm.to_string(),
         );
     }
+    for (field, share) in [
+        ("warmup_share", recipe.warmup_share),
+        ("ramp_share", recipe.ramp_share),
+    ] {
+        if !(0.0..=1.0).contains(&share) {
+            return bad(field, "a share between 0 and 1", share.to_string());
+        }
+    }
     if options.train_points == Some(0) {
-        return bad("--train-points", "a positive number of pairs", "0".into());
+        return bad("train_points", "a positive number of pairs", "0".into());
     }
     if let Some(horizon) = options
         .online_horizon
         .filter(|h| !(*h > 0.0 && h.is_finite()))
     {
         return bad(
-            "--online-horizon",
+            "online_horizon",
             "a positive time span",
             horizon.to_string(),
         );

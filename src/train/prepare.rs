@@ -139,7 +139,7 @@ fn grid_options(
     };
     if !(max_step > 0.0 && max_step.is_finite()) {
         return Err(TrainError::BadOption {
-            option: "--dt".into(),
+            option: "dt".into(),
             expected: "a positive step (the data need two distinct times)".into(),
             found: max_step.to_string(),
         });

@@ -39,16 +39,25 @@ impl Objective {
 }
 
 /// Which implementation runs the one-step training epochs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Engine {
-    /// The graph backend, [`crate::backend::Network`], for every epoch.
+    /// The graph backend (dfdx) for every epoch.
     #[default]
     Graph,
-    /// The hand-fused step, [`crate::fused::FusedNetwork`], for the one-step epochs (the
-    /// same result up to rounding, about twice as fast); rollouts, hidden-state refreshes,
-    /// the polish and the evaluation run on the graph backend, which takes over the
-    /// weights and Adam's state.
+    /// The hand-fused step for the one-step epochs: the same results up to rounding, about
+    /// 2x faster per one-step epoch (rollouts, polish and evaluation run on the graph
+    /// backend).
     Fused,
 }
 

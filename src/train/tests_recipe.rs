@@ -239,17 +239,17 @@ fn bad_recipe_values_are_refused_naming_the_flag() {
         horizon: 0,
         ..Recipe::default()
     };
-    assert_eq!(refused(horizon), "--horizon");
+    assert_eq!(refused(horizon), "horizon");
     let factor = Recipe {
         range_factor: 0.5,
         ..Recipe::default()
     };
-    assert_eq!(refused(factor), "--range-factor");
+    assert_eq!(refused(factor), "range_factor");
     let rate = Recipe {
         param_learning_rate: Some(-1.0),
         ..Recipe::default()
     };
-    assert_eq!(refused(rate), "--param-lr");
+    assert_eq!(refused(rate), "param_learning_rate");
 }
 
 /// Trains `model` on `data` with both engines from the same seed in f64; returns the

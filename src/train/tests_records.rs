@@ -217,7 +217,7 @@ fn a_column_weight_scales_its_cells_in_the_loss() {
         Err(TrainError::BadOption {
             option, expected, ..
         }) => {
-            assert_eq!(option, "--weight");
+            assert_eq!(option, "column_weights");
             assert!(expected.contains("measured state"), "{expected}");
         }
         _ => panic!("expected a bad --weight"),

@@ -1,5 +1,7 @@
-//! The floating-point element types the backend trains in (`f32`, `f64`), with the
-//! numerically safe scalar functions the network and the physics need.
+//! The floating-point element types training runs in (`f32`, `f64`), with the numerically
+//! safe scalar functions the networks and the physics need. The one definition of softplus
+//! (value and slope) is here: the graph backend, the fused step, the physics program and the
+//! scalar evaluator ([`crate::vocabulary::softplus`]) all call it.
 
 use std::fmt::Debug;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
@@ -56,21 +58,27 @@ pub trait Real:
             sum.ln() * self / (sum - Self::ONE)
         }
     }
-    /// `log(1 + e^x)`, written as `max(x, 0) + ln(1 + e^-|x|)` so that it neither overflows
-    /// for large positive `x` nor loses the tail for large negative `x`.
-    fn softplus(self) -> Self {
+    /// `log(1 + e^x)` and its slope `1 / (1 + e^-x)` from one exponential: written as
+    /// `max(x, 0) + ln(1 + e)` and `1 / (1 + e)` or `e / (1 + e)` with `e = e^-|x|`, so
+    /// that neither overflows for large positive `x` nor loses the tail for large negative
+    /// `x`.
+    fn softplus_and_slope(self) -> (Self, Self) {
+        let decay = (-self.abs()).exp();
         let positive_part = if self > Self::ZERO { self } else { Self::ZERO };
-        positive_part + (-self.abs()).exp().ln_one_plus()
+        let numerator = if self >= Self::ZERO { Self::ONE } else { decay };
+        (
+            positive_part + decay.ln_one_plus(),
+            numerator / (Self::ONE + decay),
+        )
+    }
+    /// `log(1 + e^x)` ([`Real::softplus_and_slope`]'s value).
+    fn softplus(self) -> Self {
+        self.softplus_and_slope().0
     }
     /// `1 / (1 + e^-x)`, evaluated through `e^-|x|` so it never overflows; it is also the
-    /// derivative of [`Real::softplus`].
+    /// derivative of [`Real::softplus`] ([`Real::softplus_and_slope`]'s slope).
     fn sigmoid(self) -> Self {
-        let decay = (-self.abs()).exp();
-        if self >= Self::ZERO {
-            Self::ONE / (Self::ONE + decay)
-        } else {
-            decay / (Self::ONE + decay)
-        }
+        self.softplus_and_slope().1
     }
 }
 
