@@ -510,7 +510,13 @@ impl BarChart {
             );
         }
         let entries: Vec<(&str, String, Style)> = (self.groups.iter().enumerate())
-            .map(|(g, (name, _))| (name.as_str(), PALETTE[g % PALETTE.len()].to_string(), Style::Line))
+            .map(|(g, (name, _))| {
+                (
+                    name.as_str(),
+                    PALETTE[g % PALETTE.len()].to_string(),
+                    Style::Line,
+                )
+            })
             .collect();
         let _ = write_legend(&mut svg, &entries, right + LEGEND_GAP);
         svg.push_str("</svg>\n");

@@ -545,7 +545,11 @@ fn cut_off_scale(mut names: Vec<String>, groups: &mut [(String, Vec<f64>)]) -> V
     let Some((_, truth)) = groups.iter().find(|(name, _)| name == "truth") else {
         return names;
     };
-    let largest = truth.iter().map(|v| v.abs()).filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let largest = truth
+        .iter()
+        .map(|v| v.abs())
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
     if largest <= 0.0 {
         return names;
     }
@@ -553,7 +557,11 @@ fn cut_off_scale(mut names: Vec<String>, groups: &mut [(String, Vec<f64>)]) -> V
     for (_, values) in groups.iter_mut() {
         for (index, value) in values.iter_mut().enumerate() {
             if value.abs() > ceiling {
-                names[index] = format!("{} ({}, cut)", names[index], crate::plot::tick_label(*value));
+                names[index] = format!(
+                    "{} ({}, cut)",
+                    names[index],
+                    crate::plot::tick_label(*value)
+                );
                 *value = ceiling.copysign(*value);
             }
         }
