@@ -217,6 +217,16 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     let log = progress.log(&trained.report);
     crate::io::write_atomic(&directory.join(LOG_FILE), log.as_bytes())
         .map_err(CommandError::user)?;
+    let title = (args.model.file_stem()).map_or(model.name.clone(), |s| s.to_string_lossy().into());
+    let page = train::page::run_page(
+        &model,
+        &trained,
+        (&train_records, &validation),
+        (options.history, &progress.horizons()),
+        &title,
+    );
+    crate::io::write_atomic(&directory.join(REPORT_FILE), page.as_bytes())
+        .map_err(CommandError::user)?;
     let json_to_stdout = args
         .json
         .as_ref()
@@ -238,6 +248,9 @@ pub fn run(args: &TrainArgs) -> CommandResult {
 
 /// The training log of a run directory.
 pub const LOG_FILE: &str = "log.csv";
+
+/// The report page of a run directory.
+pub const REPORT_FILE: &str = "report.html";
 
 /// Where the run goes: `-o DIR` (refused when it holds files, unless `--force`), else a new
 /// directory `runs/<model>-<UTC time>` announced on stderr. Checked before training, so
@@ -507,6 +520,11 @@ impl Progress {
     /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,
     /// seconds) and the validation errors where they were computed (before the first epoch
     /// and after the last).
+    /// Each epoch's rollout length (1: one-step).
+    fn horizons(&self) -> Vec<usize> {
+        self.epochs.iter().map(|(horizon, ..)| *horizon).collect()
+    }
+
     fn log(&self, report: &train::TrainReport) -> String {
         let metrics = &report.metrics;
         let overall = |set: &Option<ErrorSet>| {

@@ -297,22 +297,4 @@ fn representatives(prepared: &Prepared, results: &[RunResult]) -> String {
     )
 }
 
-/// A whole HTML page around study sections.
-pub fn page(title: &str, intro: &str, sections: &[String]) -> String {
-    let mut html = String::new();
-    let _ = writeln!(
-        html,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n\
-         <style>body{{font-family:sans-serif;max-width:1340px;margin:2em auto;padding:0 1em;color:#222}}\
-         table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
-         th{{background:#f3f3f3}}figure{{display:inline-block;margin:0.5em;vertical-align:top;width:640px}}\
-         figcaption{{font-size:0.85em;color:#444}}.notes{{color:#8a4b00}}</style></head><body>",
-        escape(title)
-    );
-    let _ = writeln!(html, "<h1>{}</h1>\n{intro}", escape(title));
-    for section in sections {
-        html.push_str(section);
-    }
-    html.push_str("</body></html>\n");
-    html
-}
+pub use crate::plot::page;

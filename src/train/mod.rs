@@ -31,6 +31,7 @@ mod error;
 pub mod evaluate;
 mod fit;
 pub mod initial;
+pub mod page;
 pub mod pairs;
 pub mod polish;
 pub mod predict;
@@ -223,6 +224,9 @@ pub struct TrainReport {
     pub dt: f64,
     /// The Adam learning rate of the network weights.
     pub learning_rate: f64,
+    /// Each training experiment whose later part validates (`--train-points`,
+    /// `--val-fraction`), with the time its validated part starts.
+    pub validated_from: Vec<(String, f64)>,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -416,6 +420,7 @@ pub fn train_with(
         initial_states,
         dt: layout.grid.max_step,
         learning_rate: options.learning_rate,
+        validated_from: validated_from(&layout),
     };
     Ok(Trained {
         network,
@@ -524,6 +529,21 @@ fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
         });
     }
     Ok(())
+}
+
+/// The training experiments whose later part validates, with the time it starts.
+fn validated_from(layout: &Layout) -> Vec<(String, f64)> {
+    (layout.scorings[..layout.part_scorings].iter())
+        .filter_map(|scoring| {
+            let track = &layout.tracks[scoring.track];
+            let time = if scoring.scored_from.is_finite() {
+                scoring.scored_from
+            } else {
+                *track.times.get(scoring.run_start)?
+            };
+            Some((track.name.clone(), time))
+        })
+        .collect()
 }
 
 /// How many one-step pairs `data`'s training experiments offer `model` (the largest

@@ -31,8 +31,11 @@ pub struct Layout {
     /// The validation tracks: the training tracks again when part of them validates, then
     /// the whole validation experiments.
     pub validation_tracks: Vec<Track>,
-    /// How each validation track is scored.
+    /// How each validation track is scored: the validated parts of training tracks
+    /// first ([`Layout::part_scorings`] of them), then the whole validation experiments.
     pub scorings: Vec<Scoring>,
+    /// How many of `scorings` score the later part of a training track.
+    pub part_scorings: usize,
     /// Statistics over the training part.
     pub normalisation: Normalisation,
 }
@@ -75,6 +78,7 @@ impl Layout {
             tracks.clone()
         };
         let offset = validation_tracks.len();
+        let part_scorings = scorings.len();
         let held_out: Vec<Track> = (data.validation.iter())
             .zip(&initial[data.train.len()..])
             .map(|(r, i)| lay(r, i))
@@ -104,6 +108,7 @@ impl Layout {
             intervals,
             validation_tracks,
             scorings,
+            part_scorings,
             normalisation,
         })
     }

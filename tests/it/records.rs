@@ -67,6 +67,15 @@ fn training_on_several_irregular_experiments_validates_the_held_out_one() {
     let stdout = text(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert!(stdout.contains("validation on c ("), "{stdout}");
+    // The run's report page: the fit of every experiment by role, and the figures.
+    let page = std::fs::read_to_string(dir.join("run/report.html")).expect("report.html");
+    assert!(page.contains("<h2>Fit per state</h2>"), "{page}");
+    assert!(page.contains("<td>c</td><td>validation</td>"), "{page}");
+    assert!(page.contains("<td>a</td><td>training</td>"), "{page}");
+    assert!(
+        page.matches("<svg").count() >= 4,
+        "loss, states and closures drawn"
+    );
     // Without a choice, the last experiment validates and the user is told.
     let second = dir.join("run2").display().to_string();
     let out = gbc(&["train", MODEL, &a, &b, &c, "--epochs", "1", "-o", &second]);

@@ -1,0 +1,418 @@
+//! The run report (`RUN/report.html`): what a person checks after training — the loss
+//! curve, each state measured against its one-step prediction and its free run with the
+//! training/validation split marked, the learned closure outputs over time, the params with
+//! their standard errors, and per experiment and state MATLAB's fit percentage beside the
+//! paper's normalised MSE.
+
+use std::fmt::Write;
+
+use super::predict::{predict, Mode, PredictionTable};
+use super::{History, Trained};
+use crate::ir;
+use crate::plot::{escape, page, tick_label, Chart, Series, Style, PALETTE};
+use crate::record::Record;
+
+/// Figure width in pixels.
+const WIDTH: f64 = 640.0;
+/// Figure height in pixels.
+const HEIGHT: f64 = 330.0;
+/// Experiments drawn per role (the tables cover every experiment).
+const DRAWN: usize = 3;
+/// Colour of measured cells.
+const DATA: &str = "#000000";
+/// Colour of one-step predictions.
+const OFFLINE: &str = "#1f77b4";
+/// Colour of free runs.
+const ONLINE: &str = "#d62728";
+/// Colour of the training/validation boundary.
+const SPLIT: &str = "#888888";
+
+/// One experiment with its role and both predictions.
+struct Shown<'a> {
+    record: &'a Record,
+    role: &'static str,
+    offline: Option<PredictionTable>,
+    online: Option<PredictionTable>,
+}
+
+/// The report page of a trained run: `train` and `validation` are the experiments it
+/// trained and validated on, `history` where their free runs start, `horizons` each
+/// epoch's rollout length (1: one-step; empty: unknown).
+pub fn run_page(
+    model: &ir::Model,
+    trained: &Trained,
+    (train, validation): (&[Record], &[Record]),
+    (history, horizons): (History, &[usize]),
+    title: &str,
+) -> String {
+    let predicted = |record, mode| {
+        predict(
+            model,
+            &trained.network,
+            &trained.setup,
+            record,
+            (mode, history),
+        )
+        .ok()
+    };
+    let shown: Vec<Shown> = (train.iter().map(|r| (r, "training")))
+        .chain(validation.iter().map(|r| (r, "validation")))
+        .map(|(record, role)| Shown {
+            record,
+            role,
+            offline: predicted(record, Mode::Offline),
+            online: predicted(record, Mode::Online),
+        })
+        .collect();
+    let report = &trained.report;
+    let mut sections = Vec::new();
+    sections.push(format!(
+        "<h2>Training</h2>\n<p>{} pairs, {} epochs ({:?} recipe), learning rate {}, grid step up to \
+         {}. Errors are over measured cells only; NMSE is the paper's (squared error over the \
+         training data's variance), fit is MATLAB's <code>100 (1 - |y - ŷ| / |y - mean y|)</code> \
+         (100 %: exact; 0 %: no better than the mean).</p>\n{}",
+        report.train_pairs,
+        report.losses.len(),
+        report.recipe.objective,
+        tick_label(report.learning_rate),
+        tick_label(report.dt),
+        figure(&loss_chart(report.losses.as_slice(), horizons, title))
+    ));
+    sections.push(fit_section(model, trained, &shown));
+    sections.push(params_section(report));
+    sections.push(states_section(model, trained, &shown, title));
+    sections.push(closures_section(model, &shown, title));
+    page(
+        &format!("{title}: training report"),
+        &format!(
+            "<p>Model <code>{}</code>. Every figure is drawn from the saved run: rerun \
+             <code>gbc predict</code> for the tables behind them.</p>",
+            escape(&model.name)
+        ),
+        &sections,
+    )
+}
+
+fn figure(svg: &str) -> String {
+    format!("<figure>{svg}</figure>\n")
+}
+
+/// The mean training loss per epoch (log scale), one series per phase: one-step epochs and
+/// rollout epochs have losses of different kinds.
+fn loss_chart(losses: &[f64], horizons: &[usize], title: &str) -> String {
+    let point = |(epoch, loss): (usize, &f64)| ((epoch + 1) as f64, *loss);
+    let rollout = |epoch: usize| horizons.get(epoch).is_some_and(|h| *h > 1);
+    let one_step: Vec<(f64, f64)> = (losses.iter().enumerate())
+        .filter(|(epoch, _)| !rollout(*epoch))
+        .map(point)
+        .collect();
+    let multi_step: Vec<(f64, f64)> = (losses.iter().enumerate())
+        .filter(|(epoch, _)| rollout(*epoch))
+        .map(point)
+        .collect();
+    let mut chart = Chart::new(
+        &format!("{title}: training loss"),
+        "epoch",
+        "mean loss (z-scored)",
+    )
+    .log_axes(false, true);
+    if !one_step.is_empty() {
+        chart = chart.with(Series::line("one-step epochs", one_step).colored(OFFLINE));
+    }
+    if !multi_step.is_empty() {
+        let series = Series::line("rollout epochs", multi_step).styled(Style::Dashed);
+        chart = chart.with(series.colored(ONLINE));
+    }
+    chart.to_svg(WIDTH, HEIGHT)
+}
+
+/// Per experiment and state: fit % and NMSE of the one-step prediction and the free run.
+fn fit_section(model: &ir::Model, trained: &Trained, shown: &[Shown]) -> String {
+    let mut html = String::from(
+        "<h2>Fit per state</h2>\n<table><tr><th>experiment</th><th>role</th><th>state</th>\
+         <th>cells</th><th>one-step fit %</th><th>free-run fit %</th><th>one-step NMSE</th>\
+         <th>free-run NMSE</th></tr>\n",
+    );
+    let std = &trained.setup.normalisation.state_std;
+    let parts = shown.iter().flat_map(|entry| {
+        let split = (trained.report.validated_from.iter())
+            .find(|(name, _)| name == &entry.record.name)
+            .map(|(_, time)| *time);
+        match split {
+            Some(time) => vec![
+                (entry, "training", f64::NEG_INFINITY..time),
+                (entry, "validated part", time..f64::INFINITY),
+            ],
+            None => vec![(entry, entry.role, f64::NEG_INFINITY..f64::INFINITY)],
+        }
+    });
+    for (entry, role, times) in parts {
+        for (index, state) in model.states.iter().enumerate() {
+            let within = |table: &PredictionTable| {
+                let mut pairs = paired(entry.record, table, index);
+                pairs.retain(|(time, ..)| times.contains(time));
+                pairs
+                    .into_iter()
+                    .map(|(_, y, p)| (y, p))
+                    .collect::<Vec<_>>()
+            };
+            let offline = entry.offline.as_ref().map(within);
+            let online = entry.online.as_ref().map(within);
+            let cells = online.as_ref().or(offline.as_ref()).map_or(0, Vec::len);
+            if cells == 0 {
+                continue;
+            }
+            let scale = std.get(index).copied().unwrap_or(1.0);
+            let cell = |pairs: &Option<Vec<(f64, f64)>>, what: fn(&[(f64, f64)], f64) -> f64| {
+                pairs
+                    .as_deref()
+                    .map_or("–".to_string(), |p| tick_label(what(p, scale)))
+            };
+            let _ = writeln!(
+                html,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{cells}</td><td>{}</td><td>{}</td>\
+                 <td>{}</td><td>{}</td></tr>",
+                escape(&entry.record.name),
+                role,
+                escape(&state.name),
+                cell(&offline, |p, _| fit_percent(p)),
+                cell(&online, |p, _| fit_percent(p)),
+                cell(&offline, nmse),
+                cell(&online, nmse),
+            );
+        }
+    }
+    html.push_str("</table>\n");
+    html
+}
+
+/// `(time, measured, predicted)` at the measured cells of state `index` where the
+/// prediction is finite.
+fn paired(record: &Record, table: &PredictionTable, index: usize) -> Vec<(f64, f64, f64)> {
+    let Some(column) = table.columns.get(index + 1) else {
+        return Vec::new();
+    };
+    let mut pairs = Vec::new();
+    for (time, predicted) in table.columns[0].iter().zip(column) {
+        let Ok(row) = record.times.binary_search_by(|t| t.total_cmp(time)) else {
+            continue;
+        };
+        if let (Some(measured), true) = (record.states[index][row], predicted.is_finite()) {
+            pairs.push((*time, measured, *predicted));
+        }
+    }
+    pairs
+}
+
+/// MATLAB's fit: `100 (1 - |y - ŷ| / |y - mean y|)` (Euclidean norms).
+pub fn fit_percent(pairs: &[(f64, f64)]) -> f64 {
+    let mean = pairs.iter().map(|p| p.0).sum::<f64>() / pairs.len().max(1) as f64;
+    let error: f64 = pairs
+        .iter()
+        .map(|(y, p)| (y - p).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let spread: f64 = pairs
+        .iter()
+        .map(|(y, _)| (y - mean).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    if spread > 0.0 {
+        100.0 * (1.0 - error / spread)
+    } else {
+        f64::NAN
+    }
+}
+
+/// The paper's normalised MSE: mean squared error over `scale²` (the training std).
+pub fn nmse(pairs: &[(f64, f64)], scale: f64) -> f64 {
+    let sum: f64 = pairs.iter().map(|(y, p)| ((y - p) / scale).powi(2)).sum();
+    sum / pairs.len().max(1) as f64
+}
+
+/// Params with standard errors and identifiability.
+fn params_section(report: &super::TrainReport) -> String {
+    if report.params.is_empty() {
+        return String::new();
+    }
+    let mut html = String::from(
+        "<h2>Params</h2>\n<table><tr><th>param</th><th>value</th><th>standard error</th>\
+         <th>relative</th><th>identified</th></tr>\n",
+    );
+    for (name, value) in &report.params {
+        let estimate = report.estimates.iter().find(|e| &e.name == name);
+        let (se, relative, flag) = match estimate {
+            Some(e) if e.std_error.is_finite() => (
+                tick_label(e.std_error),
+                format!("{:.1} %", 100.0 * e.relative_error),
+                if e.well_identified { "yes" } else { "poorly" },
+            ),
+            Some(_) => ("∞".into(), "–".into(), "no (the data leave it free)"),
+            None => ("–".into(), "–".into(), "not estimated"),
+        };
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td>{}</td><td>{se}</td><td>{relative}</td><td>{flag}</td></tr>",
+            escape(name),
+            tick_label(*value)
+        );
+    }
+    html.push_str("</table>\n");
+    html
+}
+
+/// Measured cells against the one-step prediction and the free run, per state, for the
+/// first experiments of each role; the validated part of a training experiment is marked.
+fn states_section(model: &ir::Model, trained: &Trained, shown: &[Shown], title: &str) -> String {
+    let mut html = String::from(
+        "<h2>Measured and predicted</h2>\n<p>Dots: measured cells. Solid: one step from the \
+         measured history. Dashed: free run from the experiment's start, driven by its inputs \
+         alone. A grey vertical line marks where a training experiment's validated part \
+         starts.</p>\n",
+    );
+    for entry in drawn(shown) {
+        let split = (trained.report.validated_from.iter())
+            .find(|(name, _)| name == &entry.record.name)
+            .map(|(_, time)| *time);
+        for (index, state) in model.states.iter().enumerate() {
+            let cells: Vec<(f64, f64)> = (entry.record.times.iter())
+                .zip(&entry.record.states[index])
+                .filter_map(|(t, cell)| cell.map(|v| (*t, v)))
+                .collect();
+            if cells.is_empty() {
+                continue;
+            }
+            let (lo, hi) = span(cells.iter().map(|c| c.1));
+            let mut chart = Chart::new(
+                &format!(
+                    "{title}: {} ({}) — {}",
+                    entry.record.name, entry.role, state.name
+                ),
+                &model.time_label(),
+                &model.axis_label(&state.name),
+            )
+            .with(
+                Series::line("measured", thinned(cells))
+                    .styled(Style::Markers)
+                    .colored(DATA),
+            );
+            for (table, name, color, style) in [
+                (&entry.offline, "one step", OFFLINE, Style::Line),
+                (&entry.online, "free run", ONLINE, Style::Dashed),
+            ] {
+                if let Some(points) = table
+                    .as_ref()
+                    .map(|t| column_points(t, index + 1, (lo, hi)))
+                {
+                    chart = chart.with(Series::line(name, points).styled(style).colored(color));
+                }
+            }
+            if let Some(time) = split {
+                let line = vec![(time, lo), (time, hi)];
+                chart = chart.with(Series::line("validated from", line).colored(SPLIT));
+            }
+            html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT)));
+        }
+    }
+    html
+}
+
+/// The learned closure outputs along each drawn experiment's free run.
+fn closures_section(model: &ir::Model, shown: &[Shown], title: &str) -> String {
+    let outputs: Vec<&str> = (model.closures.iter())
+        .flat_map(|c| c.outputs.iter().map(|o| o.name.as_str()))
+        .collect();
+    if outputs.is_empty() {
+        return String::new();
+    }
+    let mut html = String::from(
+        "<h2>Learned closures</h2>\n<p>Each closure output along the free run of each drawn \
+         experiment.</p>\n",
+    );
+    for output in outputs {
+        let mut chart = Chart::new(
+            &format!("{title}: closure output {output}"),
+            &model.time_label(),
+            &model.axis_label(output),
+        );
+        for (index, entry) in drawn(shown).enumerate() {
+            let Some(table) = &entry.online else {
+                continue;
+            };
+            let Some(column) = table.header.iter().position(|h| h == output) else {
+                continue;
+            };
+            let points = column_points(table, column, (f64::NEG_INFINITY, f64::INFINITY));
+            let name = format!("{} ({})", entry.record.name, entry.role);
+            let series = Series::line(&name, points).colored(PALETTE[index % PALETTE.len()]);
+            chart = chart.with(series);
+        }
+        html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT)));
+    }
+    html
+}
+
+/// The first [`DRAWN`] experiments of each role.
+fn drawn<'s, 'a>(shown: &'s [Shown<'a>]) -> impl Iterator<Item = &'s Shown<'a>> {
+    let training = shown.iter().filter(|s| s.role == "training").take(DRAWN);
+    let validation = shown.iter().filter(|s| s.role == "validation").take(DRAWN);
+    training.chain(validation)
+}
+
+/// Finite values of column `column` against time, clamped to `(lo, hi)` widened by half
+/// their span (so that a runaway free run does not flatten the data).
+fn column_points(table: &PredictionTable, column: usize, (lo, hi): (f64, f64)) -> Vec<(f64, f64)> {
+    let pad = if hi > lo {
+        0.5 * (hi - lo)
+    } else {
+        f64::INFINITY
+    };
+    (table.columns[0].iter().zip(&table.columns[column]))
+        .filter(|(_, v)| v.is_finite())
+        .map(|(t, v)| (*t, v.clamp(lo - pad, hi + pad)))
+        .collect()
+}
+
+/// At most [`MARKERS`] points: every k-th (dots denser than that hide the lines).
+fn thinned(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    let stride = points.len().div_ceil(MARKERS).max(1);
+    points.into_iter().step_by(stride).collect()
+}
+
+/// Most measured cells drawn as dots per figure.
+const MARKERS: usize = 300;
+
+/// The smallest and largest of `values`.
+fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fit_is_100_for_an_exact_prediction_and_0_for_the_mean() {
+        let exact = [(1.0, 1.0), (2.0, 2.0), (4.0, 4.0)];
+        assert_eq!(fit_percent(&exact), 100.0);
+        let mean = 7.0 / 3.0;
+        let flat = [(1.0, mean), (2.0, mean), (4.0, mean)];
+        assert!(fit_percent(&flat).abs() < 1e-12);
+        // Half the error of the mean everywhere: 50 %.
+        let half = [
+            (1.0, (1.0 + mean) / 2.0),
+            (2.0, (2.0 + mean) / 2.0),
+            (4.0, (4.0 + mean) / 2.0),
+        ];
+        assert!((fit_percent(&half) - 50.0).abs() < 1e-12);
+        assert!(fit_percent(&[(3.0, 1.0), (3.0, 2.0)]).is_nan());
+    }
+
+    #[test]
+    fn nmse_divides_by_the_training_variance() {
+        let pairs = [(1.0, 3.0), (2.0, 2.0)];
+        assert!((nmse(&pairs, 2.0) - 0.5).abs() < 1e-15);
+    }
+}
