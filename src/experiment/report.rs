@@ -152,6 +152,7 @@ pub fn section(
         seconds
     );
     html.push_str(&comparison_list(&compare(prepared, results)));
+    html.push_str(&verdicts(prepared, results));
     html.push_str(&summary_table(&summarise(study, results)));
     html.push_str(&params_table(prepared, results));
     html.push_str(&representatives(prepared, results));
@@ -171,6 +172,105 @@ pub fn section(
         html.push_str("</ul>\n");
     }
     html.push_str("</section>\n");
+    html
+}
+
+/// One paragraph per grey box against the study's first black box: where it wins and where
+/// it loses (by median, size by size) and why.
+fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
+    let rows = summarise(&prepared.study, results);
+    let median = |label: &str, size: usize, online: bool| {
+        (rows.iter())
+            .find(|r| r.model == label && r.size == size)
+            .and_then(|r| if online { r.online } else { r.offline })
+            .map(|s| s.median)
+    };
+    let Some(black) = prepared.models.iter().find(|m| is_black_box(&m.model)) else {
+        return String::new();
+    };
+    let sizes = prepared.study.sorted_sizes();
+    let mut html = String::new();
+    for grey in prepared.models.iter().filter(|m| !is_black_box(&m.model)) {
+        let split = |online: bool| {
+            let (mut wins, mut losses) = (Vec::new(), Vec::new());
+            for &size in &sizes {
+                if let (Some(g), Some(b)) = (
+                    median(&grey.label, size, online),
+                    median(&black.label, size, online),
+                ) {
+                    if g < b {
+                        wins.push(size);
+                    } else {
+                        losses.push(size);
+                    }
+                }
+            }
+            (wins, losses)
+        };
+        let (online_wins, online_losses) = split(true);
+        let (offline_wins, offline_losses) = split(false);
+        let list = |sizes: &[usize]| {
+            let names: Vec<String> = sizes.iter().map(ToString::to_string).collect();
+            names.join(", ")
+        };
+        let largest = sizes.last().copied().unwrap_or(0);
+        let at_largest = match (
+            median(&grey.label, largest, true),
+            median(&black.label, largest, true),
+        ) {
+            (Some(g), Some(b)) => format!(
+                " (at {largest} points: online MSE {} against {})",
+                number(g),
+                number(b)
+            ),
+            _ => String::new(),
+        };
+        let wins = match (online_wins.is_empty(), offline_wins.is_empty()) {
+            (false, _) => format!(
+                "the free run at {} of {} sizes ({}){at_largest}, and one step ahead at {} \
+                 of them. The balances carry the grey box: the network learns only the \
+                 unknown rates, and an error in a rate shifts the trajectory without breaking \
+                 mass conservation, so it does not compound the way a black box's does",
+                online_wins.len(),
+                sizes.len(),
+                list(&online_wins),
+                offline_wins.len()
+            ),
+            (true, false) => format!(
+                "one step ahead only, at sizes {}: the balances help the one-step fit, \
+                 but this grid gives no size where its free run is the better one",
+                list(&offline_wins)
+            ),
+            (true, true) => "nowhere in this grid".to_string(),
+        };
+        let losses = match (online_losses.is_empty(), offline_losses.is_empty()) {
+            (true, true) => "nowhere in this grid".to_string(),
+            (true, false) => format!(
+                "one step ahead at sizes {}: judged from the measured history, the black \
+                 box's direct map to the next state fits as well or better, and its freedom \
+                 only costs it in the free run",
+                list(&offline_losses)
+            ),
+            (false, _) => format!(
+                "the free run at sizes {}: with these few pairs or epochs the learned rates \
+                 are not yet right over the whole range of states the free run visits, and \
+                 the balances then carry a wrong rate forward{}",
+                list(&online_losses),
+                if offline_losses.is_empty() {
+                    String::new()
+                } else {
+                    format!("; one step ahead too at sizes {}", list(&offline_losses))
+                }
+            ),
+        };
+        let _ = writeln!(
+            html,
+            "<p><b>{}</b> against <b>{}</b>. <i>Where the grey box wins:</i> {wins}. \
+             <i>Where it loses:</i> {losses}.</p>",
+            escape(&grey.label),
+            escape(&black.label)
+        );
+    }
     html
 }
 

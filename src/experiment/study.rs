@@ -228,6 +228,24 @@ impl Study {
         }
     }
 
+    /// The studies of `gbc demo`: both scaled-down studies with gbc's default recipe, then
+    /// both with the paper's recipe (named `<study>-paper`).
+    pub fn demo_studies() -> Vec<Study> {
+        let base = [Study::chemostat_demo(), Study::bioreactor_demo()];
+        let default = base.iter().map(|study| Study {
+            title: format!("{} — gbc's default recipe", study.title),
+            training: Training::MultiStep,
+            ..study.clone()
+        });
+        let paper = base.iter().map(|study| Study {
+            name: format!("{}-paper", study.name),
+            title: format!("{} — the paper's recipe", study.title),
+            training: Training::Paper,
+            ..study.clone()
+        });
+        default.chain(paper).collect()
+    }
+
     /// Every file the study reads, in the order of [`StudyRecord`](super::StudyRecord)'s
     /// fingerprints.
     pub fn files(&self) -> Vec<&Path> {

@@ -165,6 +165,24 @@ fn a_sharded_experiment_reruns_nothing_and_merges_into_tables_figures_and_report
         report.contains("<svg") && report.contains("trajectory") || report.contains("Free runs")
     );
     assert!(report.contains("<table>") && report.contains("below <b>blackbox</b>"));
+    // The verdict paragraph says where the grey box wins, with the same count as the list.
+    let list = "below <b>blackbox</b> (median): online at ";
+    let counted = report.find(list).map(|at| &report[at + list.len()..]);
+    let wins: Option<(usize, usize)> = counted.and_then(|text| {
+        let mut words = text.split_whitespace();
+        let wins = words.next()?.parse().ok()?;
+        let _of = words.next()?;
+        Some((wins, words.next()?.parse().ok()?))
+    });
+    let (wins, sizes) = wins.expect("the comparison list");
+    assert!(
+        report.contains("<b>greybox</b> against <b>blackbox</b>. <i>Where the grey box wins:</i>")
+    );
+    assert_eq!(
+        report.contains(&format!("the free run at {wins} of {sizes} sizes")),
+        wins > 0,
+        "{report}"
+    );
 
     let study = tiny_study();
     let changed = prepare(&Study {
