@@ -28,10 +28,14 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "NAME", num_args = 1..)]
     pub holdout: Vec<String>,
     /// Score the last share of each experiment's measured rows (the free run still starts
-    /// at the experiment's first row). Default: 0.3 with one experiment and nothing held
-    /// out; with several, the last experiment is held out.
+    /// at the experiment's first row). Default: 0.3 when no experiment is held out.
     #[arg(long, value_name = "SHARE")]
     pub val_fraction: Option<f64>,
+    /// Fit the initial values of the hidden states in every training experiment (else they
+    /// start from their declared values): for experiments that do not start where the
+    /// model's declarations say, e.g. records cut from one long run.
+    #[arg(long)]
+    pub fit_initial: bool,
     /// How data columns are named.
     #[command(flatten)]
     pub columns: ColumnArgs,
@@ -116,6 +120,7 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         seed: args.seed,
         span: args.span,
         dim: args.dim,
+        fit_initial: args.fit_initial,
         ..Options::default()
     };
     let pool = rayon::ThreadPoolBuilder::new()

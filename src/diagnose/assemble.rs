@@ -245,7 +245,7 @@ pub fn initial_states(context: &Context, base: &Simulator, x: &[f64]) -> Vec<Ini
     let fitted = &x[context.model.params.len().min(x.len())..];
     let mut found = Vec::new();
     for (index, record) in split.records.iter().enumerate() {
-        let overrides = split.overrides(index, fitted);
+        let overrides = split.overrides(index, fitted, simulator.hidden_count());
         let start = simulator.start_state(record, &overrides);
         for (k, &how) in split.starts[index].iter().enumerate() {
             if how != Start::Cell {
@@ -254,6 +254,17 @@ pub fn initial_states(context: &Context, base: &Simulator, x: &[f64]) -> Vec<Ini
                     state: context.model.states[k].name.clone(),
                     value: start[k],
                     origin: origin(how).into(),
+                });
+            }
+        }
+        let measured = context.model.states.len();
+        for (h, state) in context.model.hidden.iter().enumerate() {
+            if overrides[measured + h].is_some() {
+                found.push(InitialState {
+                    experiment: record.name.clone(),
+                    state: state.name.clone(),
+                    value: start[measured + h],
+                    origin: "fitted".into(),
                 });
             }
         }

@@ -137,7 +137,7 @@ pub fn one_step_pass(
     let fitted = &x[corrected.simulator.params().min(x.len())..];
     let mut records = Vec::new();
     for (index, record, rows) in split.training() {
-        let overrides = split.overrides(index, fitted);
+        let overrides = split.overrides(index, fitted, corrected.simulator.hidden_count());
         records.push(record_pass(corrected, (index, record, rows.end), &overrides, taus)?);
     }
     Ok(Pass { records })

@@ -9,7 +9,7 @@ use super::report::{Confidence, EffectScore, FitSummary};
 use super::simulate::{tolerances, Run, Simulator};
 use super::uncertainty::summarise;
 use super::{Context, DiagnoseError, Progress};
-use crate::ir::{self, Constraint, Model};
+use crate::ir::{self, Model};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -19,6 +19,8 @@ use std::time::Instant;
 pub struct Scored {
     /// The fitted params (then fitted starts) and their training gap.
     pub fitted: Fitted,
+    /// The fitted unknowns by name (params, `STATE@EXPERIMENT` starts).
+    pub named: BTreeMap<String, f64>,
     /// Uncertainty, criteria and cost of the fit.
     pub summary: FitSummary,
     /// Errors at the scored cells.
@@ -29,36 +31,31 @@ pub struct Scored {
     pub runs: Vec<Option<Run>>,
 }
 
-/// Fits `model` from the params `start` (by name; others from their declared values) and
-/// the fitted starts `initial`, and scores it on the held-out parts.
+/// Fits `model` from the unknowns `start` (by name: params and `STATE@EXPERIMENT` starts;
+/// others from their defaults), and scores it on the held-out parts.
 pub fn fit_and_score(
     context: &Context,
     model: &Model,
     start: &BTreeMap<String, f64>,
-    initial: &[f64],
     seed: u64,
 ) -> Result<Scored, DiagnoseError> {
     let started = Instant::now();
     let simulator = Simulator::new(model, &[], tolerances())?;
-    let mut x: Vec<f64> = (model.params.iter())
-        .map(|p| start.get(&p.name).copied().unwrap_or(p.init))
-        .collect();
-    x.extend_from_slice(initial);
-    let mut constraints: Vec<Constraint> = model.params.iter().map(|p| p.constraint).collect();
-    constraints.extend(initial.iter().map(|_| Constraint::Free));
+    let unknowns = context.unknowns(model, &simulator);
+    let x = unknowns.values(start);
+    let constraints = &unknowns.constraints;
     let objective = Objective {
         simulator: &simulator,
         split: &context.split,
     };
-    let fitted = fit(&objective, &constraints, &x, context.options.restarts, seed);
-    let mut names: Vec<String> = model.params.iter().map(|p| p.name.clone()).collect();
-    names.extend(context.fitted_start_names());
-    let mut summary = summarise(&objective, &constraints, &fitted.x, &names);
+    let fitted = fit(&objective, constraints, &x, context.options.restarts, seed);
+    let mut summary = summarise(&objective, constraints, &fitted.x, &unknowns.names);
     let (errors, runs) = held_out(context, &simulator, &fitted.x);
     summary.starts = fitted.starts;
     summary.seconds = started.elapsed().as_secs_f64();
     Ok(Scored {
         gap: errors.gap(),
+        named: (unknowns.names.iter().cloned()).zip(fitted.x.iter().copied()).collect(),
         fitted,
         summary,
         errors,
@@ -75,7 +72,7 @@ pub fn held_out(context: &Context, simulator: &Simulator, x: &[f64]) -> (Errors,
     let split = &context.split;
     let runs: Vec<Option<Run>> = (split.scored())
         .map(|(index, record, rows)| {
-            let overrides = split.overrides(index, fitted);
+            let overrides = split.overrides(index, fitted, simulator.hidden_count());
             simulator.free_run(record, &overrides, rows.end).ok()
         })
         .collect();
@@ -99,12 +96,10 @@ pub struct Ranking {
     pub confidence: Confidence,
 }
 
-/// Fits every effect of the model alone, from the model's fitted params `base` and fitted
-/// starts `initial`.
+/// Fits every effect of the model alone, from the model's fitted unknowns `base` (by name).
 pub fn rank_effects(
     context: &Context,
     base: &BTreeMap<String, f64>,
-    initial: &[f64],
     gap_before: f64,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Ranking, DiagnoseError> {
@@ -116,7 +111,7 @@ pub fn rank_effects(
         .enumerate()
         .map(|(index, name)| {
             let model = lower(context, &[name.as_str()])?;
-            let scored = fit_and_score(context, &model, base, initial, context.seed(index as u64 + 1))?;
+            let scored = fit_and_score(context, &model, base, context.seed(index as u64 + 1))?;
             progress(Progress::Done {
                 item: name.clone(),
                 seconds: scored.summary.seconds,

@@ -13,7 +13,7 @@ const REGIME_BINS: usize = 5;
 const REGIME_REPORTED: usize = 3;
 /// A free run whose gap exceeds this (in normalised units: a thousand standard deviations
 /// root mean square) has diverged: its gap is reported as such, not as a number.
-pub const DIVERGED_GAP: f64 = 1e6;
+pub const DIVERGED_GAP: f64 = 1e4;
 
 /// The squared z-scored errors of one record's free run at its scored cells.
 #[derive(Debug, Clone, PartialEq)]
@@ -137,7 +137,7 @@ pub fn offline_errors(
     let states = split.normalisation.state_std.len();
     let mut sums = vec![(0.0, 0usize, false); states];
     for (index, record, rows) in split.scored() {
-        let overrides = split.overrides(index, fitted_starts);
+        let overrides = split.overrides(index, fitted_starts, simulator.hidden_count());
         let predictions = simulator.one_step(record, &overrides, rows.end);
         for (k, cells) in record.states.iter().enumerate() {
             for row in rows.start.max(1)..rows.end {

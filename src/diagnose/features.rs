@@ -9,7 +9,7 @@
 //!
 //! *History* features add a fading memory ([`super::memory`]): the inputs, the measured
 //! states and `l` passed through first-order filters at each time constant, each filtered
-//! value `w` alone, times `l`, and times each present variable.
+//! value `w` alone and times `l`.
 
 /// Z-scored variables are clipped to this many standard deviations, so a correction stays
 /// bounded when a free run leaves the training range.
@@ -51,7 +51,7 @@ impl FeatureMap {
     /// Number of features.
     pub fn width(&self) -> usize {
         let filtered = self.taus.as_ref().map_or(0, |t| t.len() * self.signals());
-        2 * self.quadratic() + filtered * (2 + self.variables())
+        2 * self.quadratic() + 2 * filtered
     }
 
     /// Indices of the features a free-run refinement adjusts: the constant and `l` alone (a
@@ -61,7 +61,7 @@ impl FeatureMap {
         let q = self.quadratic();
         let mut directions = vec![0, q];
         if let Some(taus) = &self.taus {
-            let block = 2 + self.variables();
+            let block = 2;
             for t in 0..taus.len() {
                 let signal = t * self.signals() + self.embedded;
                 directions.push(2 * q + signal * block);
@@ -109,7 +109,6 @@ impl FeatureMap {
                 };
                 out.push(w);
                 out.push(l * w);
-                out.extend(v.iter().map(|x| x * w));
             }
         }
     }
@@ -135,12 +134,12 @@ mod tests {
         let q = [1.0, 1.0, -1.0, 1.0, -1.0, 1.0];
         let mut expected: Vec<f64> = q.to_vec();
         expected.extend(q.iter().map(|x| 0.5 * x));
-        expected.extend([2.0, 1.0, 2.0, -2.0]);
-        expected.extend([2.0, 1.0, 2.0, -2.0]);
+        expected.extend([2.0, 1.0]);
+        expected.extend([2.0, 1.0]);
         assert_eq!(out, expected);
         assert_eq!(map.width(), expected.len());
         // The constant, l alone and the filtered l alone.
-        assert_eq!(map.directions(), vec![0, 6, 16]);
+        assert_eq!(map.directions(), vec![0, 6, 14]);
     }
 
     #[test]

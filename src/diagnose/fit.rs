@@ -35,6 +35,13 @@ const SETTINGS: Settings = Settings {
     max_move: 3.0,
     ..Settings::DEFAULT
 };
+/// The refinement of a free correction stops earlier: at most 20 Jacobians, converged when a
+/// step gains at most `1e-5` of the cost (it is a polish of a one-step fit).
+const POLISH: Settings = Settings {
+    max_linearisations: 20,
+    tolerance: 1e-5,
+    ..SETTINGS
+};
 /// Marquardt's scaling, with floors for a coordinate no residual sees.
 const DAMPING: Damping = Damping {
     min_diagonal: 1e-12,
@@ -69,7 +76,7 @@ impl Objective<'_> {
         let scale = (self.split.training_cells().max(1) as f64).sqrt();
         let mut residuals = Vec::new();
         for (index, record, rows) in self.split.training() {
-            let overrides = self.split.overrides(index, fitted);
+            let overrides = self.split.overrides(index, fitted, simulator.hidden_count());
             let run = simulator.free_run(record, &overrides, rows.end).ok()?;
             for row in rows {
                 let state = run.row(row);
@@ -222,6 +229,22 @@ pub fn levenberg_marquardt(
     residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
     theta: Vec<f64>,
 ) -> (Vec<f64>, f64) {
+    minimise(residuals, theta, &SETTINGS)
+}
+
+/// [`levenberg_marquardt`] with the looser settings of a refinement (a polish).
+pub fn polish(
+    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    theta: Vec<f64>,
+) -> (Vec<f64>, f64) {
+    minimise(residuals, theta, &POLISH)
+}
+
+fn minimise(
+    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    theta: Vec<f64>,
+    settings: &Settings,
+) -> (Vec<f64>, f64) {
     let function = Function {
         residuals,
         jacobian: Jacobian::ForwardDifferences {
@@ -229,7 +252,7 @@ pub fn levenberg_marquardt(
         },
         damping: DAMPING,
     };
-    let outcome = function.minimise(theta, &SETTINGS);
+    let outcome = function.minimise(theta, settings);
     (outcome.x, outcome.cost)
 }
 

@@ -322,7 +322,8 @@ pub(super) fn synthesise(context: &Context, target: &Target) -> Result<Option<Co
         });
     }
     let mut constraints: Vec<Constraint> = model.params.iter().map(|p| p.constraint).collect();
-    constraints.extend(context.split.fitted_starts.iter().map(|_| Constraint::Free));
+    let fitted = context.split.fitted_count(model.hidden.len());
+    constraints.extend((0..fitted).map(|_| Constraint::Free));
     Ok(Some(Corrected {
         simulator,
         loci,

@@ -46,7 +46,7 @@ pub use report::*;
 pub use split::MIN_ROWS;
 
 use crate::check::Checked;
-use crate::ir::{Dynamics, Model};
+use crate::ir::{Constraint, Dynamics, Model};
 use crate::record::Record;
 use ranking::Blocks;
 use simulate::{tolerances, Simulator};
@@ -59,7 +59,8 @@ pub const SIGNIFICANCE: f64 = 2.0;
 /// least this fraction of the gap above the noise floor (and the gap is significant, and
 /// its lead exceeds the ranking's uncertainty).
 pub const CREDIT: f64 = 0.5;
-/// The share held out of a single experiment when no split is asked for.
+/// The share of each experiment held out (its tail) when no split is asked for: scoring
+/// tails keeps the transient of a start away from the score.
 pub const DEFAULT_TAIL: f64 = 0.3;
 
 /// What to diagnose.
@@ -83,8 +84,7 @@ pub struct Problem<'a> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
     /// Share of each training experiment's measured rows held out (its tail). `None`: whole
-    /// held-out experiments if any; else with one experiment a tail of [`DEFAULT_TAIL`],
-    /// with several the last experiment held out.
+    /// held-out experiments if any are given, else a tail of [`DEFAULT_TAIL`].
     pub val_fraction: Option<f64>,
     /// Most random restarts of each fit besides the declared or warm start (fits stop
     /// earlier once two starts agree).
@@ -98,6 +98,8 @@ pub struct Options {
     pub span: Option<f64>,
     /// Number of time constants of the history features.
     pub dim: usize,
+    /// Whether hidden states start from values fitted per training experiment.
+    pub fit_initial: bool,
 }
 
 impl Default for Options {
@@ -109,6 +111,7 @@ impl Default for Options {
             windows: 20,
             span: None,
             dim: 5,
+            fit_initial: false,
         }
     }
 }
@@ -151,16 +154,34 @@ impl Context<'_> {
             .wrapping_add(index.wrapping_mul(0xD1B5_4A32_D192_ED03))
     }
 
-    /// Names of the fitted starts, `STATE@EXPERIMENT`.
-    fn fitted_start_names(&self) -> Vec<String> {
-        (self.split.fitted_starts.iter())
-            .map(|&(record, state)| {
-                format!(
-                    "{}@{}",
-                    self.model.states[state].name, self.split.records[record].name
-                )
-            })
-            .collect()
+    /// The unknowns of a fit of `model` (compiled as `simulator`): its params, the fitted
+    /// starts of measured states, then (with `--fit-initial`) of its hidden states in every
+    /// training experiment; named `STATE@EXPERIMENT`, with default values (declared params,
+    /// first measured values, declared initial values).
+    fn unknowns(&self, model: &Model, simulator: &Simulator) -> Unknowns {
+        let split = &self.split;
+        let mut unknowns = Unknowns::default();
+        for param in &model.params {
+            unknowns.push(param.name.clone(), param.constraint, param.init);
+        }
+        let guesses = self.initial_guesses();
+        for (&(record, state), guess) in split.fitted_starts.iter().zip(guesses) {
+            let name = format!("{}@{}", model.states[state].name, split.records[record].name);
+            unknowns.push(name, Constraint::Free, guess);
+        }
+        if split.fit_hidden {
+            let mut simulator = simulator.clone();
+            let declared: Vec<f64> = model.params.iter().map(|p| p.init).collect();
+            simulator.set_params(&declared);
+            for (_, record, _) in split.training() {
+                let start = simulator.start_state(record, &[]);
+                for (h, state) in model.hidden.iter().enumerate() {
+                    let name = format!("{}@{}", state.name, record.name);
+                    unknowns.push(name, Constraint::Free, start[model.states.len() + h]);
+                }
+            }
+        }
+        unknowns
     }
 
     /// First guesses of the fitted starts: the state's first measured value in the
@@ -173,6 +194,32 @@ impl Context<'_> {
                 (cells.iter().flatten().next().copied())
                     .unwrap_or(self.split.normalisation.state_mean[state])
             })
+            .collect()
+    }
+}
+
+/// The unknowns of a fit, in order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Unknowns {
+    /// Names: params, then `STATE@EXPERIMENT` for fitted starts.
+    pub names: Vec<String>,
+    /// Constraints (fitted starts are free).
+    pub constraints: Vec<Constraint>,
+    /// Default values.
+    pub defaults: Vec<f64>,
+}
+
+impl Unknowns {
+    fn push(&mut self, name: String, constraint: Constraint, default: f64) {
+        self.names.push(name);
+        self.constraints.push(constraint);
+        self.defaults.push(default);
+    }
+
+    /// Values from `start` by name, defaults elsewhere.
+    pub fn values(&self, start: &std::collections::BTreeMap<String, f64>) -> Vec<f64> {
+        (self.names.iter().zip(&self.defaults))
+            .map(|(name, default)| start.get(name).copied().unwrap_or(*default))
             .collect()
     }
 }
@@ -191,14 +238,8 @@ pub fn diagnose(
         name: "fitting the model",
         total: 1,
     });
-    let declared = effects::named(context.model, &[]);
-    let before = effects::fit_and_score(
-        &context,
-        context.model,
-        &declared,
-        &context.initial_guesses(),
-        context.seed(0),
-    )?;
+    let declared = std::collections::BTreeMap::new();
+    let before = effects::fit_and_score(&context, context.model, &declared, context.seed(0))?;
     progress(Progress::Done {
         item: context.model.name.clone(),
         seconds: before.summary.seconds,
@@ -212,9 +253,8 @@ pub fn diagnose(
         total: context.model.effects.len(),
     });
     let base_params = effects::named(context.model, &before.fitted.x);
-    let initial = &before.fitted.x[context.model.params.len()..];
     let effects_started = Instant::now();
-    let ranking = effects::rank_effects(&context, &base_params, initial, gap_before, progress)?;
+    let ranking = effects::rank_effects(&context, &before.named, gap_before, progress)?;
     let effects_seconds = effects_started.elapsed().as_secs_f64();
     progress(Progress::Stage {
         name: "selecting effects",
@@ -305,7 +345,7 @@ fn memory_time_constants(context: &Context, base: &Simulator, x: &[f64]) -> Vec<
         let fitted = &x[simulator.params().min(x.len())..];
         let runs: Vec<_> = (split.training())
             .map(|(index, record, rows)| {
-                let overrides = split.overrides(index, fitted);
+                let overrides = split.overrides(index, fitted, simulator.hidden_count());
                 simulator.free_run(record, &overrides, rows.end).ok()
             })
             .collect();
@@ -345,18 +385,14 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
             });
         }
     }
-    let mut train = problem.records.to_vec();
-    let mut held = problem.held_out.to_vec();
+    let train = problem.records.to_vec();
+    let held = problem.held_out.to_vec();
     let holdout = match options.val_fraction {
         Some(share) => Holdout::Tail(share),
         None if !held.is_empty() => Holdout::Experiments,
-        None if train.len() == 1 => Holdout::Tail(DEFAULT_TAIL),
-        None => {
-            held.extend(train.pop());
-            Holdout::Experiments
-        }
+        None => Holdout::Tail(DEFAULT_TAIL),
     };
-    let split = Split::new(model, train, held, holdout)?;
+    let split = Split::new(model, train, held, (holdout, options.fit_initial))?;
     Ok(Context {
         problem: *problem,
         options,
@@ -408,12 +444,11 @@ fn check_options(options: &Options) -> Result<(), DiagnoseError> {
 /// The model must run on every experiment with its declared params.
 fn check_runs(context: &Context, base: &Simulator) -> Result<(), DiagnoseError> {
     let mut simulator = base.clone();
-    let mut declared: Vec<f64> = context.model.params.iter().map(|p| p.init).collect();
-    declared.extend(context.initial_guesses());
+    let declared = context.unknowns(context.model, base).defaults;
     simulator.set_params(&declared);
     let fitted = &declared[context.model.params.len()..];
     for (index, record) in context.split.records.iter().enumerate() {
-        let overrides = context.split.overrides(index, fitted);
+        let overrides = context.split.overrides(index, fitted, simulator.hidden_count());
         simulator
             .free_run(record, &overrides, record.len())
             .map_err(|error| DiagnoseError::Unsimulable {

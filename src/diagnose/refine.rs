@@ -12,7 +12,7 @@
 use super::correction::{filtered_for, Corrected, Solution};
 use super::evaluate::{scored_errors, Errors};
 use super::features::FeatureMap;
-use super::fit::{levenberg_marquardt, values};
+use super::fit::{polish, values};
 use super::memory::FilterBank;
 use super::simulate::{inputs_at, Run};
 use super::split::Split;
@@ -78,7 +78,7 @@ pub fn refine(
     let mut start = solution.theta.clone();
     start.extend(std::iter::repeat(1.0).take(slots));
     start.extend(std::iter::repeat(0.0).take(slots * directions));
-    let (x, cost) = levenberg_marquardt(&residuals, start.clone());
+    let (x, cost) = polish(&residuals, start.clone());
     let before = residuals(&start).map_or(f64::INFINITY, |r| dot(&r, &r));
     if cost < before {
         apply(&x)
@@ -99,7 +99,7 @@ pub fn corrected_run(
     let x = values(&corrected.constraints, &solution.theta);
     corrected.simulator.set_params(&x);
     let fitted = &x[corrected.simulator.params().min(x.len())..];
-    let overrides = split.overrides(index, fitted);
+    let overrides = split.overrides(index, fitted, corrected.simulator.hidden_count());
     run_with(corrected, map, solution, &split.records[index], &overrides, end)
 }
 

@@ -17,7 +17,7 @@
 //!
 //! AIC and BIC are reported beside the held-out gap for every step, as PEtab-Select does.
 
-use super::effects::{block_sums, fit_and_score, lower, named, Ranking, Scored};
+use super::effects::{block_sums, fit_and_score, lower, Ranking, Scored};
 use super::ranking::{compare, SEPARATION};
 use super::report::{Selection, SelectionStep};
 use super::render::num;
@@ -76,7 +76,8 @@ pub fn select(
     let mut credited = vec![first.name.clone()];
     let mut current = first_fit.clone();
     let singles: BTreeMap<String, BTreeMap<String, f64>> = (ranking.scores.iter())
-        .map(|s| (s.name.clone(), s.params.clone()))
+        .zip(&ranking.fits)
+        .map(|(s, fit)| (s.name.clone(), fit.named.clone()))
         .collect();
     while credited.len() < ranking.scores.len() {
         if current.gap <= SIGNIFICANCE * levels.noise_floor {
@@ -107,9 +108,6 @@ fn next_step(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(SelectionStep, Scored), DiagnoseError> {
     let remaining: Vec<&String> = singles.keys().filter(|n| !credited.contains(n)).collect();
-    let model = lower(context, &names(credited))?;
-    let base_params = named(&model, &current.fitted.x);
-    let initial = &current.fitted.x[model.params.len()..];
     let tried = remaining
         .par_iter()
         .enumerate()
@@ -118,9 +116,9 @@ fn next_step(
             set.push(name.as_str());
             let model = lower(context, &set)?;
             let mut start = singles[*name].clone();
-            start.extend(base_params.clone());
+            start.extend(current.named.clone());
             let seed = context.seed(2000 + 100 * credited.len() as u64 + index as u64);
-            let scored = fit_and_score(context, &model, &start, initial, seed)?;
+            let scored = fit_and_score(context, &model, &start, seed)?;
             progress(Progress::Done {
                 item: format!("{} + {name}", credited.join(" + ")),
                 seconds: scored.summary.seconds,

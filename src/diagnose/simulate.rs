@@ -128,10 +128,16 @@ impl Simulator {
         self.set_corrections(&[]);
     }
 
+    /// Number of hidden states.
+    pub fn hidden_count(&self) -> usize {
+        self.hidden_init.len()
+    }
+
     /// The state a free run of `record` starts from at its first row: a measured state from
     /// `overrides` where given, else from its cell, else from its declared initial value
-    /// (else 0, which [`super::split::Split`] never leaves); hidden states from their
-    /// initial values; both under the current params.
+    /// (else 0, which [`super::split::Split`] never leaves); a hidden state from `overrides`
+    /// (after the measured ones) where given, else from its declared initial value; both
+    /// under the current params.
     pub fn start_state(&mut self, record: &Record, overrides: &[Option<f64>]) -> Vec<f64> {
         let mut state = Vec::with_capacity(self.measured + self.hidden_init.len());
         for k in 0..self.measured {
@@ -143,8 +149,12 @@ impl Simulator {
             };
             state.push(value);
         }
-        for init in &self.hidden_init {
-            state.push(init.eval(self.system.slots_mut(), &mut self.scratch));
+        for (h, init) in self.hidden_init.iter().enumerate() {
+            let value = match overrides.get(self.measured + h).copied().flatten() {
+                Some(value) => value,
+                None => init.eval(self.system.slots_mut(), &mut self.scratch),
+            };
+            state.push(value);
         }
         state
     }

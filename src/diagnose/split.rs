@@ -69,6 +69,8 @@ pub struct Split {
     pub fitted_starts: Vec<(usize, usize)>,
     /// How the held-out part was chosen.
     pub holdout: Holdout,
+    /// Whether hidden states start from values fitted per training experiment.
+    pub fit_hidden: bool,
     /// Mean and standard deviation of each measured state over the training cells.
     pub normalisation: Normalisation,
 }
@@ -80,7 +82,7 @@ impl Split {
         model: &Model,
         train: Vec<Record>,
         held: Vec<Record>,
-        holdout: Holdout,
+        (holdout, fit_hidden): (Holdout, bool),
     ) -> Result<Split, DiagnoseError> {
         let mut parts = Vec::with_capacity(train.len() + held.len());
         for record in &train {
@@ -123,6 +125,7 @@ impl Split {
             starts: Vec::new(),
             fitted_starts: Vec::new(),
             holdout,
+            fit_hidden,
             normalisation,
         };
         split.plan_starts(model);
@@ -151,16 +154,33 @@ impl Split {
         }
     }
 
-    /// Per measured state of `record`: the value its free run starts from when not read from
-    /// the data or the declaration, given the fitted starts `fitted`.
-    pub fn overrides(&self, record: usize, fitted: &[f64]) -> Vec<Option<f64>> {
-        (self.starts[record].iter())
+    /// Per state (measured, then the `hidden` hidden ones) of `record`: the value its free
+    /// run starts from when not read from the data or the declaration, given the fitted
+    /// starts `fitted` (the measured ones of [`Split::fitted_starts`], then, with
+    /// `fit_hidden`, `hidden` per training record in [`Split::training`] order).
+    pub fn overrides(&self, record: usize, fitted: &[f64], hidden: usize) -> Vec<Option<f64>> {
+        let mut overrides: Vec<Option<f64>> = (self.starts[record].iter())
             .map(|start| match *start {
                 Start::Fitted(index) => fitted.get(index).copied(),
                 Start::Fixed(value) => Some(value),
                 Start::Cell | Start::Declared => None,
             })
-            .collect()
+            .collect();
+        let slot = self.fit_hidden.then(|| self.training_slot(record)).flatten();
+        let first = self.fitted_starts.len() + slot.unwrap_or(0) * hidden;
+        overrides.extend((0..hidden).map(|h| slot.and_then(|_| fitted.get(first + h).copied())));
+        overrides
+    }
+
+    /// The position of `record` among the records with a training part.
+    pub fn training_slot(&self, record: usize) -> Option<usize> {
+        self.training().position(|(index, _, _)| index == record)
+    }
+
+    /// Number of fitted starts of a model with `hidden` hidden states.
+    pub fn fitted_count(&self, hidden: usize) -> usize {
+        let per_record = if self.fit_hidden { hidden } else { 0 };
+        self.fitted_starts.len() + per_record * self.training().count()
     }
 
     /// The records with a training part, with their indices and training rows.
@@ -274,7 +294,7 @@ mod tests {
 
     #[test]
     fn a_tail_split_scores_the_last_rows_and_normalises_on_the_rest() {
-        let split = Split::new(&model(), vec![record("a", 100)], vec![], Holdout::Tail(0.3))
+        let split = Split::new(&model(), vec![record("a", 100)], vec![], (Holdout::Tail(0.3), false))
             .unwrap();
         assert_eq!(split.parts[0], Part { train: 0..70, test: 70..100 });
         // 0..70: mean 34.5, population variance (70^2 - 1) / 12.
@@ -294,7 +314,7 @@ mod tests {
             }
         }
         let other = record("b", 30);
-        let split = Split::new(&model(), vec![thin, other], vec![], Holdout::Tail(0.3)).unwrap();
+        let split = Split::new(&model(), vec![thin, other], vec![], (Holdout::Tail(0.3), false)).unwrap();
         assert_eq!(split.parts[0], Part { train: 0..14, test: 14..20 });
         assert_eq!(split.measured_rows(), (7 + 21, 3 + 9));
     }
@@ -305,7 +325,7 @@ mod tests {
             &model(),
             vec![record("a", 12)],
             vec![record("b", 11)],
-            Holdout::Experiments,
+            (Holdout::Experiments, false),
         )
         .unwrap();
         assert_eq!(split.training().count(), 1);
@@ -314,14 +334,14 @@ mod tests {
 
     #[test]
     fn too_small_parts_say_what_each_needs_and_got() {
-        let error = Split::new(&model(), vec![record("a", 34)], vec![record("b", 6)], Holdout::Experiments)
+        let error = Split::new(&model(), vec![record("a", 34)], vec![record("b", 6)], (Holdout::Experiments, false))
             .unwrap_err();
         assert_eq!(
             error.to_string(),
             "expected at least 10 measured rows in the training part and 10 in the held-out \
              part, found 34 and 6 (experiment `b` held out)"
         );
-        let error = Split::new(&model(), vec![record("a", 3)], vec![], Holdout::Tail(0.1)).unwrap_err();
+        let error = Split::new(&model(), vec![record("a", 3)], vec![], (Holdout::Tail(0.1), false)).unwrap_err();
         assert!(matches!(error, DiagnoseError::TailTooSmall { train: 3, test: 0, .. }), "{error}");
     }
 
@@ -342,12 +362,22 @@ mod tests {
             r.states[1][1] = None;
             r
         };
-        let split = Split::new(&model, vec![gapped("a")], vec![gapped("b")], Holdout::Experiments)
+        let split = Split::new(&model, vec![gapped("a")], vec![gapped("b")], (Holdout::Experiments, false))
             .unwrap();
         assert_eq!(split.starts[0], vec![Start::Declared, Start::Fitted(0)]);
         assert_eq!(split.starts[1], vec![Start::Declared, Start::Fixed(2.0)]);
         assert_eq!(split.fitted_starts, vec![(0, 1)]);
-        assert_eq!(split.overrides(0, &[7.0]), vec![None, Some(7.0)]);
-        assert_eq!(split.overrides(1, &[7.0]), vec![None, Some(2.0)]);
+        assert_eq!(split.overrides(0, &[7.0], 0), vec![None, Some(7.0)]);
+        assert_eq!(split.overrides(1, &[7.0], 0), vec![None, Some(2.0)]);
+        // Hidden starts fitted: one per hidden state of each training record, after the
+        // measured ones; a record that is only scored keeps the declared values.
+        let mut with_hidden = split.clone();
+        with_hidden.fit_hidden = true;
+        assert_eq!(with_hidden.fitted_count(2), 1 + 2);
+        assert_eq!(
+            with_hidden.overrides(0, &[7.0, 8.0, 9.0], 2),
+            vec![None, Some(7.0), Some(8.0), Some(9.0)]
+        );
+        assert_eq!(with_hidden.overrides(1, &[7.0, 8.0, 9.0], 2), vec![None, Some(2.0), None, None]);
     }
 }
