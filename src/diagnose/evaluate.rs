@@ -11,7 +11,7 @@ use std::ops::Range;
 const REGIME_BINS: usize = 5;
 /// Variables reported in the regime analysis.
 const REGIME_REPORTED: usize = 3;
-/// A free run whose gap exceeds this (in normalised units: a thousand standard deviations
+/// A free run whose gap exceeds this (in normalised units: a hundred standard deviations
 /// root mean square) has diverged: its gap is reported as such, not as a number.
 pub const DIVERGED_GAP: f64 = 1e4;
 

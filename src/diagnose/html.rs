@@ -245,7 +245,11 @@ fn svg_open(out: &mut String, height: f64) {
 }
 
 fn time_title(series: &ExperimentSeries) -> String {
-    titled(&format!("t ({})", series.name), series.time_unit.as_deref())
+    format!(
+        "{}, experiment {}",
+        titled("t", series.time_unit.as_deref()),
+        series.name
+    )
 }
 
 fn state_plot(series: &ExperimentSeries, k: usize) -> String {

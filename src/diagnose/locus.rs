@@ -43,7 +43,7 @@ pub const HISTORY_MARGIN: f64 = 2.0;
 /// excess gap (the gap before, above the noise floor).
 pub const PRESENT_RESIDUAL: f64 = 0.05;
 /// Loci whose history correction is refined on the free run.
-pub const REFINED: usize = 4;
+pub const REFINED: usize = 3;
 /// A locus is tied with the best only if its bound is within this factor of the best's.
 pub const TIE_FACTOR: f64 = 3.0;
 /// Name of the synthesised closure.

@@ -280,7 +280,7 @@ pub fn diagnose(
     let loci_seconds = loci_started.elapsed().as_secs_f64();
     let memory = assemble::memory(&located, &ranking, &selection, (levels, &taus));
     let hints = match (&located.along, located.loci.first()) {
-        (Some(along), Some(best)) if significant => {
+        (Some(along), Some(best)) if significant && !memory.history_needed => {
             symbolic::hints(along, &correction_name(best))
         }
         _ => Vec::new(),

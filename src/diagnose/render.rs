@@ -313,6 +313,9 @@ fn which_section(out: &mut String, report: &Report) {
             step.reason
         );
     }
+    if !report.selection.credited.is_empty() {
+        let _ = writeln!(out, "   selection stops: {}", report.selection.stop);
+    }
     let _ = writeln!(out);
 }
 

@@ -258,6 +258,8 @@ pub struct Selection {
     pub credited: Vec<String>,
     /// Held-out gap of the credited set (the gap before when none).
     pub gap_after: f64,
+    /// Why the selection stopped, in words.
+    pub stop: String,
 }
 
 /// How sure the ranking of the single effects is.

@@ -65,6 +65,7 @@ pub fn select(
         levels,
     );
     let accepted = step.accepted;
+    selection.stop = step.reason.clone();
     selection.steps.push(SelectionStep {
         effects: vec![first.name.clone()],
         alternatives,
@@ -79,13 +80,22 @@ pub fn select(
         .zip(&ranking.fits)
         .map(|(s, fit)| (s.name.clone(), fit.named.clone()))
         .collect();
+    selection.stop = "every effect is credited".into();
     while credited.len() < ranking.scores.len() {
-        if current.gap <= SIGNIFICANCE * levels.noise_floor {
+        if !(current.gap > SIGNIFICANCE * levels.noise_floor) {
+            selection.stop = format!(
+                "the gap left ({}) is within {SIGNIFICANCE}x the noise floor ({})",
+                num(current.gap),
+                num(levels.noise_floor)
+            );
             break;
         }
         let (step, fit) = next_step(context, &credited, &current, &singles, levels, progress)?;
         let accepted = step.accepted;
         let added = step.added.clone();
+        if !accepted {
+            selection.stop = format!("adding {added}: {}", step.reason);
+        }
         selection.steps.push(step);
         if !accepted {
             break;
