@@ -36,6 +36,8 @@ pub struct Graph {
     pub forms: BTreeMap<String, BTreeSet<String>>,
     /// Names the balances (`der`, `next`) use directly.
     pub balance_uses: BTreeSet<String>,
+    /// Per balanced state: the names its balance uses directly.
+    pub balances: BTreeMap<String, BTreeSet<String>>,
 }
 
 impl Graph {
@@ -43,7 +45,7 @@ impl Graph {
     pub fn of(checked: &Checked) -> Graph {
         let mut kinds: BTreeMap<String, Kind> = BTreeMap::new();
         let mut definitions: Vec<(String, &SExpr)> = Vec::new();
-        let mut balances: Vec<&SExpr> = Vec::new();
+        let mut balances: Vec<(String, &SExpr)> = Vec::new();
         for item in &checked.ast.items {
             match &item.kind {
                 ItemKind::Input(inputs) => {
@@ -60,7 +62,9 @@ impl Graph {
                     kinds.insert(equation.name.node.clone(), Kind::Let);
                     definitions.push((equation.name.node.clone(), &equation.expr));
                 }
-                ItemKind::Der(equation) | ItemKind::Next(equation) => balances.push(&equation.expr),
+                ItemKind::Der(equation) | ItemKind::Next(equation) => {
+                    balances.push((equation.name.node.clone(), &equation.expr));
+                }
                 _ => {}
             }
         }
@@ -72,10 +76,13 @@ impl Graph {
             memo: BTreeMap::new(),
         };
         let mut graph = Graph::default();
-        for expr in balances {
+        for (state, expr) in balances {
+            let mut used = BTreeSet::new();
             names_in(expr, &mut |n| {
-                graph.balance_uses.insert(n.to_string());
+                used.insert(n.to_string());
             });
+            graph.balance_uses.extend(used.iter().cloned());
+            graph.balances.entry(state).or_default().extend(used);
         }
         for (name, expr) in &definitions {
             let mut used = BTreeSet::new();
@@ -109,6 +116,15 @@ impl Graph {
     pub fn reaches_balance(&self, name: &str) -> bool {
         self.balance_uses.contains(name)
             || (self.uses.iter()).any(|(user, used)| used.contains(name) && self.reaches_balance(user))
+    }
+
+    /// Whether let `name` feeds `downstream`: a let that uses it (directly or through other
+    /// lets), or a state whose balance does.
+    pub fn feeds(&self, name: &str, downstream: &str) -> bool {
+        match self.balances.get(downstream) {
+            Some(used) => used.contains(name) || used.iter().any(|u| self.reaches(u, name)),
+            None => self.reaches(downstream, name),
+        }
     }
 
     /// Whether let `a` uses let `b`, directly or through other lets.
@@ -277,6 +293,10 @@ mod tests {
         assert_eq!(graph.depth("X"), 0);
         assert!(graph.reaches("r_P", "E_ss") && !graph.reaches("E_ss", "r_P"));
         assert!(graph.reaches_balance("E_ss") && graph.reaches_balance("r_X"));
+        // What feeds what: lets through lets, balances through the lets they use.
+        assert!(graph.feeds("E_ss", "r_P") && graph.feeds("E_ss", "P"));
+        assert!(graph.feeds("r_X", "X") && !graph.feeds("r_X", "P"));
+        assert!(!graph.feeds("r_P", "E_ss"));
     }
 
     #[test]

@@ -12,8 +12,11 @@
 //! and scored.
 //!
 //! **Ranking.** Loci are ranked by the held-out gap they leave. A locus is *tied* with the
-//! best when its gap is within [`TIE_FACTOR`] of the best's and the block bootstrap of the
-//! held-out errors cannot tell them apart ([`super::ranking`]); among tied loci the most
+//! best when its gap is within [`TIE_FACTOR`] of the best's and either the block bootstrap
+//! of the held-out errors cannot tell them apart ([`super::ranking`]) or it sits upstream
+//! of the best (feeds it in the dependency graph: the cause of what the best corrects) and
+//! explains as much: the excess gap it leaves exceeds the best's by less than [`NEAR_TIE`]
+//! of the excess gap before (both close nearly all of it); among tied loci the most
 //! specific and most upstream comes first (a let before a group before a balance; among
 //! lets, the one furthest upstream), so a balance comes first only when no rate explains as
 //! much.
@@ -46,6 +49,9 @@ pub const PRESENT_RESIDUAL: f64 = 0.05;
 pub const REFINED: usize = 3;
 /// A locus is tied with the best only if its bound is within this factor of the best's.
 pub const TIE_FACTOR: f64 = 3.0;
+/// A locus explains as much as the best when the excess gap it leaves exceeds the best's by
+/// less than this share of the excess gap before.
+pub const NEAR_TIE: f64 = 0.05;
 /// Name of the synthesised closure.
 const CLOSURE: &str = "__diagnose_closure";
 /// Prefix of its outputs.
@@ -227,9 +233,22 @@ fn summarise(context: &Context, mut trials: Vec<Trial>, (gap_before, noise_floor
         .collect();
     let comparison = compare(&sums, context.seed(5000));
     let best_bound = trials.first().map_or(f64::INFINITY, Trial::bound);
+    let excess = |gap: f64| (gap - noise_floor).max(0.0);
+    let graph = Graph::of(context.checked);
+    let upstream = |i: usize| {
+        let best = &trials[0].target;
+        (trials[i].target.members.iter())
+            .any(|member| best.members.iter().any(|b| graph.feeds(member, b)))
+    };
+    let as_much = |i: usize| {
+        upstream(i)
+            && excess(trials[i].bound()) - excess(best_bound) < NEAR_TIE * excess(gap_before)
+    };
     let tied: Vec<bool> = (0..trials.len())
         .map(|i| {
-            i == 0 || (trials[i].bound() <= TIE_FACTOR * best_bound && comparison.tied_with_best(i))
+            i == 0
+                || (trials[i].bound() <= TIE_FACTOR * best_bound
+                    && (comparison.tied_with_best(i) || as_much(i)))
         })
         .collect();
     let mut order: Vec<usize> = (0..trials.len()).collect();
@@ -259,7 +278,6 @@ fn summarise(context: &Context, mut trials: Vec<Trial>, (gap_before, noise_floor
         })
         .collect();
     let history_dependent = loci.first().is_some_and(|best| {
-        let excess = |gap: f64| (gap - noise_floor).max(0.0);
         excess(best.bound_present) > PRESENT_RESIDUAL * excess(gap_before)
             && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
     });

@@ -5,9 +5,11 @@
 //! scored, otherwise each scored part into spans of equal duration, about [`BLOCKS`] in
 //! all — and [`RESAMPLES`] times a sample of as many blocks is drawn with replacement. Every
 //! candidate is scored on the same draws (a paired comparison), which gives, for each, the
-//! standard error of its gap's difference from the best's and the share of draws in which it
-//! is best. A candidate is *told apart* from the best when its gap exceeds the best's by more
-//! than [`SEPARATION`] such standard errors.
+//! standard error of its gap's difference from the best's, the share of draws in which it
+//! is best, and the share in which it does at least as well as the best. A candidate is
+//! *told apart* from the best when the best has the smaller gap in at least [`CONFIDENCE`]
+//! of the draws (a one-sided percentile bootstrap test): the best's lead exceeds the
+//! ranking's uncertainty.
 
 use super::evaluate::Errors;
 use super::split::Split;
@@ -21,8 +23,8 @@ pub const RESAMPLES: usize = 400;
 pub const BLOCKS: usize = 16;
 /// From this many scored experiments on, the blocks are whole experiments.
 pub const EXPERIMENT_BLOCKS: usize = 6;
-/// Standard errors by which a gap must exceed the best's to be told apart from it.
-pub const SEPARATION: f64 = 2.0;
+/// Share of draws in which the best must beat a candidate to be told apart from it.
+pub const CONFIDENCE: f64 = 0.95;
 
 /// The blocks of the scored data: per block, the index of its record among the scored
 /// records and its rows.
@@ -101,16 +103,18 @@ pub struct Comparison {
     pub spread: Vec<f64>,
     /// Per candidate: the share of draws in which it has the smallest gap.
     pub probability_best: Vec<f64>,
+    /// Per candidate: the share of draws in which its gap is at most the best's (1 for the
+    /// best).
+    pub as_good: Vec<f64>,
 }
 
 impl Comparison {
-    /// Whether candidate `index` cannot be told apart from the best.
+    /// Whether candidate `index` cannot be told apart from the best (the best beats it in
+    /// fewer than [`CONFIDENCE`] of the draws).
     pub fn tied_with_best(&self, index: usize) -> bool {
-        let Some(best) = self.best else {
-            return false;
-        };
-        let lead = self.gaps[index] - self.gaps[best];
-        lead.is_finite() && lead <= SEPARATION * self.spread[index]
+        self.best.is_some()
+            && self.gaps[index].is_finite()
+            && self.as_good[index] > 1.0 - CONFIDENCE
     }
 }
 
@@ -134,12 +138,14 @@ pub fn compare(sums: &[Vec<(f64, usize)>], seed: u64) -> Comparison {
         .min_by(|&a, &b| gaps[a].total_cmp(&gaps[b]));
     let mut spread = vec![f64::INFINITY; sums.len()];
     let mut probability_best = vec![0.0; sums.len()];
+    let mut as_good = vec![0.0; sums.len()];
     let Some(best) = best else {
         return Comparison {
             gaps,
             best: None,
             spread,
             probability_best,
+            as_good,
         };
     };
     let blocks = sums[best].len();
@@ -155,12 +161,19 @@ pub fn compare(sums: &[Vec<(f64, usize)>], seed: u64) -> Comparison {
             .filter(|&i| drawn[i].is_finite())
             .min_by(|&a, &b| drawn[a].total_cmp(&drawn[b]));
         if let Some(winner) = winner {
-            probability_best[winner] += 1.0 / RESAMPLES as f64;
+            probability_best[winner] += 1.0;
         }
         for (i, value) in drawn.iter().enumerate() {
             differences[i].push(value - drawn[best]);
+            if value.is_finite() && *value <= drawn[best] {
+                as_good[i] += 1.0;
+            }
         }
     }
+    let share = |counts: Vec<f64>| -> Vec<f64> {
+        counts.into_iter().map(|c| c / RESAMPLES as f64).collect()
+    };
+    let (probability_best, as_good) = (share(probability_best), share(as_good));
     for (i, values) in differences.iter().enumerate() {
         if gaps[i].is_finite() {
             let (_, std) = population_std(values);
@@ -172,6 +185,7 @@ pub fn compare(sums: &[Vec<(f64, usize)>], seed: u64) -> Comparison {
         best: Some(best),
         spread,
         probability_best,
+        as_good,
     }
 }
 
@@ -188,7 +202,7 @@ mod tests {
     use super::*;
 
     /// Blocks whose errors alternate around 2 for one candidate and sit at 2 for another
-    /// cannot be told apart; a constant shift of 0.5 can.
+    /// cannot be told apart; a shift of 1 can.
     #[test]
     fn a_shift_is_told_apart_from_noise() {
         let noisy: Vec<(f64, usize)> = (0..16)
@@ -197,11 +211,11 @@ mod tests {
         let flat = vec![(20.0, 10); 16];
         let same = compare(&[noisy.clone(), flat.clone()], 1);
         assert!(same.tied_with_best(0) && same.tied_with_best(1), "{same:?}");
-        let shifted: Vec<(f64, usize)> = noisy.iter().map(|(s, n)| (s + 5.0, *n)).collect();
+        let shifted: Vec<(f64, usize)> = noisy.iter().map(|(s, n)| (s + 10.0, *n)).collect();
         let apart = compare(&[shifted, flat], 1);
         assert_eq!(apart.best, Some(1));
         assert!(!apart.tied_with_best(0), "{apart:?}");
-        assert!(apart.probability_best[1] > 0.95);
+        assert!(apart.probability_best[1] > 0.95 && apart.as_good[0] < 0.05);
         // The best's gap over all blocks is the pooled mean.
         assert_eq!(apart.gaps[1], 2.0);
     }
@@ -214,6 +228,7 @@ mod tests {
         assert_eq!(comparison.best, Some(1));
         assert!(!comparison.tied_with_best(0));
         assert_eq!(comparison.probability_best, vec![0.0, 1.0]);
+        assert_eq!(comparison.as_good, vec![0.0, 1.0]);
     }
 
     /// The bootstrap standard error of a difference of means over blocks matches the

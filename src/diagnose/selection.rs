@@ -10,15 +10,16 @@
 //! 1. the gap before the step is significant (above [`super::SIGNIFICANCE`] times the noise
 //!    floor), and the step removes at least [`super::CREDIT`] of it above the floor;
 //! 2. the step's held-out gap is told apart from the gap before it *and* from every other
-//!    candidate of the step (block bootstrap, [`super::ranking`]): its lead exceeds the
-//!    ranking's uncertainty, so the held-out data pay for the params it adds;
+//!    candidate of the step (block bootstrap, [`super::ranking`]: lower in at least 95 % of
+//!    the draws): its lead exceeds the ranking's uncertainty, so the held-out data pay for
+//!    the params it adds;
 //! 3. Schwarz's criterion (BIC) on the training cells falls: the fit gained more than
 //!    `ln n` per added unknown.
 //!
 //! AIC and BIC are reported beside the held-out gap for every step, as PEtab-Select does.
 
 use super::effects::{block_sums, fit_and_score, lower, Ranking, Scored};
-use super::ranking::{compare, SEPARATION};
+use super::ranking::{compare, CONFIDENCE};
 use super::report::{Selection, SelectionStep};
 use super::render::num;
 use super::{Context, DiagnoseError, Progress, CREDIT, SIGNIFICANCE};
@@ -192,9 +193,10 @@ fn judge(
         )
     } else if pair.best != Some(1) || pair.tied_with_best(0) {
         format!(
-            "its decrease of the held-out gap ({}) is within {SEPARATION} standard errors ({})",
+            "its decrease of the held-out gap ({} +- {}) does not hold in {} of the bootstrap draws",
             num(removed),
-            num(spread)
+            num(spread),
+            percent(CONFIDENCE)
         )
     } else if !others_tied.is_empty() {
         format!(
