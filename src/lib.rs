@@ -35,3 +35,4 @@ pub mod suggest;
 pub mod syntax;
 pub mod train;
 pub mod units;
+pub mod vocabulary;

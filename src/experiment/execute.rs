@@ -460,7 +460,7 @@ fn run_one(
             &loaded.model,
             &data,
             &options,
-        &prepared.study.training.recipe(),
+            &prepared.study.training.recipe(),
             &mut |event| {
                 if let Event::Epoch { epoch, .. } = event {
                     on_progress(Progress::Epoch(spec, epoch));

@@ -57,8 +57,11 @@ pub struct Track {
     pub known: Vec<Vec<bool>>,
     /// `measured[i][knot]`: a measured cell sits at that knot (a loss target).
     pub measured: Vec<Vec<bool>>,
-    /// `observed[j][knot]`: the measured value of observable `j`, if any.
+    /// `observed[j][knot]`: the measured value of observable `j` (model output
+    /// `observed_outputs[j]`), if any.
     pub observed: Vec<Vec<Option<f64>>>,
+    /// The model outputs the rows of `observed` are.
+    pub observed_outputs: Vec<usize>,
 }
 
 /// Positions this close to a knot are that knot (rounding of stage times).
@@ -88,9 +91,14 @@ impl Track {
             known: Vec::new(),
             measured: Vec::new(),
             observed: Vec::new(),
+            observed_outputs: record.observables.iter().map(|o| o.output).collect(),
         };
         track.observed = (record.observables.iter())
-            .map(|o| (track.rows.iter()).map(|row| row.and_then(|r| o.cells[r])).collect())
+            .map(|o| {
+                (track.rows.iter())
+                    .map(|row| row.and_then(|r| o.cells[r]))
+                    .collect()
+            })
             .collect();
         for (index, cells) in record.states.iter().enumerate() {
             let limit = options.gap_limits.get(index).copied().unwrap_or(0.0);
@@ -177,6 +185,17 @@ impl Track {
         }
     }
 
+    /// The measured value of model output `output` at `knot`, if any.
+    pub fn observed_cell(&self, output: usize, knot: usize) -> Option<f64> {
+        let index = self.observed_outputs.iter().position(|&o| o == output)?;
+        self.observed[index].get(knot).copied().flatten()
+    }
+
+    /// Whether any measured state or observable has a cell at `knot`.
+    pub fn has_cell(&self, knot: usize) -> bool {
+        self.measured.iter().any(|m| m[knot]) || self.observed.iter().any(|o| o[knot].is_some())
+    }
+
     /// Whether every state is known at every knot (no model fill needed).
     pub fn fully_known(&self) -> bool {
         self.known.iter().flatten().all(|&k| k)
@@ -201,19 +220,22 @@ impl Track {
         for (k, &time) in self.times.iter().enumerate() {
             let is_cell = self.rows[k].is_some_and(|row| cells[row].is_some());
             let after = samples.partition_point(|&(t, _)| t <= time);
-            let (value, from_data) = match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
-                (Some((t, v)), _) if t == time => (v, true),
-                (Some((ta, va)), Some(&(tb, vb))) => {
-                    let value = va + (vb - va) * (time - ta) / (tb - ta);
-                    (value, tb - ta <= gap_limit * (1.0 + SNAP))
-                }
-                (Some((_, v)), None) => (v, false),
-                (None, Some(&(tb, vb))) => match initial.filter(|_| !has_first) {
-                    Some(first) => (first + (vb - first) * (time - start) / (tb - start), false),
-                    None => (vb, false),
-                },
-                (None, None) => (initial.unwrap_or(0.0), false),
-            };
+            let (value, from_data) =
+                match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
+                    (Some((t, v)), _) if t == time => (v, true),
+                    (Some((ta, va)), Some(&(tb, vb))) => {
+                        let value = va + (vb - va) * (time - ta) / (tb - ta);
+                        (value, tb - ta <= gap_limit * (1.0 + SNAP))
+                    }
+                    (Some((_, v)), None) => (v, false),
+                    (None, Some(&(tb, vb))) => match initial.filter(|_| !has_first) {
+                        Some(first) => {
+                            (first + (vb - first) * (time - start) / (tb - start), false)
+                        }
+                        None => (vb, false),
+                    },
+                    (None, None) => (initial.unwrap_or(0.0), false),
+                };
             let value = if k == 0 && !is_cell {
                 initial.unwrap_or(value)
             } else {

@@ -75,7 +75,9 @@ pub fn bench(
     data: &TrainingData,
     options: &BenchOptions,
 ) -> Result<BenchReport, TrainError> {
-    let part = options.train_points.map_or(Part::All, |n| Part::FirstPairs(Some(n)));
+    let part = options
+        .train_points
+        .map_or(Part::All, |n| Part::FirstPairs(Some(n)));
     if options.train_points == Some(0) {
         return Err(TrainError::TooManyTrainPoints {
             available: 0,
@@ -99,8 +101,20 @@ pub fn bench(
     let network = Network::build(model, &setup)?;
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let weights = vec![1.0; model.states.len()];
-    let mut course = Course::new(model, layout.tracks, (&layout.pairs, &weights), &fractions);
-    refresh(&network, model, &mut course, (&fractions, false), &hidden_init)?;
+    let observables = layout.normalisation.observables.clone();
+    let pairs = (
+        layout.pairs.as_slice(),
+        weights.as_slice(),
+        observables.as_slice(),
+    );
+    let mut course = Course::new(model, layout.tracks, pairs, &fractions);
+    refresh(
+        &network,
+        model,
+        &mut course,
+        (&fractions, false),
+        &hidden_init,
+    )?;
     let table = course.table;
     let mut step = Step::new(options.engine, network, model, &setup)?;
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);

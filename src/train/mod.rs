@@ -41,6 +41,8 @@ pub mod split;
 mod tests;
 #[cfg(test)]
 mod tests_recipe;
+#[cfg(test)]
+mod tests_records;
 mod validation;
 pub mod windows;
 
@@ -197,6 +199,8 @@ pub struct TrainReport {
     pub initial_states: Vec<InitialState>,
     /// The grid's longest step.
     pub dt: f64,
+    /// The Adam learning rate of the network weights.
+    pub learning_rate: f64,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -239,8 +243,7 @@ pub fn train_with(
     let layout = Layout::new(model, &data, options)?;
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
-    let scales =
-        analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
+    let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
     let warnings = analysis::stiffness(
         model,
         &scales,
@@ -282,14 +285,20 @@ pub fn train_with(
     let mut training = Course::new(
         model,
         layout.tracks.clone(),
-        (&layout.pairs, &weights),
+        (&layout.pairs, &weights, &layout.normalisation.observables),
         &fractions,
     );
-    refresh(&network, model, &mut training, (&fractions, false), &hidden_init)?;
+    refresh(
+        &network,
+        model,
+        &mut training,
+        (&fractions, false),
+        &hidden_init,
+    )?;
     let mut validating = Course::new(
         model,
         layout.validation_tracks.clone(),
-        (&[], &weights),
+        (&[], &weights, &layout.normalisation.observables),
         &fractions,
     );
     let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
@@ -322,7 +331,30 @@ pub fn train_with(
         trainings: &layout.trainings,
     };
     let losses = fit.run(&mut network, &mut training, on_event)?;
-    refresh(&network, model, &mut training, (&fractions, true), &hidden_init)?;
+    let mut initial_states = layout.initial.clone();
+    let refit = (&mut initial_states[..], hidden_init.as_slice());
+    initial::fit_initial_states(
+        &network,
+        model,
+        (&mut training, &fractions),
+        &setup.normalisation,
+        refit,
+    )?;
+    refresh(
+        &network,
+        model,
+        &mut training,
+        (&fractions, true),
+        &hidden_init,
+    )?;
+    let refit = (&mut initial_states[..], hidden_init.as_slice());
+    initial::fit_initial_states(
+        &network,
+        model,
+        (&mut validating, &fractions),
+        &setup.normalisation,
+        refit,
+    )?;
     let (polish, estimates) = match &balance_fit {
         Some(fit) => (None, fit.estimates.clone()),
         None => polish::polish_and_estimate(
@@ -359,8 +391,9 @@ pub fn train_with(
         estimates,
         polish,
         balance_fit,
-        initial_states: layout.initial.clone(),
+        initial_states,
         dt: layout.grid.max_step,
+        learning_rate: options.learning_rate,
     };
     Ok(Trained {
         network,
@@ -374,16 +407,17 @@ fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>,
     let mut weights = vec![1.0; model.states.len()];
     for (name, weight) in &options.column_weights {
         let names: Vec<&str> = model.states.iter().map(|s| s.name.as_str()).collect();
-        let index = names.iter().position(|n| n == name).ok_or_else(|| {
-            TrainError::BadOption {
+        let index = names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| TrainError::BadOption {
                 option: "--weight".into(),
                 expected: format!(
                     "a measured state ({})",
                     crate::suggest::did_you_mean(name, &names, "measured states")
                 ),
                 found: name.clone(),
-            }
-        })?;
+            })?;
         if !(*weight > 0.0 && weight.is_finite()) {
             return Err(TrainError::BadOption {
                 option: "--weight".into(),
@@ -469,11 +503,6 @@ fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
     }
     Ok(())
 }
-
-
-
-
-
 
 /// The measured states and inputs of `model` from a complete record `data`, as a
 /// [`crate::record::Record`].

@@ -55,7 +55,13 @@ pub fn predict(
     (mode, history): (Mode, History),
 ) -> Result<PredictionTable, TrainError> {
     let range = PhysicalRange::new(&setup.normalisation, DEFAULT_RANGE_FACTOR);
-    predict_in_range(model, network, setup, record, (mode, history, range.as_ref()))
+    predict_in_range(
+        model,
+        network,
+        setup,
+        record,
+        (mode, history, range.as_ref()),
+    )
 }
 
 /// The track a trained network runs along `record` on: the grid of its training.
@@ -130,7 +136,9 @@ pub fn predict_in_range(
             .map(|o| o.name.clone()),
     );
     header.extend(model.outputs.iter().map(|o| o.name.clone()));
-    let rows: Vec<usize> = (first..=last).filter(|&k| track.rows[k].is_some()).collect();
+    let rows: Vec<usize> = (first..=last)
+        .filter(|&k| track.rows[k].is_some())
+        .collect();
     let pick = |all: &[Vec<f64>]| -> Vec<Vec<f64>> {
         let padded = pad(all, knots);
         rows.iter().map(|&k| padded[k - first].clone()).collect()

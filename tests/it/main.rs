@@ -8,3 +8,4 @@ mod format;
 mod golden;
 mod lsp;
 mod parser;
+mod records;
