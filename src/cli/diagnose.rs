@@ -56,6 +56,10 @@ pub struct DiagnoseArgs {
     /// Replaced by --span (the history is no longer a delay embedding).
     #[arg(long, hide = true)]
     pub delay: Option<f64>,
+    /// Skip the locus search (the free corrections at every let, group and balance, most
+    /// of the cost): rank and select the effects only.
+    #[arg(long)]
+    pub skip_loci: bool,
     /// Worker threads for the fits (default: every core).
     #[arg(long, value_name = "N")]
     pub jobs: Option<usize>,
@@ -96,7 +100,12 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         ));
     }
     if args.jobs == Some(0) {
-        return Err(bad("--jobs", "at least 1 thread".into(), "0".into(), "--jobs 2 runs two fits at a time"));
+        return Err(bad(
+            "--jobs",
+            "at least 1 thread".into(),
+            "0".into(),
+            "--jobs 2 runs two fits at a time",
+        ));
     }
     let name = args.model.display().to_string();
     let source = crate::driver::read_source(&args.model).map_err(|r| vec![r])?;
@@ -121,6 +130,7 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         span: args.span,
         dim: args.dim,
         fit_initial: args.fit_initial,
+        locate: !args.skip_loci,
         ..Options::default()
     };
     let pool = rayon::ThreadPoolBuilder::new()
@@ -128,7 +138,8 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         .build()
         .map_err(|e| CommandError::Internal(format!("cannot start worker threads: {e}")))?;
     let bar = ProgressReporter::new();
-    let outcome = pool.install(|| diagnose::diagnose(&problem, &options, &|event| bar.update(event)));
+    let outcome =
+        pool.install(|| diagnose::diagnose(&problem, &options, &|event| bar.update(event)));
     bar.finish();
     let report = outcome.map_err(|error| match error {
         DiagnoseError::Internal(_) => CommandError::Internal(error.to_string()),

@@ -76,7 +76,11 @@ pub fn memory(
     };
     let significant = levels.gap_before > super::SIGNIFICANCE * levels.noise_floor;
     let Some(first) = located.loci.first().filter(|_| significant) else {
-        memory.reason = "no significant gap".into();
+        memory.reason = if significant {
+            "not probed: the free corrections were not tried".into()
+        } else {
+            "no significant gap".into()
+        };
         return memory;
     };
     let excess = |gap: f64| (gap - levels.noise_floor).max(0.0);

@@ -138,7 +138,12 @@ pub fn one_step_pass(
     let mut records = Vec::new();
     for (index, record, rows) in split.training() {
         let overrides = split.overrides(index, fitted, corrected.simulator.hidden_count());
-        records.push(record_pass(corrected, (index, record, rows.end), &overrides, taus)?);
+        records.push(record_pass(
+            corrected,
+            (index, record, rows.end),
+            &overrides,
+            taus,
+        )?);
     }
     Ok(Pass { records })
 }
@@ -164,16 +169,21 @@ fn record_pass(
     };
     for row in 0..rows {
         let state = starts.row(row);
-        pass.present
-            .push(inputs_at(record, row).chain(state.iter().copied()).collect());
+        pass.present.push(
+            inputs_at(record, row)
+                .chain(state.iter().copied())
+                .collect(),
+        );
         pass.locus.push(corrected.locus_values(record, row, state));
         let predicted = predictions.row(row);
         pass.residual.push(
             (0..measured)
-                .map(|k| match (record.states[k][row], record.states[k][row + 1]) {
-                    (Some(_), Some(next)) => Some(next - predicted[k]),
-                    _ => None,
-                })
+                .map(
+                    |k| match (record.states[k][row], record.states[k][row + 1]) {
+                        (Some(_), Some(next)) => Some(next - predicted[k]),
+                        _ => None,
+                    },
+                )
                 .collect(),
         );
     }
@@ -192,7 +202,9 @@ fn record_pass(
             let mut state = starts.row(row).to_vec();
             corrected.simulator.step(record, row, &mut state)?;
             let base = predictions.row(row);
-            per_row[slot] = (0..measured).map(|k| (state[k] - base[k]) / delta).collect();
+            per_row[slot] = (0..measured)
+                .map(|k| (state[k] - base[k]) / delta)
+                .collect();
         }
     }
     corrected.simulator.clear_corrections();
@@ -202,7 +214,12 @@ fn record_pass(
 
 /// The filtered signals at each row of a pass: inputs held, measured states and corrected
 /// quantities linear between rows (their pass values).
-fn filter_along(pass: &RecordPass, record: &Record, measured: usize, taus: &[f64]) -> Vec<Vec<f64>> {
+fn filter_along(
+    pass: &RecordPass,
+    record: &Record,
+    measured: usize,
+    taus: &[f64],
+) -> Vec<Vec<f64>> {
     let inputs = record.inputs.len();
     let signal = |row: usize| -> Vec<f64> {
         let present = &pass.present[row];
@@ -229,7 +246,10 @@ fn probe(balance: bool, pass: &RecordPass, slot: usize, record: &Record) -> f64 
     let typical = root_mean_square(&values);
     let size = if balance {
         let steps: Vec<f64> = record.times.windows(2).map(|w| w[1] - w[0]).collect();
-        typical / crate::numeric::median(&steps).unwrap_or(1.0).max(f64::MIN_POSITIVE)
+        typical
+            / crate::numeric::median(&steps)
+                .unwrap_or(1.0)
+                .max(f64::MIN_POSITIVE)
     } else {
         typical
     };
@@ -276,7 +296,12 @@ pub fn row_features(pass: &RecordPass, map: &FeatureMap, row: usize) -> Vec<Vec<
                 Vec::new()
             };
             let mut phi = Vec::new();
-            map.features(&pass.present[row], pass.locus[row][slot], &filtered, &mut phi);
+            map.features(
+                &pass.present[row],
+                pass.locus[row][slot],
+                &filtered,
+                &mut phi,
+            );
             phi
         })
         .collect()
@@ -326,7 +351,10 @@ fn normal_equations(
             for (k, residual) in r.iter().enumerate() {
                 let Some(residual) = residual else { continue };
                 for (slot, features) in phi.iter().enumerate() {
-                    for (cell, f) in stacked[slot * width..(slot + 1) * width].iter_mut().zip(features) {
+                    for (cell, f) in stacked[slot * width..(slot + 1) * width]
+                        .iter_mut()
+                        .zip(features)
+                    {
                         *cell = s[slot][k] * f;
                     }
                 }

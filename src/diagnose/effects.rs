@@ -55,7 +55,9 @@ pub fn fit_and_score(
     summary.seconds = started.elapsed().as_secs_f64();
     Ok(Scored {
         gap: errors.gap(),
-        named: (unknowns.names.iter().cloned()).zip(fitted.x.iter().copied()).collect(),
+        named: (unknowns.names.iter().cloned())
+            .zip(fitted.x.iter().copied())
+            .collect(),
         fitted,
         summary,
         errors,
@@ -146,7 +148,12 @@ pub fn rank_effects(
         });
         ordered.push(scored);
     }
-    let confidence = confidence(&scores, &comparison, gap_before, context.blocks.blocks.len());
+    let confidence = confidence(
+        &scores,
+        &comparison,
+        gap_before,
+        context.blocks.blocks.len(),
+    );
     Ok(Ranking {
         scores,
         fits: ordered,

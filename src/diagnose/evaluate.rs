@@ -30,7 +30,11 @@ impl RecordErrors {
     /// Per scored row, the sum of its squared errors and the number of its cells.
     pub fn row_totals(&self) -> Vec<(f64, usize)> {
         (self.squares.iter())
-            .map(|row| row.iter().flatten().fold((0.0, 0), |(s, n), e| (s + e, n + 1)))
+            .map(|row| {
+                row.iter()
+                    .flatten()
+                    .fold((0.0, 0), |(s, n), e| (s + e, n + 1))
+            })
             .collect()
     }
 }
@@ -113,7 +117,9 @@ pub fn scored_errors(split: &Split, runs: &[Option<Run>]) -> Errors {
             Some(run) => cell_errors(run, record, rows.clone(), &split.normalisation),
             None => {
                 errors.diverged = true;
-                rows.clone().map(|_| vec![None; record.states.len()]).collect()
+                rows.clone()
+                    .map(|_| vec![None; record.states.len()])
+                    .collect()
             }
         };
         errors.records.push(RecordErrors {
@@ -147,7 +153,8 @@ pub fn offline_errors(
                 let slot = &mut sums[k];
                 match &predictions {
                     Ok((_, predicted)) => {
-                        let z = (predicted.row(row - 1)[k] - value) / split.normalisation.state_std[k];
+                        let z =
+                            (predicted.row(row - 1)[k] - value) / split.normalisation.state_std[k];
                         slot.0 += z * z;
                         slot.1 += 1;
                     }
@@ -168,12 +175,7 @@ pub fn offline_errors(
 /// The windows of one scored record: its scored time span cut into `count` windows of equal
 /// duration, each with the share of the total squared error `total` that falls into it.
 /// A window with fewer than two measured rows is not a window (it is left out).
-pub fn windows(
-    record: &Record,
-    errors: &RecordErrors,
-    count: usize,
-    total: f64,
-) -> Vec<Window> {
+pub fn windows(record: &Record, errors: &RecordErrors, count: usize, total: f64) -> Vec<Window> {
     let rows = errors.rows.clone();
     let totals = errors.row_totals();
     let (first, last) = (record.times[rows.start], record.times[rows.end - 1]);
@@ -200,7 +202,10 @@ pub fn windows(
         if measured.len() < 2 {
             continue;
         }
-        let share = inside.iter().map(|&row| totals[row - rows.start].0).sum::<f64>()
+        let share = inside
+            .iter()
+            .map(|&row| totals[row - rows.start].0)
+            .sum::<f64>()
             / total.max(f64::MIN_POSITIVE);
         found.push(Window {
             experiment: record.name.clone(),
@@ -292,7 +297,11 @@ mod tests {
         let squares: Vec<Vec<Option<f64>>> = (60..100)
             .map(|row| vec![Some(if row >= 90 { 7.0 } else { 1.0 })])
             .collect();
-        let errors = RecordErrors { record: 0, rows: 60..100, squares };
+        let errors = RecordErrors {
+            record: 0,
+            rows: 60..100,
+            squares,
+        };
         let found = windows(&record(times), &errors, 4, 100.0);
         assert_eq!(found.len(), 4);
         let last = &found[3];
@@ -306,7 +315,11 @@ mod tests {
         // Irregular times: 0, 1, 2, 3 then one row at 10; the second half holds one row.
         let times = vec![0.0, 1.0, 2.0, 3.0, 10.0];
         let squares = vec![vec![Some(1.0)]; 5];
-        let errors = RecordErrors { record: 0, rows: 0..5, squares };
+        let errors = RecordErrors {
+            record: 0,
+            rows: 0..5,
+            squares,
+        };
         let found = windows(&record(times), &errors, 2, 5.0);
         assert_eq!(found.len(), 1);
         assert_eq!((found[0].t_start, found[0].t_end), (0.0, 3.0));
@@ -325,7 +338,11 @@ mod tests {
         assert_eq!(errors.gap(), 3.0);
         assert_eq!(errors.per_state(2), vec![Some(1.5), Some(6.0)]);
         let huge = Errors {
-            records: vec![RecordErrors { record: 0, rows: 0..1, squares: vec![vec![Some(2.1e100)]] }],
+            records: vec![RecordErrors {
+                record: 0,
+                rows: 0..1,
+                squares: vec![vec![Some(2.1e100)]],
+            }],
             diverged: false,
         };
         assert_eq!(huge.gap(), f64::INFINITY);

@@ -76,7 +76,9 @@ impl Objective<'_> {
         let scale = (self.split.training_cells().max(1) as f64).sqrt();
         let mut residuals = Vec::new();
         for (index, record, rows) in self.split.training() {
-            let overrides = self.split.overrides(index, fitted, simulator.hidden_count());
+            let overrides = self
+                .split
+                .overrides(index, fitted, simulator.hidden_count());
             let run = simulator.free_run(record, &overrides, rows.end).ok()?;
             for row in rows {
                 let state = run.row(row);
@@ -286,7 +288,8 @@ mod tests {
             (Constraint::Bounds(0.1, 10.0), 0.7),
         ] {
             let h = 1e-6;
-            let numeric = (from_theta(constraint, theta + h) - from_theta(constraint, theta - h)) / (2.0 * h);
+            let numeric =
+                (from_theta(constraint, theta + h) - from_theta(constraint, theta - h)) / (2.0 * h);
             assert!((slope(constraint, theta) - numeric).abs() < 1e-8 * numeric.abs().max(1.0));
         }
     }
@@ -294,7 +297,11 @@ mod tests {
     #[test]
     fn restarts_stop_when_two_starts_agree() {
         assert!(!agreeing(&[(vec![0.0], 1.0)]));
-        assert!(agreeing(&[(vec![0.0], 1.0), (vec![1.0], 2.0), (vec![2.0], 1.0000001)]));
+        assert!(agreeing(&[
+            (vec![0.0], 1.0),
+            (vec![1.0], 2.0),
+            (vec![2.0], 1.0000001)
+        ]));
         assert!(!agreeing(&[(vec![0.0], 1.0), (vec![1.0], 1.1)]));
     }
 }

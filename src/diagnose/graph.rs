@@ -115,7 +115,8 @@ impl Graph {
     /// Whether let `name` reaches a balance (used there, or by a let that does).
     pub fn reaches_balance(&self, name: &str) -> bool {
         self.balance_uses.contains(name)
-            || (self.uses.iter()).any(|(user, used)| used.contains(name) && self.reaches_balance(user))
+            || (self.uses.iter())
+                .any(|(user, used)| used.contains(name) && self.reaches_balance(user))
     }
 
     /// Whether let `name` feeds `downstream`: a let that uses it (directly or through other
@@ -286,7 +287,10 @@ mod tests {
     fn lets_sharing_an_input_through_a_let_form_a_group() {
         let graph = graph(TWO_RATES);
         let all: Vec<String> = graph.lets.clone();
-        assert_eq!(graph.groups(&all), vec![vec!["r_P".to_string(), "r_Q".to_string()]]);
+        assert_eq!(
+            graph.groups(&all),
+            vec![vec!["r_P".to_string(), "r_Q".to_string()]]
+        );
         // E_ss feeds both rates: it sits upstream of them.
         assert_eq!(graph.depth("E_ss"), 2);
         assert_eq!(graph.depth("r_P"), 1);
@@ -308,7 +312,10 @@ mod tests {
             der X = -a - c\nder P = a - b\n";
         let graph = graph(source);
         let all = graph.lets.clone();
-        assert_eq!(graph.groups(&all), vec![vec!["a".to_string(), "b".to_string()]]);
+        assert_eq!(
+            graph.groups(&all),
+            vec![vec!["a".to_string(), "b".to_string()]]
+        );
         // Only candidates count.
         assert!(graph.groups(&["a".to_string(), "c".to_string()]).is_empty());
     }

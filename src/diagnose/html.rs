@@ -38,11 +38,13 @@ pub fn page(report: &Report) -> String {
         escape(&title)
     );
     let _ = writeln!(out, "<h2>Gap before and after</h2>\n{}", bars(report));
-    let _ = writeln!(
-        out,
-        "<h2>Free corrections: held-out gap left at each place</h2>\n{}",
-        loci_chart(report)
-    );
+    if !report.locus.is_empty() {
+        let _ = writeln!(
+            out,
+            "<h2>Free corrections: held-out gap left at each place</h2>\n{}",
+            loci_chart(report)
+        );
+    }
     if !report.selection.steps.is_empty() {
         let _ = writeln!(
             out,
@@ -57,7 +59,11 @@ pub fn page(report: &Report) -> String {
         let rest: Vec<&str> = (report.series[MAX_EXPERIMENTS..].iter())
             .map(|s| s.name.as_str())
             .collect();
-        let _ = writeln!(out, "<p>Also scored (not drawn): {}.</p>", escape(&rest.join(", ")));
+        let _ = writeln!(
+            out,
+            "<p>Also scored (not drawn): {}.</p>",
+            escape(&rest.join(", "))
+        );
     }
     let _ = writeln!(
         out,
@@ -69,11 +75,11 @@ pub fn page(report: &Report) -> String {
 
 /// The figures of the report as standalone SVG documents, with file names.
 pub fn figures(report: &Report) -> Vec<(String, String)> {
-    let mut found = vec![
-        ("gap.svg".to_string(), bars(report)),
-        ("loci.svg".to_string(), loci_chart(report)),
-        ("selection.svg".to_string(), selection_chart(report)),
-    ];
+    let mut found = vec![("gap.svg".to_string(), bars(report))];
+    if !report.locus.is_empty() {
+        found.push(("loci.svg".to_string(), loci_chart(report)));
+    }
+    found.push(("selection.svg".to_string(), selection_chart(report)));
     for (index, series) in report.series.iter().enumerate().take(MAX_EXPERIMENTS) {
         for k in 0..series.names.len() {
             found.push((
@@ -168,7 +174,9 @@ impl Frame {
 
     fn py(&self, y: f64) -> f64 {
         let clamped = y.clamp(self.y.0, self.y.1);
-        HEIGHT - MARGIN.3 - (clamped - self.y.0) / (self.y.1 - self.y.0) * (HEIGHT - MARGIN.2 - MARGIN.3)
+        HEIGHT
+            - MARGIN.3
+            - (clamped - self.y.0) / (self.y.1 - self.y.0) * (HEIGHT - MARGIN.2 - MARGIN.3)
     }
 
     fn axes(&self, out: &mut String, x_title: &str, y_title: &str) {
@@ -195,17 +203,16 @@ impl Frame {
                 tick_label(tick)
             );
         }
+        let (width, height) = (right - left, bottom - top);
+        let (centre_x, centre_y) = ((left + right) / 2.0, (top + bottom) / 2.0);
+        let (x_title, y_title) = (escape(x_title), escape(y_title));
         let _ = write!(
             out,
-            "<rect x=\"{left}\" y=\"{top}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#444\"/>\
-             <text x=\"{}\" y=\"{}\" font-size=\"11\" text-anchor=\"middle\">{}</text>\
-             <text x=\"14\" y=\"{2}\" font-size=\"11\" text-anchor=\"middle\" transform=\"rotate(-90 14 {2})\">{}</text>",
-            right - left,
-            bottom - top,
-            (left + right) / 2.0,
+            "<rect x=\"{left}\" y=\"{top}\" width=\"{width}\" height=\"{height}\" fill=\"none\" stroke=\"#444\"/>\
+             <text x=\"{centre_x}\" y=\"{}\" font-size=\"11\" text-anchor=\"middle\">{x_title}</text>\
+             <text x=\"14\" y=\"{centre_y}\" font-size=\"11\" text-anchor=\"middle\" \
+             transform=\"rotate(-90 14 {centre_y})\">{y_title}</text>",
             HEIGHT - 6.0,
-            escape(x_title),
-            escape(y_title),
         );
     }
 
@@ -310,8 +317,17 @@ fn log_bars(rows: &[(String, f64, &str, String)], axis: &str) -> String {
     let finite: Vec<f64> = (rows.iter().map(|r| r.1))
         .filter(|v| v.is_finite() && *v > 0.0)
         .collect();
-    let lo = finite.iter().fold(f64::INFINITY, |m, v| m.min(*v)).log10().floor() - 0.3;
-    let hi = finite.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v)).log10().ceil();
+    let lo = finite
+        .iter()
+        .fold(f64::INFINITY, |m, v| m.min(*v))
+        .log10()
+        .floor()
+        - 0.3;
+    let hi = finite
+        .iter()
+        .fold(f64::NEG_INFINITY, |m, v| m.max(*v))
+        .log10()
+        .ceil();
     let (label_width, bar_height, note_width) = (250.0, 20.0, 150.0);
     let height = rows.len() as f64 * bar_height + 34.0;
     let mut out = String::new();
@@ -370,20 +386,40 @@ fn log_bars(rows: &[(String, f64, &str, String)], axis: &str) -> String {
 /// noise floor.
 fn bars(report: &Report) -> String {
     let change = |gap: f64| percent(-(1.0 - gap / report.gap_before));
-    let mut rows = vec![("before".to_string(), report.gap_before, BEFORE, String::new())];
+    let mut rows = vec![(
+        "before".to_string(),
+        report.gap_before,
+        BEFORE,
+        String::new(),
+    )];
     let credited = &report.selection.credited;
     if !credited.is_empty() {
         let gap = report.selection.gap_after;
-        rows.push((format!("after {}", credited.join(" + ")), gap, AFTER, change(gap)));
+        rows.push((
+            format!("after {}", credited.join(" + ")),
+            gap,
+            AFTER,
+            change(gap),
+        ));
     } else if let Some(best) = report.effects.first() {
         let label = format!("after {} (not credited)", best.name);
         rows.push((label, best.gap_after, AFTER, change(best.gap_after)));
     }
     if let Some(locus) = report.locus.first() {
         let label = format!("free correction at {}", locus.name);
-        rows.push((label, locus.bound_after, "#7d3c98", change(locus.bound_after)));
+        rows.push((
+            label,
+            locus.bound_after,
+            "#7d3c98",
+            change(locus.bound_after),
+        ));
     }
-    rows.push(("noise floor".into(), report.noise_floor, DATA, change(report.noise_floor)));
+    rows.push((
+        "noise floor".into(),
+        report.noise_floor,
+        DATA,
+        change(report.noise_floor),
+    ));
     log_bars(&rows, "held-out gap (log)")
 }
 
@@ -397,7 +433,11 @@ fn loci_chart(report: &Report) -> String {
             LocusKind::Group => "group",
             _ => "let",
         };
-        let tied = if locus.tied { ", tied with the best" } else { "" };
+        let tied = if locus.tied {
+            ", tied with the best"
+        } else {
+            ""
+        };
         rows.push((
             format!("{} ({kind}), present", locus.name),
             locus.bound_present,
@@ -411,16 +451,35 @@ fn loci_chart(report: &Report) -> String {
             String::new(),
         ));
     }
-    rows.push(("noise floor".into(), report.noise_floor, DATA, String::new()));
-    rows.push(("gap before".into(), report.gap_before, BEFORE, String::new()));
+    rows.push((
+        "noise floor".into(),
+        report.noise_floor,
+        DATA,
+        String::new(),
+    ));
+    rows.push((
+        "gap before".into(),
+        report.gap_before,
+        BEFORE,
+        String::new(),
+    ));
     log_bars(&rows, "held-out gap (log)")
 }
 
 /// The held-out gap after each step of the forward selection.
 fn selection_chart(report: &Report) -> String {
-    let mut rows = vec![("no effect".to_string(), report.gap_before, BEFORE, String::new())];
+    let mut rows = vec![(
+        "no effect".to_string(),
+        report.gap_before,
+        BEFORE,
+        String::new(),
+    )];
     for step in &report.selection.steps {
-        let verdict = if step.accepted { "credited" } else { "not credited" };
+        let verdict = if step.accepted {
+            "credited"
+        } else {
+            "not credited"
+        };
         rows.push((
             step.effects.join(" + "),
             step.gap_after,
@@ -428,7 +487,12 @@ fn selection_chart(report: &Report) -> String {
             format!("{verdict}, BIC {}", num(step.bic)),
         ));
     }
-    rows.push(("noise floor".into(), report.noise_floor, DATA, String::new()));
+    rows.push((
+        "noise floor".into(),
+        report.noise_floor,
+        DATA,
+        String::new(),
+    ));
     log_bars(&rows, "held-out gap (log)")
 }
 
@@ -458,5 +522,32 @@ mod tests {
     fn axis_titles_carry_units() {
         assert_eq!(titled("X", Some("g/L")), "X [g/L]");
         assert_eq!(titled("u", None), "u");
+    }
+
+    /// Both axis titles are drawn inside the figure: the x title under the plot area, the
+    /// y title (turned a quarter) beside its middle.
+    #[test]
+    fn axis_titles_lie_inside_the_figure() {
+        let frame = Frame::new(&[0.0, 10.0], &mut [1.0, 3.0].into_iter());
+        let mut out = String::new();
+        frame.axes(&mut out, "t [h]", "X [g/L]");
+        let y_of = |title: &str| -> f64 {
+            let end = out.find(&format!(">{title}</text>")).unwrap();
+            let start = out[..end].rfind("<text").unwrap();
+            let tag = &out[start..end];
+            let value = tag
+                .split(" y=\"")
+                .nth(1)
+                .unwrap()
+                .split('"')
+                .next()
+                .unwrap();
+            value.parse().unwrap()
+        };
+        let x_title = y_of("t [h]");
+        assert!(x_title > HEIGHT - MARGIN.3 && x_title < HEIGHT, "{x_title}");
+        let y_title = y_of("X [g/L]");
+        assert_eq!(y_title, (MARGIN.2 + HEIGHT - MARGIN.3) / 2.0);
+        assert!(out.contains(&format!("rotate(-90 14 {y_title})")));
     }
 }

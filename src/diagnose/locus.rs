@@ -129,8 +129,8 @@ pub struct Along {
 }
 
 /// The loci, best first, the memory verdict of the free corrections, and the best
-/// correction along the data.
-#[derive(Debug, Clone)]
+/// correction along the data (empty when the loci are not searched).
+#[derive(Debug, Clone, Default)]
 pub struct Located {
     /// Report entries, best first.
     pub loci: Vec<Locus>,
@@ -223,7 +223,11 @@ pub fn locate(
     Ok(summarise(context, trials, gaps))
 }
 
-fn summarise(context: &Context, mut trials: Vec<Trial>, (gap_before, noise_floor): (f64, f64)) -> Located {
+fn summarise(
+    context: &Context,
+    mut trials: Vec<Trial>,
+    (gap_before, noise_floor): (f64, f64),
+) -> Located {
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
     let sums: Vec<_> = (trials.iter())
         .map(|t| match t.best() {
@@ -253,7 +257,16 @@ fn summarise(context: &Context, mut trials: Vec<Trial>, (gap_before, noise_floor
         .collect();
     let mut order: Vec<usize> = (0..trials.len()).collect();
     order.sort_by(|&a, &b| {
-        let key = |i: usize| (!tied[i], if tied[i] { trials[i].target.kind } else { LocusKind::Let });
+        let key = |i: usize| {
+            (
+                !tied[i],
+                if tied[i] {
+                    trials[i].target.kind
+                } else {
+                    LocusKind::Let
+                },
+            )
+        };
         let depth = |i: usize| if tied[i] { trials[i].target.depth } else { 0 };
         key(a)
             .cmp(&key(b))
@@ -294,8 +307,13 @@ fn summarise(context: &Context, mut trials: Vec<Trial>, (gap_before, noise_floor
 }
 
 /// The model with corrections at `target`; `None` when no balance uses them.
-pub(super) fn synthesise(context: &Context, target: &Target) -> Result<Option<Corrected>, DiagnoseError> {
-    let outputs: Vec<String> = (0..target.members.len()).map(|j| format!("{OUTPUT}{j}")).collect();
+pub(super) fn synthesise(
+    context: &Context,
+    target: &Target,
+) -> Result<Option<Corrected>, DiagnoseError> {
+    let outputs: Vec<String> = (0..target.members.len())
+        .map(|j| format!("{OUTPUT}{j}"))
+        .collect();
     let source = format!(
         "{}\n\nclosure {CLOSURE} {{\n  outputs {}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
         context.problem.source,
@@ -313,7 +331,9 @@ pub(super) fn synthesise(context: &Context, target: &Target) -> Result<Option<Co
         })?;
     let model = compiled.model;
     let Some(closure) = model.closures.iter().position(|c| c.name == CLOSURE) else {
-        return Err(DiagnoseError::Internal("synthesised closure missing".into()));
+        return Err(DiagnoseError::Internal(
+            "synthesised closure missing".into(),
+        ));
     };
     if !model.balances.iter().any(|b| ir::uses_closure(&b.expr)) {
         return Ok(None);
@@ -370,7 +390,9 @@ fn try_target(
         Some(evaluate(context, &mut corrected, map, solution))
     };
     let present = variant(None);
-    let history = (!taus.is_empty()).then(|| variant(Some(taus.to_vec()))).flatten();
+    let history = (!taus.is_empty())
+        .then(|| variant(Some(taus.to_vec())))
+        .flatten();
     Ok(Some(Trial {
         target: target.clone(),
         corrected,
@@ -396,8 +418,12 @@ fn refine_trial(context: &Context, trial: &mut Trial, history: bool) {
     let width = variant.map.width();
     let reference: Vec<f64> = (0..slots)
         .map(|slot| {
-            let along =
-                correction::values_along(&trial.pass, &variant.map, &variant.solution.weights, slot);
+            let along = correction::values_along(
+                &trial.pass,
+                &variant.map,
+                &variant.solution.weights,
+                slot,
+            );
             let typical = root_mean_square(&along);
             if typical > 0.0 {
                 typical
@@ -422,7 +448,12 @@ fn refine_trial(context: &Context, trial: &mut Trial, history: bool) {
 }
 
 /// The held-out errors and gap of a correction.
-fn evaluate(context: &Context, corrected: &mut Corrected, map: FeatureMap, solution: Solution) -> Variant {
+fn evaluate(
+    context: &Context,
+    corrected: &mut Corrected,
+    map: FeatureMap,
+    solution: Solution,
+) -> Variant {
     let errors = score(corrected, &map, &solution, &context.split);
     Variant {
         map,

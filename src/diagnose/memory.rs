@@ -94,7 +94,10 @@ pub fn time_constants(step: f64, span: f64, count: usize) -> Vec<f64> {
 pub fn median_step(split: &Split) -> f64 {
     let steps: Vec<f64> = (split.training())
         .flat_map(|(_, record, rows)| {
-            record.times[rows].windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>()
+            record.times[rows]
+                .windows(2)
+                .map(|w| w[1] - w[0])
+                .collect::<Vec<_>>()
         })
         .collect();
     median(&steps).filter(|s| *s > 0.0).unwrap_or(1.0)
@@ -114,7 +117,10 @@ pub fn span_from_residuals(split: &Split, runs: &[Option<Run>]) -> f64 {
             let samples: Vec<(f64, f64)> = (rows.clone())
                 .filter_map(|row| {
                     let value = cells[row]?;
-                    Some((record.times[row], (run.row(row)[k] - value) / split.normalisation.state_std[k]))
+                    Some((
+                        record.times[row],
+                        (run.row(row)[k] - value) / split.normalisation.state_std[k],
+                    ))
                 })
                 .collect();
             if let Some((time, variance)) = correlation_time(&samples) {
@@ -123,7 +129,11 @@ pub fn span_from_residuals(split: &Split, runs: &[Option<Run>]) -> f64 {
             }
         }
     }
-    let correlation = if weights > 0.0 { weighted / weights } else { step };
+    let correlation = if weights > 0.0 {
+        weighted / weights
+    } else {
+        step
+    };
     (SPAN_FACTOR * correlation).clamp(2.0 * step, (longest / 4.0).max(2.0 * step))
 }
 
@@ -145,7 +155,11 @@ pub fn correlation_time(samples: &[(f64, f64)]) -> Option<(f64, f64)> {
             j += 1;
         }
         let ((ta, va), (tb, vb)) = (samples[j], samples[(j + 1).min(samples.len() - 1)]);
-        let fraction = if tb > ta { ((t - ta) / (tb - ta)).clamp(0.0, 1.0) } else { 0.0 };
+        let fraction = if tb > ta {
+            ((t - ta) / (tb - ta)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         grid.push(va + (vb - va) * fraction);
     }
     let mean = grid.iter().sum::<f64>() / grid.len() as f64;
@@ -163,11 +177,17 @@ pub fn correlation_time(samples: &[(f64, f64)]) -> Option<(f64, f64)> {
         let threshold = (-1.0f64).exp();
         if acf < threshold {
             let fraction = (previous - threshold) / (previous - acf);
-            return Some(((lag as f64 - 1.0 + fraction) * step, variance / grid.len() as f64));
+            return Some((
+                (lag as f64 - 1.0 + fraction) * step,
+                variance / grid.len() as f64,
+            ));
         }
         previous = acf;
     }
-    Some(((centred.len() / 2) as f64 * step, variance / grid.len() as f64))
+    Some((
+        (centred.len() / 2) as f64 * step,
+        variance / grid.len() as f64,
+    ))
 }
 
 #[cfg(test)]
@@ -199,8 +219,16 @@ mod tests {
             let held = integrate(0.2, &|_| 0.5);
             let ramp = integrate(1.0, &|t| 1.0 + 2.0 * t / h);
             let values = bank.values();
-            assert!((values[0] - held).abs() < 1e-12, "{h} {tau}: {} {held}", values[0]);
-            assert!((values[1] - ramp).abs() < 1e-12, "{h} {tau}: {} {ramp}", values[1]);
+            assert!(
+                (values[0] - held).abs() < 1e-12,
+                "{h} {tau}: {} {held}",
+                values[0]
+            );
+            assert!(
+                (values[1] - ramp).abs() < 1e-12,
+                "{h} {tau}: {} {ramp}",
+                values[1]
+            );
         }
     }
 
@@ -222,7 +250,9 @@ mod tests {
         let mut state: u64 = 7;
         let mut samples = Vec::new();
         for i in 0..40_000 {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let uniform = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
             x = phi * x + uniform;
             samples.push((2.0 * i as f64, x));

@@ -100,6 +100,9 @@ pub struct Options {
     pub dim: usize,
     /// Whether hidden states start from values fitted per training experiment.
     pub fit_initial: bool,
+    /// Whether to search the loci (free corrections at every let, group and balance; most
+    /// of the cost). Without it the report answers which effects and how far only.
+    pub locate: bool,
 }
 
 impl Default for Options {
@@ -112,6 +115,7 @@ impl Default for Options {
             span: None,
             dim: 5,
             fit_initial: false,
+            locate: true,
         }
     }
 }
@@ -166,7 +170,10 @@ impl Context<'_> {
         }
         let guesses = self.initial_guesses();
         for (&(record, state), guess) in split.fitted_starts.iter().zip(guesses) {
-            let name = format!("{}@{}", model.states[state].name, split.records[record].name);
+            let name = format!(
+                "{}@{}",
+                model.states[state].name, split.records[record].name
+            );
             unknowns.push(name, Constraint::Free, guess);
         }
         if split.fit_hidden {
@@ -269,14 +276,15 @@ pub fn diagnose(
         selection::select(&context, &before, &ranking, levels, progress)?;
     let selection_seconds = selection_started.elapsed().as_secs_f64();
     let loci_started = Instant::now();
-    let taus = memory_time_constants(&context, &base, &before.fitted.x);
-    let located = locus::locate(
-        &context,
-        &before.fitted.x,
-        &taus,
-        (gap_before, noise_floor),
-        progress,
-    )?;
+    // Without a significant gap there is nothing to locate.
+    let (taus, located) = if options.locate && significant {
+        let taus = memory_time_constants(&context, &base, &before.fitted.x);
+        let gaps = (gap_before, noise_floor);
+        let located = locus::locate(&context, &before.fitted.x, &taus, gaps, progress)?;
+        (taus, located)
+    } else {
+        (Vec::new(), locus::Located::default())
+    };
     let loci_seconds = loci_started.elapsed().as_secs_f64();
     let memory = assemble::memory(&located, &ranking, &selection, (levels, &taus));
     let hints = match (&located.along, located.loci.first()) {
@@ -288,7 +296,10 @@ pub fn diagnose(
     let after = credited_fit.as_ref().or(ranking.fits.first());
     let after_name = match &credited_fit {
         Some(_) => selection.credited.join(" + "),
-        None => ranking.scores.first().map_or(String::new(), |s| s.name.clone()),
+        None => ranking
+            .scores
+            .first()
+            .map_or(String::new(), |s| s.name.clone()),
     };
     let series = assemble::series(&context, &before, after.map(|a| (a, after_name)));
     let (windows, regime) = assemble::where_and_when(&context, &before);
@@ -377,7 +388,12 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
         let steps: Vec<Option<f64>> = records.clone().map(Record::uniform_step).collect();
         let first = steps.first().copied().flatten();
         if let Some(record) = (records.zip(&steps))
-            .find(|(_, step)| step.is_none() || step.zip(first).is_some_and(|(a, b)| (a - b).abs() > 1e-6 * b))
+            .find(|(_, step)| {
+                step.is_none()
+                    || step
+                        .zip(first)
+                        .is_some_and(|(a, b)| (a - b).abs() > 1e-6 * b)
+            })
             .map(|(record, _)| record)
         {
             return Err(DiagnoseError::IrregularMap {
@@ -448,7 +464,9 @@ fn check_runs(context: &Context, base: &Simulator) -> Result<(), DiagnoseError> 
     simulator.set_params(&declared);
     let fitted = &declared[context.model.params.len()..];
     for (index, record) in context.split.records.iter().enumerate() {
-        let overrides = context.split.overrides(index, fitted, simulator.hidden_count());
+        let overrides = context
+            .split
+            .overrides(index, fitted, simulator.hidden_count());
         simulator
             .free_run(record, &overrides, record.len())
             .map_err(|error| DiagnoseError::Unsimulable {

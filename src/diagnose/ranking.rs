@@ -194,7 +194,14 @@ fn population_std(values: &[f64]) -> (f64, f64) {
     let count = values.len().max(1) as f64;
     let mean = values.iter().sum::<f64>() / count;
     let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
-    (mean, if variance.is_finite() { variance.sqrt() } else { f64::INFINITY })
+    (
+        mean,
+        if variance.is_finite() {
+            variance.sqrt()
+        } else {
+            f64::INFINITY
+        },
+    )
 }
 
 #[cfg(test)]
@@ -235,12 +242,20 @@ mod tests {
     /// textbook one, `std(d_b) / sqrt(B)` for equal blocks (within resampling error).
     #[test]
     fn the_spread_is_the_standard_error_of_the_paired_difference() {
-        let differences: Vec<f64> = (0..16).map(|b| ((b * 37 % 16) as f64 - 7.5) / 4.0).collect();
+        let differences: Vec<f64> = (0..16)
+            .map(|b| ((b * 37 % 16) as f64 - 7.5) / 4.0)
+            .collect();
         let base = vec![(100.0, 10); 16];
-        let other: Vec<(f64, usize)> = differences.iter().map(|d| (100.0 + 10.0 * (d + 3.0), 10)).collect();
+        let other: Vec<(f64, usize)> = differences
+            .iter()
+            .map(|d| (100.0 + 10.0 * (d + 3.0), 10))
+            .collect();
         let comparison = compare(&[base, other], 7);
         let (_, std) = population_std(&differences);
         let expected = std / 16f64.sqrt();
-        assert!((comparison.spread[1] / expected - 1.0).abs() < 0.15, "{comparison:?} {expected}");
+        assert!(
+            (comparison.spread[1] / expected - 1.0).abs() < 0.15,
+            "{comparison:?} {expected}"
+        );
     }
 }

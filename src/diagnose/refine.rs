@@ -64,11 +64,14 @@ pub fn refine(
         let candidate = apply(x);
         let mut out = Vec::new();
         for (index, record, rows) in split.training() {
-            let run = corrected_run(&mut corrected, map, &candidate, (split, index), rows.end).ok()?;
+            let run =
+                corrected_run(&mut corrected, map, &candidate, (split, index), rows.end).ok()?;
             for row in rows {
                 for (k, cells) in record.states.iter().enumerate() {
                     if let Some(value) = cells[row] {
-                        out.push((run.row(row)[k] - value) / split.normalisation.state_std[k] / scale);
+                        out.push(
+                            (run.row(row)[k] - value) / split.normalisation.state_std[k] / scale,
+                        );
                     }
                 }
             }
@@ -100,7 +103,14 @@ pub fn corrected_run(
     corrected.simulator.set_params(&x);
     let fitted = &x[corrected.simulator.params().min(x.len())..];
     let overrides = split.overrides(index, fitted, corrected.simulator.hidden_count());
-    run_with(corrected, map, solution, &split.records[index], &overrides, end)
+    run_with(
+        corrected,
+        map,
+        solution,
+        &split.records[index],
+        &overrides,
+        end,
+    )
 }
 
 fn run_with(
@@ -125,7 +135,8 @@ fn run_with(
         s.extend_from_slice(locus);
         s
     };
-    let mut bank = (map.taus.as_ref()).map(|taus| FilterBank::start(taus, &signal(0, &state, &locus)));
+    let mut bank =
+        (map.taus.as_ref()).map(|taus| FilterBank::start(taus, &signal(0, &state, &locus)));
     let (mut phi, mut present, mut corrections) = (Vec::new(), Vec::new(), vec![0.0; slots]);
     for row in 0..end.saturating_sub(1) {
         present.clear();

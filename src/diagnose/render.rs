@@ -161,8 +161,17 @@ fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
     }
     let params: Vec<String> = (fit.estimates.iter())
         .map(|e| {
-            let flag = if e.identified { "" } else { " (not identified)" };
-            format!("{} = {} +- {}{flag}", e.name, num(e.value), num(e.std_error))
+            let flag = if e.identified {
+                ""
+            } else {
+                " (not identified)"
+            };
+            format!(
+                "{} = {} +- {}{flag}",
+                e.name,
+                num(e.value),
+                num(e.std_error)
+            )
         })
         .collect();
     let _ = writeln!(out, "   {label}: {}", params.join(", "));
@@ -179,6 +188,10 @@ fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
 }
 
 fn loci(out: &mut String, report: &Report) {
+    if report.locus.is_empty() {
+        let _ = writeln!(out, "   loci and memory: {}", report.memory.reason);
+        return;
+    }
     let _ = writeln!(
         out,
         "   free correction at each rate, group and balance (held-out gap it leaves):"
@@ -279,7 +292,10 @@ fn which_section(out: &mut String, report: &Report) {
         confidence.blocks
     );
     if confidence.separated {
-        let _ = writeln!(out, "   ranking: the best is told apart from every other ({certainty})");
+        let _ = writeln!(
+            out,
+            "   ranking: the best is told apart from every other ({certainty})"
+        );
     } else {
         let _ = writeln!(
             out,
@@ -324,19 +340,38 @@ fn how_far_section(out: &mut String, report: &Report) {
     let mut rows: Vec<(String, f64)> = Vec::new();
     let credited = &report.selection.credited;
     if !credited.is_empty() {
-        rows.push((format!("after {}", credited.join(" + ")), report.selection.gap_after));
+        rows.push((
+            format!("after {}", credited.join(" + ")),
+            report.selection.gap_after,
+        ));
     } else if let Some(best) = report.effects.first() {
-        rows.push((format!("after {} (not credited)", best.name), best.gap_after));
+        rows.push((
+            format!("after {} (not credited)", best.name),
+            best.gap_after,
+        ));
     }
     if let Some(locus) = report.locus.first() {
-        rows.push((format!("free correction at {}", locus.name), locus.bound_after));
+        rows.push((
+            format!("free correction at {}", locus.name),
+            locus.bound_after,
+        ));
     }
     rows.push(("noise floor".into(), report.noise_floor));
     let width = rows.iter().map(|r| r.0.len()).max().unwrap_or(0).max(12);
-    let _ = writeln!(out, "   {:<width$} {:>10}", "before", num(report.gap_before));
+    let _ = writeln!(
+        out,
+        "   {:<width$} {:>10}",
+        "before",
+        num(report.gap_before)
+    );
     for (label, gap) in rows {
         let shrink = 1.0 - gap / report.gap_before;
-        let _ = writeln!(out, "   {label:<width$} {:>10}  {:>9}", num(gap), percent(-shrink));
+        let _ = writeln!(
+            out,
+            "   {label:<width$} {:>10}  {:>9}",
+            num(gap),
+            percent(-shrink)
+        );
     }
     match credited.as_slice() {
         [] if !report.significant => {

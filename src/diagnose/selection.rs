@@ -20,8 +20,8 @@
 
 use super::effects::{block_sums, fit_and_score, lower, Ranking, Scored};
 use super::ranking::{compare, CONFIDENCE};
-use super::report::{Selection, SelectionStep};
 use super::render::num;
+use super::report::{Selection, SelectionStep};
 use super::{Context, DiagnoseError, Progress, CREDIT, SIGNIFICANCE};
 use rayon::prelude::*;
 use std::collections::BTreeMap;

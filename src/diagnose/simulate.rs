@@ -11,9 +11,9 @@
 //! see [`super::locus`]) are held constant over each interval.
 
 use super::DiagnoseError;
-use crate::record::Record;
 use crate::eval::Program;
 use crate::ir::{Dynamics, Model, Var};
+use crate::record::Record;
 use crate::sim::{Dopri5, IntegrationError, ModelSystem, OdeSystem, Tolerances};
 
 /// Most integration steps per interval before a run is declared failed (wild params).
@@ -107,8 +107,7 @@ impl Simulator {
     pub fn set_params(&mut self, values: &[f64]) {
         let range = self.system.layout().param_range();
         let count = self.params.min(values.len());
-        self.system.slots_mut()[range.start..range.start + count]
-            .copy_from_slice(&values[..count]);
+        self.system.slots_mut()[range.start..range.start + count].copy_from_slice(&values[..count]);
     }
 
     /// Number of params.
@@ -142,7 +141,11 @@ impl Simulator {
         let mut state = Vec::with_capacity(self.measured + self.hidden_init.len());
         for k in 0..self.measured {
             let cell = record.states[k].first().copied().flatten();
-            let value = match (overrides.get(k).copied().flatten(), cell, &self.measured_init[k]) {
+            let value = match (
+                overrides.get(k).copied().flatten(),
+                cell,
+                &self.measured_init[k],
+            ) {
                 (Some(value), _, _) | (None, Some(value), _) => value,
                 (None, None, Some(init)) => init.eval(self.system.slots_mut(), &mut self.scratch),
                 (None, None, None) => 0.0,

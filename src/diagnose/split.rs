@@ -3,10 +3,10 @@
 //! the rows that are scored, where each free run starts, and the statistics that z-score
 //! every error.
 //!
-//! - **Whole experiments** (`--holdout NAME`, `--val FILE`, and by default with several
-//!   experiments the last one): a training experiment fits on all its rows, a held-out one
-//!   is scored on all its rows.
-//! - **Tail** (`--val-fraction SHARE`, and by default with one experiment a share of 0.3):
+//! - **Whole experiments** (`--holdout NAME`, `--val FILE`): a training experiment fits on
+//!   all its rows, a held-out one is scored on all its rows.
+//! - **Tail** (`--val-fraction SHARE`, and by default, when no experiment is held out, a
+//!   share of 0.3 of every experiment):
 //!   the last share of each training experiment's measured rows is scored and the rows
 //!   before it fit; the free run still starts at the experiment's first row, so a good score
 //!   means the whole run is good.
@@ -166,7 +166,10 @@ impl Split {
                 Start::Cell | Start::Declared => None,
             })
             .collect();
-        let slot = self.fit_hidden.then(|| self.training_slot(record)).flatten();
+        let slot = self
+            .fit_hidden
+            .then(|| self.training_slot(record))
+            .flatten();
         let first = self.fitted_starts.len() + slot.unwrap_or(0) * hidden;
         overrides.extend((0..hidden).map(|h| slot.and_then(|_| fitted.get(first + h).copied())));
         overrides
@@ -294,9 +297,20 @@ mod tests {
 
     #[test]
     fn a_tail_split_scores_the_last_rows_and_normalises_on_the_rest() {
-        let split = Split::new(&model(), vec![record("a", 100)], vec![], (Holdout::Tail(0.3), false))
-            .unwrap();
-        assert_eq!(split.parts[0], Part { train: 0..70, test: 70..100 });
+        let split = Split::new(
+            &model(),
+            vec![record("a", 100)],
+            vec![],
+            (Holdout::Tail(0.3), false),
+        )
+        .unwrap();
+        assert_eq!(
+            split.parts[0],
+            Part {
+                train: 0..70,
+                test: 70..100
+            }
+        );
         // 0..70: mean 34.5, population variance (70^2 - 1) / 12.
         let norm = &split.normalisation;
         assert!((norm.state_mean[0] - 34.5).abs() < 1e-12);
@@ -314,8 +328,20 @@ mod tests {
             }
         }
         let other = record("b", 30);
-        let split = Split::new(&model(), vec![thin, other], vec![], (Holdout::Tail(0.3), false)).unwrap();
-        assert_eq!(split.parts[0], Part { train: 0..14, test: 14..20 });
+        let split = Split::new(
+            &model(),
+            vec![thin, other],
+            vec![],
+            (Holdout::Tail(0.3), false),
+        )
+        .unwrap();
+        assert_eq!(
+            split.parts[0],
+            Part {
+                train: 0..14,
+                test: 14..20
+            }
+        );
         assert_eq!(split.measured_rows(), (7 + 21, 3 + 9));
     }
 
@@ -329,20 +355,44 @@ mod tests {
         )
         .unwrap();
         assert_eq!(split.training().count(), 1);
-        assert_eq!(split.scored().map(|(i, _, r)| (i, r)).collect::<Vec<_>>(), vec![(1, 0..11)]);
+        assert_eq!(
+            split.scored().map(|(i, _, r)| (i, r)).collect::<Vec<_>>(),
+            vec![(1, 0..11)]
+        );
     }
 
     #[test]
     fn too_small_parts_say_what_each_needs_and_got() {
-        let error = Split::new(&model(), vec![record("a", 34)], vec![record("b", 6)], (Holdout::Experiments, false))
-            .unwrap_err();
+        let error = Split::new(
+            &model(),
+            vec![record("a", 34)],
+            vec![record("b", 6)],
+            (Holdout::Experiments, false),
+        )
+        .unwrap_err();
         assert_eq!(
             error.to_string(),
             "expected at least 10 measured rows in the training part and 10 in the held-out \
              part, found 34 and 6 (experiment `b` held out)"
         );
-        let error = Split::new(&model(), vec![record("a", 3)], vec![], (Holdout::Tail(0.1), false)).unwrap_err();
-        assert!(matches!(error, DiagnoseError::TailTooSmall { train: 3, test: 0, .. }), "{error}");
+        let error = Split::new(
+            &model(),
+            vec![record("a", 3)],
+            vec![],
+            (Holdout::Tail(0.1), false),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                error,
+                DiagnoseError::TailTooSmall {
+                    train: 3,
+                    test: 0,
+                    ..
+                }
+            ),
+            "{error}"
+        );
     }
 
     #[test]
@@ -362,8 +412,13 @@ mod tests {
             r.states[1][1] = None;
             r
         };
-        let split = Split::new(&model, vec![gapped("a")], vec![gapped("b")], (Holdout::Experiments, false))
-            .unwrap();
+        let split = Split::new(
+            &model,
+            vec![gapped("a")],
+            vec![gapped("b")],
+            (Holdout::Experiments, false),
+        )
+        .unwrap();
         assert_eq!(split.starts[0], vec![Start::Declared, Start::Fitted(0)]);
         assert_eq!(split.starts[1], vec![Start::Declared, Start::Fixed(2.0)]);
         assert_eq!(split.fitted_starts, vec![(0, 1)]);
@@ -378,6 +433,9 @@ mod tests {
             with_hidden.overrides(0, &[7.0, 8.0, 9.0], 2),
             vec![None, Some(7.0), Some(8.0), Some(9.0)]
         );
-        assert_eq!(with_hidden.overrides(1, &[7.0, 8.0, 9.0], 2), vec![None, Some(2.0), None, None]);
+        assert_eq!(
+            with_hidden.overrides(1, &[7.0, 8.0, 9.0], 2),
+            vec![None, Some(2.0), None, None]
+        );
     }
 }

@@ -106,7 +106,13 @@ pub(super) fn noise_gap(model: &str, sets: &[Simulated]) -> f64 {
         .unwrap()
         .model;
     let records = sets.iter().map(|s| s.record.clone()).collect();
-    let split = Split::new(&model, records, vec![], (Holdout::Tail(DEFAULT_TAIL), false)).unwrap();
+    let split = Split::new(
+        &model,
+        records,
+        vec![],
+        (Holdout::Tail(DEFAULT_TAIL), false),
+    )
+    .unwrap();
     let (mut sum, mut count) = (0.0, 0);
     for (index, record, rows) in split.scored() {
         for row in rows {
@@ -231,7 +237,10 @@ fn without_a_gap_nothing_is_credited() {
     assert!(report.selection.credited.is_empty());
     assert!((report.gap_before / noise_gap(CHEMOSTAT_MODEL, &sets) - 1.0).abs() < 0.1);
     assert!(report.effects.iter().all(|e| e.shrink < 0.1));
-    assert!(text.contains("credited: none (no significant gap)"), "{text}");
+    assert!(
+        text.contains("credited: none (no significant gap)"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -241,12 +250,24 @@ fn two_withheld_effects_are_credited_in_order() {
     let noise = noise_gap(CHEMOSTAT_MODEL, &sets);
     // The decay alone explains more than the inhibition alone: it comes first. The pair's
     // gap is within 1.5x of the truth's (the injected noise).
-    check_credited(&report, noise, &["product_decay", "product_inhibition"], 0.5);
+    check_credited(
+        &report,
+        noise,
+        &["product_decay", "product_inhibition"],
+        0.5,
+    );
     let steps = &report.selection.steps;
-    assert!(steps.len() == 2 && steps.iter().all(|s| s.accepted), "{steps:?}");
+    assert!(
+        steps.len() == 2 && steps.iter().all(|s| s.accepted),
+        "{steps:?}"
+    );
     // Each accepted step lowers both criteria.
     assert!(steps[1].bic < steps[0].bic && steps[1].aic < steps[0].aic);
-    assert!(report.selection.stop.contains("noise floor"), "{}", report.selection.stop);
+    assert!(
+        report.selection.stop.contains("noise floor"),
+        "{}",
+        report.selection.stop
+    );
 }
 
 #[test]
@@ -265,12 +286,19 @@ fn the_burden_of_enzyme_b_is_found_in_the_growth_of_x() {
     // could tell them apart: both are tied, the rate (more specific) first.
     assert_eq!(locus(&report), ("mu", LocusKind::Let), "{:?}", report.locus);
     let tied = tied(&report);
-    assert!(tied.contains(&"mu") && tied.contains(&"X"), "{:?}", report.locus);
+    assert!(
+        tied.contains(&"mu") && tied.contains(&"X"),
+        "{:?}",
+        report.locus
+    );
     assert!(!report.history_dependent);
     // Every fitted param of the credited effect carries a standard error.
     let estimates = &report.effects[0].fit.estimates;
     assert_eq!(estimates.len(), 3);
-    assert!(estimates.iter().all(|e| e.std_error > 0.0 && e.identified), "{estimates:?}");
+    assert!(
+        estimates.iter().all(|e| e.std_error > 0.0 && e.identified),
+        "{estimates:?}"
+    );
 }
 
 #[test]
@@ -303,7 +331,10 @@ fn a_slow_expression_lag_on_two_rates_needs_history_at_the_lagging_let() {
     // The truth's time constants, 3 h and 5 h (the two lags are interchangeable).
     let (a, b) = (param(&report, "tau_M"), param(&report, "tau_E"));
     let (short, long) = (a.min(b), a.max(b));
-    assert!((short / 3.0 - 1.0).abs() < 0.15 && (long / 5.0 - 1.0).abs() < 0.15, "{text}");
+    assert!(
+        (short / 3.0 - 1.0).abs() < 0.15 && (long / 5.0 - 1.0).abs() < 0.15,
+        "{text}"
+    );
     // The one-stage lag is second, told apart.
     assert_eq!(report.effects[1].name, "single_lag");
     // History needed, from the probe and from the credited effect's hidden states.
@@ -317,7 +348,11 @@ fn a_slow_expression_lag_on_two_rates_needs_history_at_the_lagging_let() {
         "{:?}",
         report.locus
     );
-    let group = report.locus.iter().find(|l| l.kind == LocusKind::Group).unwrap();
+    let group = report
+        .locus
+        .iter()
+        .find(|l| l.kind == LocusKind::Group)
+        .unwrap();
     assert_eq!(group.name, "r_P + r_Q");
 }
 
@@ -342,7 +377,11 @@ fn the_same_seed_gives_the_same_report() {
 #[test]
 fn models_with_closures_or_too_little_data_are_refused() {
     let sets = [chemostat("truth.gbm")];
-    let refused = try_run("models/mm_chemostat/greybox.gbm", &sets, &Options::default());
+    let refused = try_run(
+        "models/mm_chemostat/greybox.gbm",
+        &sets,
+        &Options::default(),
+    );
     assert!(matches!(refused, Err(DiagnoseError::HasClosures { .. })));
     let mut short = sets[0].clone();
     short.record = short.record.rows(0..20);
@@ -380,7 +419,9 @@ fn the_json_has_the_spec_fields_and_the_html_its_figures() {
     assert_eq!(json["locus"][0]["kind"], "balance");
     assert!(json["locus"][0]["bound_after"].as_f64().is_some());
     assert!(json["effects"][0]["params"]["k_P"].as_f64().is_some());
-    assert!(json["effects"][0]["fit"]["estimates"][0]["std_error"].as_f64().is_some());
+    assert!(json["effects"][0]["fit"]["estimates"][0]["std_error"]
+        .as_f64()
+        .is_some());
     assert_eq!(json["regime"][0]["range"].as_array().map(Vec::len), Some(2));
     let shares: f64 = (json["states"].as_array().unwrap().iter())
         .map(|s| s["share"].as_f64().unwrap())

@@ -14,7 +14,12 @@ use rand_chacha::ChaCha8Rng;
 /// if it keeps a cell or an input changes there (inputs are logged at every change). The
 /// clean values follow the rows kept. Deterministic for a `seed`; `scripts/split_thin.py`
 /// does the same on CSV files.
-pub(super) fn split_and_thin(full: &Simulated, experiments: usize, keep: f64, seed: u64) -> Vec<Simulated> {
+pub(super) fn split_and_thin(
+    full: &Simulated,
+    experiments: usize,
+    keep: f64,
+    seed: u64,
+) -> Vec<Simulated> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let record = &full.record;
     let rows = record.len();
@@ -28,8 +33,8 @@ pub(super) fn split_and_thin(full: &Simulated, experiments: usize, keep: f64, se
                 let drawn: Vec<Option<f64>> = (record.states.iter())
                     .map(|column| column[row].filter(|_| first || rng.gen::<f64>() < keep))
                     .collect();
-                let changed = !first
-                    && (record.inputs.iter()).any(|column| column[row] != column[row - 1]);
+                let changed =
+                    !first && (record.inputs.iter()).any(|column| column[row] != column[row - 1]);
                 if first || changed || drawn.iter().any(Option::is_some) {
                     kept.push(row);
                     for (column, cell) in cells.iter_mut().zip(drawn) {
@@ -71,7 +76,10 @@ fn splitting_and_thinning_keeps_starts_inputs_and_a_share_of_cells() {
     for set in &sets {
         let record = &set.record;
         assert!(record.uniform_step().is_none(), "irregular times");
-        assert!(record.states.iter().all(|c| c[0].is_some()), "first row whole");
+        assert!(
+            record.states.iter().all(|c| c[0].is_some()),
+            "first row whole"
+        );
         // The held inputs are the full record's at every kept time.
         for (row, &t) in record.times.iter().enumerate() {
             let original = t as usize;
@@ -94,7 +102,12 @@ fn check_thinned(model: &str, full: &Simulated, effects: &[&str], options: &Opti
 #[test]
 fn thinned_a_missing_hidden_lag_is_still_found_with_history() {
     let model = "models/diagnose/chemostat/nolag.gbm";
-    let report = check_thinned(model, &chemostat("truth.gbm"), &["enzyme_holdup"], &Options::default());
+    let report = check_thinned(
+        model,
+        &chemostat("truth.gbm"),
+        &["enzyme_holdup"],
+        &Options::default(),
+    );
     assert!((param(&report, "tau_E") / 20.0 - 1.0).abs() < 0.1);
     assert!(report.history_dependent, "{}", render::text(&report));
 }
@@ -102,14 +115,24 @@ fn thinned_a_missing_hidden_lag_is_still_found_with_history() {
 #[test]
 fn thinned_a_missing_factor_is_still_found() {
     let full = chemostat("truth_inhibition.gbm");
-    let report = check_thinned(CHEMOSTAT_MODEL, &full, &["product_inhibition"], &Options::default());
+    let report = check_thinned(
+        CHEMOSTAT_MODEL,
+        &full,
+        &["product_inhibition"],
+        &Options::default(),
+    );
     assert!((param(&report, "K_P") / 0.02 - 1.0).abs() < 0.2);
 }
 
 #[test]
 fn thinned_a_missing_balance_term_is_still_found() {
     let full = chemostat("truth_decay.gbm");
-    let report = check_thinned(CHEMOSTAT_MODEL, &full, &["product_decay"], &Options::default());
+    let report = check_thinned(
+        CHEMOSTAT_MODEL,
+        &full,
+        &["product_decay"],
+        &Options::default(),
+    );
     assert_eq!(tests::locus(&report), ("P", LocusKind::Balance));
 }
 
@@ -127,22 +150,41 @@ fn thinned_two_withheld_effects_are_still_credited_in_order() {
     let sets = thinned(&full);
     let report = run(CHEMOSTAT_MODEL, &sets, &Options::default());
     // The pair's gap within 1.5x of the truth's.
-    check_credited(&report, noise_gap(CHEMOSTAT_MODEL, &sets), &["product_decay", "product_inhibition"], 0.5);
+    check_credited(
+        &report,
+        noise_gap(CHEMOSTAT_MODEL, &sets),
+        &["product_decay", "product_inhibition"],
+        0.5,
+    );
+}
+
+/// The effects only: the locus search (most of the cost) is skipped, and says so.
+fn effects_only() -> Options {
+    Options {
+        locate: false,
+        ..Options::default()
+    }
 }
 
 #[test]
 fn thinned_the_burden_is_still_found() {
     let model = "models/diagnose/bioreactor/noburden.gbm";
     let full = bioreactor("models/bioreactor/truth.gbm");
-    let report = check_thinned(model, &full, &["burden"], &Options::default());
+    let report = check_thinned(model, &full, &["burden"], &effects_only());
     assert!((param(&report, "K_EB") / 0.5 - 1.0).abs() < 0.1);
+    assert!(report.locus.is_empty() && !report.memory.history_needed);
+    let text = render::text(&report);
+    assert!(
+        text.contains("not probed: the free corrections were not tried"),
+        "{text}"
+    );
 }
 
 #[test]
 fn thinned_cell_death_is_still_found() {
     let model = "models/diagnose/bioreactor/nodeath.gbm";
     let full = bioreactor("models/diagnose/bioreactor/truth_death.gbm");
-    let report = check_thinned(model, &full, &["death"], &Options::default());
+    let report = check_thinned(model, &full, &["death"], &effects_only());
     assert!((param(&report, "k_d") / 0.006 - 1.0).abs() < 0.2);
 }
 
@@ -157,12 +199,19 @@ fn thinned_the_slow_expression_lag_is_still_found_with_fitted_hidden_starts() {
     };
     let report = check_thinned(model, &expression(), &["expression_lag"], &options);
     assert!(report.memory.history_needed, "{}", render::text(&report));
-    assert!(report.locus[0].kind != LocusKind::Balance, "{:?}", report.locus);
+    assert!(
+        report.locus[0].kind != LocusKind::Balance,
+        "{:?}",
+        report.locus
+    );
     // The base model has no hidden state: the fitted starts are the effect's.
     let names: Vec<&str> = (report.effects[0].fit.estimates.iter())
         .map(|e| e.name.as_str())
         .collect();
-    assert!(names.contains(&"M@e2") && names.contains(&"E@e3"), "{names:?}");
+    assert!(
+        names.contains(&"M@e2") && names.contains(&"E@e3"),
+        "{names:?}"
+    );
 }
 
 /// A measured state with no cell at an experiment's first row and no declared initial value
@@ -188,10 +237,18 @@ fn an_unmeasured_start_without_declaration_is_fitted() {
     };
     let report = diagnose(&problem, &Options::default(), &|_| {}).unwrap();
     let start = &report.initial_states[0];
-    assert_eq!((start.state.as_str(), start.origin.as_str()), ("X", "fitted"));
+    assert_eq!(
+        (start.state.as_str(), start.origin.as_str()),
+        ("X", "fitted")
+    );
     assert!((start.value - 2.0).abs() < 1e-6, "{start:?}");
     assert!((report.fitted_params["k"] - 0.1).abs() < 1e-6);
-    let estimate = report.base_fit.estimates.iter().find(|e| e.name == "X@a").unwrap();
+    let estimate = report
+        .base_fit
+        .estimates
+        .iter()
+        .find(|e| e.name == "X@a")
+        .unwrap();
     assert!(estimate.identified, "{estimate:?}");
 }
 
@@ -223,7 +280,10 @@ fn held_out_experiments_are_scored_whole() {
     assert_eq!(report.split.scored[0].t_start, records[2].times[0]);
     assert_eq!(report.credited.as_deref(), Some("product_decay"));
     // Offline errors only where the previous row measured the same state.
-    assert!(report.states.iter().all(|s| s.offline.is_some_and(f64::is_finite)));
+    assert!(report
+        .states
+        .iter()
+        .all(|s| s.offline.is_some_and(f64::is_finite)));
 }
 
 #[test]
@@ -253,17 +313,27 @@ fn bad_options_and_data_are_refused_with_their_codes() {
     };
     let error = try_run(CHEMOSTAT_MODEL, &short, &tiny).unwrap_err();
     assert!(
-        matches!(error, DiagnoseError::TailTooSmall { train: 3, test: 0, .. }),
+        matches!(
+            error,
+            DiagnoseError::TailTooSmall {
+                train: 3,
+                test: 0,
+                ..
+            }
+        ),
         "{error}"
     );
     // A data set that measures a model output.
     let mut observed = sets.clone();
     let rows = observed[0].record.len();
-    observed[0].record.observables.push(crate::record::Observable {
-        output: 0,
-        name: "OD".into(),
-        cells: vec![Some(1.0); rows],
-    });
+    observed[0]
+        .record
+        .observables
+        .push(crate::record::Observable {
+            output: 0,
+            name: "OD".into(),
+            cells: vec![Some(1.0); rows],
+        });
     assert!(matches!(
         try_run(CHEMOSTAT_MODEL, &observed, &Options::default()),
         Err(DiagnoseError::MeasuredOutput { .. })

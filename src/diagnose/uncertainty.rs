@@ -15,8 +15,8 @@
 use super::fit::{slope, thetas, values, Objective, JACOBIAN_STEP};
 use super::report::{FitSummary, ParamEstimate};
 use crate::ir::Constraint;
-use crate::numeric::lm::{forward_differences, standard_errors};
 use crate::numeric::linalg::gauss_newton_system;
+use crate::numeric::lm::{forward_differences, standard_errors};
 use crate::numeric::symmetric_eigen;
 pub use crate::train::polish::IDENTIFIABILITY_LIMIT;
 
@@ -50,7 +50,11 @@ pub fn summarise(
     let estimates: Vec<ParamEstimate> = (0..x.len())
         .map(|i| {
             let std_error = errors[i] * slope(constraints[i], theta[i]).abs();
-            let std_error = if std_error.is_finite() { std_error } else { f64::INFINITY };
+            let std_error = if std_error.is_finite() {
+                std_error
+            } else {
+                f64::INFINITY
+            };
             let relative_error = std_error / x[i].abs().max(1e-300);
             ParamEstimate {
                 name: names[i].clone(),
@@ -107,7 +111,10 @@ pub fn free_direction(columns: &[Vec<f64>], names: &[String]) -> Vec<(String, f6
         return Vec::new();
     };
     let raw: Vec<f64> = (0..n).map(|i| vector[i] / scale[i]).collect();
-    let largest = raw.iter().copied().fold(0.0_f64, |m, v| if v.abs() > m.abs() { v } else { m });
+    let largest = raw
+        .iter()
+        .copied()
+        .fold(0.0_f64, |m, v| if v.abs() > m.abs() { v } else { m });
     if largest == 0.0 || !largest.is_finite() {
         return Vec::new();
     }
@@ -131,7 +138,10 @@ mod tests {
         let direction = free_direction(&columns, &names);
         assert_eq!(direction.len(), 2);
         assert!((direction[0].1.abs() - 1.0).abs() < 1e-6);
-        assert!((direction[0].1 + direction[1].1).abs() < 1e-6, "{direction:?}");
+        assert!(
+            (direction[0].1 + direction[1].1).abs() < 1e-6,
+            "{direction:?}"
+        );
     }
 
     #[test]

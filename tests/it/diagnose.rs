@@ -71,7 +71,16 @@ fn diagnose_reads_a_data_set_and_writes_its_reports() {
     let figures = dir.join("figures").display().to_string();
     let mut args = vec!["diagnose", MODEL];
     args.extend(files.iter().map(String::as_str));
-    args.extend(["--json", &json, "--html", &html, "--figures", &figures, "--restarts", "1"]);
+    args.extend([
+        "--json",
+        &json,
+        "--html",
+        &html,
+        "--figures",
+        &figures,
+        "--restarts",
+        "1",
+    ]);
     let out = gbc(&args);
     let stdout = text(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{}{stdout}", text(&out.stderr));
@@ -85,7 +94,11 @@ fn diagnose_reads_a_data_set_and_writes_its_reports() {
     let page = std::fs::read_to_string(&html).expect("html");
     assert!(page.contains("Experiment e3") && page.contains("S [mol/L]"));
     let count = std::fs::read_dir(&figures).expect("figures").count();
-    assert_eq!(count, 3 + 3 * 3, "gap, loci, selection; per experiment S, P, error");
+    assert_eq!(
+        count,
+        3 + 3 * 3,
+        "gap, loci, selection; per experiment S, P, error"
+    );
 }
 
 /// Runs `gbc diagnose` expecting exit code 1 with `code` and each of `phrases` on stderr.
@@ -95,7 +108,10 @@ fn refused(args: &[&str], code: &str, phrases: &[&str]) {
     assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
     assert!(stderr.contains(code), "{args:?}: {stderr}");
     for phrase in phrases {
-        assert!(stderr.contains(phrase), "{args:?} lacks `{phrase}`: {stderr}");
+        assert!(
+            stderr.contains(phrase),
+            "{args:?} lacks `{phrase}`: {stderr}"
+        );
     }
 }
 
@@ -108,14 +124,21 @@ fn bad_diagnose_input_is_a_coded_error_with_exit_one() {
     refused(
         &["diagnose", MODEL, e1, e2, e3, "--holdout", "0.3"],
         "gbm::E0805",
-        &["expected the name of an experiment (e1, e2, e3), found 0.3", "--val-fraction 0.3"],
+        &[
+            "expected the name of an experiment (e1, e2, e3), found 0.3",
+            "--val-fraction 0.3",
+        ],
     );
     refused(
         &["diagnose", MODEL, e1, "--val-fraction", "1.2"],
         "gbm::E0805",
         &["--val-fraction"],
     );
-    refused(&["diagnose", MODEL, e1, "--delay", "2"], "gbm::E0805", &["--span"]);
+    refused(
+        &["diagnose", MODEL, e1, "--delay", "2"],
+        "gbm::E0805",
+        &["--span"],
+    );
     // A held-out experiment too small: the message says what each part needs and got.
     let tiny = dir.join("tiny.csv");
     let rows: Vec<String> = std::fs::read_to_string(e3)
@@ -139,5 +162,9 @@ fn bad_diagnose_input_is_a_coded_error_with_exit_one() {
         "gbm::E0801",
         &["closures"],
     );
-    refused(&["diagnose", MODEL, e1, "--holdout", "e9"], "gbm::E04", &["e9"]);
+    refused(
+        &["diagnose", MODEL, e1, "--holdout", "e9"],
+        "gbm::E04",
+        &["e9"],
+    );
 }
