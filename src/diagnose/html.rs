@@ -427,28 +427,34 @@ fn bars(report: &Report) -> String {
 /// corrections.
 fn loci_chart(report: &Report) -> String {
     let mut rows = Vec::new();
-    for locus in report.locus.iter().take(8) {
+    for (rank, locus) in report.locus.iter().take(8).enumerate() {
         let kind = match locus.kind {
             LocusKind::Balance => "balance",
             LocusKind::Group => "group",
             _ => "let",
         };
-        let tied = if locus.tied {
-            ", tied with the best"
+        // The note goes on the correction that gives the locus its bound.
+        let note = match (rank, locus.tied) {
+            (0, _) => "first",
+            (_, true) => "tied with the first",
+            _ => "",
+        };
+        let (present_note, history_note) = if locus.bound_history < locus.bound_present {
+            ("", note)
         } else {
-            ""
+            (note, "")
         };
         rows.push((
             format!("{} ({kind}), present", locus.name),
             locus.bound_present,
             "#e59866",
-            tied.trim_start_matches(", ").to_string(),
+            present_note.to_string(),
         ));
         rows.push((
             format!("{} ({kind}), history", locus.name),
             locus.bound_history,
             "#7d3c98",
-            String::new(),
+            history_note.to_string(),
         ));
     }
     rows.push((

@@ -194,7 +194,7 @@ fn loci(out: &mut String, report: &Report) {
     }
     let _ = writeln!(
         out,
-        "   free correction at each rate, group and balance (held-out gap it leaves):"
+        "   free correction at each rate, group and balance (held-out gap it leaves; time of its fits):"
     );
     for locus in report.locus.iter().take(8) {
         let kind = match locus.kind {
@@ -211,12 +211,13 @@ fn loci(out: &mut String, report: &Report) {
         };
         let _ = writeln!(
             out,
-            "     {:<16} {:<8} {:>10}  (present only {}, with history {}){tied}",
+            "     {:<16} {:<8} {:>10}  (present only {}, with history {}; {:.1} s){tied}",
             locus.name,
             kind,
             num(locus.bound_after),
             num(locus.bound_present),
-            num(locus.bound_history)
+            num(locus.bound_history),
+            locus.seconds
         );
     }
     let tied: Vec<&str> = (report.locus.iter())
