@@ -152,7 +152,7 @@ impl Frame {
                 })
         };
         let mut x = range(&mut xs.iter().copied());
-        if !(x.1 > x.0) {
+        if x.1.is_nan() || x.0.is_nan() || x.1 <= x.0 {
             x = (x.0.min(0.0), x.0.max(0.0) + 1.0);
         }
         let mut y = range(ys);

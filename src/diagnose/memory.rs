@@ -66,7 +66,7 @@ impl FilterBank {
 /// `exp(-a)` and the ramp weight `(1 - e^-a) - (1 - e^-a - a e^-a) / a` of a step of `a`
 /// time constants (the exact response to a signal linear over the step).
 fn weights(a: f64) -> (f64, f64) {
-    if !(a > 0.0) {
+    if a.is_nan() || a <= 0.0 {
         return (1.0, 0.0);
     }
     let decay = (-a).exp();
@@ -165,7 +165,7 @@ pub fn correlation_time(samples: &[(f64, f64)]) -> Option<(f64, f64)> {
     let mean = grid.iter().sum::<f64>() / grid.len() as f64;
     let centred: Vec<f64> = grid.iter().map(|v| v - mean).collect();
     let variance = centred.iter().map(|v| v * v).sum::<f64>();
-    if !(variance > 0.0) {
+    if variance.is_nan() || variance <= 0.0 {
         return None;
     }
     let mut previous = 1.0;

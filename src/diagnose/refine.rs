@@ -79,8 +79,8 @@ pub fn refine(
         out.iter().all(|r| r.is_finite()).then_some(out)
     };
     let mut start = solution.theta.clone();
-    start.extend(std::iter::repeat(1.0).take(slots));
-    start.extend(std::iter::repeat(0.0).take(slots * directions));
+    start.extend(std::iter::repeat_n(1.0, slots));
+    start.extend(std::iter::repeat_n(0.0, slots * directions));
     let (x, cost) = polish(&residuals, start.clone());
     let before = residuals(&start).map_or(f64::INFINITY, |r| dot(&r, &r));
     if cost < before {

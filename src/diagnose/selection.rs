@@ -83,7 +83,8 @@ pub fn select(
         .collect();
     selection.stop = "every effect is credited".into();
     while credited.len() < ranking.scores.len() {
-        if !(current.gap > SIGNIFICANCE * levels.noise_floor) {
+        let significant = current.gap > SIGNIFICANCE * levels.noise_floor;
+        if !significant {
             selection.stop = format!(
                 "the gap left ({}) is within {SIGNIFICANCE}x the noise floor ({})",
                 num(current.gap),
@@ -179,13 +180,17 @@ fn judge(
     let spread = pair.spread[0].max(pair.spread[1]);
     let excess = before.gap - levels.noise_floor;
     let removed = before.gap - after.gap;
-    let reason = if !(before.gap > SIGNIFICANCE * levels.noise_floor) {
+    // Each test is false for a NaN, which is then refused.
+    let significant = before.gap > SIGNIFICANCE * levels.noise_floor;
+    let removes_enough = removed >= CREDIT * excess;
+    let bic_falls = after.summary.bic < before.summary.bic;
+    let reason = if !significant {
         format!(
             "the gap before it ({}) is within {SIGNIFICANCE}x the noise floor ({})",
             num(before.gap),
             num(levels.noise_floor)
         )
-    } else if !(removed >= CREDIT * excess) {
+    } else if !removes_enough {
         format!(
             "it removes {} of the gap above the noise floor, less than {}",
             percent(removed / excess),
@@ -203,7 +208,7 @@ fn judge(
             "the held-out data cannot tell it from {}",
             others_tied.join(", ")
         )
-    } else if !(after.summary.bic < before.summary.bic) {
+    } else if !bic_falls {
         format!(
             "BIC does not fall ({} to {})",
             num(before.summary.bic),
