@@ -1,10 +1,12 @@
-//! `gbc diagnose SIM.gbm REAL.csv [--test TEST.csv]`: where a mechanistic model misses
-//! the data, which of its candidate effects causes it, and how far it shrinks (spec
-//! section 5; method in `docs/diagnose.md`). Text on stdout, optionally `--json` and
-//! `--html` reports.
+//! `gbc diagnose MODEL DATA... [--val FILE...] [--holdout NAME...] [--val-fraction SHARE]`:
+//! where a mechanistic model misses a data set of experiments, which of its candidate
+//! effects cause it, and how far it shrinks (spec section 5; method in `docs/diagnose.md`).
+//! Data are read as `gbc train` reads them (records spec). Text on stdout, optionally
+//! `--json` and `--html` reports and `--figures` SVG files.
 
+use super::data::{hold_out, load_records, ColumnArgs};
 use super::{CommandError, CommandResult};
-use crate::diagnose::{self, Options, Problem, Progress};
+use crate::diagnose::{self, DiagnoseError, Options, Problem, Progress};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -15,90 +17,172 @@ use std::sync::Mutex;
 pub struct DiagnoseArgs {
     /// The mechanistic model (no closures); its `effect`s are the candidates.
     pub model: PathBuf,
-    /// The measured record: `t`, the model's inputs and measured states.
-    pub data: PathBuf,
-    /// A separate held-out record (otherwise the last part of DATA is held out).
-    #[arg(long, value_name = "TEST.csv")]
-    pub test: Option<PathBuf>,
-    /// Fraction of DATA held out when there is no --test.
-    #[arg(long, default_value_t = 0.3)]
-    pub holdout: f64,
+    /// The data set: one or more CSV files, each an experiment (or several, with an
+    /// `experiment` column); `t`, the inputs and the measured states, cells may be empty.
+    #[arg(required = true, num_args = 1..)]
+    pub data: Vec<PathBuf>,
+    /// Files of whole experiments that are only scored (repeatable).
+    #[arg(long, value_name = "FILE", num_args = 1.., alias = "test")]
+    pub val: Vec<PathBuf>,
+    /// Experiments of the data set that are only scored (repeatable).
+    #[arg(long, value_name = "NAME", num_args = 1..)]
+    pub holdout: Vec<String>,
+    /// Score the last share of each experiment's measured rows (the free run still starts
+    /// at the experiment's first row). Default: 0.3 when no experiment is held out.
+    #[arg(long, value_name = "SHARE")]
+    pub val_fraction: Option<f64>,
+    /// Fit the initial values of the hidden states in every training experiment (else they
+    /// start from their declared values): for experiments that do not start where the
+    /// model's declarations say, e.g. records cut from one long run.
+    #[arg(long)]
+    pub fit_initial: bool,
+    /// How data columns are named.
+    #[command(flatten)]
+    pub columns: ColumnArgs,
     /// Seed of the random restarts (results are deterministic for a given seed).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Random restarts of each param fit, besides the declared or warm start.
-    #[arg(long, default_value_t = 2)]
+    /// Most random restarts of each fit besides the declared or warm start; a fit stops
+    /// earlier once two starts agree.
+    #[arg(long, default_value_t = 4)]
     pub restarts: usize,
-    /// Delay of the history embedding of the corrections (model time units); by default
-    /// 2 and 12 sampling steps are both tried.
-    #[arg(long)]
-    pub delay: Option<f64>,
-    /// Lags of the history embedding, the present included.
-    #[arg(long, default_value_t = 6)]
+    /// The longest time constant of the history features of the free corrections (model
+    /// time units); by default chosen from the residuals of the fitted model.
+    #[arg(long, value_name = "T")]
+    pub span: Option<f64>,
+    /// Time constants of the history features, from the sampling step to the span.
+    #[arg(long, default_value_t = 5)]
     pub dim: usize,
+    /// Replaced by --span (the history is no longer a delay embedding).
+    #[arg(long, hide = true)]
+    pub delay: Option<f64>,
+    /// Skip the locus search (the free corrections at every let, group and balance, most
+    /// of the cost): rank and select the effects only.
+    #[arg(long)]
+    pub skip_loci: bool,
+    /// Worker threads for the fits (default: every core).
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<usize>,
     /// Write the report as JSON (spec section 5 schema) to this file.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Write an HTML report with plots to this file.
+    /// Write an HTML report with figures to this file.
     #[arg(long, value_name = "FILE")]
     pub html: Option<PathBuf>,
+    /// Write the report's figures as SVG files into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub figures: Option<PathBuf>,
 }
 
 /// Runs the diagnosis and prints (and writes) its report.
 pub fn run(args: &DiagnoseArgs) -> CommandResult {
-    let mut inputs = vec![args.model.as_path(), args.data.as_path()];
-    inputs.extend(args.test.as_deref());
+    let mut inputs = vec![args.model.as_path()];
+    inputs.extend(args.data.iter().map(PathBuf::as_path));
+    inputs.extend(args.val.iter().map(PathBuf::as_path));
     for output in [&args.json, &args.html].into_iter().flatten() {
         crate::io::ensure_not_input(output, &inputs).map_err(CommandError::user)?;
+    }
+    let bad = |option: &str, expected: String, found: String, help: &str| {
+        CommandError::user(DiagnoseError::BadOption {
+            option: option.into(),
+            expected,
+            found,
+            help: help.into(),
+        })
+    };
+    if let Some(delay) = args.delay {
+        return Err(bad(
+            "--delay",
+            "--span T, the longest time constant of the history".into(),
+            delay.to_string(),
+            "the history of the free corrections is a fading memory now: --span sets its \
+             longest time constant and --dim how many it has",
+        ));
+    }
+    if args.jobs == Some(0) {
+        return Err(bad(
+            "--jobs",
+            "at least 1 thread".into(),
+            "0".into(),
+            "--jobs 2 runs two fits at a time",
+        ));
     }
     let name = args.model.display().to_string();
     let source = crate::driver::read_source(&args.model).map_err(|r| vec![r])?;
     let compiled = crate::driver::compile(&name, &source, &[])?;
     let model = &compiled.model;
-    let columns: Vec<&str> = (model.inputs.iter().map(|i| i.name.as_str()))
-        .chain(model.states.iter().map(|s| s.name.as_str()))
-        .collect();
-    let minimum = crate::data::MinRows::new(
-        2 * diagnose::MIN_ROWS,
-        "the diagnosis fits on one part and scores on another",
-    );
-    let train = crate::data::read(&args.data, &columns, minimum).map_err(CommandError::user)?;
-    let test = match &args.test {
-        Some(path) => Some(
-            crate::data::read(path, &columns, diagnose::MIN_ROWS).map_err(CommandError::user)?,
-        ),
-        None => None,
-    };
+    let records = load_records(model, &args.data, &args.columns)?;
+    check_holdout_names(&records, &args.holdout)?;
+    let (train, mut held) = hold_out(records, &args.holdout)?;
+    held.extend(load_records(model, &args.val, &args.columns)?);
     let problem = Problem {
         name: &name,
         source: &source,
         checked: &compiled.checked,
         model,
-        train: &train,
-        test: test.as_ref(),
+        records: &train,
+        held_out: &held,
     };
     let options = Options {
-        holdout: args.holdout,
+        val_fraction: args.val_fraction,
         restarts: args.restarts,
         seed: args.seed,
-        delay: args.delay,
+        span: args.span,
         dim: args.dim,
+        fit_initial: args.fit_initial,
+        locate: !args.skip_loci,
         ..Options::default()
     };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.jobs.unwrap_or(0))
+        .build()
+        .map_err(|e| CommandError::Internal(format!("cannot start worker threads: {e}")))?;
     let bar = ProgressReporter::new();
-    let outcome = diagnose::diagnose(&problem, &options, &|event| bar.update(event));
+    let outcome =
+        pool.install(|| diagnose::diagnose(&problem, &options, &|event| bar.update(event)));
     bar.finish();
     let report = outcome.map_err(CommandError::user)?;
     print!("{}", diagnose::render::text(&report));
+    write_outputs(args, &report)
+}
+
+/// `--holdout 0.3` (the old spelling of a tail split) names no experiment: a clear error
+/// that points to `--val-fraction`.
+fn check_holdout_names(records: &[crate::record::Record], holdout: &[String]) -> CommandResult {
+    for name in holdout {
+        let known = records.iter().any(|r| &r.name == name);
+        if !known && name.trim().parse::<f64>().is_ok() {
+            let names: Vec<&str> = records.iter().map(|r| r.name.as_str()).collect();
+            return Err(CommandError::user(DiagnoseError::BadOption {
+                option: "--holdout".into(),
+                expected: format!("the name of an experiment ({})", names.join(", ")),
+                found: name.clone(),
+                help: format!(
+                    "--holdout names experiments to hold out; to score the last share of each \
+                     experiment use --val-fraction {name}"
+                ),
+            }));
+        }
+    }
+    Ok(())
+}
+
+fn write_outputs(args: &DiagnoseArgs, report: &diagnose::Report) -> CommandResult {
     if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(&report)
+        let json = serde_json::to_string_pretty(report)
             .map_err(|e| CommandError::Internal(e.to_string()))?;
         crate::io::write_atomic(path, format!("{json}\n").as_bytes())
             .map_err(CommandError::user)?;
     }
     if let Some(path) = &args.html {
-        crate::io::write_atomic(path, diagnose::html::page(&report).as_bytes())
+        crate::io::write_atomic(path, diagnose::html::page(report).as_bytes())
             .map_err(CommandError::user)?;
+    }
+    if let Some(directory) = &args.figures {
+        for (file, svg) in diagnose::html::figures(report) {
+            crate::io::write_atomic(&directory.join(file), svg.as_bytes())
+                .map_err(CommandError::user)?;
+        }
     }
     Ok(())
 }
@@ -130,16 +214,17 @@ impl ProgressReporter {
                     bar.finish_and_clear();
                 }
                 let bar = ProgressBar::new(total as u64);
-                if let Ok(style) =
-                    ProgressStyle::with_template("{msg:>20} [{bar:30}] {pos}/{len} {elapsed}")
-                {
+                if let Ok(style) = ProgressStyle::with_template(
+                    "{prefix:>20} [{bar:30}] {pos}/{len} {elapsed} {msg}",
+                ) {
                     bar.set_style(style.progress_chars("=> "));
                 }
-                bar.set_message(name);
+                bar.set_prefix(name);
                 *slot = Some(bar);
             }
-            Progress::Item => {
+            Progress::Done { item, seconds } => {
                 if let Some(bar) = slot.as_ref() {
+                    bar.set_message(format!("{item} done in {seconds:.1} s"));
                     bar.inc(1);
                 }
             }

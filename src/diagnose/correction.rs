@@ -1,33 +1,34 @@
-//! A free correction at one locus: fitted by one-step regression along the training rows,
-//! refined on the training free run, and scored by a held-out free run with the correction
-//! in the loop.
+//! A free correction at one locus (one let, a group of lets, or a balance): fitted by
+//! one-step regression along the training rows of every experiment, then refined on the
+//! training free runs ([`super::refine`]) and scored by held-out free runs with the
+//! correction in the loop.
 //!
-//! Along the training rows the model is stepped from each row's measured data (hidden
-//! states carried along, as in the offline error), once as it is and once with the
-//! correction slot at a small `delta`: the sensitivity `s_ik = d x_k(i+1) / d c` and the
-//! residual `r_ik = data_k(i+1) - x_k(i+1)` make the problem linear,
-//! `min_w sum_ik ((r_ik - s_ik w . phi_i) / std_k)^2 + ridge |w|^2`, solved through the
-//! normal equations with the ridge chosen by cross-validation over contiguous blocks.
-//! [`refine`] then fits the model's params and a gain on the correction to the training
-//! free run (Levenberg–Marquardt), since small one-step errors add up in a free run and
-//! params fitted without the correction compensate for what it now explains. The
-//! correction is held constant over each sampling interval, in fitting and in runs.
+//! Along the training rows the model is stepped from each row's measured cells (states not
+//! measured there, and hidden ones, carried along as in the offline error), once as it is
+//! and once with each correction slot `j` at a small `delta_j`: the sensitivity
+//! `s_ijk = d x_k(i+1) / d c_j` and the residual `r_ik = data_k(i+1) - x_k(i+1)` (only where
+//! state `k` is measured at rows `i` and `i + 1`) make the problem linear,
+//! `min_w sum_ik ((r_ik - sum_j s_ijk w_j . phi_ij) / std_k)^2 + ridge |w|^2`, solved through
+//! the normal equations with the ridge chosen by cross-validation over contiguous blocks of
+//! rows. A group's corrections (one per let) are fitted jointly this way. Corrections are
+//! held constant over each interval between rows, in fitting and in runs.
 
 use super::features::FeatureMap;
-use super::fit::{from_theta, to_theta};
-use super::record::{Normalisation, Record};
-use super::simulate::{Run, Simulator};
+use super::memory::FilterBank;
+use super::simulate::{inputs_at, Simulator};
+use super::split::Split;
 use crate::eval::Program;
 use crate::ir::Constraint;
 use crate::numeric::{dot, root_mean_square, NormalEquations};
+use crate::record::{Normalisation, Record};
 use crate::sim::IntegrationError;
 
-/// Ridge strengths tried (relative to the mean diagonal of the correction's block).
+/// Ridge strengths tried (relative to the mean diagonal of the normal equations).
 const RIDGES: [f64; 5] = [1e-9, 1e-7, 1e-5, 1e-3, 1e-1];
 /// Cross-validation folds.
 const FOLDS: usize = 4;
 
-/// How the corrected quantity's value is read at a state.
+/// How a corrected quantity's value is read at a state.
 #[derive(Debug, Clone)]
 pub enum LocusValue {
     /// A let: its (uncorrected) expression.
@@ -36,127 +37,219 @@ pub enum LocusValue {
     State(usize),
 }
 
-/// A model with a correction slot at one locus.
+/// A model with correction slots at one locus (one per corrected let, or one for a
+/// balance).
 #[derive(Debug, Clone)]
 pub struct Corrected {
     /// The compiled model.
     pub simulator: Simulator,
-    /// The corrected quantity.
-    pub locus: LocusValue,
+    /// The corrected quantities, one per slot.
+    pub loci: Vec<LocusValue>,
     /// Whether the locus is a balance (its correction is a rate of its state).
     pub balance: bool,
-    /// The params' constraints.
+    /// The constraints of the params, then of the fitted starts (free).
     pub constraints: Vec<Constraint>,
 }
 
 impl Corrected {
-    fn locus_value(&mut self, record: &Record, row: usize, state: &[f64]) -> f64 {
-        match &self.locus {
-            LocusValue::Let(program) => self.simulator.evaluate(program, record, row, state),
-            LocusValue::State(k) => state[*k],
-        }
+    /// The corrected quantities at `state` with the inputs of `row`.
+    pub fn locus_values(&mut self, record: &Record, row: usize, state: &[f64]) -> Vec<f64> {
+        let Corrected {
+            simulator, loci, ..
+        } = self;
+        (loci.iter())
+            .map(|locus| match locus {
+                LocusValue::Let(program) => simulator.evaluate(program, record, row, state),
+                LocusValue::State(k) => state[*k],
+            })
+            .collect()
     }
 }
 
-/// What the one-step pass along the training rows found, per row.
+/// What the one-step pass found along one experiment's training rows, per step `i -> i+1`.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Pass {
-    /// Rows stepped (0..rows).
-    pub rows: usize,
-    /// Present variables per row: inputs, measured (data), hidden (carried).
+pub struct RecordPass {
+    /// Index of the record in the split.
+    pub record: usize,
+    /// Present variables per row: inputs, measured (cells, else carried), hidden (carried).
     pub present: Vec<Vec<f64>>,
-    /// The corrected quantity per row.
-    pub locus: Vec<f64>,
-    /// Sensitivities `s_ik` per row (measured states).
-    pub sensitivity: Vec<Vec<f64>>,
-    /// Residuals `r_ik` per row (measured states).
-    pub residual: Vec<Vec<f64>>,
+    /// The corrected quantities per row, one per slot.
+    pub locus: Vec<Vec<f64>>,
+    /// Filtered signals per row (inputs, measured states, then one per slot, at each time
+    /// constant), empty without history.
+    pub filtered: Vec<Vec<f64>>,
+    /// Sensitivities `s_ijk` per row, per slot, per measured state.
+    pub sensitivity: Vec<Vec<Vec<f64>>>,
+    /// Residuals `r_ik` per row (only where the state is measured at both ends).
+    pub residual: Vec<Vec<Option<f64>>>,
 }
 
-/// Steps the model (params as set) from every training row with the correction at 0 and
-/// at `delta`.
+impl RecordPass {
+    /// Steps in the pass.
+    pub fn rows(&self) -> usize {
+        self.present.len()
+    }
+
+    /// The filtered signals slot `slot` sees at `row`: the embedded ones and its own
+    /// quantity, at each time constant.
+    pub fn filtered_for(&self, row: usize, slot: usize, embedded: usize) -> Vec<f64> {
+        filtered_for(&self.filtered[row], slot, embedded, self.locus[row].len())
+    }
+}
+
+/// From a bank's values over `[embedded..., slot quantities...]` per time constant, the
+/// values slot `slot` sees: the embedded signals and its own quantity.
+pub fn filtered_for(values: &[f64], slot: usize, embedded: usize, slots: usize) -> Vec<f64> {
+    let per = embedded + slots;
+    if per == 0 {
+        return Vec::new();
+    }
+    (values.chunks(per))
+        .flat_map(|chunk| chunk[..embedded].iter().chain([&chunk[embedded + slot]]))
+        .copied()
+        .collect()
+}
+
+/// The one-step pass over every training experiment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pass {
+    /// One per training record.
+    pub records: Vec<RecordPass>,
+}
+
+impl Pass {
+    /// Steps in all.
+    pub fn rows(&self) -> usize {
+        self.records.iter().map(RecordPass::rows).sum()
+    }
+}
+
+/// Steps the model (params as in `x`: params, then fitted starts) from every training row
+/// with each correction at 0 and at a probe; filters the signals at `taus` (none: no
+/// history).
 pub fn one_step_pass(
     corrected: &mut Corrected,
-    record: &Record,
-    end: usize,
+    split: &Split,
+    x: &[f64],
+    taus: &[f64],
 ) -> Result<Pass, IntegrationError> {
+    corrected.simulator.set_params(x);
+    let fitted = &x[corrected.simulator.params().min(x.len())..];
+    let mut records = Vec::new();
+    for (index, record, rows) in split.training() {
+        let overrides = split.overrides(index, fitted, corrected.simulator.hidden_count());
+        records.push(record_pass(
+            corrected,
+            (index, record, rows.end),
+            &overrides,
+            taus,
+        )?);
+    }
+    Ok(Pass { records })
+}
+
+fn record_pass(
+    corrected: &mut Corrected,
+    (index, record, end): (usize, &Record, usize),
+    overrides: &[Option<f64>],
+    taus: &[f64],
+) -> Result<RecordPass, IntegrationError> {
     let measured = record.states.len();
-    corrected.simulator.set_correction(0.0);
-    let (starts, predictions) = corrected.simulator.one_step(record, end)?;
+    let slots = corrected.loci.len();
+    corrected.simulator.clear_corrections();
+    let (starts, predictions) = corrected.simulator.one_step(record, overrides, end)?;
     let rows = starts.rows();
-    let mut pass = Pass {
-        rows,
+    let mut pass = RecordPass {
+        record: index,
         present: Vec::with_capacity(rows),
         locus: Vec::with_capacity(rows),
-        sensitivity: Vec::new(),
+        filtered: Vec::new(),
+        sensitivity: Vec::with_capacity(rows),
         residual: Vec::with_capacity(rows),
     };
     for row in 0..rows {
         let state = starts.row(row);
-        pass.present
-            .push(record.inputs_at(row).chain(state.iter().copied()).collect());
-        pass.locus.push(corrected.locus_value(record, row, state));
+        pass.present.push(
+            inputs_at(record, row)
+                .chain(state.iter().copied())
+                .collect(),
+        );
+        pass.locus.push(corrected.locus_values(record, row, state));
         let predicted = predictions.row(row);
         pass.residual.push(
             (0..measured)
-                .map(|k| record.states[k][row + 1] - predicted[k])
+                .map(
+                    |k| match (record.states[k][row], record.states[k][row + 1]) {
+                        (Some(_), Some(next)) => Some(next - predicted[k]),
+                        _ => None,
+                    },
+                )
                 .collect(),
         );
     }
-    let delta = delta(corrected, &pass, record);
-    corrected.simulator.set_correction(delta);
-    pass.sensitivity = sensitivities(
-        &mut corrected.simulator,
-        record,
-        (&starts, &predictions),
-        delta,
-    )?;
-    corrected.simulator.set_correction(0.0);
+    if !taus.is_empty() && rows > 0 {
+        pass.filtered = filter_along(&pass, record, measured, taus);
+    }
+    let deltas: Vec<f64> = (0..slots)
+        .map(|slot| probe(corrected.balance, &pass, slot, record))
+        .collect();
+    let mut sensitivity = vec![vec![vec![0.0; measured]; slots]; rows];
+    for (slot, &delta) in deltas.iter().enumerate() {
+        let mut values = vec![0.0; slots];
+        values[slot] = delta;
+        corrected.simulator.set_corrections(&values);
+        for (row, per_row) in sensitivity.iter_mut().enumerate() {
+            let mut state = starts.row(row).to_vec();
+            corrected.simulator.step(record, row, &mut state)?;
+            let base = predictions.row(row);
+            per_row[slot] = (0..measured)
+                .map(|k| (state[k] - base[k]) / delta)
+                .collect();
+        }
+    }
+    corrected.simulator.clear_corrections();
+    pass.sensitivity = sensitivity;
     Ok(pass)
 }
 
-/// Per row, `(step from the row's start - base prediction) / size` for each measured state.
-fn sensitivities(
-    simulator: &mut Simulator,
+/// The filtered signals at each row of a pass: inputs held, measured states and corrected
+/// quantities linear between rows (their pass values).
+fn filter_along(
+    pass: &RecordPass,
     record: &Record,
-    (starts, predictions): (&Run, &Run),
-    size: f64,
-) -> Result<Vec<Vec<f64>>, IntegrationError> {
-    let measured = record.states.len();
-    (0..starts.rows())
-        .map(|row| {
-            let mut state = starts.row(row).to_vec();
-            simulator.step(record, row, &mut state)?;
-            let base = predictions.row(row);
-            Ok((0..measured).map(|k| (state[k] - base[k]) / size).collect())
-        })
-        .collect()
-}
-
-/// The constrained params of transformed values.
-pub fn params_of(constraints: &[Constraint], theta: &[f64]) -> Vec<f64> {
-    constraints
-        .iter()
-        .zip(theta)
-        .map(|(c, &t)| from_theta(*c, t))
-        .collect()
-}
-
-/// The transformed values of constrained params.
-pub fn theta_of(constraints: &[Constraint], params: &[f64]) -> Vec<f64> {
-    constraints
-        .iter()
-        .zip(params)
-        .map(|(c, &p)| to_theta(*c, p))
-        .collect()
+    measured: usize,
+    taus: &[f64],
+) -> Vec<Vec<f64>> {
+    let inputs = record.inputs.len();
+    let signal = |row: usize| -> Vec<f64> {
+        let present = &pass.present[row];
+        let mut values = present[..inputs + measured].to_vec();
+        values.extend_from_slice(&pass.locus[row]);
+        values
+    };
+    let mut bank = FilterBank::start(taus, &signal(0));
+    let mut filtered = vec![bank.values().to_vec()];
+    for row in 1..pass.rows() {
+        let from = signal(row - 1);
+        let mut to = signal(row);
+        to[..inputs].copy_from_slice(&from[..inputs]);
+        bank.advance(&from, &to, record.times[row] - record.times[row - 1]);
+        filtered.push(bank.values().to_vec());
+    }
+    filtered
 }
 
 /// A probe size well inside the linear range: 1e-4 of the quantity's typical size (for a
-/// balance, of its state per sampling step).
-fn delta(corrected: &Corrected, pass: &Pass, record: &Record) -> f64 {
-    let typical = root_mean_square(&pass.locus);
-    let size = if corrected.balance {
-        typical / record.step
+/// balance, of its state per median step).
+fn probe(balance: bool, pass: &RecordPass, slot: usize, record: &Record) -> f64 {
+    let values: Vec<f64> = pass.locus.iter().map(|l| l[slot]).collect();
+    let typical = root_mean_square(&values);
+    let size = if balance {
+        let steps: Vec<f64> = record.times.windows(2).map(|w| w[1] - w[0]).collect();
+        typical
+            / crate::numeric::median(&steps)
+                .unwrap_or(1.0)
+                .max(f64::MIN_POSITIVE)
     } else {
         typical
     };
@@ -167,45 +260,22 @@ fn delta(corrected: &Corrected, pass: &Pass, record: &Record) -> f64 {
     }
 }
 
-/// The embedded variables (inputs, then measured states) at each lag `1..dim` before `row`,
-/// lag-major, from the record's inputs and the measured `history` (rows before the start
-/// repeat row 0).
-fn lagged(
-    map: &FeatureMap,
-    record: &Record,
-    history: &dyn Fn(usize, usize) -> f64,
-    row: usize,
-    out: &mut Vec<f64>,
-) {
-    out.clear();
-    let Some(lags) = map.lags else { return };
-    for lag in 1..lags.dim {
-        let at = row.saturating_sub(lag * lags.delay);
-        out.extend(record.inputs_at(at));
-        out.extend((0..record.states.len()).map(|k| history(at, k)));
-    }
-}
-
-/// A fitted correction: weights and the params it goes with.
+/// A fitted correction: weights (one block per slot) and the params (and fitted starts) it
+/// goes with, transformed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Solution {
-    /// Weights of the features.
+    /// Weights of the features, slot-major.
     pub weights: Vec<f64>,
-    /// Params (transformed).
+    /// Params then fitted starts (transformed).
     pub theta: Vec<f64>,
 }
 
 /// Fits the weights of a correction with features `map` to the pass (params `theta`, as
 /// the pass ran); `None` if the normal equations are singular at every ridge.
-pub fn fit(
-    pass: &Pass,
-    map: &FeatureMap,
-    record: &Record,
-    norm: &Normalisation,
-    theta: &[f64],
-) -> Option<Solution> {
-    let n = map.width();
-    let folds = normal_equations(pass, map, record, norm);
+pub fn fit(pass: &Pass, map: &FeatureMap, norm: &Normalisation, theta: &[f64]) -> Option<Solution> {
+    let slots = pass.records.first()?.locus.first().map_or(1, Vec::len);
+    let n = map.width() * slots;
+    let folds = normal_equations(pass, map, norm, slots);
     let ridge = choose_ridge(&folds, n)?;
     let mut all = NormalEquations::new(n);
     folds.iter().for_each(|f| all.merge(&f.0));
@@ -215,29 +285,83 @@ pub fn fit(
     })
 }
 
+/// The features of every slot at one row of a pass, slot-major.
+pub fn row_features(pass: &RecordPass, map: &FeatureMap, row: usize) -> Vec<Vec<f64>> {
+    let slots = pass.locus[row].len();
+    (0..slots)
+        .map(|slot| {
+            let filtered = if map.taus.is_some() {
+                pass.filtered_for(row, slot, map.embedded)
+            } else {
+                Vec::new()
+            };
+            let mut phi = Vec::new();
+            map.features(
+                &pass.present[row],
+                pass.locus[row][slot],
+                &filtered,
+                &mut phi,
+            );
+            phi
+        })
+        .collect()
+}
+
 /// The normal equations, one set per fold, with each fold's constant `sum r^2 / std^2`.
 fn normal_equations(
     pass: &Pass,
     map: &FeatureMap,
-    record: &Record,
     norm: &Normalisation,
+    slots: usize,
 ) -> Vec<(NormalEquations, f64)> {
-    let n = map.width();
+    let width = map.width();
+    let n = width * slots;
     let mut folds: Vec<(NormalEquations, f64)> =
         (0..FOLDS).map(|_| (NormalEquations::new(n), 0.0)).collect();
-    let (mut phi, mut lag) = (Vec::new(), Vec::new());
-    let data = |row: usize, k: usize| record.states[k][row];
-    let weights: Vec<f64> = norm.std.iter().map(|s| 1.0 / (s * s)).collect();
-    for row in 0..pass.rows {
-        lagged(map, record, &data, row, &mut lag);
-        map.features(&pass.present[row], pass.locus[row], &lag, &mut phi);
-        let (s, r) = (&pass.sensitivity[row], &pass.residual[row]);
-        let (normal, constant) = &mut folds[row * FOLDS / pass.rows.max(1)];
-        let weight: f64 = (0..s.len()).map(|k| s[k] * s[k] * weights[k]).sum();
-        let target: f64 = (0..s.len()).map(|k| s[k] * r[k] * weights[k]).sum();
-        *constant += (0..r.len()).map(|k| r[k] * r[k] * weights[k]).sum::<f64>();
-        if weight > 0.0 && weight.is_finite() {
-            normal.add(&phi, target / weight, weight);
+    let weights: Vec<f64> = norm.state_std.iter().map(|s| 1.0 / (s * s)).collect();
+    let total = pass.rows().max(1);
+    let mut position = 0;
+    let mut stacked = vec![0.0; n];
+    for record in &pass.records {
+        for row in 0..record.rows() {
+            let (normal, constant) = &mut folds[position * FOLDS / total];
+            position += 1;
+            let r = &record.residual[row];
+            if r.iter().all(Option::is_none) {
+                continue;
+            }
+            let phi = row_features(record, map, row);
+            let s = &record.sensitivity[row];
+            *constant += (0..r.len())
+                .filter_map(|k| r[k].map(|v| v * v * weights[k]))
+                .sum::<f64>();
+            if slots == 1 {
+                let weight: f64 = (0..r.len())
+                    .filter(|&k| r[k].is_some())
+                    .map(|k| s[0][k] * s[0][k] * weights[k])
+                    .sum();
+                let target: f64 = (0..r.len())
+                    .filter_map(|k| r[k].map(|v| s[0][k] * v * weights[k]))
+                    .sum();
+                if weight > 0.0 && weight.is_finite() {
+                    normal.add(&phi[0], target / weight, weight);
+                }
+                continue;
+            }
+            for (k, residual) in r.iter().enumerate() {
+                let Some(residual) = residual else { continue };
+                for (slot, features) in phi.iter().enumerate() {
+                    for (cell, f) in stacked[slot * width..(slot + 1) * width]
+                        .iter_mut()
+                        .zip(features)
+                    {
+                        *cell = s[slot][k] * f;
+                    }
+                }
+                if stacked.iter().all(|v| v.is_finite()) {
+                    normal.add(&stacked, *residual, weights[k]);
+                }
+            }
         }
     }
     folds.iter_mut().for_each(|f| f.0.finish());
@@ -266,105 +390,12 @@ fn choose_ridge(folds: &[(NormalEquations, f64)], penalised: usize) -> Option<f6
     best.map(|(ridge, _)| ridge)
 }
 
-/// The correction's values along a pass.
-pub fn values_along(pass: &Pass, map: &FeatureMap, record: &Record, weights: &[f64]) -> Vec<f64> {
-    let (mut phi, mut lag) = (Vec::new(), Vec::new());
-    let data = |row: usize, k: usize| record.states[k][row];
-    (0..pass.rows)
-        .map(|row| {
-            lagged(map, record, &data, row, &mut lag);
-            map.features(&pass.present[row], pass.locus[row], &lag, &mut phi);
-            dot(&phi, weights)
-        })
+/// One slot's correction values along a pass.
+pub fn values_along(pass: &Pass, map: &FeatureMap, weights: &[f64], slot: usize) -> Vec<f64> {
+    let width = map.width();
+    let block = &weights[slot * width..(slot + 1) * width];
+    (pass.records.iter())
+        .flat_map(|record| (0..record.rows()).map(move |row| (record, row)))
+        .map(|(record, row)| dot(&row_features(record, map, row)[slot], block))
         .collect()
-}
-
-/// What a free-run refinement may change besides the params: a gain on the one-step
-/// weights and the weights of some features.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Refinement {
-    /// Feature indices whose weights are fitted (see [`FeatureMap::directions`]).
-    pub directions: Vec<usize>,
-    /// The size of a unit move of those weights (a typical correction value).
-    pub reference: f64,
-}
-
-/// Refines a solution on the free run over the training rows: Levenberg–Marquardt over the
-/// params (transformed), a gain on the one-step weights and the weights of the
-/// refinement's directions; the result is kept only if it lowers the training gap.
-pub fn refine(
-    corrected: &Corrected,
-    map: &FeatureMap,
-    solution: &Solution,
-    refinement: &Refinement,
-    fitting: (&Record, std::ops::Range<usize>, &Normalisation),
-) -> Solution {
-    let (record, rows, norm) = fitting;
-    let params = solution.theta.len();
-    let scale = ((rows.len() * record.states.len()).max(1) as f64).sqrt();
-    let apply = |x: &[f64]| {
-        let mut weights: Vec<f64> = solution.weights.iter().map(|w| w * x[params]).collect();
-        for (&index, extra) in refinement.directions.iter().zip(&x[params + 1..]) {
-            weights[index] += refinement.reference * extra;
-        }
-        Solution {
-            weights,
-            theta: x[..params].to_vec(),
-        }
-    };
-    let residuals = |x: &[f64]| -> Option<Vec<f64>> {
-        let mut corrected = corrected.clone();
-        let run = corrected_run(&mut corrected, map, &apply(x), record, rows.end).ok()?;
-        let mut out = Vec::with_capacity(rows.len() * record.states.len());
-        for row in rows.clone() {
-            for (k, column) in record.states.iter().enumerate() {
-                out.push((run.row(row)[k] - column[row]) / norm.std[k] / scale);
-            }
-        }
-        out.iter().all(|r| r.is_finite()).then_some(out)
-    };
-    let mut start = solution.theta.clone();
-    start.push(1.0);
-    start.extend(refinement.directions.iter().map(|_| 0.0));
-    let (x, cost) = super::fit::levenberg_marquardt(&residuals, start.clone());
-    let before = residuals(&start).map_or(f64::INFINITY, |r| dot(&r, &r));
-    if cost < before {
-        apply(&x)
-    } else {
-        solution.clone()
-    }
-}
-
-/// The free run from row 0 to `end - 1` of `record` with the correction in the loop (its
-/// embedding fed by the run's own measured states) and the solution's params.
-pub fn corrected_run(
-    corrected: &mut Corrected,
-    map: &FeatureMap,
-    solution: &Solution,
-    record: &Record,
-    end: usize,
-) -> Result<Run, IntegrationError> {
-    let params = params_of(&corrected.constraints, &solution.theta);
-    corrected.simulator.set_params(&params);
-    let mut state = corrected.simulator.start_state(record, 0);
-    let dim = state.len();
-    let mut values = Vec::with_capacity(end * dim);
-    values.extend_from_slice(&state);
-    let (mut phi, mut lag, mut present) = (Vec::new(), Vec::new(), Vec::new());
-    for row in 0..end.saturating_sub(1) {
-        let own = |at: usize, k: usize| values[at * dim + k];
-        lagged(map, record, &own, row, &mut lag);
-        present.clear();
-        present.extend(record.inputs_at(row));
-        present.extend_from_slice(&state);
-        let locus = corrected.locus_value(record, row, &state);
-        map.features(&present, locus, &lag, &mut phi);
-        corrected
-            .simulator
-            .set_correction(dot(&phi, &solution.weights));
-        corrected.simulator.step(record, row, &mut state)?;
-        values.extend_from_slice(&state);
-    }
-    corrected.simulator.set_correction(0.0);
-    Ok(Run { dim, values })
 }

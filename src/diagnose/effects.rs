@@ -1,220 +1,210 @@
-//! Fitting models to the training part and scoring them on the held-out part: the model
-//! alone, each candidate effect, and the two best together.
+//! Fitting models on the training parts and scoring them on the held-out parts: the model
+//! alone, each candidate effect alone (ranked, with a block-bootstrap confidence), and
+//! forward selection of several effects ([`super::selection`]).
 
+use super::evaluate::{scored_errors, Errors};
 use super::fit::{fit, Fitted, Objective};
-use super::report::{Combined, Confidence, EffectScore};
+use super::ranking::{compare, Comparison, RESAMPLES};
+use super::report::{Confidence, EffectScore, FitSummary};
 use super::simulate::{tolerances, Run, Simulator};
-use super::{Context, DiagnoseError};
+use super::uncertainty::summarise;
+use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Model};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
-use std::ops::Range;
+use std::time::Instant;
 
-/// A model fitted on some training rows and run over the held-out record.
+/// A model fitted on the training parts and run over the scored parts.
 #[derive(Debug, Clone)]
 pub struct Scored {
-    /// The fitted params and their training gap.
+    /// The fitted params (then fitted starts) and their training gap.
     pub fitted: Fitted,
+    /// The fitted unknowns by name (params, `STATE@EXPERIMENT` starts).
+    pub named: BTreeMap<String, f64>,
+    /// Uncertainty, criteria and cost of the fit.
+    pub summary: FitSummary,
+    /// Errors at the scored cells.
+    pub errors: Errors,
     /// Held-out gap.
     pub gap: f64,
-    /// Free run over the held-out record (from its row 0).
-    pub run: Option<Run>,
+    /// Free runs of the scored records (`None` where one failed).
+    pub runs: Vec<Option<Run>>,
 }
 
-/// Which training rows a fit uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Part {
-    /// All training rows.
-    Full,
-    /// The first half of the training rows.
-    FirstHalf,
-    /// The second half of the training rows.
-    SecondHalf,
-}
-
-impl Part {
-    fn rows(self, train: Range<usize>) -> Range<usize> {
-        let middle = train.start + train.len() / 2;
-        match self {
-            Part::Full => train,
-            Part::FirstHalf => train.start..middle,
-            Part::SecondHalf => middle..train.end,
-        }
-    }
-}
-
-/// Fits `model` on `part` of the training rows from the params `start` (by name; others
-/// from their declared values) and scores it on the held-out rows.
+/// Fits `model` from the unknowns `start` (by name: params and `STATE@EXPERIMENT` starts;
+/// others from their defaults), and scores it on the held-out parts.
 pub fn fit_and_score(
     context: &Context,
     model: &Model,
     start: &BTreeMap<String, f64>,
-    part: Part,
     seed: u64,
 ) -> Result<Scored, DiagnoseError> {
-    let simulator = Simulator::new(model, None, tolerances())?;
-    let initial: Vec<f64> = (model.params.iter())
-        .map(|p| start.get(&p.name).copied().unwrap_or(p.init))
-        .collect();
-    let constraints: Vec<ir::Constraint> = model.params.iter().map(|p| p.constraint).collect();
+    let started = Instant::now();
+    let simulator = Simulator::new(model, &[], tolerances())?;
+    let unknowns = context.unknowns(model, &simulator);
+    let x = unknowns.values(start);
+    let constraints = &unknowns.constraints;
     let objective = Objective {
         simulator: &simulator,
-        record: &context.split.train,
-        rows: part.rows(context.split.train_rows.clone()),
-        normalisation: &context.normalisation,
+        split: &context.split,
     };
-    let fitted = fit(
-        &objective,
-        &constraints,
-        &initial,
-        context.options.restarts,
-        seed,
-    );
-    let (gap, run) = held_out(context, &simulator, &fitted.params);
-    Ok(Scored { fitted, gap, run })
-}
-
-/// The held-out gap of `simulator` with `params`, and its free run (infinite gap and no run
-/// if the run fails).
-pub fn held_out(context: &Context, simulator: &Simulator, params: &[f64]) -> (f64, Option<Run>) {
-    let mut simulator = simulator.clone();
-    simulator.set_params(params);
-    let test = &context.split.test;
-    match simulator.free_run(test, context.split.test_rows.end) {
-        Ok(run) => {
-            let errors = super::evaluate::state_errors(
-                &run,
-                test,
-                context.split.test_rows.clone(),
-                &context.normalisation,
-            );
-            let gap = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
-            (if gap.is_finite() { gap } else { f64::INFINITY }, Some(run))
-        }
-        Err(_) => (f64::INFINITY, None),
-    }
-}
-
-/// The named params of a model.
-pub fn named(model: &Model, values: &[f64]) -> BTreeMap<String, f64> {
-    (model.params.iter().map(|p| p.name.clone()))
-        .zip(values.iter().copied())
-        .collect()
-}
-
-/// Every candidate effect fitted on the training part and on each half, ranked by held-out
-/// gap; with the ranking confidence and the models (for plots and combinations).
-pub struct Ranking {
-    /// Scores, best first.
-    pub scores: Vec<EffectScore>,
-    /// Ranking stability.
-    pub confidence: Confidence,
-    /// Free run of the best effect on the held-out record.
-    pub best_run: Option<Run>,
-}
-
-/// Fits every effect of the model (and each on both halves of the training part).
-pub fn rank_effects(
-    context: &Context,
-    base_params: &BTreeMap<String, f64>,
-    gap_before: f64,
-    tick: &(dyn Fn() + Sync),
-) -> Result<Ranking, DiagnoseError> {
-    let names: Vec<String> = context
-        .model
-        .effects
-        .iter()
-        .map(|e| e.name.clone())
-        .collect();
-    let models = (names.iter())
-        .map(|name| lower(context, &[name.as_str()]))
-        .collect::<Result<Vec<_>, _>>()?;
-    let parts = [Part::Full, Part::FirstHalf, Part::SecondHalf];
-    let tasks: Vec<(usize, Part)> = (0..models.len())
-        .flat_map(|m| parts.iter().map(move |&p| (m, p)))
-        .collect();
-    let results = tasks
-        .par_iter()
-        .enumerate()
-        .map(|(index, &(m, part))| {
-            let scored = fit_and_score(
-                context,
-                &models[m],
-                base_params,
-                part,
-                context.seed(index as u64 + 1),
-            );
-            tick();
-            scored
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut scores = Vec::new();
-    let mut runs = Vec::new();
-    for (m, chunk) in results.chunks(parts.len()).enumerate() {
-        let full = &chunk[0];
-        scores.push(EffectScore {
-            name: names[m].clone(),
-            description: context.model.effects[m].description.clone(),
-            gap_after: full.gap,
-            shrink: 1.0 - full.gap / gap_before,
-            params: named(&models[m], &full.fitted.params),
-            gap_after_halves: [chunk[1].gap, chunk[2].gap],
-        });
-        runs.push(full.run.clone());
-    }
-    let mut order: Vec<usize> = (0..scores.len()).collect();
-    order.sort_by(|&a, &b| scores[a].gap_after.total_cmp(&scores[b].gap_after));
-    let confidence = confidence(&scores, &order, gap_before);
-    let best_run = order.first().and_then(|&b| runs[b].clone());
-    let scores = order.into_iter().map(|i| scores[i].clone()).collect();
-    Ok(Ranking {
-        scores,
-        confidence,
-        best_run,
+    let fitted = fit(&objective, constraints, &x, context.options.restarts, seed);
+    let mut summary = summarise(&objective, constraints, &fitted.x, &unknowns.names);
+    let (errors, runs) = held_out(context, &simulator, &fitted.x);
+    summary.starts = fitted.starts;
+    summary.seconds = started.elapsed().as_secs_f64();
+    Ok(Scored {
+        gap: errors.gap(),
+        named: (unknowns.names.iter().cloned())
+            .zip(fitted.x.iter().copied())
+            .collect(),
+        fitted,
+        summary,
+        errors,
+        runs,
     })
 }
 
-fn confidence(scores: &[EffectScore], order: &[usize], gap_before: f64) -> Confidence {
-    let best_of = |half: usize| {
-        (scores.iter())
-            .min_by(|a, b| a.gap_after_halves[half].total_cmp(&b.gap_after_halves[half]))
-            .map(|s| s.name.clone())
-    };
-    let best_by_half = [best_of(0), best_of(1)];
-    let best = order.first().map(|&b| scores[b].name.clone());
-    let margin = match order {
-        [first, second, ..] => (scores[*second].gap_after - scores[*first].gap_after) / gap_before,
-        [_] => 1.0 - scores[order[0]].gap_after / gap_before,
-        [] => 0.0,
+/// The errors at the scored cells of `simulator` with `x` (params, then fitted starts), and
+/// its free runs of the scored records.
+pub fn held_out(context: &Context, simulator: &Simulator, x: &[f64]) -> (Errors, Vec<Option<Run>>) {
+    let mut simulator = simulator.clone();
+    simulator.set_params(x);
+    let fitted = &x[simulator.params().min(x.len())..];
+    let split = &context.split;
+    let runs: Vec<Option<Run>> = (split.scored())
+        .map(|(index, record, rows)| {
+            let overrides = split.overrides(index, fitted, simulator.hidden_count());
+            simulator.free_run(record, &overrides, rows.end).ok()
+        })
+        .collect();
+    (scored_errors(split, &runs), runs)
+}
+
+/// The named params of a model (the first `model.params.len()` entries of `x`).
+pub fn named(model: &Model, x: &[f64]) -> BTreeMap<String, f64> {
+    (model.params.iter().map(|p| p.name.clone()))
+        .zip(x.iter().copied())
+        .collect()
+}
+
+/// Every candidate effect applied alone and fitted, ranked by held-out gap.
+pub struct Ranking {
+    /// Scores, best first.
+    pub scores: Vec<EffectScore>,
+    /// The fits, in the same order.
+    pub fits: Vec<Scored>,
+    /// How sure the ranking is.
+    pub confidence: Confidence,
+}
+
+/// Fits every effect of the model alone, from the model's fitted unknowns `base` (by name).
+pub fn rank_effects(
+    context: &Context,
+    base: &BTreeMap<String, f64>,
+    gap_before: f64,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Ranking, DiagnoseError> {
+    let names: Vec<String> = (context.model.effects.iter())
+        .map(|e| e.name.clone())
+        .collect();
+    let fits = names
+        .par_iter()
+        .enumerate()
+        .map(|(index, name)| {
+            let model = lower(context, &[name.as_str()])?;
+            let scored = fit_and_score(context, &model, base, context.seed(index as u64 + 1))?;
+            progress(Progress::Done {
+                item: name.clone(),
+                seconds: scored.summary.seconds,
+            });
+            Ok((model, scored))
+        })
+        .collect::<Result<Vec<_>, DiagnoseError>>()?;
+    let sums: Vec<_> = (fits.iter())
+        .map(|(_, scored)| context.blocks.sums(&scored.errors))
+        .collect();
+    let comparison = compare(&sums, context.seed(1000));
+    let mut order: Vec<usize> = (0..fits.len()).collect();
+    order.sort_by(|&a, &b| fits[a].1.gap.total_cmp(&fits[b].1.gap));
+    let mut scores = Vec::with_capacity(fits.len());
+    let mut ordered = Vec::with_capacity(fits.len());
+    let mut fits: Vec<Option<(Model, Scored)>> = fits.into_iter().map(Some).collect();
+    for &index in &order {
+        let Some((model, scored)) = fits[index].take() else {
+            continue;
+        };
+        scores.push(EffectScore {
+            name: names[index].clone(),
+            description: context.model.effects[index].description.clone(),
+            gap_after: scored.gap,
+            shrink: 1.0 - scored.gap / gap_before,
+            params: named(&model, &scored.fitted.x),
+            fit: scored.summary.clone(),
+            adds_hidden: added_hidden(context.model, &model),
+            probability_best: comparison.probability_best[index],
+            spread: comparison.spread[index],
+            tied: comparison.tied_with_best(index),
+        });
+        ordered.push(scored);
+    }
+    let confidence = confidence(
+        &scores,
+        &comparison,
+        gap_before,
+        context.blocks.blocks.len(),
+    );
+    Ok(Ranking {
+        scores,
+        fits: ordered,
+        confidence,
+    })
+}
+
+/// The ranking's confidence from the bootstrap comparison (scores sorted best first).
+fn confidence(
+    scores: &[EffectScore],
+    comparison: &Comparison,
+    gap_before: f64,
+    blocks: usize,
+) -> Confidence {
+    let indistinguishable: Vec<String> = (scores.iter())
+        .filter(|s| s.tied)
+        .map(|s| s.name.clone())
+        .collect();
+    let (margin, margin_error) = match scores {
+        [first, second, ..] => (
+            (second.gap_after - first.gap_after) / gap_before,
+            second.spread / gap_before,
+        ),
+        [only] => (1.0 - only.gap_after / gap_before, 0.0),
+        [] => (0.0, 0.0),
     };
     Confidence {
-        stable: best.is_some() && best_by_half.iter().all(|b| *b == best),
+        separated: scores.first().is_some_and(|s| s.gap_after.is_finite())
+            && indistinguishable.len() == 1,
         margin,
-        best_by_half,
+        margin_error,
+        probability_best: comparison
+            .best
+            .map_or(0.0, |b| comparison.probability_best[b]),
+        indistinguishable,
+        blocks,
+        resamples: RESAMPLES,
     }
 }
 
-/// The two best effects applied together, fitted on the training part.
-pub fn combine(
-    context: &Context,
-    scores: &[EffectScore],
-    base_params: &BTreeMap<String, f64>,
-    gap_before: f64,
-) -> Result<Option<Combined>, DiagnoseError> {
-    let [first, second, ..] = scores else {
-        return Ok(None);
-    };
-    let names = [first.name.as_str(), second.name.as_str()];
-    let model = lower(context, &names)?;
-    let mut start = base_params.clone();
-    start.extend(first.params.clone());
-    start.extend(second.params.clone());
-    let scored = fit_and_score(context, &model, &start, Part::Full, context.seed(0))?;
-    Ok(Some(Combined {
-        names: names.iter().map(|n| n.to_string()).collect(),
-        gap_after: scored.gap,
-        shrink: 1.0 - scored.gap / gap_before,
-    }))
+/// The hidden states `with` has that `model` has not.
+pub fn added_hidden(model: &Model, with: &Model) -> Vec<String> {
+    (with.hidden.iter())
+        .filter(|h| !model.hidden.iter().any(|m| m.name == h.name))
+        .map(|h| h.name.clone())
+        .collect()
+}
+
+/// The block sums of a scored fit, for comparisons.
+pub fn block_sums(context: &Context, scored: &Scored) -> Vec<(f64, usize)> {
+    context.blocks.sums(&scored.errors)
 }
 
 /// The model with the named effects applied.

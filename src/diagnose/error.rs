@@ -28,17 +28,28 @@ pub enum DiagnoseError {
         /// The hidden state.
         state: String,
     },
-    /// Too few rows to fit on one part and score on the other.
-    #[error("expected at least {needed} data rows, found {rows}")]
+    /// Too few measured rows to fit on one part and score on the other.
+    #[error(
+        "expected at least {needed} measured rows in the training part and {needed} in the \
+         held-out part, found {train} and {test} ({how})"
+    )]
     #[diagnostic(
         code(gbm::E0803),
-        help("the diagnosis fits on the training part and scores on the held-out part; each needs at least 10 rows")
+        help(
+            "the diagnosis fits on the training part and scores on the held-out part: hold out \
+             other experiments (--holdout NAME, --val FILE) or another share of each \
+             (--val-fraction SHARE)"
+        )
     )]
     TooFewRows {
-        /// Rows found.
-        rows: usize,
-        /// Rows needed.
+        /// Measured rows each part needs.
         needed: usize,
+        /// Measured rows in the training part.
+        train: usize,
+        /// Measured rows in the held-out part.
+        test: usize,
+        /// What was held out, in words.
+        how: String,
     },
     /// The model cannot be run on the data with its initial params.
     #[error("the model cannot be run on the data: {reason}")]
@@ -52,10 +63,7 @@ pub enum DiagnoseError {
     },
     /// A bad option value.
     #[error("invalid option `{option}`: expected {expected}, found {found}")]
-    #[diagnostic(
-        code(gbm::E0805),
-        help("see `gbc diagnose --help` for the accepted values")
-    )]
+    #[diagnostic(code(gbm::E0805))]
     BadOption {
         /// The option.
         option: String,
@@ -63,27 +71,50 @@ pub enum DiagnoseError {
         expected: String,
         /// What was given.
         found: String,
+        /// What to do instead.
+        #[help]
+        help: String,
     },
-    /// The test record's step differs from the training record's.
-    #[error("the test data are sampled every {test}, the training data every {train}")]
-    #[diagnostic(code(gbm::E0806), help("sample both records on the same step"))]
-    StepMismatch {
-        /// Training step.
-        train: f64,
-        /// Test step.
-        test: f64,
+    /// A tail split that leaves one part of an experiment without a measured row.
+    #[error(
+        "expected at least one measured row in each part of experiment `{experiment}` split \
+         by --val-fraction {share}, found {train} training and {test} held-out rows"
+    )]
+    #[diagnostic(
+        code(gbm::E0806),
+        help("choose a --val-fraction that leaves both parts a measured row, or hold out whole experiments (--holdout NAME)")
+    )]
+    TailTooSmall {
+        /// The experiment.
+        experiment: String,
+        /// The share held out.
+        share: f64,
+        /// Measured rows that would train.
+        train: usize,
+        /// Measured rows that would be held out.
+        test: usize,
     },
-    /// A column the model needs is not in the data (normally caught when reading).
-    #[error("data file `{file}` has no column `{column}`")]
+    /// The data measure a model `output`, which the diagnosis does not score.
+    #[error("the data measure output `{output}` of model `{model}`: the diagnosis compares measured states only")]
     #[diagnostic(
         code(gbm::E0807),
-        help("the data need a column for every input and measured state of the model")
+        help("give the states the output is computed from as columns, or rename the column so that it does not name the output")
     )]
-    MissingColumn {
-        /// The file.
-        file: String,
-        /// The column.
-        column: String,
+    MeasuredOutput {
+        /// The model.
+        model: String,
+        /// The output.
+        output: String,
+    },
+    /// A discrete map on rows that are not uniformly spaced.
+    #[error("expected uniformly spaced rows for a `next` model, found irregular times in experiment `{experiment}`")]
+    #[diagnostic(
+        code(gbm::E0808),
+        help("a discrete map steps from row to row; write the model with `der` balances to diagnose it on irregular data")
+    )]
+    IrregularMap {
+        /// The experiment.
+        experiment: String,
     },
     /// A bug: a synthesised model did not compile, or expressions do not fit their layout.
     #[error(transparent)]

@@ -7,22 +7,13 @@
 //! and the same multiplied by `l`, so that additive (`c = g(v)`) and multiplicative
 //! (`c = l g(v)`) corrections are both within reach.
 //!
-//! *History* features add the delay embedding of the measured record (spec section 3):
-//! inputs and measured states at `t - k delay`, `k = 1..dim-1`, each alone, times `l`, and
-//! times each present variable.
+//! *History* features add a fading memory ([`super::memory`]): the inputs, the measured
+//! states and `l` passed through first-order filters at each time constant, each filtered
+//! value `w` alone and times `l`.
 
 /// Z-scored variables are clipped to this many standard deviations, so a correction stays
 /// bounded when a free run leaves the training range.
 pub const CLIP: f64 = 4.0;
-
-/// A delay embedding in rows of the record.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Lags {
-    /// Rows between lags.
-    pub delay: usize,
-    /// Number of lags including the present (>= 2 to add anything).
-    pub dim: usize,
-}
 
 /// How to turn variables into features.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,43 +24,70 @@ pub struct FeatureMap {
     pub scale: Vec<f64>,
     /// Root mean square of the corrected quantity.
     pub locus_scale: f64,
-    /// Number of embedded variables (inputs, then measured states: the first of `center`).
+    /// Number of filtered variables besides `l` (inputs, then measured states: the first of
+    /// `center`).
     pub embedded: usize,
-    /// The history, if any.
-    pub lags: Option<Lags>,
+    /// The filters' time constants, if the map has history.
+    pub taus: Option<Vec<f64>>,
 }
 
 impl FeatureMap {
-    /// Number of features.
-    pub fn width(&self) -> usize {
-        let v = self.center.len();
-        let quadratic = 1 + v + v * (v + 1) / 2;
-        let history = self
-            .lags
-            .map_or(0, |l| l.dim.saturating_sub(1) * self.embedded);
-        2 * quadratic + history * (2 + v)
+    /// Number of present variables.
+    fn variables(&self) -> usize {
+        self.center.len()
     }
 
-    /// Indices of the features a free-run refinement adjusts: the constant and `l` alone
-    /// (a constant offset and a term proportional to the corrected quantity).
+    /// Number of quadratic monomials.
+    fn quadratic(&self) -> usize {
+        let v = self.variables();
+        1 + v + v * (v + 1) / 2
+    }
+
+    /// Number of filtered signals per time constant (the embedded variables and `l`).
+    pub fn signals(&self) -> usize {
+        self.embedded + 1
+    }
+
+    /// Number of features.
+    pub fn width(&self) -> usize {
+        let filtered = self.taus.as_ref().map_or(0, |t| t.len() * self.signals());
+        2 * self.quadratic() + 2 * filtered
+    }
+
+    /// Indices of the features a free-run refinement adjusts: the constant and `l` alone (a
+    /// constant offset and a term proportional to the corrected quantity), and with history
+    /// the filtered `l` alone at each time constant (a lag of the corrected quantity).
     pub fn directions(&self) -> Vec<usize> {
-        let v = self.center.len();
-        vec![0, 1 + v + v * (v + 1) / 2]
+        let q = self.quadratic();
+        let mut directions = vec![0, q];
+        if let Some(taus) = &self.taus {
+            let block = 2;
+            for t in 0..taus.len() {
+                let signal = t * self.signals() + self.embedded;
+                directions.push(2 * q + signal * block);
+            }
+        }
+        directions
     }
 
     fn normalise(&self, index: usize, value: f64) -> f64 {
         ((value - self.center[index]) / self.scale[index]).clamp(-CLIP, CLIP)
     }
 
+    fn locus(&self, value: f64) -> f64 {
+        (value / self.locus_scale).clamp(-2.0 * CLIP, 2.0 * CLIP)
+    }
+
     /// Writes the features into `out` (cleared first). `present` holds the present
-    /// variables, `locus` the corrected quantity, `lagged` the embedded variables at each
-    /// lag `1..dim` (lag-major), as raw values.
-    pub fn features(&self, present: &[f64], locus: f64, lagged: &[f64], out: &mut Vec<f64>) {
+    /// variables, `locus` the corrected quantity, `filtered` the filtered signals (the
+    /// embedded variables, then `l`) at each time constant, time-constant-major, as raw
+    /// values.
+    pub fn features(&self, present: &[f64], locus: f64, filtered: &[f64], out: &mut Vec<f64>) {
         out.clear();
         let v: Vec<f64> = (present.iter().enumerate())
             .map(|(j, &x)| self.normalise(j, x))
             .collect();
-        let l = (locus / self.locus_scale).clamp(-2.0 * CLIP, 2.0 * CLIP);
+        let l = self.locus(locus);
         out.push(1.0);
         out.extend_from_slice(&v);
         for j in 0..v.len() {
@@ -81,12 +99,16 @@ impl FeatureMap {
         for q in 0..quadratic {
             out.push(l * out[q]);
         }
-        if self.lags.is_some() {
-            for (index, &raw) in lagged.iter().enumerate() {
-                let w = self.normalise(index % self.embedded.max(1), raw);
+        if self.taus.is_some() {
+            for (index, &raw) in filtered.iter().enumerate() {
+                let signal = index % self.signals();
+                let w = if signal < self.embedded {
+                    self.normalise(signal, raw)
+                } else {
+                    self.locus(raw)
+                };
                 out.push(w);
                 out.push(l * w);
-                out.extend(v.iter().map(|x| x * w));
             }
         }
     }
@@ -103,19 +125,21 @@ mod tests {
             scale: vec![2.0, 1.0],
             locus_scale: 0.5,
             embedded: 1,
-            lags: Some(Lags { delay: 3, dim: 2 }),
+            taus: Some(vec![3.0]),
         };
         let mut out = Vec::new();
-        // v = [(3 - 1) / 2, -1] = [1, -1]; l = 0.25 / 0.5 = 0.5; lagged w = (5 - 1) / 2 = 2.
-        map.features(&[3.0, -1.0], 0.25, &[5.0], &mut out);
+        // v = [(3 - 1) / 2, -1] = [1, -1]; l = 0.25 / 0.5 = 0.5; filtered embedded
+        // w = (5 - 1) / 2 = 2, filtered l: 1 / 0.5 = 2.
+        map.features(&[3.0, -1.0], 0.25, &[5.0, 1.0], &mut out);
         let q = [1.0, 1.0, -1.0, 1.0, -1.0, 1.0];
         let mut expected: Vec<f64> = q.to_vec();
         expected.extend(q.iter().map(|x| 0.5 * x));
-        expected.extend([2.0, 1.0, 2.0, -2.0]);
+        expected.extend([2.0, 1.0]);
+        expected.extend([2.0, 1.0]);
         assert_eq!(out, expected);
         assert_eq!(map.width(), expected.len());
-        // The constant and l alone.
-        assert_eq!(map.directions(), vec![0, 6]);
+        // The constant, l alone and the filtered l alone.
+        assert_eq!(map.directions(), vec![0, 6, 14]);
     }
 
     #[test]
@@ -125,7 +149,7 @@ mod tests {
             scale: vec![1.0],
             locus_scale: 1.0,
             embedded: 1,
-            lags: None,
+            taus: None,
         };
         let mut out = Vec::new();
         map.features(&[100.0], 0.0, &[], &mut out);

@@ -1,11 +1,18 @@
-//! Fitting a mechanistic model's params to a record: Levenberg–Marquardt on the z-scored
-//! free-run residuals of the training rows, with a forward-difference Jacobian through the
-//! simulator (the shared driver, [`crate::numeric::lm`]), in transformed coordinates so
-//! that constraints always hold (`positive`: `p = exp(theta)`; `in [lo, hi]`:
-//! `p = lo + (hi - lo) sigmoid(theta)`), from the given start and a few random restarts.
+//! Fitting a mechanistic model's params (and the starts of measured states that no cell or
+//! declaration gives, [`super::split::Start::Fitted`]) to the training parts of every
+//! experiment: Levenberg–Marquardt on the z-scored free-run residuals at the measured
+//! training cells, with a forward-difference Jacobian through the simulator (the shared
+//! driver, [`crate::numeric::lm`]), in transformed coordinates so that constraints always
+//! hold (`positive`: `p = exp(theta)`; `in [lo, hi]`: `p = lo + (hi - lo) sigmoid(theta)`;
+//! fitted starts are free).
+//!
+//! **Restarts where the landscape needs them.** The first start is the given one (declared
+//! values, or a warm start); random restarts follow one at a time, up to the budget, and the
+//! fit stops as soon as two starts agree on the best training gap (within [`AGREE`]): a
+//! landscape with one basin costs two fits, a rugged one gets the whole budget.
 
-use super::record::{Normalisation, Record};
 use super::simulate::Simulator;
+use super::split::Split;
 use crate::eval::sigmoid;
 use crate::ir::Constraint;
 use crate::numeric::lm::{Function, Jacobian};
@@ -13,8 +20,6 @@ use crate::numeric::{Damping, Settings};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
-use rayon::prelude::*;
-use std::ops::Range;
 
 /// The damping schedule: from `1e-3`, divided by 3 on success (down to `1e-9`) and
 /// multiplied by 4 on failure, retried at the same Jacobian until the damping reaches
@@ -30,6 +35,13 @@ const SETTINGS: Settings = Settings {
     max_move: 3.0,
     ..Settings::DEFAULT
 };
+/// The refinement of a free correction stops earlier: at most 20 Jacobians, converged when a
+/// step gains at most `1e-5` of the cost (it is a polish of a one-step fit).
+const POLISH: Settings = Settings {
+    max_linearisations: 20,
+    tolerance: 1e-5,
+    ..SETTINGS
+};
 /// Marquardt's scaling, with floors for a coordinate no residual sees.
 const DAMPING: Damping = Damping {
     min_diagonal: 1e-12,
@@ -37,46 +49,52 @@ const DAMPING: Damping = Damping {
     relative_jitter: 0.0,
 };
 /// Forward-difference step in transformed coordinates.
-const JACOBIAN_STEP: f64 = 1e-6;
+pub const JACOBIAN_STEP: f64 = 1e-6;
 /// Spread of the random restarts in transformed coordinates.
 const RESTART_SPREAD: f64 = 0.7;
+/// Two starts agree when their training gaps differ by at most this fraction.
+pub const AGREE: f64 = 1e-3;
 
-/// The free-run error of a model on some rows of a record.
-#[derive(Debug, Clone)]
+/// The free-run error of a model at the training cells of a split.
+#[derive(Debug, Clone, Copy)]
 pub struct Objective<'a> {
     /// The compiled model.
     pub simulator: &'a Simulator,
-    /// The record (the free run starts at its row 0).
-    pub record: &'a Record,
-    /// Rows whose errors count.
-    pub rows: Range<usize>,
-    /// The z-scoring.
-    pub normalisation: &'a Normalisation,
+    /// The experiments and their training parts.
+    pub split: &'a Split,
 }
 
 impl Objective<'_> {
-    /// Z-scored residuals `(sim - data) / std`, divided by `sqrt(rows * states)` so that
-    /// their squares sum to the gap; `None` if the free run fails.
-    pub fn residuals(&self, params: &[f64]) -> Option<Vec<f64>> {
+    /// Z-scored residuals `(sim - data) / std` at every measured training cell, divided by
+    /// the square root of their number so that their squares sum to the training gap;
+    /// `None` if a free run fails. `x` holds the params, then the fitted starts.
+    pub fn residuals(&self, x: &[f64]) -> Option<Vec<f64>> {
         let mut simulator = self.simulator.clone();
-        simulator.set_params(params);
-        let run = simulator.free_run(self.record, self.rows.end).ok()?;
-        let measured = simulator.measured();
-        let scale = ((self.rows.len() * measured).max(1) as f64).sqrt();
-        let mut residuals = Vec::with_capacity(self.rows.len() * measured);
-        for row in self.rows.clone() {
-            let state = run.row(row);
-            for (k, column) in self.record.states.iter().enumerate() {
-                let r = (state[k] - column[row]) / self.normalisation.std[k] / scale;
-                residuals.push(r);
+        simulator.set_params(x);
+        let fitted = &x[simulator.params().min(x.len())..];
+        let norm = &self.split.normalisation;
+        let scale = (self.split.training_cells().max(1) as f64).sqrt();
+        let mut residuals = Vec::new();
+        for (index, record, rows) in self.split.training() {
+            let overrides = self
+                .split
+                .overrides(index, fitted, simulator.hidden_count());
+            let run = simulator.free_run(record, &overrides, rows.end).ok()?;
+            for row in rows {
+                let state = run.row(row);
+                for (k, cells) in record.states.iter().enumerate() {
+                    if let Some(value) = cells[row] {
+                        residuals.push((state[k] - value) / norm.state_std[k] / scale);
+                    }
+                }
             }
         }
         residuals.iter().all(|r| r.is_finite()).then_some(residuals)
     }
 
-    /// The gap (normalised mean squared error) at `params`, infinite if the run fails.
-    pub fn gap(&self, params: &[f64]) -> f64 {
-        self.residuals(params)
+    /// The training gap at `x`, infinite if a run fails.
+    pub fn gap(&self, x: &[f64]) -> f64 {
+        self.residuals(x)
             .map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum())
     }
 }
@@ -84,14 +102,17 @@ impl Objective<'_> {
 /// The result of a fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fitted {
-    /// The params (constrained values).
-    pub params: Vec<f64>,
-    /// The gap on the fitted rows.
+    /// The params and fitted starts (constrained values).
+    pub x: Vec<f64>,
+    /// The training gap there.
     pub gap: f64,
+    /// Starts run (1 + the random restarts spent).
+    pub starts: usize,
 }
 
-/// Fits the params from `start` (constrained values) plus `restarts` random restarts drawn
-/// from a generator seeded with `seed`; returns the best.
+/// Fits `x` from `start` (constrained values) and then random restarts drawn from a
+/// generator seeded with `seed`, at most `restarts` of them, stopping when two starts agree;
+/// returns the best.
 pub fn fit(
     objective: &Objective,
     constraints: &[Constraint],
@@ -99,41 +120,67 @@ pub fn fit(
     restarts: usize,
     seed: u64,
 ) -> Fitted {
-    let theta0: Vec<f64> = (constraints.iter().zip(start))
-        .map(|(c, &p)| to_theta(*c, p))
-        .collect();
+    let theta0 = thetas(constraints, start);
     if theta0.is_empty() {
         return Fitted {
-            params: Vec::new(),
+            x: Vec::new(),
             gap: objective.gap(&[]),
+            starts: 1,
         };
     }
+    let residuals = |theta: &[f64]| objective.residuals(&values(constraints, theta));
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut starts = vec![theta0.clone()];
-    for _ in 0..restarts {
-        starts.push(
-            theta0
-                .iter()
+    let mut results: Vec<(Vec<f64>, f64)> = Vec::new();
+    for attempt in 0..=restarts {
+        let theta = if attempt == 0 {
+            theta0.clone()
+        } else {
+            (theta0.iter())
                 .map(|&t| {
                     let noise: f64 = StandardNormal.sample(&mut rng);
                     t + RESTART_SPREAD * noise * t.abs().clamp(1.0, 3.0)
                 })
-                .collect(),
-        );
+                .collect()
+        };
+        results.push(levenberg_marquardt(&residuals, theta));
+        if agreeing(&results) {
+            break;
+        }
     }
-    let residuals = |theta: &[f64]| objective.residuals(&from_thetas(constraints, theta));
-    let results: Vec<(Vec<f64>, f64)> = starts
-        .par_iter()
-        .map(|theta| levenberg_marquardt(&residuals, theta.clone()))
-        .collect();
+    let starts = results.len();
     let (theta, gap) = results
         .into_iter()
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap_or((theta0, f64::INFINITY));
     Fitted {
-        params: from_thetas(constraints, &theta),
+        x: values(constraints, &theta),
         gap,
+        starts,
     }
+}
+
+/// Whether at least two of the fits reached the best gap (within [`AGREE`]).
+fn agreeing(results: &[(Vec<f64>, f64)]) -> bool {
+    let best = results.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        return false;
+    }
+    let close = (results.iter())
+        .filter(|r| r.1 <= best + AGREE * best.abs() + 1e-15)
+        .count();
+    close >= 2
+}
+
+/// The transformed coordinates of constrained values.
+pub fn thetas(constraints: &[Constraint], values: &[f64]) -> Vec<f64> {
+    (constraints.iter().zip(values))
+        .map(|(c, &p)| to_theta(*c, p))
+        .collect()
+}
+
+/// The constrained values of transformed coordinates.
+pub fn values(constraints: &[Constraint], theta: &[f64]) -> Vec<f64> {
+    from_thetas(constraints, theta)
 }
 
 fn from_thetas(constraints: &[Constraint], theta: &[f64]) -> Vec<f64> {
@@ -165,12 +212,40 @@ pub fn from_theta(constraint: Constraint, theta: f64) -> f64 {
     }
 }
 
+/// `d value / d theta` of a constrained value at transformed coordinate `theta`.
+pub fn slope(constraint: Constraint, theta: f64) -> f64 {
+    match constraint {
+        Constraint::Free => 1.0,
+        Constraint::Positive => theta.exp(),
+        Constraint::Bounds(lo, hi) => {
+            let s = sigmoid(theta);
+            (hi - lo) * s * (1.0 - s)
+        }
+    }
+}
+
 /// Minimises `|r(theta)|^2` from `theta` with the diagnosis's settings (forward-difference
 /// Jacobian, columns in parallel); returns the minimiser and the minimum (infinite when `r`
 /// fails at the start).
 pub fn levenberg_marquardt(
     residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
     theta: Vec<f64>,
+) -> (Vec<f64>, f64) {
+    minimise(residuals, theta, &SETTINGS)
+}
+
+/// [`levenberg_marquardt`] with the looser settings of a refinement (a polish).
+pub fn polish(
+    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    theta: Vec<f64>,
+) -> (Vec<f64>, f64) {
+    minimise(residuals, theta, &POLISH)
+}
+
+fn minimise(
+    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    theta: Vec<f64>,
+    settings: &Settings,
 ) -> (Vec<f64>, f64) {
     let function = Function {
         residuals,
@@ -179,7 +254,7 @@ pub fn levenberg_marquardt(
         },
         damping: DAMPING,
     };
-    let outcome = function.minimise(theta, &SETTINGS);
+    let outcome = function.minimise(theta, settings);
     (outcome.x, outcome.cost)
 }
 
@@ -203,5 +278,30 @@ mod tests {
         assert!(from_theta(Constraint::Positive, -50.0) > 0.0);
         let bounded = from_theta(Constraint::Bounds(0.1, 10.0), 40.0);
         assert!((0.1..=10.0).contains(&bounded));
+    }
+
+    #[test]
+    fn slopes_are_the_derivatives_of_the_transforms() {
+        for (constraint, theta) in [
+            (Constraint::Free, 0.3),
+            (Constraint::Positive, -1.2),
+            (Constraint::Bounds(0.1, 10.0), 0.7),
+        ] {
+            let h = 1e-6;
+            let numeric =
+                (from_theta(constraint, theta + h) - from_theta(constraint, theta - h)) / (2.0 * h);
+            assert!((slope(constraint, theta) - numeric).abs() < 1e-8 * numeric.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn restarts_stop_when_two_starts_agree() {
+        assert!(!agreeing(&[(vec![0.0], 1.0)]));
+        assert!(agreeing(&[
+            (vec![0.0], 1.0),
+            (vec![1.0], 2.0),
+            (vec![2.0], 1.0000001)
+        ]));
+        assert!(!agreeing(&[(vec![0.0], 1.0), (vec![1.0], 1.1)]));
     }
 }

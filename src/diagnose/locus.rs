@@ -1,86 +1,118 @@
-//! Where the gap lies: a free correction at each `let` (`NAME += c`) and at each balance
-//! (`der X += c`) in turn, synthesised as a closure output patched in by an effect (the
-//! model's own source plus two declarations), fitted by [`super::correction`] and scored
-//! by the held-out free run it leaves — a bound on what any mechanism acting there can do.
+//! Where the gap lies: a free correction at each `let` (`NAME += c`), at each *group* of
+//! lets that share an input and a form (one correction each, fitted jointly; see
+//! [`super::graph`]) and at each balance (`der X += c`), synthesised as closure outputs
+//! patched in by an effect (the model's own source plus two declarations), fitted by
+//! [`super::correction`] and scored by the held-out free run it leaves — a bound on what
+//! any mechanism acting there can do.
 //!
-//! Each locus is tried with *present* features (everything the model knows at `t`, see
-//! [`super::features`]) and with *history* features (plus a delay embedding of the
-//! measured record, at a short and a long delay unless one is given). All are fitted one
-//! step ahead; every present correction, and the history corrections of the [`REFINED`]
-//! best loci, are then refined on the training free run (params, gain, constant and
-//! proportional terms) and scored. At the best locus, history is needed when the present
-//! alone leaves more than [`PRESENT_RESIDUAL`] of the excess gap (the gap before, above the
-//! noise floor) and history at most 1 / [`HISTORY_MARGIN`] of what the present leaves;
-//! with much data, history features also win a little by their mere number. A locus is *tied* with the best when its bound is within
-//! [`TIE_FACTOR`] of the best's and a paired test of their per-row held-out errors over
-//! time blocks cannot tell them apart.
+//! Each locus is tried with *present* features (everything the model knows at `t`) and with
+//! *history* features (a fading memory up to the span chosen from the data, see
+//! [`super::memory`]). All are fitted one step ahead; every present correction, and the
+//! history corrections of the [`REFINED`] best loci, are refined on the training free runs
+//! and scored.
+//!
+//! **Ranking.** Loci are ranked by the held-out gap they leave. A locus is *tied* with the
+//! best when its gap is within [`TIE_FACTOR`] of the best's and either the block bootstrap
+//! of the held-out errors cannot tell them apart ([`super::ranking`]) or it sits upstream
+//! of the best (feeds it in the dependency graph: the cause of what the best corrects) and
+//! explains as much: the excess gap it leaves exceeds the best's by less than [`NEAR_TIE`]
+//! of the excess gap before (both close nearly all of it); among tied loci the most
+//! specific and most upstream comes first (a let before a group before a balance; among
+//! lets, the one furthest upstream), so a balance comes first only when no rate explains as
+//! much.
+//!
+//! **Memory.** At the first locus, closing the gap needs history when the present alone
+//! leaves more than [`PRESENT_RESIDUAL`] of the excess gap (the gap before, above the noise
+//! floor) and history at most 1 / [`HISTORY_MARGIN`] of what the present leaves.
 
 use super::correction::{self, Corrected, LocusValue, Pass, Solution};
-use super::evaluate::{indistinguishable, row_errors};
-use super::features::{FeatureMap, Lags};
+use super::evaluate::Errors;
+use super::features::FeatureMap;
+use super::fit::thetas;
+use super::graph::Graph;
+use super::ranking::compare;
+use super::refine::{refine, score, Refinement};
 use super::report::{Locus, LocusKind};
 use super::simulate::{tolerances, Simulator};
 use super::{Context, DiagnoseError, Progress};
-use crate::ir::{self, Model, Var};
+use crate::ir::{self, Constraint, Var};
 use crate::numeric::{mean_std, root_mean_square};
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// History must leave this many times less excess gap than the present alone.
 pub const HISTORY_MARGIN: f64 = 2.0;
 /// History is only needed when the present alone leaves more than this fraction of the
 /// excess gap (the gap before, above the noise floor).
 pub const PRESENT_RESIDUAL: f64 = 0.05;
-/// Loci refined on the free run.
+/// Loci whose history correction is refined on the free run.
 pub const REFINED: usize = 3;
-/// Blocks of the paired test between loci (few and long: free-run errors are correlated
-/// in time).
-const TIE_BLOCKS: usize = 8;
 /// A locus is tied with the best only if its bound is within this factor of the best's.
 pub const TIE_FACTOR: f64 = 3.0;
+/// A locus explains as much as the best when the excess gap it leaves exceeds the best's by
+/// less than this share of the excess gap before.
+pub const NEAR_TIE: f64 = 0.05;
 /// Name of the synthesised closure.
 const CLOSURE: &str = "__diagnose_closure";
-/// Name of its output.
+/// Prefix of its outputs.
 const OUTPUT: &str = "__diagnose_c";
 /// Name of the synthesised effect.
 const EFFECT: &str = "__diagnose_effect";
 
-/// A quantity a correction can be added to.
+/// A place a correction can be added to.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Target {
-    /// The let's or the state's name.
+    /// What the report calls it.
     pub name: String,
-    /// Let or balance.
+    /// Let, group or balance.
     pub kind: LocusKind,
+    /// The corrected lets, or the balance's state.
+    pub members: Vec<String>,
+    /// How far upstream it sits.
+    pub depth: usize,
 }
 
 impl Target {
-    fn patch(&self) -> String {
-        match self.kind {
-            LocusKind::Balance => format!("der {} += {OUTPUT}", self.name),
-            _ => format!("{} += {OUTPUT}", self.name),
-        }
+    fn patches(&self) -> Vec<String> {
+        (self.members.iter().enumerate())
+            .map(|(slot, member)| match self.kind {
+                LocusKind::Balance => format!("der {member} += {OUTPUT}{slot}"),
+                _ => format!("{member} += {OUTPUT}{slot}"),
+            })
+            .collect()
     }
 }
 
-/// Every let, then every balance (measured, then hidden states).
-pub fn targets(model: &Model) -> Vec<Target> {
-    let lets = model.lets.iter().map(|l| Target {
-        name: l.name.clone(),
-        kind: LocusKind::Let,
-    });
-    let balances = model.states.iter().chain(&model.hidden).map(|s| Target {
+/// Every let that reaches a balance, every group of them, then every balance (measured,
+/// then hidden states).
+pub fn targets(context: &Context) -> Vec<Target> {
+    let graph = Graph::of(context.checked);
+    let model = context.model;
+    let lets: Vec<String> = (model.lets.iter())
+        .map(|l| l.name.clone())
+        .filter(|name| graph.reaches_balance(name))
+        .collect();
+    let mut targets: Vec<Target> = (lets.iter())
+        .map(|name| Target {
+            name: name.clone(),
+            kind: LocusKind::Let,
+            members: vec![name.clone()],
+            depth: graph.depth(name),
+        })
+        .collect();
+    targets.extend(graph.groups(&lets).into_iter().map(|members| Target {
+        name: members.join(" + "),
+        kind: LocusKind::Group,
+        depth: members.iter().map(|m| graph.depth(m)).min().unwrap_or(1),
+        members,
+    }));
+    targets.extend(model.states.iter().chain(&model.hidden).map(|s| Target {
         name: s.name.clone(),
         kind: LocusKind::Balance,
-    });
-    lets.chain(balances).collect()
-}
-
-/// The embeddings tried as history, in rows: the user's, or a short and a long delay.
-pub fn history_lags(delay: Option<usize>, dim: usize) -> Vec<Lags> {
-    match delay {
-        Some(delay) => vec![Lags { delay, dim }],
-        None => vec![Lags { delay: 2, dim }, Lags { delay: 12, dim }],
-    }
+        members: vec![s.name.clone()],
+        depth: 0,
+    }));
+    targets
 }
 
 /// A fitted correction along the training rows, for the symbolic hint.
@@ -96,14 +128,16 @@ pub struct Along {
     pub let_last: bool,
 }
 
-/// The loci, best first, the memory verdict, and the best correction along the data.
-#[derive(Debug, Clone)]
+/// The loci, best first, the memory verdict of the free corrections, and the best
+/// correction along the data (empty when the loci are not searched).
+#[derive(Debug, Clone, Default)]
 pub struct Located {
     /// Report entries, best first.
     pub loci: Vec<Locus>,
-    /// Whether the best locus needs history.
+    /// Whether, at the first locus, history beats the present by the margin.
     pub history_dependent: bool,
-    /// The best locus's present-only correction along the training rows.
+    /// The first locus's present-only correction along the training rows (single lets and
+    /// balances only).
     pub along: Option<Along>,
 }
 
@@ -113,7 +147,7 @@ struct Variant {
     map: FeatureMap,
     solution: Solution,
     gap: f64,
-    errors: Vec<f64>,
+    errors: Errors,
 }
 
 /// Everything tried at one target.
@@ -124,6 +158,7 @@ struct Trial {
     pass: Pass,
     present: Option<Variant>,
     history: Option<Variant>,
+    seconds: f64,
 }
 
 impl Trial {
@@ -139,15 +174,16 @@ impl Trial {
     }
 }
 
-/// Tries every target, reporting progress in two stages.
+/// Tries every target with the fitted model `x` (params, then fitted starts) and the history
+/// time constants `taus`.
 pub fn locate(
     context: &Context,
-    params: &[f64],
-    lags: &[Lags],
+    x: &[f64],
+    taus: &[f64],
     gaps: (f64, f64),
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Located, DiagnoseError> {
-    let targets = targets(context.model);
+    let targets = targets(context);
     progress(Progress::Stage {
         name: "fitting corrections",
         total: targets.len(),
@@ -155,68 +191,113 @@ pub fn locate(
     let found = targets
         .par_iter()
         .map(|target| {
-            let trial = try_target(context, target, params, lags);
-            progress(Progress::Item);
-            trial
+            let started = Instant::now();
+            let mut trial = try_target(context, target, x, taus)?;
+            if let Some(trial) = trial.as_mut() {
+                refine_trial(context, trial, false);
+                trial.seconds = started.elapsed().as_secs_f64();
+            }
+            progress(Progress::Done {
+                item: target.name.clone(),
+                seconds: started.elapsed().as_secs_f64(),
+            });
+            Ok(trial)
         })
-        .collect::<Result<Vec<_>, _>>()?;
+        .collect::<Result<Vec<_>, DiagnoseError>>()?;
     let mut trials: Vec<Trial> = found.into_iter().flatten().collect();
+    trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
     let top = trials.len().min(REFINED);
     progress(Progress::Stage {
-        name: "refining corrections",
-        total: trials.len() + top,
+        name: "refining memory",
+        total: top,
     });
-    trials.par_iter_mut().for_each(|trial| {
-        refine(context, trial, false);
-        progress(Progress::Item);
-    });
-    trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
     trials[..top].par_iter_mut().for_each(|trial| {
-        refine(context, trial, true);
-        progress(Progress::Item);
+        let started = Instant::now();
+        refine_trial(context, trial, true);
+        trial.seconds += started.elapsed().as_secs_f64();
+        progress(Progress::Done {
+            item: trial.target.name.clone(),
+            seconds: started.elapsed().as_secs_f64(),
+        });
     });
-    trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
-    Ok(summarise(context, &trials, gaps))
+    Ok(summarise(context, trials, gaps))
 }
 
 fn summarise(
     context: &Context,
-    trials: &[Trial],
+    mut trials: Vec<Trial>,
     (gap_before, noise_floor): (f64, f64),
 ) -> Located {
-    let best = trials
-        .first()
-        .and_then(|t| t.best())
-        .map(|v| (v.gap, v.errors.clone()));
-    let loci: Vec<Locus> = trials
-        .iter()
-        .map(|trial| {
+    trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
+    let sums: Vec<_> = (trials.iter())
+        .map(|t| match t.best() {
+            Some(v) => context.blocks.sums(&v.errors),
+            None => vec![(f64::INFINITY, 0); context.blocks.blocks.len()],
+        })
+        .collect();
+    let comparison = compare(&sums, context.seed(5000));
+    let best_bound = trials.first().map_or(f64::INFINITY, Trial::bound);
+    let excess = |gap: f64| (gap - noise_floor).max(0.0);
+    let graph = Graph::of(context.checked);
+    let upstream = |i: usize| {
+        let best = &trials[0].target;
+        (trials[i].target.members.iter())
+            .any(|member| best.members.iter().any(|b| graph.feeds(member, b)))
+    };
+    let as_much = |i: usize| {
+        upstream(i)
+            && excess(trials[i].bound()) - excess(best_bound) < NEAR_TIE * excess(gap_before)
+    };
+    let tied: Vec<bool> = (0..trials.len())
+        .map(|i| {
+            i == 0
+                || (trials[i].bound() <= TIE_FACTOR * best_bound
+                    && (comparison.tied_with_best(i) || as_much(i)))
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..trials.len()).collect();
+    order.sort_by(|&a, &b| {
+        let key = |i: usize| {
+            (
+                !tied[i],
+                if tied[i] {
+                    trials[i].target.kind
+                } else {
+                    LocusKind::Let
+                },
+            )
+        };
+        let depth = |i: usize| if tied[i] { trials[i].target.depth } else { 0 };
+        key(a)
+            .cmp(&key(b))
+            .then(depth(b).cmp(&depth(a)))
+            .then(trials[a].bound().total_cmp(&trials[b].bound()))
+    });
+    let loci: Vec<Locus> = (order.iter())
+        .map(|&i| {
+            let trial = &trials[i];
             let gap = |v: &Option<Variant>| v.as_ref().map_or(f64::INFINITY, |v| v.gap);
-            let tied = match (&best, trial.best()) {
-                (Some((gap, errors)), Some(variant)) => {
-                    variant.gap <= TIE_FACTOR * gap
-                        && indistinguishable(&variant.errors, errors, TIE_BLOCKS)
-                }
-                _ => false,
-            };
             Locus {
                 name: trial.target.name.clone(),
                 kind: trial.target.kind,
+                members: trial.target.members.clone(),
                 bound_after: trial.bound(),
                 bound_present: gap(&trial.present),
                 bound_history: gap(&trial.history),
-                tied,
+                tied: tied[i],
+                depth: trial.target.depth,
+                seconds: trial.seconds,
             }
         })
         .collect();
     let history_dependent = loci.first().is_some_and(|best| {
-        let excess = |gap: f64| (gap - noise_floor).max(0.0);
         excess(best.bound_present) > PRESENT_RESIDUAL * excess(gap_before)
             && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
     });
-    let along = trials.first().and_then(|trial| {
+    let along = order.first().and_then(|&i| {
+        let trial = &trials[i];
         let variant = trial.present.as_ref().filter(|v| v.gap.is_finite())?;
-        Some(along(context, trial, variant))
+        (trial.target.members.len() == 1).then(|| along(context, trial, variant))
     });
     Located {
         loci,
@@ -225,17 +306,19 @@ fn summarise(
     }
 }
 
-/// The model with a correction at `target` (params set); `None` when the target reaches
-/// no balance.
+/// The model with corrections at `target`; `None` when no balance uses them.
 pub(super) fn synthesise(
     context: &Context,
     target: &Target,
-    params: &[f64],
 ) -> Result<Option<Corrected>, DiagnoseError> {
+    let outputs: Vec<String> = (0..target.members.len())
+        .map(|j| format!("{OUTPUT}{j}"))
+        .collect();
     let source = format!(
-        "{}\n\nclosure {CLOSURE} {{\n  outputs {OUTPUT}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
+        "{}\n\nclosure {CLOSURE} {{\n  outputs {}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
         context.problem.source,
-        target.patch()
+        outputs.join(", "),
+        target.patches().join("\n  ")
     );
     let compiled =
         crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
@@ -253,178 +336,173 @@ pub(super) fn synthesise(
     if !model.balances.iter().any(|b| ir::uses_closure(&b.expr)) {
         return Ok(None);
     }
-    let var = Var::ClosureOutput { closure, output: 0 };
-    let mut simulator = Simulator::new(&model, Some(var), tolerances())?;
-    simulator.set_params(params);
-    let locus = match target.kind {
-        LocusKind::Balance => {
-            let index = (model.states.iter().chain(&model.hidden))
-                .position(|s| s.name == target.name)
-                .ok_or_else(|| DiagnoseError::internal(format!("no state `{}`", target.name)))?;
-            LocusValue::State(index)
-        }
-        _ => {
-            let definition = (context.model.lets.iter())
-                .find(|l| l.name == target.name)
-                .ok_or_else(|| DiagnoseError::internal(format!("no let `{}`", target.name)))?;
-            LocusValue::Let(simulator.compile(&definition.expr)?)
-        }
-    };
+    let vars: Vec<Var> = (0..outputs.len())
+        .map(|output| Var::ClosureOutput { closure, output })
+        .collect();
+    let simulator = Simulator::new(&model, &vars, tolerances())?;
+    let mut loci = Vec::new();
+    for member in &target.members {
+        loci.push(match target.kind {
+            LocusKind::Balance => {
+                let index = (model.states.iter().chain(&model.hidden))
+                    .position(|s| &s.name == member)
+                    .ok_or_else(|| DiagnoseError::internal(format!("no state `{member}`")))?;
+                LocusValue::State(index)
+            }
+            _ => {
+                let definition = (context.model.lets.iter())
+                    .find(|l| &l.name == member)
+                    .ok_or_else(|| DiagnoseError::internal(format!("no let `{member}`")))?;
+                LocusValue::Let(simulator.compile(&definition.expr)?)
+            }
+        });
+    }
+    let mut constraints: Vec<Constraint> = model.params.iter().map(|p| p.constraint).collect();
+    let fitted = context.split.fitted_count(model.hidden.len());
+    constraints.extend((0..fitted).map(|_| Constraint::Free));
     Ok(Some(Corrected {
         simulator,
-        locus,
+        loci,
         balance: target.kind == LocusKind::Balance,
-        constraints: model.params.iter().map(|p| p.constraint).collect(),
+        constraints,
     }))
 }
 
 fn try_target(
     context: &Context,
     target: &Target,
-    params: &[f64],
-    lags: &[Lags],
+    x: &[f64],
+    taus: &[f64],
 ) -> Result<Option<Trial>, DiagnoseError> {
-    let Some(mut corrected) = synthesise(context, target, params)? else {
+    let Some(mut corrected) = synthesise(context, target)? else {
         return Ok(None);
     };
-    let (train, end) = (&context.split.train, context.split.train_rows.end);
-    let Ok(pass) = correction::one_step_pass(&mut corrected, train, end) else {
+    let Ok(pass) = correction::one_step_pass(&mut corrected, &context.split, x, taus) else {
         return Ok(None);
     };
-    let theta = correction::theta_of(&corrected.constraints, params);
-    let mut variant = |lags| {
-        let map = feature_map(context, &pass, lags);
-        let solution = correction::fit(&pass, &map, train, &context.normalisation, &theta)?;
-        Some(score(context, &mut corrected, map, solution))
+    let theta = thetas(&corrected.constraints, x);
+    let norm = &context.split.normalisation;
+    let mut variant = |taus: Option<Vec<f64>>| {
+        let map = feature_map(context, &pass, taus);
+        let solution = correction::fit(&pass, &map, norm, &theta)?;
+        Some(evaluate(context, &mut corrected, map, solution))
     };
     let present = variant(None);
-    let history = (lags.iter())
-        .filter_map(|&lag| variant(Some(lag)))
-        .min_by(|a, b| a.gap.total_cmp(&b.gap));
+    let history = (!taus.is_empty())
+        .then(|| variant(Some(taus.to_vec())))
+        .flatten();
     Ok(Some(Trial {
         target: target.clone(),
         corrected,
         pass,
         present,
         history,
+        seconds: 0.0,
     }))
 }
 
 /// Refines a trial's present correction (with `history`, its history correction) on the
-/// training free run, and scores it again.
-fn refine(context: &Context, trial: &mut Trial, history: bool) {
-    let split = &context.split;
-    let fitting = (
-        &split.train,
-        split.train_rows.clone(),
-        &context.normalisation,
-    );
-    let variants = if history {
-        vec![&mut trial.history]
+/// training free runs, and scores it again.
+fn refine_trial(context: &Context, trial: &mut Trial, history: bool) {
+    let variant = if history {
+        &mut trial.history
     } else {
-        vec![&mut trial.present]
+        &mut trial.present
     };
-    for variant in variants.into_iter().flatten() {
-        let along = correction::values_along(
-            &trial.pass,
-            &variant.map,
-            &split.train,
-            &variant.solution.weights,
-        );
-        let typical = root_mean_square(&along);
-        let refinement = correction::Refinement {
-            directions: variant.map.directions(),
-            reference: if typical > 0.0 {
+    let Some(variant) = variant.as_mut() else {
+        return;
+    };
+    let slots = trial.corrected.loci.len();
+    let width = variant.map.width();
+    let reference: Vec<f64> = (0..slots)
+        .map(|slot| {
+            let along = correction::values_along(
+                &trial.pass,
+                &variant.map,
+                &variant.solution.weights,
+                slot,
+            );
+            let typical = root_mean_square(&along);
+            if typical > 0.0 {
                 typical
             } else {
                 1e-3 * variant.map.locus_scale
-            },
-        };
-        let solution = correction::refine(
-            &trial.corrected,
-            &variant.map,
-            &variant.solution,
-            &refinement,
-            fitting.clone(),
-        );
-        *variant = score(context, &mut trial.corrected, variant.map.clone(), solution);
-    }
+            }
+        })
+        .collect();
+    let refinement = Refinement {
+        directions: variant.map.directions(),
+        reference,
+    };
+    debug_assert_eq!(variant.solution.weights.len(), slots * width);
+    let solution = refine(
+        &trial.corrected,
+        &variant.map,
+        &variant.solution,
+        &refinement,
+        &context.split,
+    );
+    *variant = evaluate(context, &mut trial.corrected, variant.map.clone(), solution);
 }
 
-/// The held-out gap (infinite when the run fails) and per-row errors of a correction.
-fn score(
+/// The held-out errors and gap of a correction.
+fn evaluate(
     context: &Context,
     corrected: &mut Corrected,
     map: FeatureMap,
     solution: Solution,
 ) -> Variant {
-    let test = &context.split.test;
-    let rows = context.split.test_rows.clone();
-    let (gap, errors) = match correction::corrected_run(corrected, &map, &solution, test, rows.end)
-    {
-        Ok(run) => {
-            let errors = row_errors(&run, test, rows, &context.normalisation);
-            let gap = errors.iter().sum::<f64>() / (errors.len() * test.states.len()).max(1) as f64;
-            (if gap.is_finite() { gap } else { f64::INFINITY }, errors)
-        }
-        Err(_) => (f64::INFINITY, Vec::new()),
-    };
+    let errors = score(corrected, &map, &solution, &context.split);
     Variant {
         map,
         solution,
-        gap,
+        gap: errors.gap(),
         errors,
     }
 }
 
-/// Feature scaling from the pass: present variables z-scored over the training rows.
-pub(super) fn feature_map(context: &Context, pass: &Pass, lags: Option<Lags>) -> FeatureMap {
-    let width = pass.present.first().map_or(0, Vec::len);
+/// Feature scaling from the pass: present variables z-scored over the training rows, the
+/// corrected quantities by their root mean square.
+pub(super) fn feature_map(context: &Context, pass: &Pass, taus: Option<Vec<f64>>) -> FeatureMap {
+    let rows: Vec<&Vec<f64>> = pass.records.iter().flat_map(|r| r.present.iter()).collect();
+    let width = rows.first().map_or(0, |p| p.len());
     let (center, scale) = (0..width)
-        .map(|j| mean_std(&pass.present.iter().map(|p| p[j]).collect::<Vec<_>>()))
+        .map(|j| mean_std(&rows.iter().map(|p| p[j]).collect::<Vec<_>>()))
         .unzip();
-    let locus_scale = root_mean_square(&pass.locus);
+    let loci: Vec<f64> = (pass.records.iter())
+        .flat_map(|r| r.locus.iter().flatten().copied())
+        .collect();
+    let locus_scale = root_mean_square(&loci);
     FeatureMap {
         center,
         scale,
         locus_scale: if locus_scale > 0.0 { locus_scale } else { 1.0 },
         embedded: context.model.inputs.len() + context.model.states.len(),
-        lags,
+        taus,
     }
 }
 
 fn along(context: &Context, trial: &Trial, variant: &Variant) -> Along {
     let model = context.model;
-    let pass = &trial.pass;
     let mut names: Vec<String> = (model.inputs.iter().map(|i| i.name.clone()))
-        .chain(
-            model
-                .states
-                .iter()
-                .chain(&model.hidden)
-                .map(|s| s.name.clone()),
-        )
+        .chain((model.states.iter().chain(&model.hidden)).map(|s| s.name.clone()))
         .collect();
     let balance = trial.target.kind == LocusKind::Balance;
     if !balance {
         names.push(trial.target.name.clone());
     }
-    let variables = (0..pass.rows)
-        .map(|row| {
-            let mut values = pass.present[row].clone();
+    let variables = (trial.pass.records.iter())
+        .flat_map(|record| (0..record.rows()).map(move |row| (record, row)))
+        .map(|(record, row)| {
+            let mut values = record.present[row].clone();
             if !balance {
-                values.push(pass.locus[row]);
+                values.push(record.locus[row][0]);
             }
             values
         })
         .collect();
     Along {
-        values: correction::values_along(
-            pass,
-            &variant.map,
-            &context.split.train,
-            &variant.solution.weights,
-        ),
+        values: correction::values_along(&trial.pass, &variant.map, &variant.solution.weights, 0),
         names,
         variables,
         let_last: !balance,

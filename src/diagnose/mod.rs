@@ -1,49 +1,67 @@
 //! Sim-to-real gap diagnosis (`gbc diagnose`, spec section 5): a mechanistic model against
-//! measured data. Method and worked example: `docs/diagnose.md`.
+//! a data set of experiments (irregular times, missing cells). Method and worked examples:
+//! `docs/diagnose.md`.
 //!
-//! 1. **Gap.** The model's `param`s are fitted on the training part ([`fit`]: Levenberg–
-//!    Marquardt on the z-scored free-run residuals); the held-out free run gives the gap,
-//!    per measured state its share, free-run (online) and one-step (offline) errors. The
-//!    noise floor ([`noise`]) says what a perfect model would score.
-//! 2. **Where.** A free correction is added at each `let` and each balance in turn
-//!    ([`locus`]), once seeing the present only and once the measured history; the held-out
-//!    gap it leaves bounds what any mechanism there can achieve. Windows and regime
-//!    ([`evaluate`]) say when and where the error lies; a sparse regression ([`symbolic`])
-//!    proposes formulas for the correction.
-//! 3. **Which and how far.** Every `effect` is applied, all params fitted, and the effects
-//!    ranked by held-out gap ([`effects`]), refitted on both halves of the training part
-//!    for confidence; the two best are also combined.
+//! 1. **Gap.** The model's `param`s (and starts no cell or declaration gives) are fitted on
+//!    the training parts ([`fit`]: Levenberg–Marquardt on the z-scored free-run residuals
+//!    at measured cells, restarts spent where the starts disagree, standard errors and the
+//!    direction the data leave free from [`uncertainty`]); the held-out free runs give the
+//!    gap, per measured state its share, free-run (online) and one-step (offline) errors.
+//!    The noise floor ([`noise`]) says what a perfect model would score.
+//! 2. **Where.** A free correction is added at each `let`, each group of lets sharing an
+//!    input and a form ([`graph`]) and each balance ([`locus`]), once seeing the present
+//!    only and once a fading memory whose span is chosen from the data ([`memory`]); the
+//!    held-out gap it leaves bounds what any mechanism there can achieve. Windows and
+//!    regime ([`evaluate`]) say when and where the error lies; a sparse regression
+//!    ([`symbolic`]) proposes formulas for the correction.
+//! 3. **Which and how far.** Every `effect` is applied alone, all params fitted, and ranked
+//!    by held-out gap with a block-bootstrap uncertainty ([`effects`], [`ranking`]); forward
+//!    selection ([`selection`]) credits several effects in order while each pays for its
+//!    params on held-out data.
 
+mod assemble;
 mod correction;
 mod effects;
 mod error;
 mod evaluate;
 mod features;
 mod fit;
+mod graph;
 pub mod html;
 mod locus;
+mod memory;
 mod noise;
-mod record;
+mod ranking;
+mod refine;
 pub mod render;
 mod report;
+mod selection;
 mod simulate;
+mod split;
 mod symbolic;
+mod uncertainty;
 
 pub use error::DiagnoseError;
-pub use record::{Record, Split, MIN_ROWS};
 pub use report::*;
+pub use split::MIN_ROWS;
 
 use crate::check::Checked;
-use crate::data::Dataset;
-use crate::ir::Model;
-use record::Normalisation;
+use crate::ir::{Constraint, Dynamics, Model};
+use crate::record::Record;
+use ranking::Blocks;
 use simulate::{tolerances, Simulator};
+use split::{Holdout, Split, Start};
+use std::time::Instant;
 
 /// The gap is significant when it exceeds this multiple of the noise floor.
 pub const SIGNIFICANCE: f64 = 2.0;
-/// The best effect is credited when it removes at least this fraction of the gap above the
-/// noise floor (and the gap is significant).
+/// An effect (or an addition to the credited ones) is credited only when it removes at
+/// least this fraction of the gap above the noise floor (and the gap is significant, and
+/// its lead exceeds the ranking's uncertainty).
 pub const CREDIT: f64 = 0.5;
+/// The share of each experiment held out (its tail) when no split is asked for: scoring
+/// tails keeps the transient of a start away from the score.
+pub const DEFAULT_TAIL: f64 = 0.3;
 
 /// What to diagnose.
 #[derive(Debug, Clone, Copy)]
@@ -56,45 +74,54 @@ pub struct Problem<'a> {
     pub checked: &'a Checked,
     /// The model lowered without effects.
     pub model: &'a Model,
-    /// The training record.
-    pub train: &'a Dataset,
-    /// A separate held-out record; `None` holds out the tail of `train`.
-    pub test: Option<&'a Dataset>,
+    /// The experiments that train (with a tail split, their tails are scored).
+    pub records: &'a [Record],
+    /// Experiments that are only scored (`--holdout NAME`, `--val FILE`).
+    pub held_out: &'a [Record],
 }
 
 /// How to diagnose.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
-    /// Fraction of the record held out when there is no separate test record.
-    pub holdout: f64,
-    /// Random restarts of each fit, besides the declared or warm start.
+    /// Share of each training experiment's measured rows held out (its tail). `None`: whole
+    /// held-out experiments if any are given, else a tail of [`DEFAULT_TAIL`].
+    pub val_fraction: Option<f64>,
+    /// Most random restarts of each fit besides the declared or warm start (fits stop
+    /// earlier once two starts agree).
     pub restarts: usize,
     /// Seed of every random choice.
     pub seed: u64,
-    /// Number of time windows of the held-out part.
+    /// Number of time windows of each held-out part.
     pub windows: usize,
-    /// Delay of the history embedding of corrections (model time units); `None` tries a
-    /// short (2 rows) and a long (12 rows) delay.
-    pub delay: Option<f64>,
-    /// Number of lags of the history embedding, the present included (>= 2).
+    /// The longest time constant of the history features (model time units); `None`
+    /// chooses it from the data.
+    pub span: Option<f64>,
+    /// Number of time constants of the history features.
     pub dim: usize,
+    /// Whether hidden states start from values fitted per training experiment.
+    pub fit_initial: bool,
+    /// Whether to search the loci (free corrections at every let, group and balance; most
+    /// of the cost). Without it the report answers which effects and how far only.
+    pub locate: bool,
 }
 
 impl Default for Options {
     fn default() -> Self {
         Options {
-            holdout: 0.3,
-            restarts: 2,
+            val_fraction: None,
+            restarts: 4,
             seed: 0,
             windows: 20,
-            delay: None,
-            dim: 6,
+            span: None,
+            dim: 5,
+            fit_initial: false,
+            locate: true,
         }
     }
 }
 
 /// Progress of a diagnosis, for a progress bar.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Progress {
     /// A stage of `total` work items starts.
     Stage {
@@ -104,7 +131,12 @@ pub enum Progress {
         total: usize,
     },
     /// One item of the current stage is done.
-    Item,
+    Done {
+        /// What it was (a candidate effect, a locus).
+        item: String,
+        /// Seconds it took.
+        seconds: f64,
+    },
 }
 
 /// Everything the stages share.
@@ -114,7 +146,7 @@ pub struct Context<'a> {
     model: &'a Model,
     checked: &'a Checked,
     split: Split,
-    normalisation: Normalisation,
+    blocks: Blocks,
 }
 
 impl Context<'_> {
@@ -125,6 +157,78 @@ impl Context<'_> {
             .wrapping_mul(0x9E37_79B9_7F4A_7C15)
             .wrapping_add(index.wrapping_mul(0xD1B5_4A32_D192_ED03))
     }
+
+    /// The unknowns of a fit of `model` (compiled as `simulator`): its params, the fitted
+    /// starts of measured states, then (with `--fit-initial`) of its hidden states in every
+    /// training experiment; named `STATE@EXPERIMENT`, with default values (declared params,
+    /// first measured values, declared initial values).
+    fn unknowns(&self, model: &Model, simulator: &Simulator) -> Unknowns {
+        let split = &self.split;
+        let mut unknowns = Unknowns::default();
+        for param in &model.params {
+            unknowns.push(param.name.clone(), param.constraint, param.init);
+        }
+        let guesses = self.initial_guesses();
+        for (&(record, state), guess) in split.fitted_starts.iter().zip(guesses) {
+            let name = format!(
+                "{}@{}",
+                model.states[state].name, split.records[record].name
+            );
+            unknowns.push(name, Constraint::Free, guess);
+        }
+        if split.fit_hidden {
+            let mut simulator = simulator.clone();
+            let declared: Vec<f64> = model.params.iter().map(|p| p.init).collect();
+            simulator.set_params(&declared);
+            for (_, record, _) in split.training() {
+                let start = simulator.start_state(record, &[]);
+                for (h, state) in model.hidden.iter().enumerate() {
+                    let name = format!("{}@{}", state.name, record.name);
+                    unknowns.push(name, Constraint::Free, start[model.states.len() + h]);
+                }
+            }
+        }
+        unknowns
+    }
+
+    /// First guesses of the fitted starts: the state's first measured value in the
+    /// experiment's training part, else its training mean.
+    fn initial_guesses(&self) -> Vec<f64> {
+        (self.split.fitted_starts.iter())
+            .map(|&(record, state)| {
+                let rows = self.split.parts[record].train.clone();
+                let cells = &self.split.records[record].states[state][rows];
+                (cells.iter().flatten().next().copied())
+                    .unwrap_or(self.split.normalisation.state_mean[state])
+            })
+            .collect()
+    }
+}
+
+/// The unknowns of a fit, in order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Unknowns {
+    /// Names: params, then `STATE@EXPERIMENT` for fitted starts.
+    pub names: Vec<String>,
+    /// Constraints (fitted starts are free).
+    pub constraints: Vec<Constraint>,
+    /// Default values.
+    pub defaults: Vec<f64>,
+}
+
+impl Unknowns {
+    fn push(&mut self, name: String, constraint: Constraint, default: f64) {
+        self.names.push(name);
+        self.constraints.push(constraint);
+        self.defaults.push(default);
+    }
+
+    /// Values from `start` by name, defaults elsewhere.
+    pub fn values(&self, start: &std::collections::BTreeMap<String, f64>) -> Vec<f64> {
+        (self.names.iter().zip(&self.defaults))
+            .map(|(name, default)| start.get(name).copied().unwrap_or(*default))
+            .collect()
+    }
 }
 
 /// Runs the whole diagnosis.
@@ -133,53 +237,72 @@ pub fn diagnose(
     options: &Options,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Report, DiagnoseError> {
+    let started = Instant::now();
     let context = context(problem, options)?;
-    let base = Simulator::new(context.model, None, tolerances())?;
+    let base = Simulator::new(context.model, &[], tolerances())?;
     check_runs(&context, &base)?;
     progress(Progress::Stage {
         name: "fitting the model",
         total: 1,
     });
-    let declared = effects::named(context.model, &[]);
-    let before = effects::fit_and_score(
-        &context,
-        context.model,
-        &declared,
-        effects::Part::Full,
-        context.seed(0),
-    )?;
-    progress(Progress::Item);
-    let base_params = effects::named(context.model, &before.fitted.params);
+    let declared = std::collections::BTreeMap::new();
+    let before = effects::fit_and_score(&context, context.model, &declared, context.seed(0))?;
+    progress(Progress::Done {
+        item: context.model.name.clone(),
+        seconds: before.summary.seconds,
+    });
     let gap_before = before.gap;
-    let mut fitted = base.clone();
-    fitted.set_params(&before.fitted.params);
-    let states = state_gaps(&context, &mut fitted, before.run.as_ref())?;
-    let noise_floor = states.iter().map(|s| s.noise).sum::<f64>() / states.len().max(1) as f64;
-    let significant = gap_before > SIGNIFICANCE * noise_floor;
+    let states = assemble::state_gaps(&context, &base, &before);
+    let noise_floor = assemble::noise_floor(&states);
+    let significant = gap_before.is_finite() && gap_before > SIGNIFICANCE * noise_floor;
     progress(Progress::Stage {
         name: "fitting effects",
-        total: 3 * context.model.effects.len(),
+        total: context.model.effects.len(),
     });
-    let tick = || progress(Progress::Item);
-    let ranking = effects::rank_effects(&context, &base_params, gap_before, &tick)?;
-    let combined = effects::combine(&context, &ranking.scores, &base_params, gap_before)?;
-    let credited = ranking
-        .scores
-        .first()
-        .filter(|best| {
-            significant && gap_before - best.gap_after >= CREDIT * (gap_before - noise_floor)
-        })
-        .map(|best| best.name.clone());
-    let lags = locus::history_lags(delay_rows(&context)?, options.dim);
-    let gaps = (gap_before, noise_floor);
-    let located = locus::locate(&context, &before.fitted.params, &lags, gaps, progress)?;
-    let history_dependent = significant && located.history_dependent;
+    let base_params = effects::named(context.model, &before.fitted.x);
+    let effects_started = Instant::now();
+    let ranking = effects::rank_effects(&context, &before.named, gap_before, progress)?;
+    let effects_seconds = effects_started.elapsed().as_secs_f64();
+    progress(Progress::Stage {
+        name: "selecting effects",
+        total: context.model.effects.len().saturating_sub(1),
+    });
+    let levels = selection::Levels {
+        gap_before,
+        noise_floor,
+    };
+    let selection_started = Instant::now();
+    let (selection, credited_fit) =
+        selection::select(&context, &before, &ranking, levels, progress)?;
+    let selection_seconds = selection_started.elapsed().as_secs_f64();
+    let loci_started = Instant::now();
+    // Without a significant gap there is nothing to locate.
+    let (taus, located) = if options.locate && significant {
+        let taus = memory_time_constants(&context, &base, &before.fitted.x);
+        let gaps = (gap_before, noise_floor);
+        let located = locus::locate(&context, &before.fitted.x, &taus, gaps, progress)?;
+        (taus, located)
+    } else {
+        (Vec::new(), locus::Located::default())
+    };
+    let loci_seconds = loci_started.elapsed().as_secs_f64();
+    let memory = assemble::memory(&located, &ranking, &selection, (levels, &taus));
     let hints = match (&located.along, located.loci.first()) {
-        (Some(along), Some(best)) if significant => symbolic::hints(along, &correction_name(best)),
+        (Some(along), Some(best)) if significant && !memory.history_needed => {
+            symbolic::hints(along, &correction_name(best))
+        }
         _ => Vec::new(),
     };
-    let series = series(&context, before.run.as_ref(), ranking.best_run.as_ref());
-    let (windows, regime) = where_and_when(&context, &series);
+    let after = credited_fit.as_ref().or(ranking.fits.first());
+    let after_name = match &credited_fit {
+        Some(_) => selection.credited.join(" + "),
+        None => ranking
+            .scores
+            .first()
+            .map_or(String::new(), |s| s.name.clone()),
+    };
+    let series = assemble::series(&context, &before, after.map(|a| (a, after_name)));
+    let (windows, regime) = assemble::where_and_when(&context, &before);
     let mut states = states;
     states.sort_by(|a, b| b.share.total_cmp(&a.share));
     Ok(Report {
@@ -188,17 +311,28 @@ pub fn diagnose(
         noise_floor,
         significant,
         states,
+        history_dependent: memory.history_needed,
+        memory,
         locus: located.loci,
-        history_dependent,
         windows,
         regime,
+        credited: selection.credited.first().cloned(),
         effects: ranking.scores,
-        credited,
-        combined,
+        selection,
         confidence: ranking.confidence,
         hints,
         fitted_params: base_params,
-        split: split_summary(&context),
+        base_fit: before.summary.clone(),
+        initial_states: assemble::initial_states(&context, &base, &before.fitted.x),
+        split: assemble::split_summary(&context),
+        timing: Timing {
+            total: started.elapsed().as_secs_f64(),
+            base_fit: before.summary.seconds,
+            effects: effects_seconds,
+            selection: selection_seconds,
+            loci: loci_seconds,
+            jobs: rayon::current_num_threads(),
+        },
         series,
     })
 }
@@ -211,28 +345,24 @@ fn correction_name(locus: &Locus) -> String {
     }
 }
 
-/// The history delay in rows, if the user gave one.
-fn delay_rows(context: &Context) -> Result<Option<usize>, DiagnoseError> {
-    let options = context.options;
-    if options.dim < 2 {
-        return Err(DiagnoseError::BadOption {
-            option: "--dim".into(),
-            expected: "at least 2 lags".into(),
-            found: options.dim.to_string(),
-        });
-    }
-    let Some(delay) = options.delay else {
-        return Ok(None);
-    };
-    let rows = (delay / context.split.train.step).round();
-    if !(rows >= 1.0 && rows.is_finite()) {
-        return Err(DiagnoseError::BadOption {
-            option: "--delay".into(),
-            expected: format!("at least one sampling step ({})", context.split.train.step),
-            found: delay.to_string(),
-        });
-    }
-    Ok(Some(rows as usize))
+/// The history's time constants: from the median row spacing up to the span (the user's,
+/// or chosen from the residuals of the fitted model's training free runs).
+fn memory_time_constants(context: &Context, base: &Simulator, x: &[f64]) -> Vec<f64> {
+    let split = &context.split;
+    let step = memory::median_step(split);
+    let span = context.options.span.unwrap_or_else(|| {
+        let mut simulator = base.clone();
+        simulator.set_params(x);
+        let fitted = &x[simulator.params().min(x.len())..];
+        let runs: Vec<_> = (split.training())
+            .map(|(index, record, rows)| {
+                let overrides = split.overrides(index, fitted, simulator.hidden_count());
+                simulator.free_run(record, &overrides, rows.end).ok()
+            })
+            .collect();
+        memory::span_from_residuals(split, &runs)
+    });
+    memory::time_constants(step, span, context.options.dim)
 }
 
 fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a>, DiagnoseError> {
@@ -244,161 +374,119 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
             closures: names.join(", "),
         });
     }
-    if !(options.holdout > 0.0 && options.holdout < 1.0) {
-        return Err(DiagnoseError::BadOption {
-            option: "--holdout".into(),
-            expected: "a fraction strictly between 0 and 1".into(),
-            found: options.holdout.to_string(),
-        });
-    }
-    let train = Record::from_dataset(model, problem.train)?;
-    let split = match problem.test {
-        None => Split::tail(train, options.holdout)?,
-        Some(test) => {
-            let test = Record::from_dataset(model, test)?;
-            if ((test.step - train.step) / train.step).abs() > 1e-6 {
-                return Err(DiagnoseError::StepMismatch {
-                    train: train.step,
-                    test: test.step,
-                });
-            }
-            Split::separate(train, test)?
+    check_options(options)?;
+    let records = problem.records.iter().chain(problem.held_out);
+    for record in records.clone() {
+        if let Some(observable) = record.observables.first() {
+            return Err(DiagnoseError::MeasuredOutput {
+                model: model.name.clone(),
+                output: observable.name.clone(),
+            });
         }
+    }
+    if model.dynamics == Dynamics::Discrete {
+        let steps: Vec<Option<f64>> = records.clone().map(Record::uniform_step).collect();
+        let first = steps.first().copied().flatten();
+        if let Some(record) = (records.zip(&steps))
+            .find(|(_, step)| {
+                step.is_none()
+                    || step
+                        .zip(first)
+                        .is_some_and(|(a, b)| (a - b).abs() > 1e-6 * b)
+            })
+            .map(|(record, _)| record)
+        {
+            return Err(DiagnoseError::IrregularMap {
+                experiment: record.name.clone(),
+            });
+        }
+    }
+    let train = problem.records.to_vec();
+    let held = problem.held_out.to_vec();
+    let holdout = match options.val_fraction {
+        Some(share) => Holdout::Tail(share),
+        None if !held.is_empty() => Holdout::Experiments,
+        None => Holdout::Tail(DEFAULT_TAIL),
     };
+    let split = Split::new(model, train, held, (holdout, options.fit_initial))?;
     Ok(Context {
         problem: *problem,
         options,
         model,
         checked: problem.checked,
-        normalisation: split.normalisation(),
+        blocks: Blocks::new(&split),
         split,
     })
 }
 
-/// The model must run on both records with its declared params.
+fn check_options(options: &Options) -> Result<(), DiagnoseError> {
+    let bad = |option: &str, expected: &str, found: String, help: &str| DiagnoseError::BadOption {
+        option: option.into(),
+        expected: expected.into(),
+        found,
+        help: help.into(),
+    };
+    if let Some(share) = options.val_fraction {
+        if !(share > 0.0 && share < 1.0) {
+            return Err(bad(
+                "--val-fraction",
+                "a share strictly between 0 and 1",
+                share.to_string(),
+                "--val-fraction 0.3 scores the last 30 % of each experiment's measured rows",
+            ));
+        }
+    }
+    if options.dim < 1 {
+        return Err(bad(
+            "--dim",
+            "at least 1 time constant",
+            options.dim.to_string(),
+            "--dim sets how many filters of the history span, from the sampling step to --span",
+        ));
+    }
+    if let Some(span) = options.span {
+        if !(span > 0.0 && span.is_finite()) {
+            return Err(bad(
+                "--span",
+                "a positive time",
+                span.to_string(),
+                "--span is the longest time constant of the history features, in the model's time unit",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The model must run on every experiment with its declared params.
 fn check_runs(context: &Context, base: &Simulator) -> Result<(), DiagnoseError> {
     let mut simulator = base.clone();
-    let declared: Vec<f64> = context.model.params.iter().map(|p| p.init).collect();
+    let declared = context.unknowns(context.model, base).defaults;
     simulator.set_params(&declared);
-    for record in [&context.split.train, &context.split.test] {
+    let fitted = &declared[context.model.params.len()..];
+    for (index, record) in context.split.records.iter().enumerate() {
+        let overrides = context
+            .split
+            .overrides(index, fitted, simulator.hidden_count());
         simulator
-            .free_run(record, record.len())
+            .free_run(record, &overrides, record.len())
             .map_err(|error| DiagnoseError::Unsimulable {
-                reason: error.to_string(),
+                reason: format!("experiment `{}`: {error}", record.name),
             })?;
     }
     Ok(())
 }
 
-/// Per measured state: shares, online and offline errors, noise.
-fn state_gaps(
-    context: &Context,
-    fitted: &mut Simulator,
-    run: Option<&simulate::Run>,
-) -> Result<Vec<StateGap>, DiagnoseError> {
-    let (test, rows, norm) = (
-        &context.split.test,
-        context.split.test_rows.clone(),
-        &context.normalisation,
-    );
-    let online = match run {
-        Some(run) => evaluate::state_errors(run, test, rows.clone(), norm),
-        None => vec![f64::INFINITY; context.model.states.len()],
-    };
-    let offline = evaluate::offline_errors(fitted, test, rows, norm)
-        .unwrap_or_else(|_| vec![f64::INFINITY; online.len()]);
-    let noise = noise::noise_floors(
-        &context.split.train.states,
-        context.split.train_rows.clone(),
-        norm,
-    );
-    let total: f64 = online.iter().sum();
-    Ok((context.model.states.iter().enumerate())
-        .map(|(k, state)| StateGap {
-            name: state.name.clone(),
-            share: if total > 0.0 { online[k] / total } else { 0.0 },
-            online: online[k],
-            offline: offline[k],
-            noise: noise[k],
-        })
-        .collect())
-}
-
-fn series(
-    context: &Context,
-    before: Option<&simulate::Run>,
-    after: Option<&simulate::Run>,
-) -> Series {
-    let test = &context.split.test;
-    let rows = context.split.test_rows.clone();
-    let measured = context.model.states.len();
-    let columns = |run: &simulate::Run| -> Vec<Vec<f64>> {
-        (0..measured)
-            .map(|k| (0..run.rows()).map(|row| run.row(row)[k]).collect())
-            .collect()
-    };
-    Series {
-        times: test.times[..rows.end].to_vec(),
-        first_scored: rows.start,
-        names: context
-            .model
-            .states
-            .iter()
-            .map(|s| s.name.clone())
-            .collect(),
-        data: test.states.iter().map(|c| c[..rows.end].to_vec()).collect(),
-        before: before.map(columns).unwrap_or_default(),
-        after: after.map(columns),
-        errors: before
-            .map(|run| evaluate::row_errors(run, test, rows, &context.normalisation))
-            .unwrap_or_default(),
-    }
-}
-
-fn where_and_when(context: &Context, series: &Series) -> (Vec<Window>, Vec<Regime>) {
-    if series.errors.is_empty() {
-        return (Vec::new(), Vec::new());
-    }
-    let rows = context.split.test_rows.clone();
-    let test = &context.split.test;
-    let mut found = evaluate::windows(
-        &test.times,
-        rows.clone(),
-        &series.errors,
-        context.options.windows,
-    );
-    let mut covered = 0.0;
-    found.retain(|w| {
-        let keep = covered < 0.5;
-        covered += w.share;
-        keep
-    });
-    let variables: Vec<(String, Vec<f64>)> = (context.model.inputs.iter().map(|i| &i.name))
-        .zip(&test.inputs)
-        .chain(
-            context
-                .model
-                .states
-                .iter()
-                .map(|s| &s.name)
-                .zip(&test.states),
-        )
-        .map(|(name, column)| (name.clone(), column[rows.clone()].to_vec()))
-        .collect();
-    (found, evaluate::regimes(&variables, &series.errors))
-}
-
-fn split_summary(context: &Context) -> SplitSummary {
-    let rows = context.split.test_rows.clone();
-    let times = &context.split.test.times;
-    SplitSummary {
-        train_rows: context.split.train_rows.len(),
-        test_rows: rows.len(),
-        t_test_start: times[rows.start],
-        t_test_end: times[rows.end - 1],
-        separate_test: context.problem.test.is_some(),
+/// Where a measured state's run starts, in words.
+fn origin(start: Start) -> &'static str {
+    match start {
+        Start::Cell => "measured",
+        Start::Declared => "declared",
+        Start::Fitted(_) => "fitted",
+        Start::Fixed(_) => "first measured value",
     }
 }
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_sets;

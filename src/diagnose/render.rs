@@ -13,13 +13,14 @@ pub fn text(report: &Report) -> String {
     out
 }
 
-/// A number with 3 significant digits, in plain or scientific notation.
+/// A number with 3 significant digits, in plain or scientific notation; "diverged" for an
+/// infinite gap.
 pub fn num(value: f64) -> String {
     if !value.is_finite() {
         return if value.is_nan() {
             "n/a".into()
         } else {
-            "diverges".into()
+            "diverged".into()
         };
     }
     let magnitude = value.abs();
@@ -35,6 +36,11 @@ pub fn num(value: f64) -> String {
     }
 }
 
+/// An optional number, `-` when absent.
+fn maybe(value: Option<f64>) -> String {
+    value.map_or("-".into(), num)
+}
+
 /// A fraction as a percentage.
 pub fn percent(value: f64) -> String {
     if value.is_finite() {
@@ -46,19 +52,26 @@ pub fn percent(value: f64) -> String {
 
 fn header(out: &mut String, report: &Report) {
     let split = &report.split;
-    let held = if split.separate_test {
-        "test file"
-    } else {
-        "held-out tail"
+    let held = match split.share {
+        Some(share) => format!("the last {} of each experiment", percent(share)),
+        None => String::new(),
+    };
+    let whole: Vec<&str> = (split.scored.iter())
+        .filter(|p| !split.train_experiments.contains(&p.experiment))
+        .map(|p| p.experiment.as_str())
+        .collect();
+    let held = match (held.is_empty(), whole.is_empty()) {
+        (false, false) => format!("{held}, and experiments {}", whole.join(", ")),
+        (false, true) => held,
+        (true, _) => format!("experiments {}", whole.join(", ")),
     };
     let _ = writeln!(
         out,
-        "model {}: fitted on {} rows, scored on {} rows ({held}, t = {} to {})\n",
+        "model {}: fitted on {} measured rows ({}), scored on {} ({held})\n",
         report.model,
         split.train_rows,
+        split.train_experiments.join(", "),
         split.test_rows,
-        num(split.t_test_start),
-        num(split.t_test_end)
     );
 }
 
@@ -80,13 +93,16 @@ fn where_section(out: &mut String, report: &Report) {
         num(report.gap_before),
         num(report.noise_floor),
     );
-    let params: Vec<String> = report
-        .fitted_params
-        .iter()
-        .map(|(k, v)| format!("{k} = {}", num(*v)))
-        .collect();
-    if !params.is_empty() {
-        let _ = writeln!(out, "   fitted params: {}", params.join(", "));
+    fit_lines(out, "fitted params", &report.base_fit);
+    for start in &report.initial_states {
+        let _ = writeln!(
+            out,
+            "   initial {} of {}: {} ({})",
+            start.state,
+            start.experiment,
+            num(start.value),
+            start.origin
+        );
     }
     let _ = writeln!(
         out,
@@ -99,8 +115,8 @@ fn where_section(out: &mut String, report: &Report) {
             "   {:<12} {:>8} {:>10} {:>10} {:>10}",
             state.name,
             percent(state.share),
-            num(state.online),
-            num(state.offline),
+            maybe(state.online),
+            maybe(state.offline),
             num(state.noise)
         );
     }
@@ -112,9 +128,10 @@ fn where_section(out: &mut String, report: &Report) {
     for window in report.windows.iter().take(3) {
         let _ = writeln!(
             out,
-            "   window t = {} to {}: {} of the error",
+            "   window t = {} to {} ({}): {} of the error",
             num(window.t_start),
             num(window.t_end),
+            window.experiment,
             percent(window.share)
         );
     }
@@ -137,15 +154,53 @@ fn where_section(out: &mut String, report: &Report) {
     let _ = writeln!(out);
 }
 
+/// The params of a fit with their standard errors, flags and free direction.
+fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
+    if fit.estimates.is_empty() {
+        return;
+    }
+    let params: Vec<String> = (fit.estimates.iter())
+        .map(|e| {
+            let flag = if e.identified {
+                ""
+            } else {
+                " (not identified)"
+            };
+            format!(
+                "{} = {} +- {}{flag}",
+                e.name,
+                num(e.value),
+                num(e.std_error)
+            )
+        })
+        .collect();
+    let _ = writeln!(out, "   {label}: {}", params.join(", "));
+    if !fit.free_direction.is_empty() {
+        let parts: Vec<String> = (fit.free_direction.iter())
+            .map(|(name, v)| format!("{name} {}{:.2}", if *v >= 0.0 { "+" } else { "-" }, v.abs()))
+            .collect();
+        let _ = writeln!(
+            out,
+            "   the data leave free the direction {} (logarithms of positive params): the fit cannot tell these apart",
+            parts.join(", ")
+        );
+    }
+}
+
 fn loci(out: &mut String, report: &Report) {
+    if report.locus.is_empty() {
+        let _ = writeln!(out, "   loci and memory: {}", report.memory.reason);
+        return;
+    }
     let _ = writeln!(
         out,
-        "   free correction at each rate and balance (held-out gap it leaves):"
+        "   free correction at each rate, group and balance (held-out gap it leaves; time of its fits):"
     );
-    for locus in report.locus.iter().take(6) {
+    for locus in report.locus.iter().take(8) {
         let kind = match locus.kind {
             LocusKind::Balance => "balance",
             LocusKind::Let => "let",
+            LocusKind::Group => "group",
             LocusKind::Output => "output",
             LocusKind::Closure => "closure",
         };
@@ -156,29 +211,39 @@ fn loci(out: &mut String, report: &Report) {
         };
         let _ = writeln!(
             out,
-            "     {:<12} {:<8} {:>10}  (present only {}, with history {}){tied}",
+            "     {:<16} {:<8} {:>10}  (present only {}, with history {}; {:.1} s){tied}",
             locus.name,
             kind,
             num(locus.bound_after),
             num(locus.bound_present),
-            num(locus.bound_history)
+            num(locus.bound_history),
+            locus.seconds
         );
     }
-    let tied: Vec<&str> = report
-        .locus
-        .iter()
+    let tied: Vec<&str> = (report.locus.iter())
         .filter(|l| l.tied)
         .map(|l| l.name.as_str())
         .collect();
     if tied.len() > 1 {
-        let _ = writeln!(out, "   the data cannot tell apart: {}", tied.join(", "));
+        let _ = writeln!(
+            out,
+            "   the data cannot tell apart: {} (listed most specific and upstream first)",
+            tied.join(", ")
+        );
     }
-    let memory = if report.history_dependent {
+    let memory = &report.memory;
+    let taus: Vec<String> = memory.time_constants.iter().map(|t| num(*t)).collect();
+    let verdict = if memory.history_needed {
         "closing it needs history (hidden dynamics such as a lag)"
     } else {
         "closing it needs no history (an instantaneous term)"
     };
-    let _ = writeln!(out, "   memory: {memory}");
+    let _ = writeln!(out, "   memory: {verdict}: {}", memory.reason);
+    let _ = writeln!(
+        out,
+        "   (history: filters with time constants {}, span chosen from the data)",
+        taus.join(", ")
+    );
 }
 
 /// "u below 0.2", "S above 10", "X between 1 and 2".
@@ -192,61 +257,98 @@ pub fn phrase(regime: &Regime) -> String {
 }
 
 fn which_section(out: &mut String, report: &Report) {
-    let _ = writeln!(out, "2. Which effect causes it");
+    let _ = writeln!(out, "2. Which effects cause it");
     if report.effects.is_empty() {
         let _ = writeln!(out, "   the model declares no effect\n");
         return;
     }
     let _ = writeln!(
         out,
-        "   {:<4} {:<24} {:>10} {:>9}  params",
-        "rank", "effect", "gap after", "shrink"
+        "   {:<4} {:<24} {:>10} {:>9} {:>7} {:>7}  params",
+        "rank", "effect", "gap after", "shrink", "P(best)", "s"
     );
     for (rank, effect) in report.effects.iter().enumerate() {
-        let params: Vec<String> = effect
-            .params
-            .iter()
+        let params: Vec<String> = (effect.params.iter())
             .map(|(k, v)| format!("{k} = {}", num(*v)))
             .collect();
         let _ = writeln!(
             out,
-            "   {:<4} {:<24} {:>10} {:>9}  {}",
+            "   {:<4} {:<24} {:>10} {:>9} {:>7} {:>7.1}  {}",
             rank + 1,
             effect.name,
             num(effect.gap_after),
             percent(effect.shrink),
+            percent(effect.probability_best),
+            effect.fit.seconds,
             params.join(", ")
         );
     }
     let confidence = &report.confidence;
-    let halves: Vec<&str> = confidence
-        .best_by_half
-        .iter()
-        .map(|b| b.as_deref().unwrap_or("-"))
-        .collect();
-    let stability = if confidence.stable {
-        "stable"
+    let certainty = format!(
+        "margin to the second {} +- {} of the gap; best in {} of {} draws over {} blocks",
+        percent(confidence.margin),
+        percent(confidence.margin_error),
+        percent(confidence.probability_best),
+        confidence.resamples,
+        confidence.blocks
+    );
+    if confidence.separated {
+        let _ = writeln!(
+            out,
+            "   ranking: the best is told apart from every other ({certainty})"
+        );
     } else {
-        "not stable"
-    };
+        let _ = writeln!(
+            out,
+            "   ranking: the held-out data cannot tell apart {} ({certainty})",
+            confidence.indistinguishable.join(", ")
+        );
+    }
+    if let Some(best) = report.effects.first() {
+        fit_lines(out, &format!("{} params", best.name), &best.fit);
+    }
     let _ = writeln!(
         out,
-        "   ranking {stability} over the halves of the training part (best: {}); margin to the second: {} of the gap\n",
-        halves.join(" / "),
-        percent(confidence.margin)
+        "   forward selection (held-out gap, with AIC and BIC of the training fit):"
     );
+    let _ = writeln!(
+        out,
+        "     {:<4} {:<30} {:>10} {:>9} {:>11} {:>11}  verdict",
+        "step", "effects", "gap after", "shrink", "AIC", "BIC"
+    );
+    for (index, step) in report.selection.steps.iter().enumerate() {
+        let verdict = if step.accepted { "credited" } else { "stop" };
+        let _ = writeln!(
+            out,
+            "     {:<4} {:<30} {:>10} {:>9} {:>11} {:>11}  {verdict}: {}",
+            index + 1,
+            step.effects.join(" + "),
+            num(step.gap_after),
+            percent(step.shrink),
+            num(step.aic),
+            num(step.bic),
+            step.reason
+        );
+    }
+    if !report.selection.credited.is_empty() {
+        let _ = writeln!(out, "   selection stops: {}", report.selection.stop);
+    }
+    let _ = writeln!(out);
 }
 
 fn how_far_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "3. How far it shrinks");
     let mut rows: Vec<(String, f64)> = Vec::new();
-    if let Some(best) = report.effects.first() {
-        rows.push((format!("after {}", best.name), best.gap_after));
-    }
-    if let Some(combined) = &report.combined {
+    let credited = &report.selection.credited;
+    if !credited.is_empty() {
         rows.push((
-            format!("after {}", combined.names.join(" + ")),
-            combined.gap_after,
+            format!("after {}", credited.join(" + ")),
+            report.selection.gap_after,
+        ));
+    } else if let Some(best) = report.effects.first() {
+        rows.push((
+            format!("after {} (not credited)", best.name),
+            best.gap_after,
         ));
     }
     if let Some(locus) = report.locus.first() {
@@ -272,17 +374,25 @@ fn how_far_section(out: &mut String, report: &Report) {
             percent(-shrink)
         );
     }
-    match &report.credited {
-        Some(name) => {
-            let _ = writeln!(out, "   credited: {name}");
-        }
-        None if !report.significant => {
+    match credited.as_slice() {
+        [] if !report.significant => {
             let _ = writeln!(out, "   credited: none (no significant gap)");
         }
-        None => {
-            let _ = writeln!(out, "   credited: none (no effect closes most of the gap)");
+        [] => {
+            let reason = (report.selection.steps.first())
+                .map_or("no effect declared".to_string(), |s| s.reason.clone());
+            let _ = writeln!(out, "   credited: none ({reason})");
+        }
+        names => {
+            let _ = writeln!(out, "   credited: {}", names.join(", then "));
         }
     }
+    let timing = &report.timing;
+    let _ = writeln!(
+        out,
+        "   time: {:.1} s (model fit {:.1} s, effects {:.1} s, selection {:.1} s, corrections {:.1} s) on {} threads",
+        timing.total, timing.base_fit, timing.effects, timing.selection, timing.loci, timing.jobs
+    );
 }
 
 #[cfg(test)]
@@ -294,7 +404,7 @@ mod tests {
         assert_eq!(num(0.012345), "0.0123");
         assert_eq!(num(12.345), "12.3");
         assert_eq!(num(1.5e-5), "1.50e-5");
-        assert_eq!(num(f64::INFINITY), "diverges");
+        assert_eq!(num(f64::INFINITY), "diverged");
         assert_eq!(percent(0.5), "50.0 %");
         let regime = |lowest, highest| Regime {
             variable: "u".into(),

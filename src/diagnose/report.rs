@@ -1,5 +1,7 @@
-//! The result of a diagnosis: plain data, serialised as the JSON of spec section 5 (with a
-//! few extra fields), rendered as text by [`super::render`] and as HTML by [`super::html`].
+//! The result of a diagnosis: plain data, serialised as the JSON of spec section 5 (with
+//! extra fields), rendered as text by [`super::render`] and as HTML by [`super::html`].
+//! Gaps of free runs that diverged are infinite, written as `null` in JSON and "diverged" in
+//! text.
 
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -17,31 +19,40 @@ pub struct Report {
     pub significant: bool,
     /// Per measured state, largest share first.
     pub states: Vec<StateGap>,
-    /// Rates and balances where a free correction closes the gap, best first.
+    /// Rates, groups of rates and balances where a free correction closes the gap, best
+    /// first (near-ties: the most upstream, most specific first).
     pub locus: Vec<Locus>,
-    /// Whether closing the gap at the best locus needs history (dim > 1 beats dim 1).
+    /// Whether closing the gap needs history (see [`Memory`]).
     pub history_dependent: bool,
+    /// The memory verdict with its reasons.
+    pub memory: Memory,
     /// Time windows of the held-out part holding most of the error, largest share first.
     pub windows: Vec<Window>,
     /// Where in the operating range the error concentrates, strongest first.
     pub regime: Vec<Regime>,
-    /// Candidate effects, best (smallest held-out gap) first.
+    /// Candidate effects, each applied alone, best (smallest held-out gap) first.
     pub effects: Vec<EffectScore>,
-    /// The effect credited with the gap, if any.
+    /// The first effect credited with the gap, if any (spec section 5).
     pub credited: Option<String>,
-    /// The two best effects applied together.
-    pub combined: Option<Combined>,
-    /// How stable the effect ranking is over the halves of the training part.
+    /// Forward selection: the effects credited together, in order, and every step tried.
+    pub selection: Selection,
+    /// How sure the ranking of the single effects is.
     pub confidence: Confidence,
     /// Formulas for the correction at the best locus (sparse regression).
     pub hints: Vec<Formula>,
     /// The model's own params after fitting.
     pub fitted_params: BTreeMap<String, f64>,
+    /// The fit of the model without effects: uncertainty, criteria, cost.
+    pub base_fit: FitSummary,
+    /// Initial values of measured states not measured at an experiment's first row.
+    pub initial_states: Vec<InitialState>,
     /// What was fitted and what was scored.
     pub split: SplitSummary,
-    /// Data and runs on the held-out record, for plots (not serialised).
+    /// Where the time went.
+    pub timing: Timing,
+    /// Data and runs of the scored experiments, for plots (not serialised).
     #[serde(skip)]
-    pub series: Series,
+    pub series: Vec<ExperimentSeries>,
 }
 
 /// The error of one measured state.
@@ -51,20 +62,25 @@ pub struct StateGap {
     pub name: String,
     /// Its share of the held-out free-run error.
     pub share: f64,
-    /// Free-run (online) mean squared z-scored error on the held-out rows.
-    pub online: f64,
-    /// One-step (offline) mean squared z-scored error on the held-out rows.
-    pub offline: f64,
+    /// Free-run (online) mean squared z-scored error at its held-out cells (`None`: none).
+    pub online: Option<f64>,
+    /// One-step (offline) error at its held-out cells whose previous row is measured
+    /// (`None`: no such cell).
+    pub offline: Option<f64>,
     /// Its measurement noise variance, normalised.
     pub noise: f64,
+    /// Held-out cells of this state.
+    pub cells: usize,
 }
 
-/// What kind of quantity a locus is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// What kind of place a locus is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, PartialOrd, Ord)]
 #[serde(rename_all = "lowercase")]
 pub enum LocusKind {
     /// A `let` (rate law).
     Let,
+    /// Lets that share an input and a form, each corrected, fitted jointly.
+    Group,
     /// An `output`.
     Output,
     /// A closure output.
@@ -76,27 +92,51 @@ pub enum LocusKind {
 /// A place where a free correction was tried.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Locus {
-    /// The let's name, or the state's for a balance.
+    /// The let's name, the group's members joined by `+`, or the state's for a balance.
     pub name: String,
     /// Its kind.
     pub kind: LocusKind,
+    /// The corrected lets (or the balance's state).
+    pub members: Vec<String>,
     /// Held-out gap with the best correction there.
     pub bound_after: f64,
-    /// Held-out gap with a correction that sees the present only (dim 1).
+    /// Held-out gap with a correction that sees the present only.
     pub bound_present: f64,
-    /// Held-out gap with a correction that also sees the measured history (dim > 1).
+    /// Held-out gap with a correction that also sees the history.
     pub bound_history: f64,
-    /// Whether the held-out data cannot tell this locus from the best one (paired test
-    /// over time blocks; always true for the best).
+    /// Whether the held-out data cannot tell this locus from the best one (block
+    /// bootstrap; always true for the first).
     pub tied: bool,
+    /// Lets between it and the balances it reaches (0 for a balance): larger is upstream.
+    pub depth: usize,
+    /// Seconds spent fitting and scoring its corrections.
+    pub seconds: f64,
+}
+
+/// Whether closing the gap needs memory, and why.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Memory {
+    /// The verdict.
+    pub history_needed: bool,
+    /// Whether the free corrections alone decided it (at the best locus, history beats the
+    /// present by the margin, see [`super::locus::HISTORY_MARGIN`]).
+    pub probe: bool,
+    /// The longest time constant of the history features, chosen from the data.
+    pub span: f64,
+    /// The time constants of the history features.
+    pub time_constants: Vec<f64>,
+    /// Why, in words.
+    pub reason: String,
 }
 
 /// A time window of the held-out part.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Window {
-    /// First time.
+    /// The experiment.
+    pub experiment: String,
+    /// First measured time.
     pub t_start: f64,
-    /// Last time.
+    /// Last measured time.
     pub t_end: f64,
     /// Share of the held-out error.
     pub share: f64,
@@ -119,6 +159,44 @@ pub struct Regime {
     pub highest: bool,
 }
 
+/// A fitted param with its uncertainty.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParamEstimate {
+    /// Param name (or `X@experiment` for a fitted initial value).
+    pub name: String,
+    /// Fitted value.
+    pub value: f64,
+    /// Linearised standard error (infinite when the data do not determine it).
+    pub std_error: f64,
+    /// `std_error / |value|`.
+    pub relative_error: f64,
+    /// Whether the relative error is below 5 %.
+    pub identified: bool,
+}
+
+/// How a fit went: params with uncertainty, the direction the data leave free, criteria.
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+pub struct FitSummary {
+    /// Every fitted unknown with its standard error.
+    pub estimates: Vec<ParamEstimate>,
+    /// When some param is not identified: the direction in which the fit is (nearly) free,
+    /// as unit-normalised components in transformed coordinates (logarithms of `positive`
+    /// params), largest first.
+    pub free_direction: Vec<(String, f64)>,
+    /// Training gap.
+    pub gap_train: f64,
+    /// Akaike's criterion on the training cells: `n ln(RSS / n) + 2 k`.
+    pub aic: f64,
+    /// Schwarz's (Bayesian) criterion: `n ln(RSS / n) + k ln n`.
+    pub bic: f64,
+    /// Fitted unknowns `k`.
+    pub unknowns: usize,
+    /// Starts run (the first and the random restarts spent).
+    pub starts: usize,
+    /// Seconds the fit took.
+    pub seconds: f64,
+}
+
 /// A candidate effect after fitting.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EffectScore {
@@ -130,32 +208,77 @@ pub struct EffectScore {
     pub gap_after: f64,
     /// `1 - gap_after / gap_before`.
     pub shrink: f64,
-    /// Fitted params: the effect's own, then the model's.
+    /// Fitted params: the effect's own and the model's.
     pub params: BTreeMap<String, f64>,
-    /// Held-out gaps after fitting on the first and on the second half of the training part.
-    pub gap_after_halves: [f64; 2],
+    /// The fit: uncertainty, criteria and cost.
+    pub fit: FitSummary,
+    /// Hidden states the effect adds.
+    pub adds_hidden: Vec<String>,
+    /// Share of bootstrap draws in which it is best.
+    pub probability_best: f64,
+    /// Standard error of its gap minus the best's (0 for the best).
+    pub spread: f64,
+    /// Whether the held-out data cannot tell it from the best.
+    pub tied: bool,
 }
 
-/// Two effects applied together.
+/// One step of forward selection.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Combined {
-    /// The effects.
-    pub names: Vec<String>,
-    /// Held-out gap.
+pub struct SelectionStep {
+    /// The effect this step adds.
+    pub added: String,
+    /// The effects applied together after it.
+    pub effects: Vec<String>,
+    /// Held-out gap of the set.
     pub gap_after: f64,
     /// `1 - gap_after / gap_before`.
     pub shrink: f64,
+    /// Akaike's criterion of the set's fit.
+    pub aic: f64,
+    /// Schwarz's criterion of the set's fit.
+    pub bic: f64,
+    /// Fitted unknowns.
+    pub unknowns: usize,
+    /// Standard error of the held-out gap's decrease from the previous set.
+    pub spread: f64,
+    /// The other additions tried at this step, with their held-out gaps.
+    pub alternatives: Vec<(String, f64)>,
+    /// Whether the addition is credited.
+    pub accepted: bool,
+    /// Why it is credited or not, in words.
+    pub reason: String,
 }
 
-/// Stability of the effect ranking.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// Forward selection over the effects.
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+pub struct Selection {
+    /// The steps, in order.
+    pub steps: Vec<SelectionStep>,
+    /// The effects credited, in order.
+    pub credited: Vec<String>,
+    /// Held-out gap of the credited set (the gap before when none).
+    pub gap_after: f64,
+    /// Why the selection stopped, in words.
+    pub stop: String,
+}
+
+/// How sure the ranking of the single effects is.
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
 pub struct Confidence {
-    /// Whether the best effect is the same when fitting on either half of the training part.
-    pub stable: bool,
-    /// `(gap_after of the second - gap_after of the first) / gap_before`.
+    /// Whether the best effect is told apart from every other one.
+    pub separated: bool,
+    /// `(gap after of the second - gap after of the first) / gap_before`.
     pub margin: f64,
-    /// The best effect when fitting on each half.
-    pub best_by_half: [Option<String>; 2],
+    /// The margin's standard error (block bootstrap), in the same units.
+    pub margin_error: f64,
+    /// Share of bootstrap draws in which the best is best.
+    pub probability_best: f64,
+    /// The effects the held-out data cannot tell from the best (the best included).
+    pub indistinguishable: Vec<String>,
+    /// Blocks resampled.
+    pub blocks: usize,
+    /// Draws.
+    pub resamples: usize,
 }
 
 /// A formula found by sparse regression.
@@ -171,36 +294,89 @@ pub struct Formula {
     pub terms: usize,
 }
 
-/// Sizes and times of the split.
+/// A measured state's initial value that no cell gives.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct SplitSummary {
-    /// Training rows.
-    pub train_rows: usize,
-    /// Held-out rows.
-    pub test_rows: usize,
-    /// First held-out time.
-    pub t_test_start: f64,
-    /// Last held-out time.
-    pub t_test_end: f64,
-    /// Whether the held-out rows come from a separate file.
-    pub separate_test: bool,
+pub struct InitialState {
+    /// The experiment.
+    pub experiment: String,
+    /// The state.
+    pub state: String,
+    /// Its value (under the model's fitted params).
+    pub value: f64,
+    /// `declared`, `fitted` or `first measured value`.
+    pub origin: String,
 }
 
-/// Time series on the held-out record for plots.
+/// One scored part.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScoredPart {
+    /// The experiment.
+    pub experiment: String,
+    /// First scored time.
+    pub t_start: f64,
+    /// Last scored time.
+    pub t_end: f64,
+    /// Scored rows with a measured cell.
+    pub rows: usize,
+}
+
+/// Sizes of the split.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SplitSummary {
+    /// Measured rows that train.
+    pub train_rows: usize,
+    /// Measured rows that are scored.
+    pub test_rows: usize,
+    /// Experiments with a training part.
+    pub train_experiments: Vec<String>,
+    /// The scored parts.
+    pub scored: Vec<ScoredPart>,
+    /// `tail` (the last share of each experiment) or `experiments` (whole ones).
+    pub holdout: String,
+    /// The share of a tail split.
+    pub share: Option<f64>,
+}
+
+/// Where the time went, in seconds of wall time.
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+pub struct Timing {
+    /// The whole diagnosis.
+    pub total: f64,
+    /// Fitting the model without effects.
+    pub base_fit: f64,
+    /// Fitting every effect alone.
+    pub effects: f64,
+    /// Forward selection beyond the first effect.
+    pub selection: f64,
+    /// The free corrections.
+    pub loci: f64,
+    /// Worker threads.
+    pub jobs: usize,
+}
+
+/// One scored experiment's data and free runs, for plots.
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct Series {
-    /// Times of the whole held-out record (from its row 0).
+pub struct ExperimentSeries {
+    /// The experiment.
+    pub name: String,
+    /// Times of its rows (from its first row to its last scored one).
     pub times: Vec<f64>,
     /// First scored row.
     pub first_scored: usize,
     /// Measured-state names.
     pub names: Vec<String>,
-    /// Data, one column per measured state.
-    pub data: Vec<Vec<f64>>,
+    /// Units of the measured states and of time, where the model declares them.
+    pub units: Vec<Option<String>>,
+    /// The time unit.
+    pub time_unit: Option<String>,
+    /// Data cells, one column per measured state.
+    pub data: Vec<Vec<Option<f64>>>,
     /// Free run of the fitted model, one column per measured state.
     pub before: Vec<Vec<f64>>,
-    /// Free run with the best effect, if any was fitted.
+    /// Free run with the credited effects (or the best one), if fitted.
     pub after: Option<Vec<Vec<f64>>>,
-    /// Squared z-scored error summed over states, per scored row (before).
-    pub errors: Vec<f64>,
+    /// What `after` applies.
+    pub after_name: String,
+    /// Per scored row: squared z-scored error summed over its cells (`None`: no cell).
+    pub errors: Vec<Option<f64>>,
 }

@@ -1,18 +1,19 @@
-//! Running a mechanistic model along a record (spec section 5): the *free run* from the
-//! first row (measured states from the data, hidden states from their declared initial
-//! values, driven by the data's inputs alone) and *one-step* predictions from the measured
-//! history.
+//! Running a mechanistic model along an experiment's record (spec section 5, records spec
+//! section 3): the *free run* from the first row (measured states from their cells there,
+//! else as [`super::split::Start`] says; hidden states from their declared initial values;
+//! driven by the data's inputs alone) and *one-step* predictions from the measured history.
 //!
-//! Inputs are held constant over each sampling interval (zero-order hold, as the data
-//! record them). Continuous models are integrated by the adaptive Dormand–Prince method of
-//! [`crate::sim`], restarted wherever an input changes; discrete models apply their map
-//! once per row. An optional *correction* slot (the output of a synthesised closure, see
-//! [`super::locus`]) is held constant over each interval.
+//! Rows may be irregularly spaced and cells missing. Inputs are held from each row to the
+//! next (zero-order hold, as the record holds them). Continuous models are integrated by the
+//! adaptive Dormand–Prince method of [`crate::sim`], which reports the state at every row's
+//! time whatever the spacing, restarted wherever an input changes; discrete models apply
+//! their map once per row. Optional *correction* slots (outputs of a synthesised closure,
+//! see [`super::locus`]) are held constant over each interval.
 
-use super::record::Record;
 use super::DiagnoseError;
 use crate::eval::Program;
 use crate::ir::{Dynamics, Model, Var};
+use crate::record::Record;
 use crate::sim::{Dopri5, IntegrationError, ModelSystem, OdeSystem, Tolerances};
 
 /// Most integration steps per interval before a run is declared failed (wild params).
@@ -45,19 +46,21 @@ impl Run {
 pub struct Simulator {
     system: ModelSystem,
     dynamics: Dynamics,
+    measured_init: Vec<Option<Program>>,
     hidden_init: Vec<Program>,
     measured: usize,
-    correction_slot: Option<usize>,
+    params: usize,
+    correction_slots: Vec<usize>,
     integrator: Dopri5,
     scratch: Vec<f64>,
 }
 
 impl Simulator {
-    /// Compiles `model`; `correction` is the closure output whose slot
-    /// [`Simulator::set_correction`] writes (`None` for a plain mechanistic model).
+    /// Compiles `model`; `corrections` are the closure outputs whose slots
+    /// [`Simulator::set_corrections`] writes (none for a plain mechanistic model).
     pub fn new(
         model: &Model,
-        correction: Option<Var>,
+        corrections: &[Var],
         tolerances: Tolerances,
     ) -> Result<Self, DiagnoseError> {
         let internal = |e: crate::eval::CompileError| DiagnoseError::internal(e.to_string());
@@ -70,13 +73,24 @@ impl Simulator {
                 }),
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let correction_slot = correction.map(|var| system.layout().slot(var));
+        let measured_init = (model.states.iter())
+            .map(|state| {
+                (state.init.as_ref())
+                    .map(|init| Program::compile(init, system.layout()).map_err(internal))
+                    .transpose()
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let correction_slots = (corrections.iter())
+            .map(|&var| system.layout().slot(var))
+            .collect();
         Ok(Simulator {
             integrator: Dopri5::new(system.dim(), tolerances, MAX_STEPS),
             dynamics: model.dynamics,
             measured: model.states.len(),
+            params: model.params.len(),
+            measured_init,
             hidden_init,
-            correction_slot,
+            correction_slots,
             system,
             scratch: Vec::new(),
         })
@@ -88,25 +102,62 @@ impl Simulator {
             .map_err(|e| DiagnoseError::internal(e.to_string()))
     }
 
-    /// Sets the params (constrained values, declaration order).
+    /// Sets the params (constrained values, declaration order) from the first entries of
+    /// `values` (what follows, the fitted starts, is not the simulator's).
     pub fn set_params(&mut self, values: &[f64]) {
         let range = self.system.layout().param_range();
-        self.system.slots_mut()[range].copy_from_slice(values);
+        let count = self.params.min(values.len());
+        self.system.slots_mut()[range.start..range.start + count].copy_from_slice(&values[..count]);
     }
 
-    /// Sets the correction held over the next interval (no effect without a correction).
-    pub fn set_correction(&mut self, value: f64) {
-        if let Some(slot) = self.correction_slot {
-            self.system.slots_mut()[slot] = value;
+    /// Number of params.
+    pub fn params(&self) -> usize {
+        self.params
+    }
+
+    /// Sets the corrections held over the next interval, one per slot (missing ones 0).
+    pub fn set_corrections(&mut self, values: &[f64]) {
+        for (index, &slot) in self.correction_slots.iter().enumerate() {
+            self.system.slots_mut()[slot] = values.get(index).copied().unwrap_or(0.0);
         }
     }
 
-    /// The state a run starts from at `row`: measured states from the data, hidden states
-    /// from their initial values under the current params.
-    pub fn start_state(&mut self, record: &Record, row: usize) -> Vec<f64> {
-        let mut state: Vec<f64> = record.states.iter().map(|c| c[row]).collect();
-        for init in &self.hidden_init {
-            state.push(init.eval(self.system.slots_mut(), &mut self.scratch));
+    /// Clears every correction.
+    pub fn clear_corrections(&mut self) {
+        self.set_corrections(&[]);
+    }
+
+    /// Number of hidden states.
+    pub fn hidden_count(&self) -> usize {
+        self.hidden_init.len()
+    }
+
+    /// The state a free run of `record` starts from at its first row: a measured state from
+    /// `overrides` where given, else from its cell, else from its declared initial value
+    /// (else 0, which [`super::split::Split`] never leaves); a hidden state from `overrides`
+    /// (after the measured ones) where given, else from its declared initial value; both
+    /// under the current params.
+    pub fn start_state(&mut self, record: &Record, overrides: &[Option<f64>]) -> Vec<f64> {
+        let mut state = Vec::with_capacity(self.measured + self.hidden_init.len());
+        for k in 0..self.measured {
+            let cell = record.states[k].first().copied().flatten();
+            let value = match (
+                overrides.get(k).copied().flatten(),
+                cell,
+                &self.measured_init[k],
+            ) {
+                (Some(value), _, _) | (None, Some(value), _) => value,
+                (None, None, Some(init)) => init.eval(self.system.slots_mut(), &mut self.scratch),
+                (None, None, None) => 0.0,
+            };
+            state.push(value);
+        }
+        for (h, init) in self.hidden_init.iter().enumerate() {
+            let value = match overrides.get(self.measured + h).copied().flatten() {
+                Some(value) => value,
+                None => init.eval(self.system.slots_mut(), &mut self.scratch),
+            };
+            state.push(value);
         }
         state
     }
@@ -128,7 +179,7 @@ impl Simulator {
         let layout = self.system.layout();
         let (inputs, states) = (layout.input_range(), layout.state_range());
         let slots = self.system.slots_mut();
-        for (slot, value) in slots[inputs].iter_mut().zip(record.inputs_at(row)) {
+        for (slot, value) in slots[inputs].iter_mut().zip(inputs_at(record, row)) {
             *slot = value;
         }
         slots[states].copy_from_slice(state);
@@ -180,10 +231,15 @@ impl Simulator {
         }
     }
 
-    /// The free run from row 0 to row `end - 1` of `record`, integrating between input
-    /// switches in one go.
-    pub fn free_run(&mut self, record: &Record, end: usize) -> Result<Run, IntegrationError> {
-        let mut state = self.start_state(record, 0);
+    /// The free run from row 0 to row `end - 1` of `record` (starts as in
+    /// [`Simulator::start_state`]), integrating between input switches in one go.
+    pub fn free_run(
+        &mut self,
+        record: &Record,
+        overrides: &[Option<f64>],
+        end: usize,
+    ) -> Result<Run, IntegrationError> {
+        let mut state = self.start_state(record, overrides);
         let dim = state.len();
         let mut values = Vec::with_capacity(end * dim);
         values.extend_from_slice(&state);
@@ -200,20 +256,24 @@ impl Simulator {
         Ok(Run { dim, values })
     }
 
-    /// One-step predictions along rows `0..end - 1`: from row `i`'s measured data (and the
-    /// hidden states carried along this way from row 0), the state at row `i + 1`.
-    /// Returns the states each step starts from and the predictions.
+    /// One-step predictions along rows `0..end - 1`: from row `i`'s measured cells (and,
+    /// for a state not measured there and the hidden states, the value carried along this
+    /// way from the free run's start), the state at row `i + 1`. Returns the states each
+    /// step starts from and the predictions.
     pub fn one_step(
         &mut self,
         record: &Record,
+        overrides: &[Option<f64>],
         end: usize,
     ) -> Result<(Run, Run), IntegrationError> {
-        let mut state = self.start_state(record, 0);
+        let mut state = self.start_state(record, overrides);
         let dim = state.len();
         let (mut starts, mut predictions) = (Vec::new(), Vec::new());
         for row in 0..end.saturating_sub(1) {
             for (k, column) in record.states.iter().enumerate() {
-                state[k] = column[row];
+                if let Some(value) = column[row] {
+                    state[k] = value;
+                }
             }
             starts.extend_from_slice(&state);
             self.step(record, row, &mut state)?;
@@ -222,11 +282,11 @@ impl Simulator {
         let run = |values| Run { dim, values };
         Ok((run(starts), run(predictions)))
     }
+}
 
-    /// Number of measured states.
-    pub fn measured(&self) -> usize {
-        self.measured
-    }
+/// The input values held over the interval that starts at `row`.
+pub fn inputs_at(record: &Record, row: usize) -> impl Iterator<Item = f64> + '_ {
+    record.inputs.iter().map(move |column| column[row])
 }
 
 fn same_inputs(record: &Record, a: usize, b: usize) -> bool {

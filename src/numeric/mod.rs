@@ -1,7 +1,7 @@
 //! The numeric helpers every stage shares: statistics ([`stats`]), dense linear algebra
-//! ([`linalg`]: Cholesky, normal equations), one Levenberg–Marquardt driver ([`lm`]), the
-//! training element types with the one safe softplus ([`real`]) and the one optimiser of
-//! training, Adam with clipping ([`adam`]).
+//! ([`linalg`]: Cholesky, normal equations; [`eigen`]: symmetric eigen-decomposition), one
+//! Levenberg–Marquardt driver ([`lm`]), the training element types with the one safe
+//! softplus ([`real`]) and the one optimiser of training, Adam with clipping ([`adam`]).
 //!
 //! Training (`train::polish`, `train::balances`), the gap diagnosis (`diagnose::fit`,
 //! `diagnose::correction`, `diagnose::symbolic`) and the experiments all call these; none
@@ -10,6 +10,7 @@
 //! and never prints.
 
 pub mod adam;
+pub mod eigen;
 pub mod linalg;
 pub mod lm;
 pub mod real;
@@ -21,6 +22,7 @@ mod tests;
 mod tests_lm;
 
 pub use adam::{clip, Adam, AdamState, Update};
+pub use eigen::symmetric_eigen;
 pub use linalg::{dot, solve_spd, Cholesky, NormalEquations};
 pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Settings};
 pub use real::Real;

@@ -2,6 +2,7 @@
 
 mod authoring;
 mod cli;
+mod diagnose;
 mod editor;
 mod format;
 mod golden;

@@ -1,0 +1,441 @@
+//! The data the diagnosis fits and scores (records spec, sections 1 and 3; spec section 5):
+//! the experiments in model terms ([`Record`]), the rows of each that the fits minimise and
+//! the rows that are scored, where each free run starts, and the statistics that z-score
+//! every error.
+//!
+//! - **Whole experiments** (`--holdout NAME`, `--val FILE`): a training experiment fits on
+//!   all its rows, a held-out one is scored on all its rows.
+//! - **Tail** (`--val-fraction SHARE`, and by default, when no experiment is held out, a
+//!   share of 0.3 of every experiment):
+//!   the last share of each training experiment's measured rows is scored and the rows
+//!   before it fit; the free run still starts at the experiment's first row, so a good score
+//!   means the whole run is good.
+//!
+//! Every free run starts at its experiment's first row ([`Start`]): a measured state takes
+//! its cell there; without one, its declared initial value; without one, a value fitted
+//! with the params (in an experiment with a training part) or, in an experiment that is only
+//! scored, its first measured value there (nothing may be fitted on held-out data). Hidden
+//! states take their declared initial values.
+
+use super::DiagnoseError;
+use crate::ir::Model;
+use crate::record::{Normalisation, Record};
+use std::ops::Range;
+
+/// The fewest measured rows in the training part and in the held-out part.
+pub const MIN_ROWS: usize = 10;
+
+/// One experiment's place in the diagnosis.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Part {
+    /// Rows whose measured cells the fits minimise (empty for a held-out experiment).
+    pub train: Range<usize>,
+    /// Rows whose measured cells are scored (empty for an experiment that only trains).
+    pub test: Range<usize>,
+}
+
+/// Where a measured state's free run starts in one experiment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Start {
+    /// The experiment's cell at its first row.
+    Cell,
+    /// The model's declared initial value (under the current params).
+    Declared,
+    /// A value fitted with the params: index into the fitted starts.
+    Fitted(usize),
+    /// A fixed value (an experiment that is only scored: its first measured value).
+    Fixed(f64),
+}
+
+/// How the held-out part was chosen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Holdout {
+    /// Whole experiments are held out.
+    Experiments,
+    /// The last share of each training experiment's measured rows.
+    Tail(f64),
+}
+
+/// The experiments, their parts and starts, and the training statistics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Split {
+    /// Every experiment, training ones first.
+    pub records: Vec<Record>,
+    /// One part per record.
+    pub parts: Vec<Part>,
+    /// Per record, per measured state: where its free run starts.
+    pub starts: Vec<Vec<Start>>,
+    /// The fitted starts: `(record, state)` of each, in order.
+    pub fitted_starts: Vec<(usize, usize)>,
+    /// How the held-out part was chosen.
+    pub holdout: Holdout,
+    /// Whether hidden states start from values fitted per training experiment.
+    pub fit_hidden: bool,
+    /// Mean and standard deviation of each measured state over the training cells.
+    pub normalisation: Normalisation,
+}
+
+impl Split {
+    /// The split of `train` (experiments that fit; with `Tail`, their tails are scored) and
+    /// `held` (experiments that are only scored).
+    pub fn new(
+        model: &Model,
+        train: Vec<Record>,
+        held: Vec<Record>,
+        (holdout, fit_hidden): (Holdout, bool),
+    ) -> Result<Split, DiagnoseError> {
+        let mut parts = Vec::with_capacity(train.len() + held.len());
+        for record in &train {
+            parts.push(match holdout {
+                Holdout::Tail(share) => tail(record, share)?,
+                Holdout::Experiments => Part {
+                    train: 0..record.len(),
+                    test: 0..0,
+                },
+            });
+        }
+        parts.extend(held.iter().map(|record| Part {
+            train: 0..0,
+            test: 0..record.len(),
+        }));
+        let mut records = train;
+        records.extend(held);
+        let count = |pick: &dyn Fn(&Part) -> Range<usize>| -> usize {
+            (records.iter().zip(&parts))
+                .map(|(record, part)| measured_rows(record, pick(part)).count())
+                .sum()
+        };
+        let (fit, scored) = (count(&|p| p.train.clone()), count(&|p| p.test.clone()));
+        if fit < MIN_ROWS || scored < MIN_ROWS {
+            return Err(DiagnoseError::TooFewRows {
+                needed: MIN_ROWS,
+                train: fit,
+                test: scored,
+                how: describe(&records, &parts, holdout),
+            });
+        }
+        let trained: Vec<(&Record, Range<usize>)> = (records.iter().zip(&parts))
+            .filter(|(_, part)| !part.train.is_empty())
+            .map(|(record, part)| (record, part.train.clone()))
+            .collect();
+        let normalisation = Normalisation::over(&trained, model.states.len(), model.inputs.len());
+        let mut split = Split {
+            records,
+            parts,
+            starts: Vec::new(),
+            fitted_starts: Vec::new(),
+            holdout,
+            fit_hidden,
+            normalisation,
+        };
+        split.plan_starts(model);
+        Ok(split)
+    }
+
+    /// Decides where every measured state's free run starts (see the module documentation).
+    fn plan_starts(&mut self, model: &Model) {
+        for (index, (record, part)) in self.records.iter().zip(&self.parts).enumerate() {
+            let mut starts = Vec::with_capacity(model.states.len());
+            for (k, state) in model.states.iter().enumerate() {
+                let cells = &record.states[k];
+                starts.push(if cells.first().copied().flatten().is_some() {
+                    Start::Cell
+                } else if state.init.is_some() {
+                    Start::Declared
+                } else if !part.train.is_empty() {
+                    self.fitted_starts.push((index, k));
+                    Start::Fitted(self.fitted_starts.len() - 1)
+                } else {
+                    let first = cells.iter().flatten().next().copied();
+                    Start::Fixed(first.unwrap_or(self.normalisation.state_mean[k]))
+                });
+            }
+            self.starts.push(starts);
+        }
+    }
+
+    /// Per state (measured, then the `hidden` hidden ones) of `record`: the value its free
+    /// run starts from when not read from the data or the declaration, given the fitted
+    /// starts `fitted` (the measured ones of [`Split::fitted_starts`], then, with
+    /// `fit_hidden`, `hidden` per training record in [`Split::training`] order).
+    pub fn overrides(&self, record: usize, fitted: &[f64], hidden: usize) -> Vec<Option<f64>> {
+        let mut overrides: Vec<Option<f64>> = (self.starts[record].iter())
+            .map(|start| match *start {
+                Start::Fitted(index) => fitted.get(index).copied(),
+                Start::Fixed(value) => Some(value),
+                Start::Cell | Start::Declared => None,
+            })
+            .collect();
+        let slot = self
+            .fit_hidden
+            .then(|| self.training_slot(record))
+            .flatten();
+        let first = self.fitted_starts.len() + slot.unwrap_or(0) * hidden;
+        overrides.extend((0..hidden).map(|h| slot.and_then(|_| fitted.get(first + h).copied())));
+        overrides
+    }
+
+    /// The position of `record` among the records with a training part.
+    pub fn training_slot(&self, record: usize) -> Option<usize> {
+        self.training().position(|(index, _, _)| index == record)
+    }
+
+    /// Number of fitted starts of a model with `hidden` hidden states.
+    pub fn fitted_count(&self, hidden: usize) -> usize {
+        let per_record = if self.fit_hidden { hidden } else { 0 };
+        self.fitted_starts.len() + per_record * self.training().count()
+    }
+
+    /// The records with a training part, with their indices and training rows.
+    pub fn training(&self) -> impl Iterator<Item = (usize, &Record, Range<usize>)> + '_ {
+        self.with(|part| part.train.clone())
+    }
+
+    /// The records with a scored part, with their indices and scored rows.
+    pub fn scored(&self) -> impl Iterator<Item = (usize, &Record, Range<usize>)> + '_ {
+        self.with(|part| part.test.clone())
+    }
+
+    fn with<'a>(
+        &'a self,
+        pick: impl Fn(&Part) -> Range<usize> + 'a,
+    ) -> impl Iterator<Item = (usize, &'a Record, Range<usize>)> + 'a {
+        (self.records.iter().zip(&self.parts).enumerate())
+            .map(move |(index, (record, part))| (index, record, pick(part)))
+            .filter(|(_, _, rows)| !rows.is_empty())
+    }
+
+    /// Measured state cells in the training parts.
+    pub fn training_cells(&self) -> usize {
+        (self.training())
+            .map(|(_, record, rows)| cells_in(record, rows))
+            .sum()
+    }
+
+    /// Measured rows in the training and in the scored parts.
+    pub fn measured_rows(&self) -> (usize, usize) {
+        let count = |rows: &mut dyn Iterator<Item = (usize, &Record, Range<usize>)>| {
+            rows.map(|(_, record, rows)| measured_rows(record, rows).count())
+                .sum()
+        };
+        (count(&mut self.training()), count(&mut self.scored()))
+    }
+}
+
+/// The rows of `rows` with at least one measured state cell.
+pub fn measured_rows(record: &Record, rows: Range<usize>) -> impl Iterator<Item = usize> + '_ {
+    rows.filter(|&row| record.states.iter().any(|cells| cells[row].is_some()))
+}
+
+/// Measured state cells of `record` in `rows`.
+pub fn cells_in(record: &Record, rows: Range<usize>) -> usize {
+    (record.states.iter())
+        .map(|cells| cells[rows.clone()].iter().flatten().count())
+        .sum()
+}
+
+/// The tail split of one experiment: the last `share` of its measured rows is scored.
+fn tail(record: &Record, share: f64) -> Result<Part, DiagnoseError> {
+    let rows: Vec<usize> = measured_rows(record, 0..record.len()).collect();
+    let held = ((rows.len() as f64) * share).round() as usize;
+    if held == 0 || held >= rows.len() {
+        return Err(DiagnoseError::TailTooSmall {
+            experiment: record.name.clone(),
+            share,
+            train: rows.len().saturating_sub(held),
+            test: held.min(rows.len()),
+        });
+    }
+    let first_test = rows[rows.len() - held];
+    Ok(Part {
+        train: 0..first_test,
+        test: first_test..record.len(),
+    })
+}
+
+/// What was held out, in words (for messages).
+fn describe(records: &[Record], parts: &[Part], holdout: Holdout) -> String {
+    let held: Vec<&str> = (records.iter().zip(parts))
+        .filter(|(_, part)| part.train.is_empty())
+        .map(|(record, _)| record.name.as_str())
+        .collect();
+    let experiments = match held.as_slice() {
+        [] => String::new(),
+        [one] => format!("experiment `{one}` held out"),
+        many => format!("experiments {} held out", many.join(", ")),
+    };
+    match holdout {
+        Holdout::Tail(share) => {
+            let tail = format!("the last {} % of each experiment held out", 100.0 * share);
+            if experiments.is_empty() {
+                tail
+            } else {
+                format!("{tail}, {experiments}")
+            }
+        }
+        Holdout::Experiments => experiments,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(name: &str, rows: usize) -> Record {
+        Record::complete(
+            name,
+            (0..rows).map(|k| k as f64).collect(),
+            vec![vec![0.5; rows]],
+            vec![(0..rows).map(|k| k as f64).collect()],
+        )
+    }
+
+    fn model() -> Model {
+        let source = "model m\ninput u\nstate X = 1\nparam k = 1\nder X = -k * X + u\n";
+        crate::driver::compile("m", source, &[]).unwrap().model
+    }
+
+    #[test]
+    fn a_tail_split_scores_the_last_rows_and_normalises_on_the_rest() {
+        let split = Split::new(
+            &model(),
+            vec![record("a", 100)],
+            vec![],
+            (Holdout::Tail(0.3), false),
+        )
+        .unwrap();
+        assert_eq!(
+            split.parts[0],
+            Part {
+                train: 0..70,
+                test: 70..100
+            }
+        );
+        // 0..70: mean 34.5, population variance (70^2 - 1) / 12.
+        let norm = &split.normalisation;
+        assert!((norm.state_mean[0] - 34.5).abs() < 1e-12);
+        assert!((norm.state_std[0] - ((4900.0f64 - 1.0) / 12.0).sqrt()).abs() < 1e-12);
+        assert_eq!(split.measured_rows(), (70, 30));
+    }
+
+    #[test]
+    fn a_tail_counts_measured_rows_not_rows() {
+        // Rows 0..20, the state measured at even rows only: 10 measured rows, 3 held out.
+        let mut thin = record("a", 20);
+        for (row, cell) in thin.states[0].iter_mut().enumerate() {
+            if row % 2 == 1 {
+                *cell = None;
+            }
+        }
+        let other = record("b", 30);
+        let split = Split::new(
+            &model(),
+            vec![thin, other],
+            vec![],
+            (Holdout::Tail(0.3), false),
+        )
+        .unwrap();
+        assert_eq!(
+            split.parts[0],
+            Part {
+                train: 0..14,
+                test: 14..20
+            }
+        );
+        assert_eq!(split.measured_rows(), (7 + 21, 3 + 9));
+    }
+
+    #[test]
+    fn held_out_experiments_are_scored_whole() {
+        let split = Split::new(
+            &model(),
+            vec![record("a", 12)],
+            vec![record("b", 11)],
+            (Holdout::Experiments, false),
+        )
+        .unwrap();
+        assert_eq!(split.training().count(), 1);
+        assert_eq!(
+            split.scored().map(|(i, _, r)| (i, r)).collect::<Vec<_>>(),
+            vec![(1, 0..11)]
+        );
+    }
+
+    #[test]
+    fn too_small_parts_say_what_each_needs_and_got() {
+        let error = Split::new(
+            &model(),
+            vec![record("a", 34)],
+            vec![record("b", 6)],
+            (Holdout::Experiments, false),
+        )
+        .unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "expected at least 10 measured rows in the training part and 10 in the held-out \
+             part, found 34 and 6 (experiment `b` held out)"
+        );
+        let error = Split::new(
+            &model(),
+            vec![record("a", 3)],
+            vec![],
+            (Holdout::Tail(0.1), false),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                error,
+                DiagnoseError::TailTooSmall {
+                    train: 3,
+                    test: 0,
+                    ..
+                }
+            ),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn starts_come_from_cells_declarations_fits_or_first_values() {
+        let source = "model m\ninput u\nstate X = 1\nstate Y\nparam k = 1\n\
+                      der X = -k * X + u\nder Y = X - Y\n";
+        let model = crate::driver::compile("m", source, &[]).unwrap().model;
+        let gapped = |name: &str| {
+            let mut r = Record::complete(
+                name,
+                (0..12).map(|k| k as f64).collect(),
+                vec![vec![0.5; 12]],
+                vec![(0..12).map(|k| k as f64).collect(), vec![2.0; 12]],
+            );
+            r.states[0][0] = None;
+            r.states[1][0] = None;
+            r.states[1][1] = None;
+            r
+        };
+        let split = Split::new(
+            &model,
+            vec![gapped("a")],
+            vec![gapped("b")],
+            (Holdout::Experiments, false),
+        )
+        .unwrap();
+        assert_eq!(split.starts[0], vec![Start::Declared, Start::Fitted(0)]);
+        assert_eq!(split.starts[1], vec![Start::Declared, Start::Fixed(2.0)]);
+        assert_eq!(split.fitted_starts, vec![(0, 1)]);
+        assert_eq!(split.overrides(0, &[7.0], 0), vec![None, Some(7.0)]);
+        assert_eq!(split.overrides(1, &[7.0], 0), vec![None, Some(2.0)]);
+        // Hidden starts fitted: one per hidden state of each training record, after the
+        // measured ones; a record that is only scored keeps the declared values.
+        let mut with_hidden = split.clone();
+        with_hidden.fit_hidden = true;
+        assert_eq!(with_hidden.fitted_count(2), 1 + 2);
+        assert_eq!(
+            with_hidden.overrides(0, &[7.0, 8.0, 9.0], 2),
+            vec![None, Some(7.0), Some(8.0), Some(9.0)]
+        );
+        assert_eq!(
+            with_hidden.overrides(1, &[7.0, 8.0, 9.0], 2),
+            vec![None, Some(2.0), None, None]
+        );
+    }
+}

@@ -1,0 +1,154 @@
+//! What the data cannot decide about a fit: a standard error for every fitted unknown, an
+//! identifiability flag, and the direction in which the fit is free.
+//!
+//! At the fit's minimum, with `J` the forward-difference Jacobian of the training residuals
+//! in transformed coordinates (`theta`), the linearised covariance is `s^2 (J'J)^-1`,
+//! `s^2 = |r|^2 / (n - q)` ([`crate::numeric::lm::standard_errors`]); an unknown's standard
+//! error is its marginal one times the slope of its transform. It is *identified* when the
+//! error is below [`IDENTIFIABILITY_LIMIT`] of its value (the rule `gbc train` applies to
+//! its params). When an unknown is not identified, the eigenvector of `J'J` (scaled to unit
+//! diagonal) with the smallest eigenvalue is the direction along which the training error
+//! barely changes: moving the params that way (e.g. two params up and down together, in log
+//! units) gives the same trajectory. Free-run residuals are correlated in time, so the
+//! errors measure how sharply the data pin the fit, not confidence intervals.
+
+use super::fit::{slope, thetas, values, Objective, JACOBIAN_STEP};
+use super::report::{FitSummary, ParamEstimate};
+use crate::ir::Constraint;
+use crate::numeric::linalg::gauss_newton_system;
+use crate::numeric::lm::{forward_differences, standard_errors};
+use crate::numeric::symmetric_eigen;
+pub use crate::train::polish::IDENTIFIABILITY_LIMIT;
+
+/// Components of the free direction below this (of the largest) are left out.
+const SMALL_COMPONENT: f64 = 0.05;
+
+/// The uncertainty of the fit at `x` (constrained values; `names` one per unknown) and its
+/// information criteria, into a [`FitSummary`] (starts and seconds left at 0).
+pub fn summarise(
+    objective: &Objective,
+    constraints: &[Constraint],
+    x: &[f64],
+    names: &[String],
+) -> FitSummary {
+    let cells = objective.split.training_cells();
+    let theta = thetas(constraints, x);
+    let residuals = |theta: &[f64]| objective.residuals(&values(constraints, theta));
+    let Some(r) = residuals(&theta) else {
+        return FitSummary {
+            gap_train: f64::INFINITY,
+            aic: f64::INFINITY,
+            bic: f64::INFINITY,
+            unknowns: x.len(),
+            ..FitSummary::default()
+        };
+    };
+    let gap: f64 = r.iter().map(|v| v * v).sum();
+    let (aic, bic) = criteria(gap, cells, x.len());
+    let columns = forward_differences(&residuals, &theta, &r, JACOBIAN_STEP);
+    let errors = standard_errors(&columns, &r, x.len());
+    let estimates: Vec<ParamEstimate> = (0..x.len())
+        .map(|i| {
+            let std_error = errors[i] * slope(constraints[i], theta[i]).abs();
+            let std_error = if std_error.is_finite() {
+                std_error
+            } else {
+                f64::INFINITY
+            };
+            let relative_error = std_error / x[i].abs().max(1e-300);
+            ParamEstimate {
+                name: names[i].clone(),
+                value: x[i],
+                std_error,
+                relative_error,
+                identified: relative_error < IDENTIFIABILITY_LIMIT,
+            }
+        })
+        .collect();
+    let free_direction = if estimates.iter().all(|e| e.identified) {
+        Vec::new()
+    } else {
+        free_direction(&columns, names)
+    };
+    FitSummary {
+        estimates,
+        free_direction,
+        gap_train: gap,
+        aic,
+        bic,
+        unknowns: x.len(),
+        starts: 0,
+        seconds: 0.0,
+    }
+}
+
+/// Akaike's and Schwarz's criteria of a fit with training gap `gap` (mean squared
+/// normalised residual) over `cells` cells and `unknowns` fitted unknowns.
+pub fn criteria(gap: f64, cells: usize, unknowns: usize) -> (f64, f64) {
+    let n = cells.max(1) as f64;
+    let k = unknowns as f64;
+    let fit = n * gap.max(f64::MIN_POSITIVE).ln();
+    (fit + 2.0 * k, fit + k * n.ln())
+}
+
+/// The eigenvector of the scaled `J'J` with the smallest eigenvalue, mapped back to
+/// transformed coordinates and normalised to a largest component of 1 (sign: the largest
+/// positive), components below [`SMALL_COMPONENT`] left out, largest first.
+pub fn free_direction(columns: &[Vec<f64>], names: &[String]) -> Vec<(String, f64)> {
+    let n = columns.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let (normal, _) = gauss_newton_system(columns, &vec![0.0; columns[0].len()]);
+    let scale: Vec<f64> = (0..n)
+        .map(|i| normal[i * n + i].sqrt().max(1e-300))
+        .collect();
+    let scaled: Vec<f64> = (0..n * n)
+        .map(|index| normal[index] / (scale[index / n] * scale[index % n]))
+        .collect();
+    let (_, vectors) = symmetric_eigen(&scaled, n);
+    let Some(vector) = vectors.first() else {
+        return Vec::new();
+    };
+    let raw: Vec<f64> = (0..n).map(|i| vector[i] / scale[i]).collect();
+    let largest = raw
+        .iter()
+        .copied()
+        .fold(0.0_f64, |m, v| if v.abs() > m.abs() { v } else { m });
+    if largest == 0.0 || !largest.is_finite() {
+        return Vec::new();
+    }
+    let mut direction: Vec<(String, f64)> = (names.iter().zip(&raw))
+        .map(|(name, v)| (name.clone(), v / largest))
+        .filter(|(_, v)| v.abs() >= SMALL_COMPONENT)
+        .collect();
+    direction.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    direction
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Residuals that see only `a + b` leave the direction `(1, -1)` free.
+    #[test]
+    fn a_sum_seen_alone_leaves_its_difference_free() {
+        let columns = vec![vec![1.0, 2.0, 3.0], vec![1.0, 2.0, 3.0 + 1e-9]];
+        let names = vec!["a".to_string(), "b".to_string()];
+        let direction = free_direction(&columns, &names);
+        assert_eq!(direction.len(), 2);
+        assert!((direction[0].1.abs() - 1.0).abs() < 1e-6);
+        assert!(
+            (direction[0].1 + direction[1].1).abs() < 1e-6,
+            "{direction:?}"
+        );
+    }
+
+    #[test]
+    fn criteria_penalise_unknowns() {
+        let (aic, bic) = criteria(0.01, 1000, 3);
+        let fit = 1000.0 * 0.01f64.ln();
+        assert!((aic - (fit + 6.0)).abs() < 1e-9);
+        assert!((bic - (fit + 3.0 * 1000f64.ln())).abs() < 1e-9);
+    }
+}
