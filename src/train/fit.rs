@@ -2,7 +2,8 @@
 //! multi-step objective, rollout epochs over shuffled shooting windows (see
 //! [`super::recipe`]).
 //!
-//! With [`Engine::Fused`] the one-step epochs run on a [`FusedNetwork`] and everything else
+//! With [`Engine::Fused`] (and [`Engine::Auto`] where the fused step runs the model) the
+//! one-step epochs run on a [`FusedNetwork`] and everything else
 //! on the graph [`Network`]: whichever of the two stepped last holds the current weights
 //! and Adam state, and hands both over before the other one steps (at the curriculum's
 //! switch to rollouts, and at the end, so that the polish and the evaluation see the
@@ -203,10 +204,7 @@ impl<'n> Engines<'n> {
         model: &ir::Model,
         setup: &Setup,
     ) -> Result<Self, BackendError> {
-        let fused = match engine {
-            Engine::Graph => None,
-            Engine::Fused => Some(FusedNetwork::build(model, setup)?),
-        };
+        let fused = engine.fused_step(model, setup)?;
         Ok(Engines {
             network,
             fused,
