@@ -39,6 +39,7 @@ pub mod recipe;
 mod run;
 pub mod settings;
 pub mod split;
+pub mod step;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
