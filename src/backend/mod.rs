@@ -396,6 +396,12 @@ impl Network {
         dispatch!(mut self, net => net.set_weights(weights))
     }
 
+    /// Replaces the trainable values from one flat vector (the tensors of
+    /// [`Network::weights`] back to back).
+    pub fn set_flat_weights(&mut self, flat: &[f64]) -> Result<(), BackendError> {
+        dispatch!(mut self, net => net.set_flat_weights(flat))
+    }
+
     /// The constrained values of the model's params, in declaration order.
     pub fn param_values(&self) -> Vec<f64> {
         dispatch!(self, net => net.param_values())

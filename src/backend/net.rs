@@ -353,6 +353,25 @@ where
         Ok(())
     }
 
+    /// Replaces the trainable values from one flat vector (tensors back to back, as
+    /// [`GreyBox::weights`] lists them).
+    pub fn set_flat_weights(&mut self, flat: &[f64]) -> Result<(), BackendError> {
+        let size: usize = self.weights.iter().map(Vec::len).sum();
+        if flat.len() != size {
+            return Err(BackendError::WeightsMismatch(format!(
+                "{} values where the model has {size}",
+                flat.len()
+            )));
+        }
+        let mut values = flat.iter();
+        for tensor in &mut self.weights {
+            for (slot, &value) in tensor.iter_mut().zip(&mut values) {
+                *slot = E::from_double(value);
+            }
+        }
+        Ok(())
+    }
+
     /// Adam's step count and moments.
     pub fn adam_state(&self) -> AdamState {
         self.adam.state(&self.lengths())

@@ -112,6 +112,24 @@ impl FusedNetwork {
         })
     }
 
+    /// Replaces the trainable values from one flat vector (the tensors of
+    /// [`FusedNetwork::weights`] back to back).
+    pub fn set_flat_weights(&mut self, flat: &[f64]) -> Result<(), BackendError> {
+        dispatch!(mut self, kernel => {
+            if flat.len() != kernel.weights.len() {
+                return Err(BackendError::WeightsMismatch(format!(
+                    "{} values where the model has {}",
+                    flat.len(),
+                    kernel.weights.len()
+                )));
+            }
+            for (slot, &value) in kernel.weights.iter_mut().zip(flat) {
+                *slot = Real::from_double(value);
+            }
+            Ok(())
+        })
+    }
+
     /// The trainable tensors, named and shaped as [`Network::weights`].
     pub fn weights(&self) -> Vec<NamedTensor> {
         dispatch!(self, kernel => {

@@ -147,9 +147,9 @@ impl Step {
         model: &ir::Model,
         setup: &Setup,
     ) -> Result<Step, TrainError> {
-        Ok(match engine {
-            Engine::Graph => Step::Graph(network),
-            Engine::Fused => Step::Fused(Box::new(FusedNetwork::build(model, setup)?)),
+        Ok(match engine.fused_step(model, setup)? {
+            Some(fused) => Step::Fused(Box::new(fused)),
+            None => Step::Graph(network),
         })
     }
 

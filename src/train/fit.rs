@@ -2,26 +2,28 @@
 //! multi-step objective, rollout epochs over shuffled shooting windows (see
 //! [`super::recipe`]).
 //!
-//! With [`Engine::Fused`] the one-step epochs run on a [`FusedNetwork`] and everything else
-//! on the graph [`Network`]: whichever of the two stepped last holds the current weights
-//! and Adam state, and hands both over before the other one steps (at the curriculum's
-//! switch to rollouts, and at the end, so that the polish and the evaluation see the
-//! trained network). Hidden states are refreshed through the graph network after it has
-//! been given the fused step's current weights.
+//! Every step goes through one [`Optimiser`] (weights and Adam's state) on top of a
+//! [`Step`]: with [`super::Engine::Fused`] (and [`super::Engine::Auto`] where the fused step runs the
+//! model) the one-step batches on a [`FusedNetwork`], everything else on the graph
+//! [`Network`]. The engines only compute gradients at the optimiser's weights, so nothing is
+//! handed over at the curriculum's switch to rollouts; the graph network is given the
+//! current weights before hidden states are refreshed and at the end, so that the polish
+//! and the evaluation see the trained network.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{BackendError, Batch, Network, Setup, StepSettings};
+use crate::backend::{BackendError, Network, Setup, StepSettings};
 use crate::fused::FusedNetwork;
 use crate::ir;
 
 use super::pairs::stage_fractions;
 use super::split::Training;
+use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
 use super::windows::{rollout_batch, shooting_starts};
-use super::{Engine, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
+use super::{Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -35,9 +37,6 @@ pub(super) struct Fit<'a> {
     /// What trains on each track.
     pub trainings: &'a [Training],
 }
-
-/// One Adam step on a one-step batch with the given settings; the loss before it.
-type OneStep<'s> = dyn FnMut(&Batch, &StepSettings) -> Result<f64, BackendError> + 's;
 
 impl Fit<'_> {
     fn settings(&self) -> StepSettings {
@@ -53,7 +52,7 @@ impl Fit<'_> {
     }
 
     /// Runs every epoch; returns the mean training loss of each. `network` ends with the
-    /// trained weights and Adam state whichever engine ran the one-step epochs.
+    /// trained weights whichever engine ran the one-step epochs.
     pub fn run(
         &self,
         network: &mut Network,
@@ -64,7 +63,11 @@ impl Fit<'_> {
         let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
-        let mut engines = Engines::new(network, options.engine, self.model, self.setup)?;
+        let mut engines = Engines {
+            fused: options.engine.fused_step(self.model, self.setup)?,
+            optimiser: Optimiser::new(network, options.precision),
+            network,
+        };
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
         // A state an experiment never measures is all fill: its estimate is the model's own
         // run, refreshed every epoch.
@@ -75,7 +78,7 @@ impl Fit<'_> {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
             let fill_due = needs_fill && (epoch - 1) % every == 0;
             if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
-                let current = engines.current_weights()?;
+                let current = engines.graph_with_weights()?;
                 let how = (fractions.as_slice(), fill_due);
                 refresh(current, self.model, training, how, self.hidden_init)?;
             }
@@ -92,7 +95,7 @@ impl Fit<'_> {
                 horizon,
             });
         }
-        engines.graph()?;
+        engines.graph_with_weights()?;
         Ok(losses)
     }
 
@@ -105,21 +108,14 @@ impl Fit<'_> {
         rng: &mut ChaCha8Rng,
     ) -> Result<f64, EpochFailure> {
         if horizon > 1 {
-            let network = engines.graph()?;
-            return self.rollout_epoch(network, training, (horizon, fractions), rng);
+            return self.rollout_epoch(engines, training, (horizon, fractions), rng);
         }
-        if engines.fused.is_some() {
-            let fused = engines.fused()?;
-            self.one_step_epoch(&mut |b, s| fused.train_step_with(b, s), training, rng)
-        } else {
-            let network = engines.graph()?;
-            self.one_step_epoch(&mut |b, s| network.train_step_with(b, s), training, rng)
-        }
+        self.one_step_epoch(engines, training, rng)
     }
 
     fn one_step_epoch(
         &self,
-        step: &mut OneStep,
+        engines: &mut Engines,
         training: &Course,
         rng: &mut ChaCha8Rng,
     ) -> Result<f64, EpochFailure> {
@@ -128,7 +124,8 @@ impl Fit<'_> {
         order.shuffle(rng);
         let mut total = 0.0;
         for chunk in order.chunks(self.options.batch_size) {
-            let loss = step(&training.table.batch(chunk), &settings)?;
+            let batch = training.table.batch(chunk);
+            let loss = engines.step(StepBatch::Pairs(&batch), &settings)?;
             finite(loss)?;
             total += loss * chunk.len() as f64;
         }
@@ -137,7 +134,7 @@ impl Fit<'_> {
 
     fn rollout_epoch(
         &self,
-        network: &mut Network,
+        engines: &mut Engines,
         training: &Course,
         (horizon, fractions): (usize, &[f64]),
         rng: &mut ChaCha8Rng,
@@ -156,8 +153,7 @@ impl Fit<'_> {
             starts.extend(tiles.into_iter().map(|knot| (index, knot)));
         }
         if starts.is_empty() {
-            let step = &mut |b: &Batch, s: &StepSettings| network.train_step_with(b, s);
-            return self.one_step_epoch(step, training, rng);
+            return self.one_step_epoch(engines, training, rng);
         }
         starts.shuffle(rng);
         let per_batch = (self.recipe.windows_per_batch)
@@ -177,7 +173,7 @@ impl Fit<'_> {
                 horizon,
                 fractions,
             );
-            let loss = network.rollout_step(&batch, &settings)?;
+            let loss = engines.step(StepBatch::Windows(&batch), &settings)?;
             finite(loss)?;
             total += loss * chunk.len() as f64;
         }
@@ -185,63 +181,27 @@ impl Fit<'_> {
     }
 }
 
-/// The graph network and, with [`Engine::Fused`], the fused step; `fused_holds` says
-/// whether the fused step has stepped since it last handed over, i.e. holds the current
-/// weights and Adam state.
+/// The optimiser, the graph network and, where the engine asks for it, the fused step.
 struct Engines<'n> {
     network: &'n mut Network,
     fused: Option<FusedNetwork>,
-    fused_holds: bool,
+    optimiser: Optimiser,
 }
 
-impl<'n> Engines<'n> {
-    /// The engines for `engine`; the fused step, if any, is built (so that a model it
-    /// refuses fails before the first epoch).
-    fn new(
-        network: &'n mut Network,
-        engine: Engine,
-        model: &ir::Model,
-        setup: &Setup,
-    ) -> Result<Self, BackendError> {
-        let fused = match engine {
-            Engine::Graph => None,
-            Engine::Fused => Some(FusedNetwork::build(model, setup)?),
+impl Engines<'_> {
+    /// One optimiser step on `batch`, on the fused step where it runs the batch, else on
+    /// the graph network.
+    fn step(&mut self, batch: StepBatch, settings: &StepSettings) -> Result<f64, BackendError> {
+        let engine: &mut dyn Step = match self.fused.as_mut().filter(|f| f.runs(batch)) {
+            Some(fused) => fused,
+            None => self.network,
         };
-        Ok(Engines {
-            network,
-            fused,
-            fused_holds: false,
-        })
+        self.optimiser.step(engine, batch, settings)
     }
 
-    /// The graph network, given the fused step's weights and Adam state if it holds them.
-    fn graph(&mut self) -> Result<&mut Network, BackendError> {
-        if let Some(fused) = self.fused.as_ref().filter(|_| self.fused_holds) {
-            self.network.set_weights(&fused.weights())?;
-            self.network.set_adam_state(&fused.adam_state())?;
-            self.fused_holds = false;
-        }
-        Ok(self.network)
-    }
-
-    /// The fused step, given the graph network's weights and Adam state if it holds them.
-    fn fused(&mut self) -> Result<&mut FusedNetwork, BackendError> {
-        let fused = (self.fused.as_mut())
-            .ok_or_else(|| BackendError::internal("a fused epoch without a fused step"))?;
-        if !self.fused_holds {
-            fused.set_weights(&self.network.weights())?;
-            fused.set_adam_state(&self.network.adam_state())?;
-            self.fused_holds = true;
-        }
-        Ok(fused)
-    }
-
-    /// The graph network with the current weights (Adam's state stays where it is), for
-    /// computations that do not step.
-    fn current_weights(&mut self) -> Result<&Network, BackendError> {
-        if let Some(fused) = self.fused.as_ref().filter(|_| self.fused_holds) {
-            self.network.set_weights(&fused.weights())?;
-        }
+    /// The graph network with the optimiser's current weights.
+    fn graph_with_weights(&mut self) -> Result<&Network, BackendError> {
+        self.network.set_flat_weights(&self.optimiser.weights())?;
         Ok(self.network)
     }
 }

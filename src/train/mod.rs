@@ -37,8 +37,10 @@ pub mod polish;
 pub mod predict;
 pub(crate) mod prepare;
 pub mod recipe;
+mod run;
 pub mod settings;
 pub mod split;
+pub mod step;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
@@ -59,13 +61,11 @@ pub use balances::BalanceFit;
 pub use error::TrainError;
 pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 pub use initial::{InitialState, Origin};
-use pairs::stage_fractions;
 pub use polish::{ParamEstimate, PolishSummary};
-use prepare::Layout;
 pub use recipe::{Engine, Objective, ParamSource, Recipe};
+pub use run::train_with;
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
-use validation::{refresh, validate, Course};
 
 /// Epochs between refreshes of the model's fill of unknown stretches.
 pub const FILL_REFRESH: usize = 10;
@@ -250,185 +250,6 @@ pub fn train(
     train_with(model, data, options, &Recipe::default(), on_event)
 }
 
-/// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
-/// params from the balances), fit, evaluate, report.
-pub fn train_with(
-    model: &ir::Model,
-    data: &TrainingData,
-    options: &TrainOptions,
-    recipe: &Recipe,
-    on_event: &mut dyn FnMut(Event),
-) -> Result<Trained, TrainError> {
-    check_options(options, recipe)?;
-    check_trainable(model)?;
-    let train_points = options.train_points.map(Some);
-    let data = TrainingData {
-        part: train_points.map_or(data.part, Part::FirstPairs),
-        ..*data
-    };
-    let layout = Layout::new(model, &data, options)?;
-    let hidden_init = hidden_initial_values(model)?;
-    let fractions = stage_fractions(model.dynamics, options.substeps);
-    let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
-    let warnings = analysis::stiffness(
-        model,
-        &scales,
-        (&layout.tracks, &layout.intervals),
-        &hidden_init,
-        options.substeps,
-    )?;
-    for warning in &warnings {
-        on_event(Event::Warning(warning));
-    }
-    let balance_fit = if recipe.params_from_balances() {
-        balances::estimate(model, &scales, &layout.tracks, &layout.intervals)?
-    } else {
-        None
-    };
-    if recipe.params == ParamSource::Balances && balance_fit.is_none() {
-        return Err(TrainError::ParamsFromBalances {
-            model: model.name.clone(),
-        });
-    }
-    let fitted;
-    let model = match &balance_fit {
-        Some(fit) => {
-            fitted = with_initial_params(model, fit);
-            &fitted
-        }
-        None => model,
-    };
-    let setup = Setup {
-        step: layout.grid.max_step,
-        substeps: options.substeps,
-        precision: options.precision,
-        seed: options.seed,
-        normalisation: layout.normalisation.clone(),
-        scales,
-    };
-    let mut network = Network::build(model, &setup)?;
-    let weights = column_weights(model, options)?;
-    let mut training = Course::new(
-        model,
-        layout.tracks.clone(),
-        (&layout.pairs, &weights, &layout.normalisation.observables),
-        &fractions,
-    );
-    refresh(
-        &network,
-        model,
-        &mut training,
-        (&fractions, false),
-        &hidden_init,
-    )?;
-    let mut validating = Course::new(
-        model,
-        layout.validation_tracks.clone(),
-        (&[], &weights, &layout.normalisation.observables),
-        &fractions,
-    );
-    let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
-    on_event(Event::Started {
-        epochs: options.epochs,
-        train_pairs: layout.pairs.len(),
-        validation_pairs,
-    });
-    let range = PhysicalRange::new(&setup.normalisation, recipe.range_factor);
-    let context = (&setup, options, range.as_ref());
-    let mut metrics = Metrics::default();
-    if !layout.scorings.is_empty() {
-        let (offline, online, _) = validate(
-            &network,
-            model,
-            (&mut validating, &layout.scorings),
-            context,
-            &hidden_init,
-        )?;
-        metrics.initial_offline = offline;
-        metrics.initial_online = online;
-    }
-    let fit = fit::Fit {
-        model,
-        setup: &setup,
-        options,
-        recipe,
-        hidden_init: &hidden_init,
-        freeze_params: balance_fit.is_some(),
-        trainings: &layout.trainings,
-    };
-    let losses = fit.run(&mut network, &mut training, on_event)?;
-    let mut initial_states = layout.initial.clone();
-    let refit = (&mut initial_states[..], hidden_init.as_slice());
-    initial::fit_initial_states(
-        &network,
-        model,
-        (&mut training, &fractions),
-        &setup.normalisation,
-        refit,
-    )?;
-    refresh(
-        &network,
-        model,
-        &mut training,
-        (&fractions, true),
-        &hidden_init,
-    )?;
-    let refit = (&mut initial_states[..], hidden_init.as_slice());
-    initial::fit_initial_states(
-        &network,
-        model,
-        (&mut validating, &fractions),
-        &setup.normalisation,
-        refit,
-    )?;
-    let (polish, estimates) = match &balance_fit {
-        Some(fit) => (None, fit.estimates.clone()),
-        None => polish::polish_and_estimate(
-            &mut network,
-            model,
-            &training.table,
-            &setup,
-            recipe.polishes(model),
-        )?,
-    };
-    if !layout.scorings.is_empty() {
-        let (offline, online, each) = validate(
-            &network,
-            model,
-            (&mut validating, &layout.scorings),
-            context,
-            &hidden_init,
-        )?;
-        metrics.offline = offline;
-        metrics.online = online;
-        metrics.validations = each;
-    }
-    let params = (model.params.iter().zip(network.param_values()))
-        .map(|(p, v)| (p.name.clone(), v))
-        .collect();
-    let report = TrainReport {
-        metrics,
-        params,
-        warnings,
-        losses,
-        train_pairs: layout.pairs.len(),
-        validation_pairs,
-        recipe: recipe.clone(),
-        estimates,
-        polish,
-        balance_fit,
-        initial_states,
-        dt: layout.grid.max_step,
-        learning_rate: options.learning_rate,
-        validated_from: validated_from(&layout),
-    };
-    Ok(Trained {
-        network,
-        setup,
-        report,
-    })
-}
-
 /// Per measured state, its loss weight (`--weight X=W`; 1 otherwise).
 fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>, TrainError> {
     let mut weights = vec![1.0; model.states.len()];
@@ -532,7 +353,7 @@ fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
 }
 
 /// The training experiments whose later part validates, with the time it starts.
-fn validated_from(layout: &Layout) -> Vec<(String, f64)> {
+pub(crate) fn validated_from(layout: &prepare::Layout) -> Vec<(String, f64)> {
     (layout.scorings[..layout.part_scorings].iter())
         .filter_map(|scoring| {
             let track = &layout.tracks[scoring.track];
@@ -557,7 +378,7 @@ pub fn available_pairs(
         part: Part::FirstPairs(None),
         ..*data
     };
-    Ok(Layout::new(model, &data, options)?.pairs.len())
+    Ok(prepare::Layout::new(model, &data, options)?.pairs.len())
 }
 
 /// The measured states and inputs of `model` from a complete record `data`, as a

@@ -52,8 +52,12 @@ impl Objective {
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Engine {
-    /// The graph backend (dfdx) for every epoch.
+    /// The fastest engine that runs the model: the hand-fused step for the one-step
+    /// epochs where it supports the model (no measured outputs), the graph backend for
+    /// everything else.
     #[default]
+    Auto,
+    /// The graph backend (dfdx) for every epoch.
     Graph,
     /// The hand-fused step for the one-step epochs: the same results up to rounding, about
     /// 2x faster per one-step epoch (rollouts, polish and evaluation run on the graph
@@ -65,14 +69,30 @@ impl Engine {
     /// The name used on the command line and in reports.
     pub fn name(self) -> &'static str {
         match self {
+            Engine::Auto => "auto",
             Engine::Graph => "graph",
             Engine::Fused => "fused",
         }
     }
 
-    /// Whether this is the graph backend (the default, left out of study files).
-    pub fn is_graph(&self) -> bool {
-        *self == Engine::Graph
+    /// The fused step for `model`, if this engine runs one: always for
+    /// [`Engine::Fused`] (a model it cannot run is an error), where it supports the model
+    /// for [`Engine::Auto`], never for [`Engine::Graph`].
+    pub fn fused_step(
+        self,
+        model: &ir::Model,
+        setup: &crate::backend::Setup,
+    ) -> Result<Option<crate::fused::FusedNetwork>, crate::backend::BackendError> {
+        use crate::backend::BackendError;
+        match self {
+            Engine::Graph => Ok(None),
+            Engine::Fused => crate::fused::FusedNetwork::build(model, setup).map(Some),
+            Engine::Auto => match crate::fused::FusedNetwork::build(model, setup) {
+                Ok(fused) => Ok(Some(fused)),
+                Err(BackendError::Unsupported { .. }) => Ok(None),
+                Err(error) => Err(error),
+            },
+        }
     }
 }
 

@@ -38,7 +38,7 @@ impl Default for Settings {
             learning_rate: 1e-3,
             precision: Precision::F32,
             substeps: 1,
-            engine: Engine::Graph,
+            engine: Engine::Auto,
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use super::evaluate::{online_error, simulate, Feed};
 use super::fixtures::{chemostat, normalise, options, record, track, train_one};
-use super::pairs::PairTable;
+use super::pairs::{stage_fractions, PairTable};
 use super::*;
 use crate::backend::Network;
 use crate::data::Dataset;

@@ -1,0 +1,288 @@
+//! [`train_with`] in four steps: [`prepare`] (options checked, grid, split, normalisation,
+//! closure magnitudes, stiffness warnings, params from the balances, network and pair
+//! tables), [`Run::fit`] (the epochs, [`super::fit`]), [`Run::evaluate`] (initial states
+//! re-fitted, params polished, validation errors) and [`Run::report`] (the
+//! [`TrainReport`]). Each step reads what the one before it left in [`Run`].
+
+use std::borrow::Cow;
+
+use crate::backend::{Network, Setup};
+use crate::ir;
+
+use super::balances::{self, BalanceFit};
+use super::pairs::stage_fractions;
+use super::polish::{ParamEstimate, PolishSummary};
+use super::prepare::Layout;
+use super::validation::{refresh, validate, Course};
+use super::{
+    analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
+    polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part, PhysicalRange,
+    Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
+};
+
+/// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
+/// params from the balances), fit, evaluate, report.
+pub fn train_with(
+    model: &ir::Model,
+    data: &TrainingData,
+    options: &TrainOptions,
+    recipe: &Recipe,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Trained, TrainError> {
+    let mut run = prepare(model, data, options, recipe, on_event)?;
+    let initial = run.validate(options, recipe)?;
+    let losses = run.fit(options, recipe, on_event)?;
+    let evaluation = run.evaluate(options, recipe)?;
+    Ok(run.report(options, recipe, (initial, evaluation), losses))
+}
+
+/// A run between its steps.
+struct Run<'m> {
+    /// The model, with its params' initial values from the balances where they came from
+    /// there.
+    model: Cow<'m, ir::Model>,
+    layout: Layout,
+    hidden_init: Vec<f64>,
+    fractions: Vec<f64>,
+    warnings: Vec<StiffnessWarning>,
+    balance_fit: Option<BalanceFit>,
+    setup: Setup,
+    network: Network,
+    training: Course,
+    validating: Course,
+    validation_pairs: usize,
+}
+
+/// What [`Run::evaluate`] finds.
+struct Evaluation {
+    metrics: Metrics,
+    initial_states: Vec<InitialState>,
+    polish: Option<PolishSummary>,
+    estimates: Vec<ParamEstimate>,
+}
+
+/// Checks the options and builds everything the epochs need; tells `on_event` of
+/// stiffness warnings and, last, that training starts.
+fn prepare<'m>(
+    model: &'m ir::Model,
+    data: &TrainingData,
+    options: &TrainOptions,
+    recipe: &Recipe,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Run<'m>, TrainError> {
+    check_options(options, recipe)?;
+    check_trainable(model)?;
+    let train_points = options.train_points.map(Some);
+    let data = TrainingData {
+        part: train_points.map_or(data.part, Part::FirstPairs),
+        ..*data
+    };
+    let layout = Layout::new(model, &data, options)?;
+    let hidden_init = hidden_initial_values(model)?;
+    let fractions = stage_fractions(model.dynamics, options.substeps);
+    let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
+    let warnings = analysis::stiffness(
+        model,
+        &scales,
+        (&layout.tracks, &layout.intervals),
+        &hidden_init,
+        options.substeps,
+    )?;
+    for warning in &warnings {
+        on_event(Event::Warning(warning));
+    }
+    let balance_fit = if recipe.params_from_balances() {
+        balances::estimate(model, &scales, &layout.tracks, &layout.intervals)?
+    } else {
+        None
+    };
+    if recipe.params == ParamSource::Balances && balance_fit.is_none() {
+        return Err(TrainError::ParamsFromBalances {
+            model: model.name.clone(),
+        });
+    }
+    let model = match &balance_fit {
+        Some(fit) => Cow::Owned(with_initial_params(model, fit)),
+        None => Cow::Borrowed(model),
+    };
+    let setup = Setup {
+        step: layout.grid.max_step,
+        substeps: options.substeps,
+        precision: options.precision,
+        seed: options.seed,
+        normalisation: layout.normalisation.clone(),
+        scales,
+    };
+    let network = Network::build(&model, &setup)?;
+    let weights = column_weights(&model, options)?;
+    let observables = &layout.normalisation.observables;
+    let mut training = Course::new(
+        &model,
+        layout.tracks.clone(),
+        (&layout.pairs, &weights, observables),
+        &fractions,
+    );
+    refresh(
+        &network,
+        &model,
+        &mut training,
+        (&fractions, false),
+        &hidden_init,
+    )?;
+    let validating = Course::new(
+        &model,
+        layout.validation_tracks.clone(),
+        (&[], &weights, observables),
+        &fractions,
+    );
+    let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
+    on_event(Event::Started {
+        epochs: options.epochs,
+        train_pairs: layout.pairs.len(),
+        validation_pairs,
+    });
+    Ok(Run {
+        model,
+        layout,
+        hidden_init,
+        fractions,
+        warnings,
+        balance_fit,
+        setup,
+        network,
+        training,
+        validating,
+        validation_pairs,
+    })
+}
+
+impl Run<'_> {
+    /// The validation errors of the network as it is (none without validation data).
+    fn validate(&mut self, options: &TrainOptions, recipe: &Recipe) -> Result<Metrics, TrainError> {
+        let mut metrics = Metrics::default();
+        if self.layout.scorings.is_empty() {
+            return Ok(metrics);
+        }
+        let range = PhysicalRange::new(&self.setup.normalisation, recipe.range_factor);
+        let (offline, online, each) = validate(
+            &self.network,
+            &self.model,
+            (&mut self.validating, &self.layout.scorings),
+            (&self.setup, options, range.as_ref()),
+            &self.hidden_init,
+        )?;
+        metrics.offline = offline;
+        metrics.online = online;
+        metrics.validations = each;
+        Ok(metrics)
+    }
+
+    /// Runs the epochs; the mean training loss of each.
+    fn fit(
+        &mut self,
+        options: &TrainOptions,
+        recipe: &Recipe,
+        on_event: &mut dyn FnMut(Event),
+    ) -> Result<Vec<f64>, TrainError> {
+        let fit = fit::Fit {
+            model: &self.model,
+            setup: &self.setup,
+            options,
+            recipe,
+            hidden_init: &self.hidden_init,
+            freeze_params: self.balance_fit.is_some(),
+            trainings: &self.layout.trainings,
+        };
+        fit.run(&mut self.network, &mut self.training, on_event)
+    }
+
+    /// After the epochs: initial states re-fitted on the training and validation data,
+    /// hidden states refreshed, params polished (unless they came from the balances), and
+    /// the validation errors of the trained network.
+    fn evaluate(
+        &mut self,
+        options: &TrainOptions,
+        recipe: &Recipe,
+    ) -> Result<Evaluation, TrainError> {
+        let mut initial_states = self.layout.initial.clone();
+        let refit = (&mut initial_states[..], self.hidden_init.as_slice());
+        initial::fit_initial_states(
+            &self.network,
+            &self.model,
+            (&mut self.training, &self.fractions),
+            &self.setup.normalisation,
+            refit,
+        )?;
+        refresh(
+            &self.network,
+            &self.model,
+            &mut self.training,
+            (&self.fractions, true),
+            &self.hidden_init,
+        )?;
+        let refit = (&mut initial_states[..], self.hidden_init.as_slice());
+        initial::fit_initial_states(
+            &self.network,
+            &self.model,
+            (&mut self.validating, &self.fractions),
+            &self.setup.normalisation,
+            refit,
+        )?;
+        let (polish, estimates) = match &self.balance_fit {
+            Some(fit) => (None, fit.estimates.clone()),
+            None => polish::polish_and_estimate(
+                &mut self.network,
+                &self.model,
+                &self.training.table,
+                &self.setup,
+                recipe.polishes(&self.model),
+            )?,
+        };
+        let metrics = self.validate(options, recipe)?;
+        Ok(Evaluation {
+            metrics,
+            initial_states,
+            polish,
+            estimates,
+        })
+    }
+
+    /// The trained network and its report.
+    fn report(
+        self,
+        options: &TrainOptions,
+        recipe: &Recipe,
+        (initial, evaluation): (Metrics, Evaluation),
+        losses: Vec<f64>,
+    ) -> Trained {
+        let metrics = Metrics {
+            initial_offline: initial.offline,
+            initial_online: initial.online,
+            ..evaluation.metrics
+        };
+        let params = (self.model.params.iter().zip(self.network.param_values()))
+            .map(|(p, v)| (p.name.clone(), v))
+            .collect();
+        let report = TrainReport {
+            metrics,
+            params,
+            warnings: self.warnings,
+            losses,
+            train_pairs: self.layout.pairs.len(),
+            validation_pairs: self.validation_pairs,
+            recipe: recipe.clone(),
+            estimates: evaluation.estimates,
+            polish: evaluation.polish,
+            balance_fit: self.balance_fit,
+            initial_states: evaluation.initial_states,
+            dt: self.layout.grid.max_step,
+            learning_rate: options.learning_rate,
+            validated_from: super::validated_from(&self.layout),
+        };
+        Trained {
+            network: self.network,
+            setup: self.setup,
+            report,
+        }
+    }
+}

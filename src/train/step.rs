@@ -1,0 +1,235 @@
+//! The one interface between training and its engines, and the optimiser written once on
+//! top of it.
+//!
+//! A [`Step`] is what an engine offers: given the weights (one flat vector, tensors back to
+//! back in [`Network::weights`] order) and a batch (one-step pairs or rollout windows), the
+//! loss and its flat gradient. The graph backend runs every batch; the fused step runs
+//! one-step pairs. The [`Optimiser`] holds the weights and Adam's state in the run's
+//! precision and takes every step ([`crate::numeric::Adam`]: bias correction, per-group
+//! learning rates, clipping), whichever engine computed the gradient, so nothing is handed
+//! over when the curriculum switches engines.
+
+use std::ops::Range;
+
+use crate::backend::{BackendError, Batch, Network, Precision, RolloutBatch, StepSettings};
+use crate::fused::FusedNetwork;
+use crate::numeric::{Adam, Real, Update};
+
+/// A batch of the training loss.
+#[derive(Clone, Copy)]
+pub enum StepBatch<'a> {
+    /// One-step pairs.
+    Pairs(&'a Batch),
+    /// Rollout windows.
+    Windows(&'a RolloutBatch),
+}
+
+/// An engine: the loss of a batch and its gradient at given weights.
+pub trait Step {
+    /// Whether this engine runs `batch`.
+    fn runs(&self, batch: StepBatch) -> bool;
+    /// The loss of `batch` at the flat `weights` and its flat gradient.
+    fn loss_and_gradient(
+        &mut self,
+        weights: &[f64],
+        batch: StepBatch,
+    ) -> Result<(f64, Vec<f64>), BackendError>;
+}
+
+impl Step for Network {
+    fn runs(&self, _: StepBatch) -> bool {
+        true
+    }
+
+    fn loss_and_gradient(
+        &mut self,
+        weights: &[f64],
+        batch: StepBatch,
+    ) -> Result<(f64, Vec<f64>), BackendError> {
+        self.set_flat_weights(weights)?;
+        let (loss, gradient) = match batch {
+            StepBatch::Pairs(batch) => self.gradient(batch)?,
+            StepBatch::Windows(batch) => self.rollout_gradient(batch)?,
+        };
+        Ok((loss, gradient.concat()))
+    }
+}
+
+impl Step for FusedNetwork {
+    fn runs(&self, batch: StepBatch) -> bool {
+        matches!(batch, StepBatch::Pairs(_))
+    }
+
+    fn loss_and_gradient(
+        &mut self,
+        weights: &[f64],
+        batch: StepBatch,
+    ) -> Result<(f64, Vec<f64>), BackendError> {
+        let StepBatch::Pairs(batch) = batch else {
+            return Err(BackendError::internal(
+                "rollout windows given to the fused step",
+            ));
+        };
+        self.set_flat_weights(weights)?;
+        let (loss, gradient) = self.gradient(batch)?;
+        Ok((loss, gradient.concat()))
+    }
+}
+
+/// The weights and Adam's state of a run, in its precision; the one optimiser loop of
+/// training.
+pub struct Optimiser {
+    state: State,
+    /// Where the params sit in the flat vector (none: the model has none).
+    params: Option<Range<usize>>,
+}
+
+enum State {
+    Single(Vec<f32>, Adam<f32>),
+    Double(Vec<f64>, Adam<f64>),
+}
+
+impl Optimiser {
+    /// Starts from `network`'s weights with zero moments.
+    pub fn new(network: &Network, precision: Precision) -> Self {
+        let tensors = network.weights();
+        let size: usize = tensors.iter().map(|t| t.values.len()).sum();
+        let params = (tensors.last())
+            .filter(|t| t.name == "params")
+            .map(|t| size - t.values.len()..size);
+        let flat = tensors.iter().flat_map(|t| t.values.iter().copied());
+        let state = match precision {
+            Precision::F32 => State::Single(flat.map(|v| v as f32).collect(), Adam::new(size)),
+            Precision::F64 => State::Double(flat.collect(), Adam::new(size)),
+        };
+        Optimiser { state, params }
+    }
+
+    /// The current weights, flat, as `f64` (exact in either precision).
+    pub fn weights(&self) -> Vec<f64> {
+        match &self.state {
+            State::Single(weights, _) => weights.iter().map(|&v| f64::from(v)).collect(),
+            State::Double(weights, _) => weights.clone(),
+        }
+    }
+
+    /// One step on `batch`: the engine's gradient at the current weights, clipped, then
+    /// Adam with the params at their own learning rate; the loss before it.
+    pub fn step(
+        &mut self,
+        engine: &mut dyn Step,
+        batch: StepBatch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        let (loss, gradient) = engine.loss_and_gradient(&self.weights(), batch)?;
+        match &mut self.state {
+            State::Single(weights, adam) => {
+                update(weights, adam, &gradient, settings, &self.params)
+            }
+            State::Double(weights, adam) => {
+                update(weights, adam, &gradient, settings, &self.params)
+            }
+        }
+        Ok(loss)
+    }
+}
+
+fn update<E: Real>(
+    weights: &mut [E],
+    adam: &mut Adam<E>,
+    gradient: &[f64],
+    settings: &StepSettings,
+    params: &Option<Range<usize>>,
+) {
+    let mut gradient: Vec<E> = gradient.iter().map(|&g| E::from_double(g)).collect();
+    let groups = settings.groups(weights.len(), params.clone());
+    let update = Update {
+        groups: &groups,
+        max_gradient_norm: settings.max_gradient_norm,
+    };
+    adam.step(weights, &mut gradient, &update);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::{Normalisation, Setup};
+    use crate::ir::Activation;
+    use crate::train::fixtures::{kitchen_sink, random_batch};
+
+    fn setup(model: &crate::ir::Model, precision: Precision) -> Setup {
+        let measured = model.states.len();
+        Setup {
+            step: 0.4,
+            substeps: 1,
+            precision,
+            seed: 3,
+            normalisation: Normalisation {
+                state_mean: vec![1.0; measured],
+                state_std: (0..measured).map(|i| 0.5 + 0.3 * i as f64).collect(),
+                input_mean: vec![0.5; model.inputs.len()],
+                input_std: vec![0.3; model.inputs.len()],
+                ..Normalisation::default()
+            },
+            scales: (model.closures.iter())
+                .map(|c| vec![0.7; c.outputs.len()])
+                .collect(),
+        }
+    }
+
+    fn settings() -> StepSettings {
+        StepSettings {
+            learning_rate: 0.01,
+            param_learning_rate: 0.003,
+            max_gradient_norm: Some(0.5),
+        }
+    }
+
+    /// The optimiser over the graph engine takes exactly the steps the graph network's own
+    /// Adam takes (same arithmetic in the same precision), in both precisions.
+    #[test]
+    fn the_optimiser_steps_as_the_engines_own_adam() {
+        let model = kitchen_sink(Activation::Softplus);
+        for precision in [Precision::F32, Precision::F64] {
+            let setup = setup(&model, precision);
+            let mut reference = Network::build(&model, &setup).unwrap();
+            let mut engine = Network::build(&model, &setup).unwrap();
+            let mut optimiser = Optimiser::new(&engine, precision);
+            assert!(optimiser.params.is_some(), "the model has params");
+            for seed in 0..4 {
+                let batch = random_batch(&model, &setup, 6, seed);
+                let expected = reference.train_step_with(&batch, &settings()).unwrap();
+                let pairs = StepBatch::Pairs(&batch);
+                let loss = optimiser.step(&mut engine, pairs, &settings()).unwrap();
+                assert_eq!(loss, expected);
+            }
+            let flat: Vec<f64> = (reference.weights().iter())
+                .flat_map(|t| t.values.clone())
+                .collect();
+            assert_eq!(optimiser.weights(), flat);
+        }
+    }
+
+    /// The fused engine under the same optimiser follows the graph engine to rounding.
+    #[test]
+    fn the_fused_engine_follows_the_graph_engine_under_one_optimiser() {
+        let model = kitchen_sink(Activation::Softplus);
+        let setup = setup(&model, Precision::F64);
+        let mut graph = Network::build(&model, &setup).unwrap();
+        let mut fused = FusedNetwork::build(&model, &setup).unwrap();
+        let mut on_graph = Optimiser::new(&graph, Precision::F64);
+        let mut on_fused = Optimiser::new(&graph, Precision::F64);
+        for seed in 0..4 {
+            let batch = random_batch(&model, &setup, 6, seed);
+            let pairs = StepBatch::Pairs(&batch);
+            let a = on_graph.step(&mut graph, pairs, &settings()).unwrap();
+            let b = on_fused.step(&mut fused, pairs, &settings()).unwrap();
+            assert!((a - b).abs() <= 1e-10 * a.abs(), "{a} vs {b}");
+        }
+        for (a, b) in on_graph.weights().iter().zip(on_fused.weights()) {
+            assert!((a - b).abs() <= 1e-9 * (1.0 + a.abs()), "{a} vs {b}");
+        }
+        let batch = random_batch(&model, &setup, 2, 9);
+        assert!(fused.runs(StepBatch::Pairs(&batch)));
+    }
+}
