@@ -4,8 +4,8 @@
 
 use super::*;
 use crate::ir::{Activation, Constraint};
-use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
 use crate::record::{GridOptions, Record, Track};
+use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
 use crate::train::pairs::stage_fractions;
 use crate::train::windows::rollout_batch;
 
@@ -46,7 +46,9 @@ fn model() -> ir::Model {
 fn record(irregular: bool) -> Track {
     let rows = 14;
     let times: Vec<f64> = if irregular {
-        (0..rows).map(|i| i as f64 + 0.3 * ((i * 7 % 5) as f64 / 4.0)).collect()
+        (0..rows)
+            .map(|i| i as f64 + 0.3 * ((i * 7 % 5) as f64 / 4.0))
+            .collect()
     } else {
         (0..rows).map(|i| i as f64).collect()
     };
@@ -100,7 +102,13 @@ fn assert_rollout_gradient_matches(substeps: usize, irregular: bool) {
     let tracks = [record(irregular)];
     let network = network(&model, substeps);
     let fractions = stage_fractions(model.dynamics, substeps);
-    let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, 3), (0, 5)], 6, &fractions);
+    let batch = rollout_batch(
+        &model,
+        (&tracks, &[], &[]),
+        &[(0, 3), (0, 5)],
+        6,
+        &fractions,
+    );
     if irregular {
         let steps: Vec<f64> = batch.step_sizes.iter().flatten().copied().collect();
         assert!(steps.iter().any(|&h| (h - 1.0).abs() > 0.05), "{steps:?}");
@@ -166,7 +174,13 @@ fn params_train_at_their_own_rate() {
     let model = model();
     let tracks = [record(false)];
     let fractions = stage_fractions(model.dynamics, 1);
-    let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, 3), (0, 5)], 4, &fractions);
+    let batch = rollout_batch(
+        &model,
+        (&tracks, &[], &[]),
+        &[(0, 3), (0, 5)],
+        4,
+        &fractions,
+    );
     let mut network = network(&model, 1);
     let before = network.weights();
     let settings = StepSettings {

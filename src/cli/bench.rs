@@ -314,14 +314,8 @@ fn time_full_training(root: &Path, epochs: usize) -> Result<FullRow, CommandErro
         validation: &[],
         part: Part::FirstPairs(Some(train_points)),
     };
-    crate::train::train_with(
-        &model,
-        &data,
-        &options,
-        &Recipe::paper(),
-        &mut |_| {},
-    )
-    .map_err(train_error)?;
+    crate::train::train_with(&model, &data, &options, &Recipe::paper(), &mut |_| {})
+        .map_err(train_error)?;
     Ok(FullRow {
         model: model_file.to_string(),
         train_points,

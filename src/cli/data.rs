@@ -59,7 +59,9 @@ pub fn hold_out(
     let (held, kept): (Vec<Record>, Vec<Record>) =
         records.into_iter().partition(|r| holdout.contains(&r.name));
     if kept.is_empty() {
-        return Err(CommandError::user(crate::train::TrainError::NoTrainingExperiment));
+        return Err(CommandError::user(
+            crate::train::TrainError::NoTrainingExperiment,
+        ));
     }
     Ok((kept, held))
 }

@@ -58,9 +58,14 @@ pub fn run(args: &PredictArgs) -> CommandResult {
     let factor = info.recipe.map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
     let history = crate::train::History::Measured;
     let range = PhysicalRange::new(&setup.normalisation, factor);
-    let mut table =
-        predict::predict_in_range(&model, &network, &setup, &record, (mode, history, range.as_ref()))
-            .map_err(train_error)?;
+    let mut table = predict::predict_in_range(
+        &model,
+        &network,
+        &setup,
+        &record,
+        (mode, history, range.as_ref()),
+    )
+    .map_err(train_error)?;
     if let Some(divergence) = &table.divergence {
         eprintln!("warning: {divergence}; the predictions stop there");
         let rows = (table.columns.first()).map_or(0, |times| {

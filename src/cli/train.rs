@@ -331,16 +331,23 @@ fn cross_validate(
         &mut |fold, folds| {
             progress.borrow_mut().finish();
             let name = &records[fold].name;
-            eprintln!("cross-validation fold {}/{folds}: holding out `{name}`", fold + 1);
+            eprintln!(
+                "cross-validation fold {}/{folds}: holding out `{name}`",
+                fold + 1
+            );
         },
         &mut |event| progress.borrow_mut().observe(event, epochs),
     );
     progress.borrow_mut().finish();
     let result = result.map_err(train_error)?;
-    println!("leave-one-experiment-out cross-validation ({} folds):", result.folds.len());
+    println!(
+        "leave-one-experiment-out cross-validation ({} folds):",
+        result.folds.len()
+    );
     println!("  {:<24} {:>12} {:>12}", "held out", "offline", "online");
     for fold in &result.folds {
-        let overall = |set: &Option<ErrorSet>| set.as_ref().map_or("-".into(), |s| error(s.overall));
+        let overall =
+            |set: &Option<ErrorSet>| set.as_ref().map_or("-".into(), |s| error(s.overall));
         println!(
             "  {:<24} {:>12} {:>12}",
             fold.held_out,
@@ -524,10 +531,19 @@ fn print_errors(offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
             .map_or("-".to_string(), |(_, e)| error(*e))
     };
     for name in names {
-        println!("  {name:<16} {:>12} {:>12}", of(offline, name), of(online, name));
+        println!(
+            "  {name:<16} {:>12} {:>12}",
+            of(offline, name),
+            of(online, name)
+        );
     }
     let overall = |set: Option<&ErrorSet>| set.map_or("-".to_string(), |s| error(s.overall));
-    println!("  {:<16} {:>12} {:>12}", "overall", overall(offline), overall(online));
+    println!(
+        "  {:<16} {:>12} {:>12}",
+        "overall",
+        overall(offline),
+        overall(online)
+    );
     if let Some(divergence) = online.and_then(|s| s.divergence.as_ref()) {
         println!("  {divergence}");
     }

@@ -17,8 +17,8 @@ use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::backend::{Network, Setup};
 use crate::data::Dataset;
 use crate::plot::{BarChart, Chart, Series, Style, PALETTE};
-use crate::train::{artifacts, History};
 use crate::train::predict::{predict, Mode, PredictionTable};
+use crate::train::{artifacts, History};
 
 /// Figure size in pixels.
 pub const WIDTH: f64 = 640.0;

@@ -93,6 +93,7 @@ pub struct Study {
     pub batch_size: usize,
     /// Adam learning rate.
     #[serde(default = "default_learning_rate")]
+    #[serde(with = "crate::json")]
     pub learning_rate: f64,
     /// Element type of training.
     #[serde(default)]

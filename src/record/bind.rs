@@ -17,7 +17,11 @@ pub fn request(
     min_rows: impl Into<MinRows>,
 ) -> Request {
     let observables_possible = !model.outputs.is_empty();
-    let mut columns: Vec<Wanted> = model.inputs.iter().map(|i| Wanted::input(&i.name)).collect();
+    let mut columns: Vec<Wanted> = model
+        .inputs
+        .iter()
+        .map(|i| Wanted::input(&i.name))
+        .collect();
     columns.extend(model.states.iter().map(|s| {
         if observables_possible {
             Wanted::optional(&s.name)
@@ -91,11 +95,15 @@ fn bind_one(model: &ir::Model, experiment: &Experiment) -> Result<Record, BindEr
     let observables: Vec<Observable> = (model.outputs.iter().enumerate())
         .filter_map(|(index, output)| {
             let cells = series(&output.name)?;
-            cells.values.iter().any(Option::is_some).then(|| Observable {
-                output: index,
-                name: output.name.clone(),
-                cells: cells.values.clone(),
-            })
+            cells
+                .values
+                .iter()
+                .any(Option::is_some)
+                .then(|| Observable {
+                    output: index,
+                    name: output.name.clone(),
+                    cells: cells.values.clone(),
+                })
         })
         .collect();
     let mut states = Vec::with_capacity(model.states.len());

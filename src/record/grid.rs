@@ -90,7 +90,11 @@ impl Track {
             observed: Vec::new(),
         };
         track.observed = (record.observables.iter())
-            .map(|o| (track.rows.iter()).map(|row| row.and_then(|r| o.cells[r])).collect())
+            .map(|o| {
+                (track.rows.iter())
+                    .map(|row| row.and_then(|r| o.cells[r]))
+                    .collect()
+            })
             .collect();
         for (index, cells) in record.states.iter().enumerate() {
             let limit = options.gap_limits.get(index).copied().unwrap_or(0.0);
@@ -201,19 +205,22 @@ impl Track {
         for (k, &time) in self.times.iter().enumerate() {
             let is_cell = self.rows[k].is_some_and(|row| cells[row].is_some());
             let after = samples.partition_point(|&(t, _)| t <= time);
-            let (value, from_data) = match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
-                (Some((t, v)), _) if t == time => (v, true),
-                (Some((ta, va)), Some(&(tb, vb))) => {
-                    let value = va + (vb - va) * (time - ta) / (tb - ta);
-                    (value, tb - ta <= gap_limit * (1.0 + SNAP))
-                }
-                (Some((_, v)), None) => (v, false),
-                (None, Some(&(tb, vb))) => match initial.filter(|_| !has_first) {
-                    Some(first) => (first + (vb - first) * (time - start) / (tb - start), false),
-                    None => (vb, false),
-                },
-                (None, None) => (initial.unwrap_or(0.0), false),
-            };
+            let (value, from_data) =
+                match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
+                    (Some((t, v)), _) if t == time => (v, true),
+                    (Some((ta, va)), Some(&(tb, vb))) => {
+                        let value = va + (vb - va) * (time - ta) / (tb - ta);
+                        (value, tb - ta <= gap_limit * (1.0 + SNAP))
+                    }
+                    (Some((_, v)), None) => (v, false),
+                    (None, Some(&(tb, vb))) => match initial.filter(|_| !has_first) {
+                        Some(first) => {
+                            (first + (vb - first) * (time - start) / (tb - start), false)
+                        }
+                        None => (vb, false),
+                    },
+                    (None, None) => (initial.unwrap_or(0.0), false),
+                };
             let value = if k == 0 && !is_cell {
                 initial.unwrap_or(value)
             } else {

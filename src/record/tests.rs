@@ -19,7 +19,12 @@ fn irregular() -> Record {
 #[test]
 fn normalisation_is_taken_over_measured_cells_of_every_part() {
     let record = irregular();
-    let other = Record::complete("b", vec![0.0, 1.0], vec![vec![2.0, 4.0]], vec![vec![6.0, 8.0], vec![5.0, 5.0]]);
+    let other = Record::complete(
+        "b",
+        vec![0.0, 1.0],
+        vec![vec![2.0, 4.0]],
+        vec![vec![6.0, 8.0], vec![5.0, 5.0]],
+    );
     let norm = Normalisation::over(&[(&record, 0..5), (&other, 0..2)], 2, 1);
     // State 0: 2, 4, 10, 6, 8 -> mean 6, population variance 8.
     assert!((norm.state_mean[0] - 6.0).abs() < 1e-12);
@@ -63,15 +68,24 @@ fn a_record_is_laid_on_its_grid() {
     let track = Track::lay(&irregular(), &options, &[1.5, 0.0]);
     // 5 -> 11 is cut into three steps of 2.
     assert_eq!(track.times, vec![2.0, 3.0, 5.0, 7.0, 9.0, 11.0, 12.0]);
-    assert_eq!(track.rows, vec![Some(0), Some(1), Some(2), None, None, Some(3), Some(4)]);
+    assert_eq!(
+        track.rows,
+        vec![Some(0), Some(1), Some(2), None, None, Some(3), Some(4)]
+    );
     assert_eq!(track.steps, vec![1.0, 2.0, 2.0, 2.0, 2.0, 1.0, 0.0]);
     assert_eq!(track.inputs[0], vec![0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 0.0]);
     // State 0 starts at its initial value 1.5 (no cell at the first row, not known); its
     // cells 4 @ 5 and 10 @ 12 are 7 apart, beyond its gap limit 3: the cut knots hold the
     // provisional interpolant, not known.
     assert_eq!(track.states[0][0], 1.5);
-    assert_eq!(track.known[0], vec![false, true, true, false, false, false, true]);
-    assert_eq!(track.measured[0], vec![false, true, true, false, false, false, true]);
+    assert_eq!(
+        track.known[0],
+        vec![false, true, true, false, false, false, true]
+    );
+    assert_eq!(
+        track.measured[0],
+        vec![false, true, true, false, false, false, true]
+    );
     assert!((track.states[0][3] - (4.0 + 6.0 * 2.0 / 7.0)).abs() < 1e-12);
     // State 1: 3 @ 5 and 9 @ 11 are 6 apart, within its limit 10: interpolated, known.
     let expected = [1.0, 5.0 / 3.0, 3.0, 5.0, 7.0, 9.0, 7.0];
@@ -114,7 +128,12 @@ fn positions_map_times_onto_knots() {
 fn a_uniform_complete_record_is_its_own_grid() {
     let times: Vec<f64> = (0..10).map(|i| 0.5 * i as f64).collect();
     let values: Vec<f64> = times.iter().map(|t| t * t).collect();
-    let record = Record::complete("u", times.clone(), vec![vec![0.0; 10]], vec![values.clone()]);
+    let record = Record::complete(
+        "u",
+        times.clone(),
+        vec![vec![0.0; 10]],
+        vec![values.clone()],
+    );
     let options = GridOptions {
         max_step: 0.5,
         gap_limits: vec![0.5],

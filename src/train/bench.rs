@@ -59,12 +59,16 @@ pub struct BenchReport {
     /// Adam steps per epoch (`train_points / batch_size`, rounded up).
     pub steps_per_epoch: usize,
     /// Wall-clock seconds of each timed epoch, in order.
+    #[serde(with = "crate::json")]
     pub epoch_seconds: Vec<f64>,
     /// Median of `epoch_seconds`.
+    #[serde(with = "crate::json")]
     pub median_epoch_seconds: f64,
     /// The median epoch divided by its steps.
+    #[serde(with = "crate::json")]
     pub median_step_seconds: f64,
     /// Mean training loss of the last timed epoch (a check that it trains).
+    #[serde(with = "crate::json")]
     pub final_loss: f64,
 }
 
@@ -75,7 +79,9 @@ pub fn bench(
     data: &TrainingData,
     options: &BenchOptions,
 ) -> Result<BenchReport, TrainError> {
-    let part = options.train_points.map_or(Part::All, |n| Part::FirstPairs(Some(n)));
+    let part = options
+        .train_points
+        .map_or(Part::All, |n| Part::FirstPairs(Some(n)));
     if options.train_points == Some(0) {
         return Err(TrainError::TooManyTrainPoints {
             available: 0,
@@ -100,7 +106,13 @@ pub fn bench(
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let weights = vec![1.0; model.states.len()];
     let mut course = Course::new(model, layout.tracks, (&layout.pairs, &weights), &fractions);
-    refresh(&network, model, &mut course, (&fractions, false), &hidden_init)?;
+    refresh(
+        &network,
+        model,
+        &mut course,
+        (&fractions, false),
+        &hidden_init,
+    )?;
     let table = course.table;
     let mut step = Step::new(options.engine, network, model, &setup)?;
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);

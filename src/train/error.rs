@@ -89,22 +89,25 @@ pub enum TrainError {
         /// The offending loss value.
         loss: f64,
     },
-    /// Weights reused with a model that changed since training.
+    /// Weights reused with a model whose structure changed since training.
     #[error(
-        "expected the model the weights in `{run}` were trained with (sha256 {expected}), found \
-         a changed model (sha256 {found})"
+        "expected the model structure the weights in `{run}` were trained with, found a \
+         changed one: {}",
+        changes.join("; ")
     )]
     #[diagnostic(
         code(gbm::E0416),
-        help("train the changed model again, or pass the model file the weights came from")
+        help(
+            "weights fit a model by its closures, embeddings, network shapes, states, inputs \
+             and params; train the changed model again, or pass the model file the weights \
+             came from (a copy is in the run directory as `model.gbm`)"
+        )
     )]
     ModelChanged {
         /// The run directory.
         run: String,
-        /// Hash recorded at training.
-        expected: String,
-        /// Hash of the model given now.
-        found: String,
+        /// Each changed part: `part: expected ..., found ...`.
+        changes: Vec<String>,
     },
     /// A run directory that cannot be read back.
     #[error("cannot read trained weights from `{path}`: {reason}")]

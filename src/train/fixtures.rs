@@ -636,7 +636,8 @@ pub fn train_one(
     recipe: &crate::train::Recipe,
 ) -> Result<crate::train::Trained, crate::train::TrainError> {
     let train = [record(model, data)];
-    let held: Vec<crate::record::Record> = validation.map(|v| record(model, v)).into_iter().collect();
+    let held: Vec<crate::record::Record> =
+        validation.map(|v| record(model, v)).into_iter().collect();
     let data = crate::train::TrainingData {
         train: &train,
         validation: &held,

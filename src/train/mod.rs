@@ -239,8 +239,7 @@ pub fn train_with(
     let layout = Layout::new(model, &data, options)?;
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
-    let scales =
-        analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
+    let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
     let warnings = analysis::stiffness(
         model,
         &scales,
@@ -285,7 +284,13 @@ pub fn train_with(
         (&layout.pairs, &weights),
         &fractions,
     );
-    refresh(&network, model, &mut training, (&fractions, false), &hidden_init)?;
+    refresh(
+        &network,
+        model,
+        &mut training,
+        (&fractions, false),
+        &hidden_init,
+    )?;
     let mut validating = Course::new(
         model,
         layout.validation_tracks.clone(),
@@ -322,7 +327,13 @@ pub fn train_with(
         trainings: &layout.trainings,
     };
     let losses = fit.run(&mut network, &mut training, on_event)?;
-    refresh(&network, model, &mut training, (&fractions, true), &hidden_init)?;
+    refresh(
+        &network,
+        model,
+        &mut training,
+        (&fractions, true),
+        &hidden_init,
+    )?;
     let (polish, estimates) = match &balance_fit {
         Some(fit) => (None, fit.estimates.clone()),
         None => polish::polish_and_estimate(
@@ -374,16 +385,17 @@ fn column_weights(model: &ir::Model, options: &TrainOptions) -> Result<Vec<f64>,
     let mut weights = vec![1.0; model.states.len()];
     for (name, weight) in &options.column_weights {
         let names: Vec<&str> = model.states.iter().map(|s| s.name.as_str()).collect();
-        let index = names.iter().position(|n| n == name).ok_or_else(|| {
-            TrainError::BadOption {
+        let index = names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| TrainError::BadOption {
                 option: "--weight".into(),
                 expected: format!(
                     "a measured state ({})",
                     crate::suggest::did_you_mean(name, &names, "measured states")
                 ),
                 found: name.clone(),
-            }
-        })?;
+            })?;
         if !(*weight > 0.0 && weight.is_finite()) {
             return Err(TrainError::BadOption {
                 option: "--weight".into(),
@@ -469,11 +481,6 @@ fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
     }
     Ok(())
 }
-
-
-
-
-
 
 /// The measured states and inputs of `model` from a complete record `data`, as a
 /// [`crate::record::Record`].

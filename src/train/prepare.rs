@@ -8,7 +8,8 @@ use crate::record::{GridOptions, Normalisation, Part as Rows, Record, Track};
 use super::initial::{initial_state, InitialState};
 use super::pairs::{stage_fractions, PairAt};
 use super::split::{
-    known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training, TrainingData,
+    known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training,
+    TrainingData,
 };
 use super::{TrainError, TrainOptions};
 
@@ -54,9 +55,8 @@ impl Layout {
         let initial = (all.iter())
             .map(|record| initial_state(model, record))
             .collect::<Result<Vec<_>, _>>()?;
-        let lay = |record: &Record, start: &InitialState| {
-            Track::lay(record, &grid, &start.values())
-        };
+        let lay =
+            |record: &Record, start: &InitialState| Track::lay(record, &grid, &start.values());
         let tracks: Vec<Track> = (data.train.iter().zip(&initial))
             .map(|(r, i)| lay(r, i))
             .collect();

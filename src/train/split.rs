@@ -134,7 +134,13 @@ pub fn split_training(
                     experiments: records.len(),
                 });
             }
-            first_pairs(model, (&records[0], &tracks[0]), count, has_validation, fractions)
+            first_pairs(
+                model,
+                (&records[0], &tracks[0]),
+                count,
+                has_validation,
+                fractions,
+            )
         }
         Part::Tail(share) => {
             let mut trainings = Vec::new();
@@ -269,7 +275,12 @@ pub fn whole_experiments(
                 track: first_index + offset,
                 run_start: start,
                 scored_from: f64::NEG_INFINITY,
-                pairs: eligible_pairs(model, track, start..track.len().saturating_sub(1), fractions),
+                pairs: eligible_pairs(
+                    model,
+                    track,
+                    start..track.len().saturating_sub(1),
+                    fractions,
+                ),
             }
         })
         .collect()

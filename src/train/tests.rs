@@ -10,7 +10,13 @@ use crate::data::Dataset;
 #[test]
 fn short_training_on_chemostat_data_cuts_the_validation_error() {
     let (data, _) = chemostat::data(700, (0.002, 0.02), 1);
-    let trained = train_one(&chemostat::grey_box(), &data, None, &options(15, 500), &Recipe::default())
+    let trained = train_one(
+        &chemostat::grey_box(),
+        &data,
+        None,
+        &options(15, 500),
+        &Recipe::default(),
+    )
     .unwrap();
     let metrics = &trained.report.metrics;
     let before = metrics.initial_offline.as_ref().unwrap().overall;
@@ -49,8 +55,14 @@ fn the_same_seed_gives_the_same_result_and_another_seed_does_not() {
             seed,
             ..options(2, 100)
         };
-        let trained =
-            train_one(&chemostat::grey_box(), &data, None, &options, &Recipe::default()).unwrap();
+        let trained = train_one(
+            &chemostat::grey_box(),
+            &data,
+            None,
+            &options,
+            &Recipe::default(),
+        )
+        .unwrap();
         (trained.report.losses, trained.network.weights())
     };
     let (losses, weights) = run(5);
@@ -212,7 +224,7 @@ fn scratch_directory(name: &str) -> std::path::PathBuf {
 }
 
 #[test]
-fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
+fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_structure() {
     let (data, _) = chemostat::data(150, (0.002, 0.02), 8);
     let model = chemostat::grey_box();
     let options = options(2, 80);
@@ -245,8 +257,22 @@ fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
     {
         assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-12), "{a} vs {b}");
     }
-    let changed = artifacts::restore(&model, "model chemostat_gb  # edited\n", &directory);
-    assert!(matches!(changed, Err(TrainError::ModelChanged { .. })));
+    // Another text of the same structure is accepted, with a note; another structure is not.
+    let edited =
+        artifacts::restore_with_notes(&model, "model chemostat_gb  # edited\n", &directory);
+    assert!(edited.unwrap().notes[0].contains("structure is the same"));
+    let mut wider = model.clone();
+    wider.closures[0].network.hidden[0] += 1;
+    match artifacts::restore(&wider, source, &directory) {
+        Err(TrainError::ModelChanged { changes, .. }) => {
+            assert_eq!(changes.len(), 1, "{changes:?}");
+            assert!(
+                changes[0].contains("network: expected `hidden [20"),
+                "{changes:?}"
+            );
+        }
+        _ => panic!("a wider network must be refused"),
+    }
     std::fs::remove_dir_all(&directory).unwrap();
 }
 

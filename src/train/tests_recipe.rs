@@ -200,7 +200,11 @@ fn every_validation_experiment_is_reported_and_the_headline_pools_their_cells() 
     let trained = train_with(&model, &training, &options, &Recipe::default(), &mut quiet);
     let trained = trained.unwrap();
     let metrics = &trained.report.metrics;
-    let names: Vec<&str> = metrics.validations.iter().map(|v| v.name.as_str()).collect();
+    let names: Vec<&str> = metrics
+        .validations
+        .iter()
+        .map(|v| v.name.as_str())
+        .collect();
     assert_eq!(names, vec!["first", "second"]);
     // Offline pairs have their history inside the record: 40 rows of it.
     assert_eq!(metrics.validations[0].pairs, 200 - 1 - 40);

@@ -104,9 +104,13 @@ pub fn rollout_batch(
             let knot = start + step;
             batch.inputs[step].extend(track.inputs.iter().map(|u| u[knot]));
             batch.targets[step].extend(track.states.iter().map(|s| s[knot + 1]));
-            (batch.weights[step]).extend(track.measured.iter().enumerate().map(|(i, m)| {
-                f64::from(m[knot + 1]) * weights.get(i).copied().unwrap_or(1.0)
-            }));
+            (batch.weights[step]).extend(
+                track
+                    .measured
+                    .iter()
+                    .enumerate()
+                    .map(|(i, m)| f64::from(m[knot + 1]) * weights.get(i).copied().unwrap_or(1.0)),
+            );
             batch.step_sizes[step].push(track.steps[knot]);
             for (closure_index, closure) in model.closures.iter().enumerate() {
                 for (offset, &fraction) in fractions.iter().enumerate() {
@@ -175,7 +179,11 @@ mod tests {
             vec![(0..12).map(|i| (i % 3) as f64).collect()],
             vec![(0..12).map(|i| 1.0 + 0.1 * i as f64).collect()],
         );
-        Track::lay(&record, &crate::train::prepare::grid_for(&model(), 2.0), &[])
+        Track::lay(
+            &record,
+            &crate::train::prepare::grid_for(&model(), 2.0),
+            &[],
+        )
     }
 
     /// Recombining data share and feedback with the data in place of predictions gives
@@ -250,7 +258,13 @@ mod tests {
         let start = first_pair_row(&model, record.steps[0]);
         let steps = 5;
         let tracks = [record.clone()];
-        let batch = rollout_batch(&model, (&tracks, &[], &[]), &[(0, start)], steps, &fractions);
+        let batch = rollout_batch(
+            &model,
+            (&tracks, &[], &[]),
+            &[(0, start)],
+            steps,
+            &fractions,
+        );
         let rolled = network.rollout_predict(&batch).unwrap();
         let run = simulate(
             &network,

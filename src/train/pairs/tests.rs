@@ -87,7 +87,14 @@ fn irregular_records_are_read_at_stage_times_from_their_own_measurements() {
         source: "r".into(),
         times: vec![0.0, 1.0, 3.0, 4.0, 8.0, 9.0],
         inputs: vec![vec![1.0, 1.0, 2.0, 2.0, 5.0, 5.0]],
-        states: vec![vec![Some(0.0), Some(1.0), None, Some(4.0), Some(12.0), Some(14.0)]],
+        states: vec![vec![
+            Some(0.0),
+            Some(1.0),
+            None,
+            Some(4.0),
+            Some(12.0),
+            Some(14.0),
+        ]],
         observables: Vec::new(),
     };
     let track = lay(&record, 2.0);
@@ -99,8 +106,14 @@ fn irregular_records_are_read_at_stage_times_from_their_own_measurements() {
     // x: cells at 0, 1, 4, 8, 9; at 3 (no cell) the interpolant of 1 @ 1 and 4 @ 4 is 3,
     // known (gap 3 <= delay 3); at 6 that of 4 @ 4 and 12 @ 8 is 8, not known (gap 4).
     assert_eq!(track.states[0], vec![0.0, 1.0, 3.0, 4.0, 8.0, 12.0, 14.0]);
-    assert_eq!(track.known[0], vec![true, true, true, true, false, true, true]);
-    assert_eq!(track.measured[0], vec![true, true, false, true, false, true, true]);
+    assert_eq!(
+        track.known[0],
+        vec![true, true, true, true, false, true, true]
+    );
+    assert_eq!(
+        track.measured[0],
+        vec![true, true, false, true, false, true, true]
+    );
     assert_eq!(track.inputs[0], vec![1.0, 1.0, 2.0, 2.0, 2.0, 5.0, 5.0]);
     let closure = &model.closures[0];
     let fractions = stage_fractions(model.dynamics, 1);
