@@ -266,7 +266,13 @@ pub fn save(directory: &Path, info: &RunInfo, network: &Network) -> Result<(), T
     let serialized = safetensors::serialize(views, &None)
         .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
     crate::io::write_atomic(&directory.join(WEIGHTS_FILE), &serialized)?;
-    if let Some(file) = &info.model.source_file {
+    // A loaded run's metadata carries no source text: its copy stays as it is.
+    if let Some(file) = info
+        .model
+        .source_file
+        .as_ref()
+        .filter(|_| !info.model.source.is_empty())
+    {
         crate::io::write_atomic(&directory.join(file), info.model.source.as_bytes())?;
     }
     let json = serde_json::to_string_pretty(info)

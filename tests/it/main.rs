@@ -1,5 +1,6 @@
 //! Integration tests: one binary, a module per feature.
 
+mod artifacts;
 mod authoring;
 mod cli;
 mod editor;
@@ -7,3 +8,4 @@ mod format;
 mod golden;
 mod lsp;
 mod parser;
+mod whatif;
