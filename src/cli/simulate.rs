@@ -208,7 +208,7 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
         }
     }
     let t_start = args.t_start.unwrap_or(0.0);
-    let dt = args.dt.ok_or_else(|| missing_dt())?;
+    let dt = args.dt.ok_or_else(missing_dt)?;
     let signals = input_signals(&model, args, (t_start, args.t_end, dt))?;
     let options = SimOptions {
         t_start,

@@ -17,6 +17,9 @@ use crate::ir::{self, Var};
 use crate::record::Track;
 use crate::train::pairs::{embedding_row, stage_fractions};
 
+/// One nonzero read: `(variable, knot, embedding column, coefficient)`.
+type Read = (Var, usize, usize, f64);
+
 /// How the window feeds every closure's embedding.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WindowMap {
@@ -40,8 +43,7 @@ pub fn window_map(model: &ir::Model, setup: &Setup) -> WindowMap {
     let knots = (span / setup.step).floor() as usize + 3;
     let current = knots - 1;
     let mut track = uniform_track(model, setup.step, knots);
-    // coefficients[closure][offset][(variable, knot)] per embedding column.
-    let mut reads: Vec<Vec<Vec<(Var, usize, usize, f64)>>> =
+    let mut reads: Vec<Vec<Vec<Read>>> =
         vec![vec![Vec::new(); fractions.len()]; model.closures.len()];
     let variables: Vec<Var> = ((0..states).map(Var::State))
         .chain((0..inputs).map(Var::Input))

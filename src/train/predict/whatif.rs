@@ -135,7 +135,7 @@ fn grid_times(what: &WhatIf) -> Result<Vec<f64>, WhatIfError> {
     let (t_start, t_end, dt) = (what.t_start, what.t_end, what.dt);
     let steps = ((t_end - t_start) / dt * (1.0 + 1e-12)).floor();
     let valid = t_start.is_finite() && t_end.is_finite() && dt > 0.0 && dt.is_finite();
-    if !valid || !(steps >= 1.0 && steps < MAX_ROWS as f64) {
+    if !(valid && steps >= 1.0 && steps < MAX_ROWS as f64) {
         return Err(WhatIfError::BadTimes { t_start, t_end, dt });
     }
     Ok((0..=steps as usize)
