@@ -75,7 +75,7 @@ pub struct SimulateArgs {
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Also write the hidden states.
+    /// Also write the hidden states (a what-if run, `--weights`, always does).
     #[arg(long)]
     pub hidden: bool,
     /// Relative tolerance of the integrator.
