@@ -55,6 +55,8 @@ def main():
     states = meta["gbc.states"].split(",")
     inputs = [n for n in meta["gbc.inputs"].split(",") if n]
     closure_outputs = [n for n in meta["gbc.closure_outputs"].split(",") if n]
+    hidden_names = [n for n in meta["gbc.hidden"].split(",") if n]
+    hidden_initial = [float(v) for v in meta["gbc.hidden_initial"].split(",") if v]
 
     _, data = read_csv(args.data)
     _, online = read_csv(predicted_path)
@@ -66,20 +68,32 @@ def main():
         knots = np.clip(knots, 0, len(times) - 1)
         return np.stack([data[n][knots] for n in names], axis=1).astype(np.float32)
 
-    history = np.arange(start - window + 1, start + 1)
-    state_window = rows(states, history)
-    found_states, found_closures = [], []
-    for step in range(steps):
+    names = ["next_state"] + (["closure_outputs"] if closure_outputs else [])
+    names += ["next_hidden"] if hidden_names else []
+
+    def call(state_window, knot, hidden):
         feed = {"state_window": state_window[None]}
         if inputs:
-            feed["input_window"] = rows(inputs, history + step)[None]
-        names = ["next_state"] + (["closure_outputs"] if closure_outputs else [])
-        result = session.run(names, feed)
-        next_state = result[0][0]
-        found_states.append(next_state)
+            feed["input_window"] = rows(inputs, np.arange(knot - window + 1, knot + 1))[None]
+        if hidden_names:
+            feed["hidden"] = hidden[None]
+        return dict(zip(names, (r[0] for r in session.run(names, feed))))
+
+    # Hidden states run in along the data from the first row (measured states reset to
+    # the data), as gbc does before a free run.
+    hidden = np.array(hidden_initial, dtype=np.float32)
+    for knot in range(start if hidden_names else 0):
+        hidden = call(rows(states, np.arange(knot - window + 1, knot + 1)), knot, hidden)["next_hidden"]
+    state_window = rows(states, np.arange(start - window + 1, start + 1))
+    found_states, found_closures = [], []
+    for step in range(steps):
+        result = call(state_window, start + step, hidden)
+        found_states.append(result["next_state"])
         if closure_outputs:
-            found_closures.append(result[1][0])
-        state_window = np.vstack([state_window[1:], next_state[None]])
+            found_closures.append(result["closure_outputs"])
+        if hidden_names:
+            hidden = result["next_hidden"]
+        state_window = np.vstack([state_window[1:], result["next_state"][None]])
 
     def worst(found, names, skip):
         expected = np.stack([online[n][skip:skip + len(found)] for n in names], axis=1)

@@ -215,8 +215,20 @@ fn metadata(model: &ir::Model, layout: &Layout) -> Vec<onnx::StringStringEntryPr
         entry("hidden", layout.hidden.join(",")),
         entry("closure_outputs", layout.closure_outputs.join(",")),
         entry("outputs", layout.outputs.join(",")),
+        entry("hidden_initial", hidden_initial(model)),
         entry("time_unit", model.time_unit.clone().unwrap_or_default()),
     ]
+}
+
+/// The hidden states' declared initial values, comma separated (`nan` where one cannot
+/// be evaluated).
+fn hidden_initial(model: &ir::Model) -> String {
+    let values = crate::train::hidden_initial_values(model)
+        .unwrap_or_else(|_| vec![f64::NAN; model.hidden.len()]);
+    (values.iter())
+        .map(|v| format!("{v:?}"))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 #[cfg(test)]
