@@ -44,10 +44,19 @@ fn trained(model: &ir::Model, record: &Record, precision: Precision) -> Trained 
 /// tract, kept in its own namespace (its prelude has an `onnx` of its own).
 mod runtime {
     use super::Exported;
+    use crate::backend::Precision;
     use tract_onnx::prelude::*;
 
     /// A loaded, optimised model.
     pub type Plan = std::sync::Arc<TypedRunnableModel>;
+
+    /// The element type of the exported tensors.
+    fn datum(exported: &Exported) -> DatumType {
+        match exported.layout.precision {
+            Precision::F32 => f32::datum_type(),
+            Precision::F64 => f64::datum_type(),
+        }
+    }
 
     /// Loads an exported file into tract for a batch of one.
     pub fn runnable(exported: &Exported) -> Plan {
@@ -55,32 +64,33 @@ mod runtime {
         let mut model = tract_onnx::onnx()
             .model_for_read(&mut exported.bytes.as_slice())
             .unwrap();
-        let w = layout.window;
-        model
-            .set_input_fact(0, f32::fact([1, w, layout.states.len()]).into())
-            .unwrap();
+        let (w, datum) = (layout.window, datum(exported));
+        let fact = |width: usize| InferenceFact::dt_shape(datum, [1, w, width]);
+        model.set_input_fact(0, fact(layout.states.len())).unwrap();
         if !layout.inputs.is_empty() {
-            model
-                .set_input_fact(1, f32::fact([1, w, layout.inputs.len()]).into())
-                .unwrap();
+            model.set_input_fact(1, fact(layout.inputs.len())).unwrap();
         }
         model.into_optimized().unwrap().into_runnable().unwrap()
     }
 
-    /// One call: the windows (`[1, W, S]`, `[1, W, U]`, row-major) in, every output out.
-    pub fn step(plan: &Plan, exported: &Exported, states: &[f32], inputs: &[f32]) -> Vec<Vec<f32>> {
-        let w = exported.layout.window;
-        let s = exported.layout.states.len();
-        let mut feed: TVec<TValue> = tvec![Tensor::from_shape(&[1, w, s], states).unwrap().into()];
+    /// One call: the windows (`[1, W, S]`, `[1, W, U]`, row-major) in, every output out,
+    /// in the export's element type (values cast to and from `f64` here).
+    pub fn step(plan: &Plan, exported: &Exported, states: &[f64], inputs: &[f64]) -> Vec<Vec<f64>> {
+        let (w, datum) = (exported.layout.window, datum(exported));
+        let tensor = |values: &[f64], width: usize| -> TValue {
+            let tensor = Tensor::from_shape(&[1, w, width], values).unwrap();
+            tensor.cast_to_dt(datum).unwrap().into_owned().into()
+        };
+        let mut feed: TVec<TValue> = tvec![tensor(states, exported.layout.states.len())];
         if !exported.layout.inputs.is_empty() {
-            let u = exported.layout.inputs.len();
-            feed.push(Tensor::from_shape(&[1, w, u], inputs).unwrap().into());
+            feed.push(tensor(inputs, exported.layout.inputs.len()));
         }
         let outputs = plan.run(feed).unwrap();
         (outputs.iter())
-            .map(|tensor| {
-                tensor
-                    .to_plain_array_view::<f32>()
+            .map(|output| {
+                let values = output.cast_to::<f64>().unwrap();
+                values
+                    .to_plain_array_view::<f64>()
                     .unwrap()
                     .iter()
                     .copied()
@@ -92,35 +102,31 @@ mod runtime {
 
 /// Steps the exported map along `record` from knot `start` (history before it from the
 /// record, held before its first row), feeding it its own predictions; returns the states
-/// after each step and the closure outputs at each start.
+/// after each step and the closure outputs at each start. Values pass through the export's
+/// element type on the way in.
 fn free_run(exported: &Exported, record: &Record, start: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
     let plan = runtime::runnable(exported);
     let w = exported.layout.window;
     let clamp = |k: isize| k.max(0) as usize;
-    let mut states: Vec<Vec<f32>> = (0..w)
+    let mut states: Vec<Vec<f64>> = (0..w)
         .map(|row| {
             let knot = clamp(start as isize + row as isize + 1 - w as isize);
-            record
-                .states
-                .iter()
-                .map(|c| c[knot].unwrap() as f32)
-                .collect()
+            record.states.iter().map(|c| c[knot].unwrap()).collect()
         })
         .collect();
     let (mut next_states, mut closure_outputs) = (Vec::new(), Vec::new());
     for knot in start..record.len() - 1 {
-        let inputs: Vec<f32> = (0..w)
+        let inputs: Vec<f64> = (0..w)
             .flat_map(|row| {
                 let at = clamp(knot as isize + row as isize + 1 - w as isize);
-                record.inputs.iter().map(move |u| u[at] as f32)
+                record.inputs.iter().map(move |u| u[at])
             })
             .collect();
-        let window: Vec<f32> = states.iter().flatten().copied().collect();
-        let outputs = runtime::step(&plan, exported, &window, &inputs);
-        let read = |index: usize| outputs[index].clone();
-        let next = read(0);
-        next_states.push(next.iter().map(|&v| f64::from(v)).collect());
-        closure_outputs.push(read(1).iter().map(|&v| f64::from(v)).collect());
+        let window: Vec<f64> = states.iter().flatten().copied().collect();
+        let mut outputs = runtime::step(&plan, exported, &window, &inputs);
+        closure_outputs.push(outputs.remove(1));
+        let next = outputs.remove(0);
+        next_states.push(next.clone());
         states.remove(0);
         states.push(next);
     }
@@ -141,12 +147,17 @@ fn worst_relative(found: &[Vec<f64>], expected: &[Vec<f64>]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Exports a trained run, steps it in tract over a free run and compares with
-/// `gbc predict --mode online` on the same record.
-fn matches_online_prediction(model_file: &str, data_file: &str, rows: usize) -> f64 {
+/// Exports a trained run in `precision`, steps it in tract over a free run and compares
+/// with `gbc predict --mode online` on the same record (trained in that precision); the
+/// largest relative error must stay below `tolerance`.
+fn matches_online_prediction(
+    (model_file, data_file, rows): (&str, &str, usize),
+    precision: Precision,
+    tolerance: f64,
+) -> f64 {
     let (model, record) = shipped(model_file, data_file, rows);
-    let trained = trained(&model, &record, Precision::F32);
-    let exported = super::onnx(&model, &trained.network, &trained.setup, Precision::F32).unwrap();
+    let trained = trained(&model, &record, precision);
+    let exported = super::onnx(&model, &trained.network, &trained.setup, precision).unwrap();
     let how = (Mode::Online, History::Measured, None);
     let online = predict_in_range(&model, &trained.network, &trained.setup, &record, how).unwrap();
     let start = (record.times.iter())
@@ -174,24 +185,36 @@ fn matches_online_prediction(model_file: &str, data_file: &str, rows: usize) -> 
     error
 }
 
+const CHEMOSTAT: (&str, &str, usize) = (
+    "models/mm_chemostat/greybox.gbm",
+    "models/mm_chemostat/data/steps.csv",
+    300,
+);
+const GB1: (&str, &str, usize) = (
+    "models/bioreactor/gb1.gbm",
+    "models/bioreactor/data/steps.csv",
+    200,
+);
+
 #[test]
 fn the_exported_chemostat_grey_box_steps_as_gbc_predicts_online() {
-    let error = matches_online_prediction(
-        "models/mm_chemostat/greybox.gbm",
-        "models/mm_chemostat/data/steps.csv",
-        300,
-    );
-    eprintln!("chemostat: largest relative error {error:e}");
+    let error = matches_online_prediction(CHEMOSTAT, Precision::F32, 1e-5);
+    eprintln!("chemostat, f32: largest relative error {error:e}");
 }
 
 #[test]
 fn the_exported_bioreactor_gb1_steps_as_gbc_predicts_online() {
-    let error = matches_online_prediction(
-        "models/bioreactor/gb1.gbm",
-        "models/bioreactor/data/steps.csv",
-        200,
-    );
-    eprintln!("bioreactor GB1: largest relative error {error:e}");
+    let error = matches_online_prediction(GB1, Precision::F32, 1e-5);
+    eprintln!("bioreactor GB1, f32: largest relative error {error:e}");
+}
+
+/// In `f64` the export is the trainable network's arithmetic up to summation order.
+#[test]
+fn an_f64_export_steps_as_gbc_predicts_online_to_rounding() {
+    for system in [CHEMOSTAT, GB1] {
+        let error = matches_online_prediction(system, Precision::F64, 1e-11);
+        eprintln!("{}, f64: largest relative error {error:e}", system.0);
+    }
 }
 
 #[test]
