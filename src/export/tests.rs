@@ -179,8 +179,8 @@ fn matches_online_prediction(
         &expected_closures[..states.len()],
     ));
     assert!(
-        error < 1e-5,
-        "{model_file}: largest relative error {error:e}"
+        error < tolerance,
+        "{model_file}: largest relative error {error:e} above {tolerance:e}"
     );
     error
 }

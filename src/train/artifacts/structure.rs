@@ -141,7 +141,7 @@ pub fn compare(expected: &Structure, found: &Structure) -> Vec<Change> {
 }
 
 /// What differs between the model trained on and the one given, outside the structure:
-/// consts, balances, priors, outputs and initial values, one line each.
+/// consts, input bounds, balances, priors, outputs and initial values, one line each.
 pub fn differences(trained: &ir::Model, given: &ir::Model) -> Vec<String> {
     let mut lines = Vec::new();
     let before: BTreeMap<&str, f64> = (trained.consts.iter())
@@ -165,6 +165,14 @@ pub fn differences(trained: &ir::Model, given: &ir::Model) -> Vec<String> {
     }
     let texts = |model: &ir::Model| -> BTreeMap<String, String> {
         let mut texts = BTreeMap::new();
+        for input in &model.inputs {
+            if let Some((lo, hi)) = input.bounds {
+                texts.insert(
+                    format!("bounds of input {}", input.name),
+                    format!("[{}, {}]", format_number(lo), format_number(hi)),
+                );
+            }
+        }
         for balance in &model.balances {
             let name = ir::var_name(model, balance.state);
             texts.insert(
@@ -217,5 +225,90 @@ fn constraint_text(constraint: Constraint) -> String {
         Constraint::Free => String::new(),
         Constraint::Positive => " positive".into(),
         Constraint::Bounds(lo, hi) => format!(" in [{}, {}]", format_number(lo), format_number(hi)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gb1(edit: (&str, &str)) -> ir::Model {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/models/bioreactor/gb1.gbm");
+        let text = std::fs::read_to_string(path).unwrap();
+        assert!(text.contains(edit.0), "{}", edit.0);
+        let text = text.replacen(edit.0, edit.1, 1);
+        crate::driver::compile("gb1.gbm", &text, &[]).unwrap().model
+    }
+
+    /// Edits GB1 by `edit` and checks the changed parts of the structure and the notes.
+    fn check(edit: (&str, &str), parts: &[&str], notes: &[&str]) {
+        let (trained, given) = (gb1(("", "")), gb1(edit));
+        let changes = compare(&structure(&trained), &structure(&given));
+        let changed: Vec<&str> = changes.iter().map(|c| c.part.as_str()).collect();
+        assert_eq!(changed, parts, "{edit:?}");
+        assert_eq!(differences(&trained, &given), notes, "{edit:?}");
+        assert_eq!(
+            fingerprint(&structure(&trained)) == fingerprint(&structure(&given)),
+            parts.is_empty()
+        );
+    }
+
+    #[test]
+    fn what_changes_the_structure_and_what_is_only_noted() {
+        check(
+            ("## Biomass balance", "# again\n## Biomass balance"),
+            &[],
+            &[],
+        );
+        check(
+            ("const D = 0.05", "const D = 0.06"),
+            &[],
+            &["const D = 0.06 (trained with 0.05)"],
+        );
+        check(
+            ("in [0, 1]", "in [0, 2]"),
+            &[],
+            &["bounds of input u: [0, 2]"],
+        );
+        check(
+            ("der X = (mu - D) * X", "der X = mu * X"),
+            &[],
+            &["balance of X: mu * X"],
+        );
+        check(("param Y_X = 0.5", "param Y_X = 0.4"), &[], &[]);
+        check(
+            ("hidden [20, 20, 20]", "hidden [20, 20]"),
+            &["closure kinetics network"],
+            &[],
+        );
+        check(("] softplus", "] tanh"), &["closure kinetics network"], &[]);
+        check(
+            ("delay 5 dim 10", "delay 5 dim 9"),
+            &["closure kinetics embedding"],
+            &[],
+        );
+        check(
+            ("observe X, A, B, S, u", "observe X, A, B, S"),
+            &["closure kinetics observe"],
+            &[],
+        );
+        check(
+            ("mu_B [1/h] ~ 0.2 positive", "mu_B [1/h] ~ 0.2"),
+            &["closure kinetics outputs"],
+            &[],
+        );
+        check(
+            ("mu_B [1/h] ~ 0.2 positive", "mu_B [1/h] ~ 0.3 positive"),
+            &[],
+            &[],
+        );
+        check(
+            (
+                "[g/g] positive\n## Yield of product A",
+                "[g/g]\n## Yield of product A",
+            ),
+            &["params"],
+            &[],
+        );
     }
 }
