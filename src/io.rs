@@ -62,9 +62,23 @@ pub enum IoError {
     },
 }
 
+/// The path that means standard output wherever gbc writes a file.
+pub const STDOUT: &str = "-";
+
 /// Writes `bytes` to `path` atomically: into a temporary file in the same directory, flushed
-/// to disk, then renamed over `path`. Missing parent directories are created.
+/// to disk, then renamed over `path`. Missing parent directories are created. The path `-`
+/// ([`STDOUT`]) writes to standard output instead.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    if path.as_os_str() == STDOUT {
+        use std::io::Write;
+        let mut stdout = std::io::stdout().lock();
+        return (stdout.write_all(bytes).and_then(|()| stdout.flush())).map_err(|error| {
+            IoError::Write {
+                path: "standard output".into(),
+                reason: describe(&error),
+            }
+        });
+    }
     let write_error = |reason: String| IoError::Write {
         path: path.display().to_string(),
         reason,
@@ -96,6 +110,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 /// resolving `.`/`..` and symbolic links where the paths exist, and by file identity on
 /// Unix, so hard links are caught too).
 pub fn ensure_not_input(output: &Path, inputs: &[&Path]) -> Result<(), IoError> {
+    if output.as_os_str() == STDOUT {
+        return Ok(());
+    }
     let resolved_output = resolve(output);
     for input in inputs {
         if resolve(input) == resolved_output || same_file(output, input) {

@@ -37,3 +37,4 @@ pub mod suggest;
 pub mod syntax;
 pub mod train;
 pub mod units;
+pub mod vocabulary;

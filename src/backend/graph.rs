@@ -66,6 +66,18 @@ pub struct EmbedEntry {
     pub row: Option<usize>,
 }
 
+/// One block of the loss: a prediction compared with its targets.
+pub struct LossBlock<'a, E: Element> {
+    /// `rows x width`; its first `inverse_std.len()` columns are compared.
+    pub prediction: &'a Matrix<E>,
+    /// `rows x inverse_std.len()` targets.
+    pub targets: &'a [E],
+    /// Their weights (`None`: every cell weighs 1).
+    pub weights: Option<&'a [E]>,
+    /// `1 / std` of each compared column.
+    pub inverse_std: &'a [E],
+}
+
 /// The state-fed entries of a closure's network input.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct EmbedColumns {
@@ -339,36 +351,29 @@ where
         Ok((result, values))
     }
 
-    /// The weighted mean over steps, rows and measured states of
-    /// `((prediction - target) * inverse_std)^2`: `predictions[k]` is compared with
-    /// `targets[k]` (`rows x measured`), each cell weighted by `weights[k]` where given
-    /// (0: not measured) and the sum divided by the number of cells of positive weight
-    /// (every cell when no weights are given); measured states are the first
-    /// `inverse_std.len()` columns of each prediction.
-    pub fn normalised_mse(
-        &mut self,
-        predictions: &[Matrix<E>],
-        targets: &[&[E]],
-        weights: &[Option<&[E]>],
-        inverse_std: &[E],
-    ) -> Result<Scalar<E>, BackendError> {
-        if predictions.len() != targets.len()
-            || predictions.len() != weights.len()
-            || predictions.is_empty()
-        {
-            return Err(BackendError::internal(
-                "loss needs one target block per step",
-            ));
+    /// The weighted mean of `((prediction - target) * inverse_std)^2` over the cells of
+    /// every block: each block compares the first `inverse_std.len()` columns of its
+    /// prediction with its `rows x inverse_std.len()` targets, each cell weighted by its
+    /// weight where given (0: not measured); the sum is divided by the number of cells of
+    /// positive weight over all blocks (every cell of a block without weights counts).
+    pub fn normalised_mse(&mut self, blocks: &[LossBlock<E>]) -> Result<Scalar<E>, BackendError> {
+        if blocks.is_empty() {
+            return Err(BackendError::internal("loss needs a target block"));
         }
-        let (rows, width) = *predictions[0].shape();
-        let measured = inverse_std.len();
         let mut cells = 0usize;
-        let mut residuals = Vec::with_capacity(predictions.len());
+        let mut residuals = Vec::with_capacity(blocks.len());
+        let mut shapes = Vec::with_capacity(blocks.len());
         let mut total = E::ZERO;
-        for ((prediction, target), weight) in predictions.iter().zip(targets).zip(weights) {
-            let values = prediction.as_vec();
-            let weight_fits = weight.is_none_or(|w| w.len() == rows * measured);
-            if values.len() != rows * width || target.len() != rows * measured || !weight_fits {
+        for block in blocks {
+            let (rows, width) = *block.prediction.shape();
+            let measured = block.inverse_std.len();
+            let values = block.prediction.as_vec();
+            let weight_fits = block.weights.is_none_or(|w| w.len() == rows * measured);
+            if values.len() != rows * width
+                || block.targets.len() != rows * measured
+                || measured > width
+                || !weight_fits
+            {
                 return Err(BackendError::internal("loss blocks differ in size"));
             }
             // Scaled residual times its weight: the gradient's factor per cell.
@@ -376,32 +381,36 @@ where
             for row in 0..rows {
                 for state in 0..measured {
                     let cell = row * measured + state;
-                    let w = weight.map_or(<E as Real>::ONE, |w| w[cell]);
+                    let w = block.weights.map_or(<E as Real>::ONE, |w| w[cell]);
                     if w <= E::ZERO {
                         continue;
                     }
                     cells += 1;
-                    let scaled = (values[row * width + state] - target[cell]) * inverse_std[state];
+                    let scaled = (values[row * width + state] - block.targets[cell])
+                        * block.inverse_std[state];
                     weighted[cell] = w * scaled;
                     total += w * scaled * scaled;
                 }
             }
             residuals.push(weighted);
+            shapes.push((rows, width, block.inverse_std.to_vec()));
         }
         let count = E::from_double(cells.max(1) as f64);
         let loss = self.device.try_tensor_from_vec(vec![total / count], ())?;
         let loss_ghost = loss.ghost();
-        let ghosts: Vec<_> = predictions.iter().map(|p| p.ghost()).collect();
-        let inverse_std = inverse_std.to_vec();
+        let ghosts: Vec<_> = blocks.iter().map(|b| b.prediction.ghost()).collect();
         self.tape.add_backward_op(move |grads| {
             let upstream = grads.get_or_alloc_mut(&loss_ghost)?[0];
             let factor = upstream * E::from_double(2.0) / count;
-            for (ghost, step_residuals) in ghosts.iter().zip(&residuals) {
+            for ((ghost, block_residuals), (rows, width, inverse_std)) in
+                ghosts.iter().zip(&residuals).zip(&shapes)
+            {
+                let measured = inverse_std.len();
                 let target = grads.get_or_alloc_mut(ghost)?;
-                for row in 0..rows {
+                for row in 0..*rows {
                     for state in 0..measured {
                         target[row * width + state] +=
-                            factor * step_residuals[row * measured + state] * inverse_std[state];
+                            factor * block_residuals[row * measured + state] * inverse_std[state];
                     }
                 }
             }

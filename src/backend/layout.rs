@@ -57,6 +57,10 @@ pub struct PreparedStep<E: Element> {
     pub step_sizes: Vec<f64>,
     /// `rows x measured` loss weights (`None`: every cell weighs 1).
     pub weights: Option<Vec<E>>,
+    /// `rows x observables` measured outputs at the step's end.
+    pub observed: Vec<E>,
+    /// Their loss weights (0: not measured).
+    pub observed_weights: Vec<E>,
 }
 
 impl ClosureLayout {
@@ -133,6 +137,22 @@ fn step_sizes(
     }
 }
 
+/// A step's observable block (targets or weights): `rows x observables`, zeros when the
+/// batch gives none (every cell then weighs 0).
+fn observed<E: Element>(
+    given: Option<&Vec<f64>>,
+    rows: usize,
+    observables: usize,
+) -> Result<Vec<E>, BackendError> {
+    match given.filter(|g| !g.is_empty()) {
+        Some(values) => {
+            expect("observed outputs", values.len(), rows * observables)?;
+            Ok(convert(values))
+        }
+        None => Ok(vec![E::ZERO; rows * observables]),
+    }
+}
+
 /// The loss weights of a step (`None` when the batch gives none).
 fn loss_weights<E: Element>(
     given: Option<&Vec<f64>>,
@@ -186,6 +206,8 @@ pub struct Frame<'a> {
     pub shape: &'a super::program::ProgramShape,
     /// Measured states (target columns).
     pub measured: usize,
+    /// Measured outputs (observable columns).
+    pub observables: usize,
     /// The step of rows that give none.
     pub nominal_step: f64,
 }
@@ -218,6 +240,8 @@ where
             targets: convert(&batch.targets),
             step_sizes: step_sizes(Some(&batch.step_sizes), rows, frame.nominal_step)?,
             weights: loss_weights(Some(&batch.weights), rows, frame.measured)?,
+            observed: observed(Some(&batch.observed), rows, frame.observables)?,
+            observed_weights: observed(Some(&batch.observed_weights), rows, frame.observables)?,
         }],
     })
 }
@@ -271,6 +295,8 @@ where
             targets,
             step_sizes: step_sizes(batch.step_sizes.get(step), rows, frame.nominal_step)?,
             weights: loss_weights(batch.weights.get(step), rows, frame.measured)?,
+            observed: observed(batch.observed.get(step), rows, frame.observables)?,
+            observed_weights: observed(batch.observed_weights.get(step), rows, frame.observables)?,
         });
     }
     Ok(Prepared {

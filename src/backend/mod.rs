@@ -113,8 +113,14 @@ pub struct Batch {
     pub step_sizes: Vec<f64>,
     /// `rows x measured` loss weight of each target cell: 0 where the cell was not
     /// measured, else the column's weight; empty: every cell weighs 1. The loss is
-    /// `sum(w r^2) / #(w > 0)` over the z-scored residuals `r`.
+    /// `sum(w r^2) / #(w > 0)` over the z-scored residuals `r` of every weighted cell,
+    /// states and observables together.
     pub weights: Vec<f64>,
+    /// `rows x observables` measured values at `t + h` of the model outputs the
+    /// normalisation lists as observables (empty for a model without any).
+    pub observed: Vec<f64>,
+    /// `rows x observables` loss weights of `observed` (0: not measured).
+    pub observed_weights: Vec<f64>,
 }
 
 /// A predicted state fed back into a later step's embedding: at a rollout step, network
@@ -161,6 +167,10 @@ pub struct RolloutBatch {
     /// `weights[step]`: `rows x measured` loss weights as in [`Batch::weights`] (empty:
     /// every cell weighs 1).
     pub weights: Vec<Vec<f64>>,
+    /// `observed[step]`: `rows x observables` as in [`Batch::observed`].
+    pub observed: Vec<Vec<f64>>,
+    /// `observed_weights[step]`: their loss weights.
+    pub observed_weights: Vec<Vec<f64>>,
 }
 
 /// How one optimiser step is taken.
@@ -194,6 +204,9 @@ pub struct Prediction {
     pub closure_outputs: Vec<f64>,
     /// `rows x (model outputs)` at `t`.
     pub outputs: Vec<f64>,
+    /// `rows x observables` measured outputs at `t + h`, at the predicted state (empty for
+    /// a model without observables).
+    pub observed: Vec<f64>,
 }
 
 /// A named array of trainable values (network weights, raw params).
@@ -214,6 +227,18 @@ pub enum BackendError {
     #[error("internal error in the trainable network: {0}")]
     #[diagnostic(code(gbm::E0400), help("this is a bug in gbc; please report it"))]
     Internal(String),
+    /// A model the chosen engine cannot run.
+    #[error("expected a model the {engine} engine runs, found {what}")]
+    #[diagnostic(
+        code(gbm::E0402),
+        help("train with `--engine graph`, which runs every model")
+    )]
+    Unsupported {
+        /// The engine.
+        engine: String,
+        /// What it lacks.
+        what: String,
+    },
     /// Saved weights do not fit the model.
     #[error("expected weights for this model, found {0}")]
     #[diagnostic(

@@ -12,7 +12,9 @@ use rand_chacha::ChaCha8Rng;
 
 use super::adam::Adam;
 use super::adam::AdamState;
-use super::graph::{gradient_of, Element, GradientBuffer, Graph, Matrix, Scalar, Vector};
+use super::graph::{
+    gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix, Scalar, Vector,
+};
 use super::layout::{
     check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout, Frame,
     Prepared, PreparedStep,
@@ -32,6 +34,9 @@ pub struct GreyBox<E: Element> {
     device: Cpu,
     program: Arc<Program>,
     balances: Arc<Vec<usize>>,
+    /// Registers of the measured outputs (observables), in the normalisation's order.
+    observables: Arc<Vec<usize>>,
+    observable_inverse_std: Vec<E>,
     closures: Vec<ClosureLayout>,
     dynamics: Dynamics,
     step: f64,
@@ -53,6 +58,8 @@ struct Tensors<E: Element> {
 /// register values of the first stage of the first step.
 struct Forward<E: Element> {
     predictions: Vec<Matrix<E>>,
+    /// Per step, the observables at the predicted state (none without observables).
+    observations: Vec<Matrix<E>>,
     first_values: Arc<Vec<E>>,
 }
 
@@ -66,6 +73,21 @@ where
         check_setup(model, setup)?;
         let program = Program::compile(model, &setup.scales)?;
         let balances = Arc::new(program.balances.clone());
+        let norm = &setup.normalisation;
+        let observables = (norm.observables.iter())
+            .map(|&output| {
+                (program.outputs.get(output).copied())
+                    .ok_or_else(|| BackendError::internal(format!("no output {output}")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        if norm.observable_std.len() != observables.len() {
+            return Err(BackendError::internal(
+                "observables without their statistics",
+            ));
+        }
+        let observable_inverse_std = (norm.observable_std.iter())
+            .map(|&s| E::from_double(1.0 / s))
+            .collect();
         let mut rng = ChaCha8Rng::seed_from_u64(setup.seed);
         let (mut names, mut shapes, mut weights) = (Vec::new(), Vec::new(), Vec::new());
         let mut closures = Vec::new();
@@ -106,6 +128,8 @@ where
             device: Cpu::default(),
             program: Arc::new(program),
             balances,
+            observables: Arc::new(observables),
+            observable_inverse_std,
             closures,
             dynamics: model.dynamics,
             step: setup.step,
@@ -205,16 +229,24 @@ where
         }
         let tensors = self.tensors(graph);
         let forward = self.forward(graph, &tensors, prepared)?;
-        let targets: Vec<&[E]> = prepared
-            .steps
-            .iter()
-            .map(|s| s.targets.as_slice())
+        let mut blocks: Vec<LossBlock<E>> = (forward.predictions.iter())
+            .zip(&prepared.steps)
+            .map(|(prediction, step)| LossBlock {
+                prediction,
+                targets: &step.targets,
+                weights: step.weights.as_deref(),
+                inverse_std: &self.inverse_std,
+            })
             .collect();
-        let weights: Vec<Option<&[E]>> = (prepared.steps.iter())
-            .map(|s| s.weights.as_deref())
-            .collect();
-        let loss =
-            graph.normalised_mse(&forward.predictions, &targets, &weights, &self.inverse_std)?;
+        for (observation, step) in forward.observations.iter().zip(&prepared.steps) {
+            blocks.push(LossBlock {
+                prediction: observation,
+                targets: &step.observed,
+                weights: Some(&step.observed_weights),
+                inverse_std: &self.observable_inverse_std,
+            });
+        }
+        let loss = graph.normalised_mse(&blocks)?;
         Ok((tensors, loss))
     }
 
@@ -274,6 +306,8 @@ where
                 &self.program.closure_outputs,
             )),
             outputs: block_to_double(self.program.read(values, rows, &self.program.outputs)),
+            observed: (forward.observations.first())
+                .map_or(Vec::new(), |o| block_to_double(o.as_vec())),
         })
     }
 
@@ -385,6 +419,7 @@ where
             closures: &self.closures,
             shape: self.program.shape(),
             measured: self.inverse_std.len(),
+            observables: self.observables.len(),
             nominal_step: self.step,
         }
     }
@@ -410,15 +445,20 @@ where
     ) -> Result<Forward<E>, BackendError> {
         let mut history = vec![prepared.states.clone()];
         let mut first_values = None;
+        let mut observations = Vec::new();
         for step in &prepared.steps {
             let (next, values) = self.step(graph, tensors, step, &history)?;
             first_values.get_or_insert(values);
+            if !self.observables.is_empty() {
+                observations.push(self.observe(graph, tensors, step, (&next, &history))?);
+            }
             history.push(next);
         }
         let first_values = first_values.unwrap_or_else(|| Arc::new(Vec::new()));
         history.remove(0);
         Ok(Forward {
             predictions: history,
+            observations,
             first_values,
         })
     }
@@ -434,7 +474,8 @@ where
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
         let start = (history.last())
             .ok_or_else(|| BackendError::internal("a step without a start state"))?;
-        let (first, values) = self.stage(graph, tensors, batch, (start, history), 0)?;
+        let (first, values) =
+            self.stage(graph, tensors, batch, (start, history), (0, &self.balances))?;
         if self.dynamics == Dynamics::Discrete {
             return Ok((first, values));
         }
@@ -452,20 +493,44 @@ where
             let offset = 2 * substep;
             if substep > 0 {
                 k1 = self
-                    .stage(graph, tensors, batch, (&state, history), offset)?
+                    .stage(
+                        graph,
+                        tensors,
+                        batch,
+                        (&state, history),
+                        (offset, &self.balances),
+                    )?
                     .0;
             }
             let x2 = graph.axpy_rows(&state, &half, &k1)?;
             let k2 = self
-                .stage(graph, tensors, batch, (&x2, history), offset + 1)?
+                .stage(
+                    graph,
+                    tensors,
+                    batch,
+                    (&x2, history),
+                    (offset + 1, &self.balances),
+                )?
                 .0;
             let x3 = graph.axpy_rows(&state, &half, &k2)?;
             let k3 = self
-                .stage(graph, tensors, batch, (&x3, history), offset + 1)?
+                .stage(
+                    graph,
+                    tensors,
+                    batch,
+                    (&x3, history),
+                    (offset + 1, &self.balances),
+                )?
                 .0;
             let x4 = graph.axpy_rows(&state, &whole, &k3)?;
             let k4 = self
-                .stage(graph, tensors, batch, (&x4, history), offset + 2)?
+                .stage(
+                    graph,
+                    tensors,
+                    batch,
+                    (&x4, history),
+                    (offset + 2, &self.balances),
+                )?
                 .0;
             let sum = graph.axpy(&k1, 2.0, &k2)?;
             let sum = graph.axpy(&sum, 2.0, &k3)?;
@@ -475,7 +540,26 @@ where
         Ok((state, values))
     }
 
-    /// The balances at one stage: every closure's network on its embedding (the stage
+    /// The observables at the end of a step: the model's measured outputs at the predicted
+    /// state, the networks evaluated on the embedding at the step's end.
+    fn observe(
+        &self,
+        graph: &mut Graph<E>,
+        tensors: &Tensors<E>,
+        batch: &PreparedStep<E>,
+        (state, history): (&Matrix<E>, &[Matrix<E>]),
+    ) -> Result<Matrix<E>, BackendError> {
+        let last = batch
+            .constants
+            .first()
+            .map_or(0, |c| c.len().saturating_sub(1));
+        let targets = Arc::clone(&self.observables);
+        Ok(self
+            .stage(graph, tensors, batch, (state, history), (last, &targets))?
+            .0)
+    }
+
+    /// The registers `targets` at one stage: every closure's network on its embedding (the stage
     /// estimate `state` in the lag-0 state columns, earlier predictions of `history` where
     /// the batch feeds them back), then the physics program.
     fn stage(
@@ -484,7 +568,7 @@ where
         tensors: &Tensors<E>,
         batch: &PreparedStep<E>,
         (state, history): (&Matrix<E>, &[Matrix<E>]),
-        offset: usize,
+        (offset, targets): (usize, &Arc<Vec<usize>>),
     ) -> Result<(Matrix<E>, Arc<Vec<E>>), BackendError> {
         let sources: Vec<&Matrix<E>> = std::iter::once(state)
             .chain(history.iter().skip(1))
@@ -506,7 +590,7 @@ where
         }
         graph.physics(
             &self.program,
-            &self.balances,
+            targets,
             state,
             &batch.inputs,
             tensors.params.as_ref(),

@@ -160,14 +160,13 @@ fn softplus_activation_is_safe_in_value_and_gradient() {
     // loss = mean(y^2): d loss / dx = 2 y sigmoid(x) / n.
     let zeros = vec![0.0; inputs.len()];
     let ones = vec![1.0; inputs.len()];
-    let loss = graph
-        .normalised_mse(
-            std::slice::from_ref(&y),
-            &[zeros.as_slice()],
-            &[None],
-            &ones,
-        )
-        .unwrap();
+    let block = super::graph::LossBlock {
+        prediction: &y,
+        targets: &zeros,
+        weights: None,
+        inverse_std: &ones,
+    };
+    let loss = graph.normalised_mse(&[block]).unwrap();
     let mut grads = graph.backward(loss).unwrap();
     let gradient = super::graph::gradient_of(&mut grads, &x).unwrap();
     for ((g, &x), &y) in gradient.iter().zip(&inputs).zip(&values) {

@@ -104,7 +104,7 @@ fn assert_rollout_gradient_matches(substeps: usize, irregular: bool) {
     let fractions = stage_fractions(model.dynamics, substeps);
     let batch = rollout_batch(
         &model,
-        (&tracks, &[], &[]),
+        (&tracks, &[], &[], &[]),
         &[(0, 3), (0, 5)],
         6,
         &fractions,
@@ -176,7 +176,7 @@ fn params_train_at_their_own_rate() {
     let fractions = stage_fractions(model.dynamics, 1);
     let batch = rollout_batch(
         &model,
-        (&tracks, &[], &[]),
+        (&tracks, &[], &[], &[]),
         &[(0, 3), (0, 5)],
         4,
         &fractions,

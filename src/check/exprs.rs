@@ -4,7 +4,7 @@
 use super::symbols::{effect_items, Kind, Scope, Symbols};
 use super::{suggest, CheckError, Sink};
 use crate::ast::{self, Expr, ItemKind, SExpr, Span};
-use crate::ir::Func;
+use crate::vocabulary::Func;
 use std::collections::HashMap;
 
 /// What an expression is allowed to refer to.

@@ -5,7 +5,7 @@ use super::exprs::{names, Evaluator};
 use super::symbols::{effect_items, Kind, Scope, Symbols};
 use super::{suggest, CheckError, Sink};
 use crate::ast::{self, ClosureItem, Constraint, ItemKind, Span};
-use crate::ir::Activation;
+use crate::vocabulary::Activation;
 use std::collections::{HashMap, HashSet};
 
 type Values = HashMap<(Scope, String), f64>;

@@ -31,14 +31,21 @@ pub enum BenchModel {
     Blackbox,
     /// models/mm_chemostat/greybox.gbm, 500 pairs.
     Chemostat,
+    /// GB1 on the lab data set (4 irregular experiments, missing cells) beside GB1 on the
+    /// uniform record cut to the same number of measured cells.
+    Lab,
 }
 
+/// The lab data set's experiments (`models/bioreactor/data/lab/`).
+const LAB: [&str; 4] = ["run1.csv", "run2.csv", "run3.csv", "run4.csv"];
+
 impl BenchModel {
-    const ALL: [BenchModel; 4] = [
+    const ALL: [BenchModel; 5] = [
         BenchModel::Gb1,
         BenchModel::Gb2,
         BenchModel::Blackbox,
         BenchModel::Chemostat,
+        BenchModel::Lab,
     ];
 
     /// Model file, data file and training pairs, relative to the repository root.
@@ -53,6 +60,7 @@ impl BenchModel {
                 "models/mm_chemostat/data/steps.csv",
                 500,
             ),
+            BenchModel::Lab => ("models/bioreactor/gb1.gbm", BIOREACTOR, 0),
         }
     }
 }
@@ -161,7 +169,7 @@ pub fn run(args: &BenchArgs) -> CommandResult {
         full: None,
     };
     println!(
-        "{:<34} {:>6} {:>5} {:>6} {:>9} {:>10}",
+        "{:<52} {:>6} {:>5} {:>6} {:>9} {:>10}",
         "model", "pairs", "type", "engine", "ms/step", "ms/epoch"
     );
     for model in models {
@@ -204,7 +212,7 @@ fn print_row(row: &TrainingRow) {
         Precision::F64 => "f64",
     };
     println!(
-        "{:<34} {:>6} {:>5} {:>6} {:>9.3} {:>10.2}",
+        "{:<52} {:>6} {:>5} {:>6} {:>9.3} {:>10.2}",
         row.model,
         report.train_points,
         precision,
@@ -224,11 +232,43 @@ fn time_training(
     let model = super::load_model(&root.join(model_file))?;
     let data = read_data(&model, &root.join(data_file))?;
     let record = crate::train::record_of(&model, &data).map_err(train_error)?;
-    let data = TrainingData {
-        train: std::slice::from_ref(&record),
-        validation: &[],
-        part: Part::FirstPairs(Some(train_points)),
-    };
+    let mut cases = Vec::new();
+    if which == BenchModel::Lab {
+        let files: Vec<PathBuf> = (LAB.iter())
+            .map(|f| root.join("models/bioreactor/data/lab").join(f))
+            .collect();
+        let lab = super::data::load_records(&model, &files, &Default::default())?;
+        let cells: usize = lab.iter().map(|r| r.measured_cells()).sum();
+        let same = cells.div_ceil(model.states.len().max(1));
+        cases.push((
+            format!("{model_file} lab: 4 experiments, {cells} cells"),
+            lab,
+            None,
+        ));
+        let label = format!("{model_file} uniform: {} cells", same * model.states.len());
+        cases.push((label, vec![record], Some(same)));
+    } else {
+        cases.push((model_file.to_string(), vec![record], Some(train_points)));
+    }
+    let mut rows = Vec::new();
+    for (label, records, points) in &cases {
+        let data = TrainingData {
+            train: records,
+            validation: &[],
+            part: points.map_or(Part::All, |n| Part::FirstPairs(Some(n))),
+        };
+        rows.extend(time_case(label, &model, (&data, *points), args)?);
+    }
+    Ok(rows)
+}
+
+/// Every requested precision and engine for one data set.
+fn time_case(
+    label: &str,
+    model: &crate::ir::Model,
+    (data, train_points): (&TrainingData, Option<usize>),
+    args: &BenchArgs,
+) -> Result<Vec<TrainingRow>, CommandError> {
     let precisions: &[Precision] = match args.precision {
         PrecisionChoice::F32 => &[Precision::F32],
         PrecisionChoice::F64 => &[Precision::F64],
@@ -243,7 +283,7 @@ fn time_training(
     for &precision in precisions {
         for &engine in engines {
             let options = BenchOptions {
-                train_points: Some(train_points),
+                train_points,
                 batch_size: 50,
                 epochs: args.epochs,
                 precision,
@@ -251,9 +291,9 @@ fn time_training(
                 seed: 0,
                 engine,
             };
-            let report = bench(&model, &data, &options).map_err(train_error)?;
+            let report = bench(model, data, &options).map_err(train_error)?;
             rows.push(TrainingRow {
-                model: model_file.to_string(),
+                model: label.to_string(),
                 report,
             });
         }

@@ -65,3 +65,21 @@ pub fn hold_out(
     }
     Ok((kept, held))
 }
+
+/// Where whole-experiment free runs and training windows start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum HistoryArg {
+    /// At each experiment's first row, the history before it held at the first values.
+    Held,
+    /// At the first row whose whole embedding lies inside the experiment (the paper's).
+    Measured,
+}
+
+impl From<HistoryArg> for crate::train::History {
+    fn from(history: HistoryArg) -> Self {
+        match history {
+            HistoryArg::Held => crate::train::History::Held,
+            HistoryArg::Measured => crate::train::History::Measured,
+        }
+    }
+}

@@ -74,7 +74,7 @@ pub enum Command {
     /// (`--weights`: a what-if run), writing a CSV record.
     Simulate(simulate::SimulateArgs),
     /// Train a grey-box (or black-box) model on a data record.
-    Train(train::TrainArgs),
+    Train(Box<train::TrainArgs>),
     /// Predict with trained weights: states and every closure output over time.
     Predict(predict::PredictArgs),
     /// Diagnose the gap between a mechanistic model and data: where, which effect, how much.

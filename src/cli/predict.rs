@@ -1,15 +1,17 @@
-//! `gbc predict MODEL --weights DIR DATA.csv --mode offline|online -o PRED.csv`: predicted
-//! states and every closure and model output over time, from a trained run.
+//! `gbc predict MODEL --weights DIR DATA... --mode offline|online -o PRED.csv`: predicted
+//! states and every closure and model output over time, from a trained run, one run per
+//! experiment of the data set.
 //!
-//! Columns: `t`, the states (measured, then hidden), the closure outputs, the model's
-//! outputs. Offline rows are one-step predictions from the true history; online rows come
+//! Columns: `experiment` (when the data set has several), `t`, the states (measured, then
+//! hidden), the closure outputs, the model's outputs; one row per data row. Offline rows are one-step predictions from the true history; online rows come
 //! from one free run driven by the data's inputs (see `gbc::train::predict`). A free run
 //! that leaves the physical range of the training data (the run's `--range-factor`) stops:
 //! the file ends at the offending row and a warning on stderr says where and why.
 
 use std::path::PathBuf;
 
-use super::train::{read_data, read_source, train_error};
+use super::data::{load_records, ColumnArgs, HistoryArg};
+use super::train::{read_source, train_error};
 use super::{CommandError, CommandResult};
 use crate::train::recipe::DEFAULT_RANGE_FACTOR;
 use crate::train::{artifacts, predict, PhysicalRange};
@@ -28,8 +30,10 @@ pub enum ModeArg {
 pub struct PredictArgs {
     /// The model file the weights were trained with.
     pub model: PathBuf,
-    /// The record to predict along (CSV with `t`, the inputs and the measured states).
-    pub data: PathBuf,
+    /// The data set to predict along: one or more CSV files (each an experiment, or several
+    /// with an `experiment` column).
+    #[arg(required = true, num_args = 1..)]
+    pub data: Vec<PathBuf>,
     /// The run directory written by `gbc train -o DIR`.
     #[arg(long, value_name = "DIR")]
     pub weights: PathBuf,
@@ -39,43 +43,60 @@ pub struct PredictArgs {
     /// The CSV file to write.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Where each experiment's run starts: its first row (history held before it) or the
+    /// first row with a full embedding history inside the data.
+    #[arg(long, value_enum, default_value_t = HistoryArg::Held)]
+    pub history: HistoryArg,
+    /// How data columns are named.
+    #[command(flatten)]
+    pub columns: ColumnArgs,
 }
 
 /// Predicts and writes the table.
 pub fn run(args: &PredictArgs) -> CommandResult {
-    crate::io::ensure_not_input(&args.output, &[&args.model, &args.data])
-        .map_err(CommandError::user)?;
+    let mut inputs: Vec<&std::path::Path> = vec![&args.model];
+    inputs.extend(args.data.iter().map(|p| p.as_path()));
+    crate::io::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
     let (network, setup, info) =
         artifacts::restore(&model, &source, &args.weights).map_err(train_error)?;
-    let data = read_data(&model, &args.data)?;
-    let record = crate::train::record_of(&model, &data).map_err(train_error)?;
+    let records = load_records(&model, &args.data, &args.columns)?;
     let mode = match args.mode {
         ModeArg::Offline => predict::Mode::Offline,
         ModeArg::Online => predict::Mode::Online,
     };
     let factor = info.recipe.map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
-    let history = crate::train::History::Measured;
     let range = PhysicalRange::new(&setup.normalisation, factor);
-    let mut table = predict::predict_in_range(
-        &model,
-        &network,
-        &setup,
-        &record,
-        (mode, history, range.as_ref()),
-    )
-    .map_err(train_error)?;
-    if let Some(divergence) = &table.divergence {
-        eprintln!("warning: {divergence}; the predictions stop there");
-        let rows = (table.columns.first()).map_or(0, |times| {
-            times.iter().take_while(|t| **t <= divergence.time).count()
-        });
-        for column in &mut table.columns {
-            column.truncate(rows);
+    let mut header = Vec::new();
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut labels = Vec::new();
+    for record in &records {
+        let how = (mode, args.history.into(), range.as_ref());
+        let mut table = predict::predict_in_range(&model, &network, &setup, record, how)
+            .map_err(train_error)?;
+        if let Some(divergence) = &table.divergence {
+            eprintln!("warning: {divergence}; the predictions stop there");
+            let rows = (table.columns.first()).map_or(0, |times| {
+                times.iter().take_while(|t| **t <= divergence.time).count()
+            });
+            for column in &mut table.columns {
+                column.truncate(rows);
+            }
+        }
+        let rows = table.columns.first().map_or(0, Vec::len);
+        labels.extend(std::iter::repeat_n(record.name.clone(), rows));
+        if columns.is_empty() {
+            header = table.header;
+            columns = table.columns;
+        } else {
+            for (all, part) in columns.iter_mut().zip(table.columns) {
+                all.extend(part);
+            }
         }
     }
-    crate::data::write_csv(&args.output, &table.header, &table.columns)
+    let labels = (records.len() > 1).then_some(("experiment", labels.as_slice()));
+    crate::data::write_table(&args.output, labels, &header, &columns)
         .map_err(CommandError::user)?;
     Ok(())
 }

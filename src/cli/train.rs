@@ -11,10 +11,19 @@
 //! `run.json`; `--json FILE` writes the same metadata (metrics, params, warnings,
 //! normalisation, ...) to FILE.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+/// `writeln!` into a `String` (which cannot fail).
+macro_rules! line {
+    ($out:expr, $($arg:tt)*) => {{
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+use std::io::IsTerminal;
 use std::time::Instant;
 
-use super::data::{hold_out, load_records, ColumnArgs};
+use super::data::{hold_out, load_records, ColumnArgs, HistoryArg};
 use super::{CommandError, CommandResult};
 use crate::backend::Precision;
 use crate::data::MinRows;
@@ -24,8 +33,8 @@ use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, Engine, ErrorSet, Event, History, Objective, ParamSource, Part, Recipe,
-    TrainError, TrainOptions, Trained, TrainingData,
+    self, artifacts, Engine, ErrorSet, Event, Objective, ParamSource, Part, Recipe, TrainError,
+    TrainOptions, Trained, TrainingData,
 };
 
 /// The loss training minimises.
@@ -96,15 +105,6 @@ impl From<EngineArg> for Engine {
     }
 }
 
-/// Where whole-experiment free runs and training windows start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum HistoryArg {
-    /// At each experiment's first row, the history before it held at the first values.
-    Held,
-    /// At the first row whose whole embedding lies inside the experiment (the paper's).
-    Measured,
-}
-
 /// Arguments of `gbc train`.
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
@@ -151,9 +151,9 @@ pub struct TrainArgs {
     /// Adam learning rate.
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
-    /// The paper's protocol on one experiment: train on its first N one-step pairs; the
-    /// pairs after them validate when nothing else does (default with one experiment and no
-    /// other split: the first 70 %).
+    /// The paper's protocol: train on the first N one-step pairs after the embedding's
+    /// history (experiments in order); with one experiment and nothing else validating,
+    /// the pairs after them validate (default then: the first 70 %).
     #[arg(long, value_name = "N")]
     pub train_points: Option<usize>,
     /// Seed of the initialisation and the shuffling (same seed, same result).
@@ -207,10 +207,15 @@ pub struct TrainArgs {
     /// ([-F x max|x|, F x max|x|] for a state that was negative).
     #[arg(long, default_value_t = DEFAULT_RANGE_FACTOR, value_name = "F")]
     pub range_factor: f64,
-    /// Directory to write the weights and run.json into.
+    /// The run directory (weights, run.json, log.csv); default: a new timestamped
+    /// directory under runs/, announced on stderr.
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
-    /// Also write the run's metadata and metrics as JSON to this file.
+    /// Replace the run in an existing, non-empty `-o` directory.
+    #[arg(long)]
+    pub force: bool,
+    /// Also write the run's metadata and metrics as JSON to this file (`-`: standard
+    /// output; the summary then goes to standard error).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
 }
@@ -234,13 +239,11 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         online_horizon: args.online_horizon,
         engine: args.engine.into(),
         dt: args.dt,
-        history: match args.history {
-            HistoryArg::Held => History::Held,
-            HistoryArg::Measured => History::Measured,
-        },
+        history: args.history.into(),
         column_weights: args.weight.clone(),
     };
     let recipe = recipe_of(args);
+    let directory = run_directory(args)?;
     if args.cv {
         cross_validate(&model, &train_records, (&options, &recipe))?;
     }
@@ -268,16 +271,89 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         &options,
         &trained,
     );
-    if let Some(directory) = &args.output {
-        artifacts::save(directory, &info, &trained.network).map_err(train_error)?;
-    }
+    artifacts::save(&directory, &info, &trained.network).map_err(train_error)?;
+    let log = progress.log(&trained.report);
+    crate::io::write_atomic(&directory.join(LOG_FILE), log.as_bytes())
+        .map_err(CommandError::user)?;
+    let json_to_stdout = args
+        .json
+        .as_ref()
+        .is_some_and(|p| p.as_os_str() == crate::io::STDOUT);
     if let Some(path) = &args.json {
         let json = serde_json::to_string_pretty(&info)
             .map_err(|error| CommandError::Internal(format!("cannot encode metrics: {error}")))?;
         crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
-    print_summary(&model, &trained, started.elapsed().as_secs_f64(), args);
+    let seconds = started.elapsed().as_secs_f64();
+    let text = summary(&model, &trained, seconds, Some(&directory), args);
+    if json_to_stdout {
+        eprint!("{text}");
+    } else {
+        print!("{text}");
+    }
     Ok(())
+}
+
+/// The training log of a run directory.
+pub const LOG_FILE: &str = "log.csv";
+
+/// Where the run goes: `-o DIR` (refused when it holds files, unless `--force`), else a new
+/// directory `runs/<model>-<UTC time>` announced on stderr. Checked before training, so
+/// that no run is lost to a directory that cannot take it.
+fn run_directory(args: &TrainArgs) -> Result<PathBuf, CommandError> {
+    if let Some(directory) = &args.output {
+        let occupied =
+            std::fs::read_dir(directory).is_ok_and(|mut entries| entries.next().is_some());
+        if occupied && !args.force {
+            return Err(train_error(TrainError::RunExists {
+                directory: directory.display().to_string(),
+            }));
+        }
+        if directory.exists() && !directory.is_dir() {
+            return Err(train_error(TrainError::RunExists {
+                directory: directory.display().to_string(),
+            }));
+        }
+        return Ok(directory.clone());
+    }
+    let stem =
+        (args.model.file_stem()).map_or("run".to_string(), |s| s.to_string_lossy().to_string());
+    let stamp = utc_stamp(std::time::SystemTime::now());
+    let mut directory = PathBuf::from("runs").join(format!("{stem}-{stamp}"));
+    let mut attempt = 1;
+    while directory.exists() {
+        attempt += 1;
+        directory = PathBuf::from("runs").join(format!("{stem}-{stamp}-{attempt}"));
+    }
+    eprintln!(
+        "the run goes to {} (choose the directory with -o DIR)",
+        directory.display()
+    );
+    Ok(directory)
+}
+
+/// `YYYYMMDD-HHMMSS` in UTC.
+fn utc_stamp(time: std::time::SystemTime) -> String {
+    let seconds = time
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rest) = (seconds / 86_400, seconds % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}{month:02}{day:02}-{:02}{:02}{:02}",
+        rest / 3600,
+        rest % 3600 / 60,
+        rest % 60
+    )
 }
 
 /// How the training experiments are split, from the flags: `--val-fraction`,
@@ -436,6 +512,9 @@ pub fn train_error(error: TrainError) -> CommandError {
 #[derive(Default)]
 struct Progress {
     bar: Option<indicatif::ProgressBar>,
+    started: Option<Instant>,
+    /// Per epoch: rollout steps, mean loss, seconds since the start.
+    epochs: Vec<(usize, f64, f64)>,
 }
 
 impl Progress {
@@ -447,14 +526,20 @@ impl Progress {
                 validation_pairs,
                 ..
             } => {
+                self.started = Some(Instant::now());
+                self.epochs.clear();
+                let message =
+                    format!("training on {train_pairs} pairs, validating on {validation_pairs}");
+                if !std::io::stderr().is_terminal() {
+                    eprintln!("{message}");
+                    return;
+                }
                 let bar = indicatif::ProgressBar::new(epochs as u64);
                 let template = "epoch {pos}/{len} [{bar:30}] {msg} ETA {eta}";
                 if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
                     bar.set_style(style.progress_chars("=> "));
                 }
-                bar.println(format!(
-                    "training on {train_pairs} pairs, validating on {validation_pairs}"
-                ));
+                bar.println(message);
                 self.bar = Some(bar);
             }
             Event::Epoch {
@@ -462,12 +547,63 @@ impl Progress {
                 loss,
                 horizon,
             } => {
-                if let Some(bar) = &self.bar {
-                    bar.set_message(format!("{horizon} step loss {loss:.3e}"));
-                    bar.set_position(epoch as u64);
+                let seconds = self.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
+                self.epochs.push((horizon, loss, seconds));
+                match &self.bar {
+                    Some(bar) => {
+                        bar.set_message(format!("{horizon} step loss {loss:.3e}"));
+                        bar.set_position(epoch as u64);
+                    }
+                    // Without a terminal, a line every twentieth of the run (and the last).
+                    None if epoch % epochs.div_ceil(20).max(1) == 0 || epoch == epochs => {
+                        eprintln!(
+                            "epoch {epoch}/{epochs}: {horizon}-step loss {loss:.4e} ({seconds:.1} s)"
+                        );
+                    }
+                    None => {}
                 }
             }
         }
+    }
+
+    /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,
+    /// seconds) and the validation errors where they were computed (before the first epoch
+    /// and after the last).
+    fn log(&self, report: &train::TrainReport) -> String {
+        let metrics = &report.metrics;
+        let overall = |set: &Option<ErrorSet>| {
+            set.as_ref()
+                .map_or(String::new(), |s| crate::data::format_number(s.overall))
+        };
+        let mut text = String::from(
+            "epoch,phase,horizon,train_loss,validation_offline,validation_online,learning_rate,seconds\n",
+        );
+        text.push_str(&format!(
+            "0,initial,,,{},{},,0\n",
+            overall(&metrics.initial_offline),
+            overall(&metrics.initial_online)
+        ));
+        let last = self.epochs.len();
+        for (index, &(horizon, loss, seconds)) in self.epochs.iter().enumerate() {
+            let phase = if horizon > 1 {
+                "multi-step"
+            } else {
+                "one-step"
+            };
+            let (offline, online) = if index + 1 == last {
+                (overall(&metrics.offline), overall(&metrics.online))
+            } else {
+                (String::new(), String::new())
+            };
+            text.push_str(&format!(
+                "{},{phase},{horizon},{},{offline},{online},{},{}\n",
+                index + 1,
+                crate::data::format_number(loss),
+                crate::data::format_number(report.learning_rate),
+                crate::data::format_number(seconds)
+            ));
+        }
+        text
     }
 
     fn finish(&mut self) {
@@ -477,9 +613,17 @@ impl Progress {
     }
 }
 
-fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArgs) {
+fn summary(
+    model: &Model,
+    trained: &Trained,
+    seconds: f64,
+    run: Option<&Path>,
+    args: &TrainArgs,
+) -> String {
+    let mut out = String::new();
     let report = &trained.report;
-    println!(
+    line!(
+        out,
         "trained `{}` on {} pairs for {} epochs ({}) in {seconds:.1} s (final loss {})",
         model.name,
         report.train_pairs,
@@ -492,32 +636,36 @@ fn print_summary(model: &Model, trained: &Trained, seconds: f64, args: &TrainArg
     );
     let metrics = &report.metrics;
     if metrics.validations.is_empty() {
-        println!(
+        line!(
+            out,
             "nothing validates: pass --val FILE, --holdout NAME, --val-fraction SHARE or a \
              smaller --train-points"
         );
     }
     for set in &metrics.validations {
-        println!(
+        line!(
+            out,
             "validation on {} ({} pairs; MSE of z-scored states at measured cells):",
-            set.name, set.pairs
+            set.name,
+            set.pairs
         );
-        print_errors(set.offline.as_ref(), set.online.as_ref());
+        print_errors(&mut out, set.offline.as_ref(), set.online.as_ref());
     }
     if metrics.validations.len() > 1 {
-        println!("validation pooled over every experiment:");
-        print_errors(metrics.offline.as_ref(), metrics.online.as_ref());
+        line!(out, "validation pooled over every experiment:");
+        print_errors(&mut out, metrics.offline.as_ref(), metrics.online.as_ref());
     }
-    print_initial_states(report);
-    print_params(trained);
-    if let Some(directory) = &args.output {
-        println!("weights written to {}", directory.display());
+    print_initial_states(&mut out, report);
+    print_params(&mut out, trained);
+    if let Some(directory) = run {
+        line!(out, "run written to {}", directory.display());
     }
+    out
 }
 
 /// One row per measured state; an error that could not be measured shows as `-`.
-fn print_errors(offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
-    println!("  {:<16} {:>12} {:>12}", "state", "offline", "online");
+fn print_errors(out: &mut String, offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
+    line!(out, "  {:<16} {:>12} {:>12}", "state", "offline", "online");
     let names: Vec<&String> = (offline.iter().chain(online.iter()))
         .flat_map(|set| set.per_state.iter().map(|(name, _)| name))
         .fold(Vec::new(), |mut names, name| {
@@ -531,26 +679,28 @@ fn print_errors(offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
             .map_or("-".to_string(), |(_, e)| error(*e))
     };
     for name in names {
-        println!(
+        line!(
+            out,
             "  {name:<16} {:>12} {:>12}",
             of(offline, name),
             of(online, name)
         );
     }
     let overall = |set: Option<&ErrorSet>| set.map_or("-".to_string(), |s| error(s.overall));
-    println!(
+    line!(
+        out,
         "  {:<16} {:>12} {:>12}",
         "overall",
         overall(offline),
         overall(online)
     );
     if let Some(divergence) = online.and_then(|s| s.divergence.as_ref()) {
-        println!("  {divergence}");
+        line!(out, "  {divergence}");
     }
 }
 
 /// The initial values that were not measured: declared or fitted per experiment.
-fn print_initial_states(report: &train::TrainReport) {
+fn print_initial_states(out: &mut String, report: &train::TrainReport) {
     let unmeasured: Vec<_> = (report.initial_states.iter())
         .flat_map(|state| {
             (state.states.iter())
@@ -561,32 +711,40 @@ fn print_initial_states(report: &train::TrainReport) {
     if unmeasured.is_empty() {
         return;
     }
-    println!("initial states not measured at an experiment's first row:");
+    line!(
+        out,
+        "initial states not measured at an experiment's first row:"
+    );
     for (experiment, name, value, origin) in unmeasured {
         let how = match origin {
             train::Origin::Declared => "declared",
             _ => "fitted",
         };
-        println!("  {experiment:<24} {name} = {value:.6} ({how})");
+        line!(out, "  {experiment:<24} {name} = {value:.6} ({how})");
     }
 }
 
-fn print_params(trained: &Trained) {
+fn print_params(out: &mut String, trained: &Trained) {
     let report = &trained.report;
     if report.params.is_empty() {
         return;
     }
     match (&report.polish, &report.balance_fit) {
-        (_, Some(fit)) => println!(
+        (_, Some(fit)) => line!(
+            out,
             "params (from the balances over {} intervals, held fixed in training; rms scaled \
              residual {:.3e}; +- standard error):",
-            fit.intervals, fit.rms_residual
+            fit.intervals,
+            fit.rms_residual
         ),
-        (Some(polish), None) => println!(
+        (Some(polish), None) => line!(
+            out,
             "params (polished in {} steps, one-step loss {:.4e} -> {:.4e}; +- standard error):",
-            polish.steps, polish.loss_before, polish.loss_after
+            polish.steps,
+            polish.loss_before,
+            polish.loss_after
         ),
-        (None, None) => println!("params (+- standard error):"),
+        (None, None) => line!(out, "params (+- standard error):"),
     }
     for estimate in &report.estimates {
         let flag = if estimate.well_identified {
@@ -594,7 +752,8 @@ fn print_params(trained: &Trained) {
         } else {
             "  poorly identified"
         };
-        println!(
+        line!(
+            out,
             "  {} = {:.6} +- {:.2e} ({:.1} %){flag}",
             estimate.name,
             estimate.value,

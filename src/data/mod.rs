@@ -237,6 +237,17 @@ impl From<usize> for MinRows {
 /// scientific notation such as `1e-7` for very small or large magnitudes). A non-finite
 /// value is written as `NaN`, `inf` or `-inf` (which [`read`] rejects).
 pub fn write_csv(path: &Path, header: &[String], columns: &[Vec<f64>]) -> Result<(), IoError> {
+    write_table(path, None, header, columns)
+}
+
+/// Writes a table as [`write_csv`] does, with a leading text column `(name, labels)` (one
+/// label per row, quoted where it needs to be), e.g. the experiment of each row.
+pub fn write_table(
+    path: &Path,
+    labels: Option<(&str, &[String])>,
+    header: &[String],
+    columns: &[Vec<f64>],
+) -> Result<(), IoError> {
     let malformed = |detail: String| IoError::MalformedTable {
         path: path.display().to_string(),
         detail,
@@ -257,9 +268,37 @@ pub fn write_csv(path: &Path, header: &[String], columns: &[Vec<f64>]) -> Result
             column.len()
         )));
     }
-    let mut text = header.join(",");
+    if let Some((_, names)) = labels.filter(|(_, names)| names.len() != rows) {
+        return Err(malformed(format!(
+            "expected {rows} row labels, found {}",
+            names.len()
+        )));
+    }
+    let quote = |text: &str| {
+        if text.contains([',', '"', '\n', '\r']) {
+            format!("\"{}\"", text.replace('"', "\"\""))
+        } else {
+            text.to_string()
+        }
+    };
+    let mut text = String::new();
+    if let Some((name, _)) = labels {
+        text.push_str(&quote(name));
+        text.push(',');
+    }
+    text.push_str(
+        &header
+            .iter()
+            .map(|h| quote(h))
+            .collect::<Vec<_>>()
+            .join(","),
+    );
     text.push('\n');
     for row in 0..rows {
+        if let Some((_, names)) = labels {
+            text.push_str(&quote(&names[row]));
+            text.push(',');
+        }
         for (index, column) in columns.iter().enumerate() {
             if index > 0 {
                 text.push(',');

@@ -122,6 +122,7 @@ fn uniform_track(model: &ir::Model, step: f64, knots: usize) -> Track {
         known: model.states.iter().map(|_| vec![true; knots]).collect(),
         measured: model.states.iter().map(|_| vec![true; knots]).collect(),
         observed: Vec::new(),
+        observed_outputs: Vec::new(),
     }
 }
 

@@ -60,6 +60,12 @@ impl FusedNetwork {
     /// Builds the step for `model` with the initial weights [`Network::build`] gives for the
     /// same setup.
     pub fn build(model: &ir::Model, setup: &Setup) -> Result<FusedNetwork, BackendError> {
+        if !setup.normalisation.observables.is_empty() {
+            return Err(BackendError::Unsupported {
+                engine: "fused".into(),
+                what: "measured outputs (observables) in the loss".into(),
+            });
+        }
         let template = Network::build(model, setup)?.weights();
         let plan = Plan::build(model, setup, &template)?;
         let flat: Vec<f64> = template.iter().flat_map(|t| t.values.clone()).collect();

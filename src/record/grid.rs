@@ -57,8 +57,11 @@ pub struct Track {
     pub known: Vec<Vec<bool>>,
     /// `measured[i][knot]`: a measured cell sits at that knot (a loss target).
     pub measured: Vec<Vec<bool>>,
-    /// `observed[j][knot]`: the measured value of observable `j`, if any.
+    /// `observed[j][knot]`: the measured value of observable `j` (model output
+    /// `observed_outputs[j]`), if any.
     pub observed: Vec<Vec<Option<f64>>>,
+    /// The model outputs the rows of `observed` are.
+    pub observed_outputs: Vec<usize>,
 }
 
 /// Positions this close to a knot are that knot (rounding of stage times).
@@ -88,6 +91,7 @@ impl Track {
             known: Vec::new(),
             measured: Vec::new(),
             observed: Vec::new(),
+            observed_outputs: record.observables.iter().map(|o| o.output).collect(),
         };
         track.observed = (record.observables.iter())
             .map(|o| {
@@ -179,6 +183,17 @@ impl Track {
                 *slot = value;
             }
         }
+    }
+
+    /// The measured value of model output `output` at `knot`, if any.
+    pub fn observed_cell(&self, output: usize, knot: usize) -> Option<f64> {
+        let index = self.observed_outputs.iter().position(|&o| o == output)?;
+        self.observed[index].get(knot).copied().flatten()
+    }
+
+    /// Whether any measured state or observable has a cell at `knot`.
+    pub fn has_cell(&self, knot: usize) -> bool {
+        self.measured.iter().any(|m| m[knot]) || self.observed.iter().any(|o| o[knot].is_some())
     }
 
     /// Whether every state is known at every knot (no model fill needed).

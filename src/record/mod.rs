@@ -111,6 +111,13 @@ impl Record {
         }
     }
 
+    /// The cells of model output `output` when it is measured here.
+    pub fn observable(&self, output: usize) -> Option<&Cells> {
+        (self.observables.iter())
+            .find(|o| o.output == output)
+            .map(|o| &o.cells)
+    }
+
     /// The number of measured state cells.
     pub fn measured_cells(&self) -> usize {
         self.states.iter().flatten().filter(|c| c.is_some()).count()
@@ -156,7 +163,11 @@ pub struct Normalisation {
     #[serde(default)]
     #[serde(with = "crate::json")]
     pub state_max: Vec<f64>,
-    /// Mean of each observable, in [`Record::observables`] order.
+    /// The model outputs that are measured (observables), as indices into the model's
+    /// outputs: every output measured in some training experiment.
+    #[serde(default)]
+    pub observables: Vec<usize>,
+    /// Mean of each observable, in [`Normalisation::observables`] order.
     #[serde(default)]
     #[serde(with = "crate::json")]
     pub observable_mean: Vec<f64>,
@@ -202,13 +213,18 @@ impl Normalisation {
             norm.input_mean.push(mean);
             norm.input_std.push(std);
         }
-        let observables = parts.first().map_or(0, |(r, _)| r.observables.len());
-        for index in 0..observables {
-            let values = gather(&|r: &Record| r.observables.get(index).map(|o| &o.cells));
+        let mut observables: Vec<usize> = (parts.iter())
+            .flat_map(|(r, _)| r.observables.iter().map(|o| o.output))
+            .collect();
+        observables.sort_unstable();
+        observables.dedup();
+        for &output in &observables {
+            let values = gather(&|r: &Record| r.observable(output));
             let (mean, std) = crate::numeric::mean_std(&values);
             norm.observable_mean.push(mean);
             norm.observable_std.push(std);
         }
+        norm.observables = observables;
         norm
     }
 }

@@ -59,16 +59,12 @@ pub struct BenchReport {
     /// Adam steps per epoch (`train_points / batch_size`, rounded up).
     pub steps_per_epoch: usize,
     /// Wall-clock seconds of each timed epoch, in order.
-    #[serde(with = "crate::json")]
     pub epoch_seconds: Vec<f64>,
     /// Median of `epoch_seconds`.
-    #[serde(with = "crate::json")]
     pub median_epoch_seconds: f64,
     /// The median epoch divided by its steps.
-    #[serde(with = "crate::json")]
     pub median_step_seconds: f64,
     /// Mean training loss of the last timed epoch (a check that it trains).
-    #[serde(with = "crate::json")]
     pub final_loss: f64,
 }
 
@@ -105,7 +101,13 @@ pub fn bench(
     let network = Network::build(model, &setup)?;
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     let weights = vec![1.0; model.states.len()];
-    let mut course = Course::new(model, layout.tracks, (&layout.pairs, &weights), &fractions);
+    let observables = layout.normalisation.observables.clone();
+    let pairs = (
+        layout.pairs.as_slice(),
+        weights.as_slice(),
+        observables.as_slice(),
+    );
+    let mut course = Course::new(model, layout.tracks, pairs, &fractions);
     refresh(
         &network,
         model,

@@ -56,7 +56,9 @@ pub enum TrainError {
     #[error("expected --train-points of at most {available}, found {requested}")]
     #[diagnostic(
         code(gbm::E0413),
-        help("the record yields {available} training pairs after the embedding's history")
+        help(
+            "the data yield {available} training pairs after each experiment's embedding history"
+        )
     )]
     TooManyTrainPoints {
         /// Pairs available.
@@ -181,22 +183,6 @@ pub enum TrainError {
         /// The model's name.
         model: String,
     },
-    /// `--train-points` (the paper's protocol) with several training experiments.
-    #[error(
-        "expected one training experiment for --train-points (the first pairs of one record), \
-         found {experiments}"
-    )]
-    #[diagnostic(
-        code(gbm::E0423),
-        help(
-            "with several experiments hold out whole ones (--holdout NAME, --val FILE) or the \
-             tail of each (--val-fraction F)"
-        )
-    )]
-    TrainPointsOnSeveral {
-        /// Training experiments given.
-        experiments: usize,
-    },
     /// A tail split that leaves a part too small.
     #[error(
         "expected at least {needed} rows in each part of experiment `{experiment}` split by \
@@ -204,7 +190,7 @@ pub enum TrainError {
     )]
     #[diagnostic(
         code(gbm::E0424),
-        help("use a --val-fraction that leaves both parts {needed} rows, or hold out whole experiments")
+        help("use a --val-fraction that leaves both parts at least {needed} rows, or hold out whole experiments")
     )]
     SplitTooSmall {
         /// The experiment.
@@ -220,8 +206,8 @@ pub enum TrainError {
     },
     /// A `next` model on data without one uniform step.
     #[error(
-        "expected rows every {step} time units for a `next` model, found irregular times in \
-         experiment `{experiment}`"
+        "expected one uniform time step for a `next` model, found {found} in experiment \
+         `{experiment}`"
     )]
     #[diagnostic(
         code(gbm::E0425),
@@ -234,8 +220,8 @@ pub enum TrainError {
     IrregularForNext {
         /// The first experiment that is irregular (or sampled at another step).
         experiment: String,
-        /// The step of the grid.
-        step: f64,
+        /// What its times look like, e.g. "steps from 0.2 to 4" or "a step of 2 (others 1)".
+        found: String,
     },
     /// A state that an experiment never measures, with no declared initial value.
     #[error(
@@ -251,6 +237,36 @@ pub enum TrainError {
         state: String,
         /// The experiment.
         experiment: String,
+    },
+    /// An experiment shorter than the embedding's history under `--history measured`.
+    #[error(
+        "expected experiment `{experiment}` to span more than {needed} time units (the \
+         embedding's history, with --history measured), found {found}"
+    )]
+    #[diagnostic(
+        code(gbm::E0428),
+        help(
+            "drop the experiment, use a shorter embedding, or --history held (the history \
+             before the first row held at the first values)"
+        )
+    )]
+    ExperimentTooShort {
+        /// The experiment.
+        experiment: String,
+        /// The embedding's span.
+        needed: f64,
+        /// The experiment's span.
+        found: f64,
+    },
+    /// `gbc train -o DIR` onto a directory that already holds files.
+    #[error("expected an empty or new run directory, found files in `{directory}`")]
+    #[diagnostic(
+        code(gbm::E0429),
+        help("choose another -o DIR, or pass --force to replace the run in it")
+    )]
+    RunExists {
+        /// The directory.
+        directory: String,
     },
     /// Nothing left to train on.
     #[error("expected at least one training experiment, found none")]

@@ -296,10 +296,11 @@ pub fn run_in_hidden(
     Ok(run_in(network, model, track, fractions, initial)?.hidden)
 }
 
-/// Squared z-scored errors summed per measured state, with their cell counts: errors of
-/// several runs pool into one [`ErrorSet`].
+/// Squared z-scored errors summed per measured state and observable, with their cell
+/// counts: errors of several runs pool into one [`ErrorSet`].
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ErrorSum {
+    names: Vec<String>,
     squared: Vec<f64>,
     cells: Vec<usize>,
     rows: usize,
@@ -307,27 +308,34 @@ pub struct ErrorSum {
 }
 
 impl ErrorSum {
-    /// Zero for `states` measured states.
-    pub fn new(states: usize) -> Self {
+    /// Zero for `model`'s measured states, then the observables of `normalisation`.
+    pub fn new(model: &ir::Model, normalisation: &Normalisation) -> Self {
+        let names: Vec<String> = (model.states.iter().map(|s| s.name.clone()))
+            .chain(
+                (normalisation.observables.iter())
+                    .filter_map(|&o| model.outputs.get(o).map(|d| d.name.clone())),
+            )
+            .collect();
         ErrorSum {
-            squared: vec![0.0; states],
-            cells: vec![0; states],
+            squared: vec![0.0; names.len()],
+            cells: vec![0; names.len()],
+            names,
             rows: 0,
             divergence: None,
         }
     }
 
-    /// Adds the squared error of one cell of state `state`.
-    pub fn add(&mut self, state: usize, squared: f64) {
-        self.squared[state] += squared;
-        self.cells[state] += 1;
+    /// Adds the squared error of one cell of column `column` (states, then observables).
+    pub fn add(&mut self, column: usize, squared: f64) {
+        self.squared[column] += squared;
+        self.cells[column] += 1;
     }
 
     /// Adds another sum (a diverged run makes the whole set infinite).
     pub fn merge(&mut self, other: &ErrorSum) {
-        for state in 0..self.squared.len() {
-            self.squared[state] += other.squared[state];
-            self.cells[state] += other.cells[state];
+        for column in 0..self.squared.len().min(other.squared.len()) {
+            self.squared[column] += other.squared[column];
+            self.cells[column] += other.cells[column];
         }
         self.rows += other.rows;
         if self.divergence.is_none() {
@@ -335,25 +343,29 @@ impl ErrorSum {
         }
     }
 
-    /// The mean squared errors per state (states without a cell left out) and their mean;
-    /// `None` when no cell was scored.
-    pub fn finish(&self, model: &ir::Model) -> Option<ErrorSet> {
+    /// The mean squared errors per column (columns without a cell left out) and their
+    /// mean; `None` when no cell was scored.
+    pub fn finish(&self) -> Option<ErrorSet> {
         let cells: usize = self.cells.iter().sum();
         if let Some(divergence) = &self.divergence {
-            let mut set = error_set(model, vec![f64::INFINITY; model.states.len()], 1);
-            set.rows = self.rows;
-            set.cells = cells;
-            set.divergence = Some(divergence.clone());
-            return Some(set);
+            return Some(ErrorSet {
+                per_state: (self.names.iter())
+                    .map(|name| (name.clone(), f64::INFINITY))
+                    .collect(),
+                overall: f64::INFINITY,
+                rows: self.rows,
+                cells,
+                divergence: Some(divergence.clone()),
+            });
         }
         if cells == 0 {
             return None;
         }
-        let per_state: Vec<(String, f64)> = (model.states.iter().enumerate())
+        let per_state: Vec<(String, f64)> = (self.names.iter().enumerate())
             .filter(|&(index, _)| self.cells[index] > 0)
-            .map(|(index, state)| {
+            .map(|(index, name)| {
                 let mean = self.squared[index] / self.cells[index] as f64;
-                (state.name.clone(), mean)
+                (name.clone(), mean)
             })
             .collect();
         let overall = per_state.iter().map(|(_, e)| e).sum::<f64>() / per_state.len() as f64;
@@ -377,7 +389,8 @@ pub fn offline_error(
 ) -> Result<ErrorSum, BackendError> {
     let measured = model.states.len();
     let width = measured + model.hidden.len();
-    let mut sum = ErrorSum::new(measured);
+    let observables = normalisation.observables.len();
+    let mut sum = ErrorSum::new(model, normalisation);
     let indices: Vec<usize> = (0..table.len()).collect();
     for chunk in indices.chunks(EVALUATION_CHUNK) {
         let batch = table.batch(chunk);
@@ -390,6 +403,15 @@ pub fn offline_error(
                 let error = prediction.next_states[row * width + state]
                     - batch.targets[row * measured + state];
                 sum.add(state, (error / normalisation.state_std[state]).powi(2));
+            }
+            for index in 0..observables {
+                let cell = row * observables + index;
+                if batch.observed_weights[cell] <= 0.0 {
+                    continue;
+                }
+                let error = prediction.observed[cell] - batch.observed[cell];
+                let std = normalisation.observable_std[index];
+                sum.add(measured + index, (error / std).powi(2));
             }
         }
     }
@@ -406,7 +428,7 @@ pub fn online_error(
     (normalisation, scored_from): (&Normalisation, f64),
 ) -> ErrorSum {
     let measured = model.states.len();
-    let mut sum = ErrorSum::new(measured);
+    let mut sum = ErrorSum::new(model, normalisation);
     if let Some(divergence) = &run.divergence {
         sum.rows = run.next_states.len();
         sum.divergence = Some(divergence.clone());
@@ -420,28 +442,22 @@ pub fn online_error(
         if track.times[knot] < scored_from {
             continue;
         }
-        for state in 0..measured {
+        for (state, &value) in next.iter().enumerate().take(measured) {
             if track.measured[state][knot] {
-                let error = next[state] - track.states[state][knot];
+                let error = value - track.states[state][knot];
                 sum.add(state, (error / normalisation.state_std[state]).powi(2));
+            }
+        }
+        // The outputs at a knot come from the step that starts there.
+        let outputs = run.outputs.get(offset + 1);
+        for (index, &output) in normalisation.observables.iter().enumerate() {
+            let predicted = outputs.and_then(|o| o.get(output));
+            if let (Some(value), Some(predicted)) = (track.observed_cell(output, knot), predicted) {
+                let std = normalisation.observable_std[index];
+                sum.add(measured + index, ((predicted - value) / std).powi(2));
             }
         }
         sum.rows += 1;
     }
     sum
-}
-
-fn error_set(model: &ir::Model, squared: Vec<f64>, rows: usize) -> ErrorSet {
-    let count = rows.max(1) as f64;
-    let per_state: Vec<(String, f64)> = (model.states.iter().zip(squared))
-        .map(|(state, total)| (state.name.clone(), total / count))
-        .collect();
-    let overall = per_state.iter().map(|(_, e)| e).sum::<f64>() / per_state.len().max(1) as f64;
-    ErrorSet {
-        per_state,
-        overall,
-        rows,
-        cells: rows * model.states.len(),
-        divergence: None,
-    }
 }

@@ -66,9 +66,14 @@ impl Fit<'_> {
         let mut losses = Vec::with_capacity(options.epochs);
         let mut engines = Engines::new(network, options.engine, self.model, self.setup)?;
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
+        // A state an experiment never measures is all fill: its estimate is the model's own
+        // run, refreshed every epoch.
+        let unmeasured =
+            (training.tracks.iter()).any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
+        let every = if unmeasured { 1 } else { FILL_REFRESH };
         for epoch in 1..=options.epochs {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
-            let fill_due = needs_fill && (epoch - 1) % FILL_REFRESH == 0;
+            let fill_due = needs_fill && (epoch - 1) % every == 0;
             if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
                 let current = engines.current_weights()?;
                 let how = (fractions.as_slice(), fill_due);
@@ -162,7 +167,12 @@ impl Fit<'_> {
         for chunk in starts.chunks(per_batch) {
             let batch = rollout_batch(
                 self.model,
-                (&training.tracks, &training.hidden, &training.weights),
+                (
+                    &training.tracks,
+                    &training.hidden,
+                    &training.weights,
+                    &self.setup.normalisation.observables,
+                ),
                 chunk,
                 horizon,
                 fractions,

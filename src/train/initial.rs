@@ -84,3 +84,86 @@ pub fn constant_value(model: &ir::Model, expr: &ir::Expr) -> f64 {
         _ => f64::NAN,
     })
 }
+
+/// Refines the fitted initial values of every track of `course` with the trained network:
+/// for each track whose `initial` entry (matched by experiment name) has fitted states,
+/// Levenberg–Marquardt moves those values to minimise the z-scored one-step errors of the
+/// run from the first knot (measured states reset to the data where known, the fitted ones
+/// free) up to each fitted state's first measured cell. Updates the tracks and `initial`.
+pub(super) fn fit_initial_states(
+    network: &crate::backend::Network,
+    model: &ir::Model,
+    (course, fractions): (&mut super::validation::Course, &[f64]),
+    normalisation: &crate::backend::Normalisation,
+    (initial, hidden_init): (&mut [InitialState], &[f64]),
+) -> Result<(), TrainError> {
+    use super::evaluate::{simulate, Feed};
+    for track in course.tracks.iter_mut() {
+        let Some(entry) = initial.iter_mut().find(|i| i.experiment == track.name) else {
+            continue;
+        };
+        let fitted = entry.fitted();
+        if fitted.is_empty() || track.len() < 2 {
+            continue;
+        }
+        let last = (fitted.iter())
+            .filter_map(|&i| track.measured[i].iter().position(|&m| m))
+            .max()
+            .unwrap_or(0)
+            .clamp(1, track.len() - 1);
+        let start: Vec<f64> = fitted.iter().map(|&i| track.states[i][0]).collect();
+        let base = track.clone();
+        let residuals = |x: &[f64]| -> Option<Vec<f64>> {
+            let mut trial = base.clone();
+            for (&state, &value) in fitted.iter().zip(x) {
+                trial.states[state][0] = value;
+            }
+            let run = simulate(
+                network,
+                model,
+                &trial,
+                fractions,
+                (0, last - 1),
+                hidden_init,
+                (Feed::Data, None),
+            )
+            .ok()?;
+            let mut errors = Vec::new();
+            for (offset, next) in run.next_states.iter().enumerate() {
+                let knot = offset + 1;
+                for (state, std) in normalisation.state_std.iter().enumerate() {
+                    if trial.measured[state][knot] {
+                        errors.push((next[state] - trial.states[state][knot]) / std);
+                    }
+                }
+            }
+            errors.iter().all(|e| e.is_finite()).then_some(errors)
+        };
+        let outcome = fit(&residuals, start);
+        for (&state, &value) in fitted.iter().zip(&outcome) {
+            track.states[state][0] = value;
+            entry.states[state].1 = value;
+        }
+    }
+    Ok(())
+}
+
+/// Levenberg–Marquardt with forward differences from `start` (the start again when no
+/// step improves).
+fn fit(residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync), start: Vec<f64>) -> Vec<f64> {
+    use crate::numeric::lm::{Damping, Function, Jacobian};
+    let problem = Function {
+        residuals,
+        jacobian: Jacobian::ForwardDifferences { step: 1e-6 },
+        damping: Damping {
+            min_diagonal: 1e-300,
+            jitter: 1e-300,
+            relative_jitter: 1e-9,
+        },
+    };
+    let settings = crate::numeric::Settings {
+        max_trials: 40,
+        ..crate::numeric::Settings::DEFAULT
+    };
+    problem.minimise(start, &settings).x
+}

@@ -41,6 +41,8 @@ pub mod split;
 mod tests;
 #[cfg(test)]
 mod tests_recipe;
+#[cfg(test)]
+mod tests_records;
 mod validation;
 pub mod windows;
 
@@ -197,6 +199,8 @@ pub struct TrainReport {
     pub initial_states: Vec<InitialState>,
     /// The grid's longest step.
     pub dt: f64,
+    /// The Adam learning rate of the network weights.
+    pub learning_rate: f64,
 }
 
 /// A trained network with everything needed to reuse it.
@@ -281,7 +285,7 @@ pub fn train_with(
     let mut training = Course::new(
         model,
         layout.tracks.clone(),
-        (&layout.pairs, &weights),
+        (&layout.pairs, &weights, &layout.normalisation.observables),
         &fractions,
     );
     refresh(
@@ -294,7 +298,7 @@ pub fn train_with(
     let mut validating = Course::new(
         model,
         layout.validation_tracks.clone(),
-        (&[], &weights),
+        (&[], &weights, &layout.normalisation.observables),
         &fractions,
     );
     let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
@@ -327,12 +331,29 @@ pub fn train_with(
         trainings: &layout.trainings,
     };
     let losses = fit.run(&mut network, &mut training, on_event)?;
+    let mut initial_states = layout.initial.clone();
+    let refit = (&mut initial_states[..], hidden_init.as_slice());
+    initial::fit_initial_states(
+        &network,
+        model,
+        (&mut training, &fractions),
+        &setup.normalisation,
+        refit,
+    )?;
     refresh(
         &network,
         model,
         &mut training,
         (&fractions, true),
         &hidden_init,
+    )?;
+    let refit = (&mut initial_states[..], hidden_init.as_slice());
+    initial::fit_initial_states(
+        &network,
+        model,
+        (&mut validating, &fractions),
+        &setup.normalisation,
+        refit,
     )?;
     let (polish, estimates) = match &balance_fit {
         Some(fit) => (None, fit.estimates.clone()),
@@ -370,8 +391,9 @@ pub fn train_with(
         estimates,
         polish,
         balance_fit,
-        initial_states: layout.initial.clone(),
+        initial_states,
         dt: layout.grid.max_step,
+        learning_rate: options.learning_rate,
     };
     Ok(Trained {
         network,

@@ -87,9 +87,10 @@ pub fn measured_history(model: &ir::Model, track: &Track, knot: usize, fractions
     })
 }
 
-/// Whether the knot after `knot` has a measured cell to compare with.
+/// Whether the knot after `knot` has a measured cell (of a state or an observable) to
+/// compare with.
 pub fn has_target(track: &Track, knot: usize) -> bool {
-    knot + 1 < track.len() && track.measured.iter().any(|m| m[knot + 1])
+    knot + 1 < track.len() && track.has_cell(knot + 1)
 }
 
 /// One pair: track index and knot.
@@ -111,6 +112,10 @@ pub struct PairTable {
     targets: Vec<f64>,
     weights: Vec<f64>,
     steps: Vec<f64>,
+    /// The observable outputs, their `pairs x observables` targets and weights.
+    observables: usize,
+    observed: Vec<f64>,
+    observed_weights: Vec<f64>,
 }
 
 impl PairTable {
@@ -138,6 +143,9 @@ impl PairTable {
             targets: Vec::new(),
             weights: Vec::new(),
             steps: Vec::new(),
+            observables: 0,
+            observed: Vec::new(),
+            observed_weights: Vec::new(),
         };
         for &(index, knot) in pairs {
             let track = &tracks[index];
@@ -183,6 +191,25 @@ impl PairTable {
         &self.weights
     }
 
+    /// Adds the targets of the model outputs `outputs` (the observables, in the
+    /// normalisation's order) at each pair's end, with weight 1 where measured and 0 where
+    /// not.
+    pub fn observe(&mut self, tracks: &[Track], outputs: &[usize]) {
+        self.observables = outputs.len();
+        self.observed.clear();
+        self.observed_weights.clear();
+        for &(index, knot) in &self.pairs {
+            let track = &tracks[index];
+            for &output in outputs {
+                let cell = (knot + 1 < track.len())
+                    .then(|| track.observed_cell(output, knot + 1))
+                    .flatten();
+                self.observed.push(cell.unwrap_or(0.0));
+                self.observed_weights.push(f64::from(cell.is_some()));
+            }
+        }
+    }
+
     /// Multiplies every target cell's loss weight by its column's `weights[state]`.
     pub fn scale_weights(&mut self, weights: &[f64]) {
         if weights.iter().all(|&w| w == 1.0) {
@@ -226,6 +253,8 @@ impl PairTable {
             targets: gather(&self.targets, self.measured),
             step_sizes: gather(&self.steps, 1),
             weights: gather(&self.weights, self.measured),
+            observed: gather(&self.observed, self.observables),
+            observed_weights: gather(&self.observed_weights, self.observables),
         }
     }
 }

@@ -11,7 +11,7 @@ use super::split::{
     known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training,
     TrainingData,
 };
-use super::{TrainError, TrainOptions};
+use super::{History, TrainError, TrainOptions};
 
 /// Everything the data fix before training.
 pub struct Layout {
@@ -85,6 +85,11 @@ impl Layout {
             (offset, options.history),
             &fractions,
         ));
+        if options.history == History::Measured {
+            for track in tracks.iter().chain(&held_out) {
+                check_long_enough(model, track)?;
+            }
+        }
         validation_tracks.extend(held_out);
         let parts: Vec<Rows> = (data.train.iter().zip(&trainings))
             .map(|(record, training)| (record, training.rows.clone()))
@@ -195,16 +200,43 @@ fn densest_spacing(records: &[Record]) -> f64 {
     })
 }
 
+/// Under `--history measured` an experiment must outlast the embedding's history by a step.
+fn check_long_enough(model: &ir::Model, track: &Track) -> Result<(), TrainError> {
+    if super::split::first_inside(model, track) + 1 < track.len() {
+        return Ok(());
+    }
+    let span = (model.closures.iter())
+        .map(|c| c.embedding.span())
+        .fold(0.0, f64::max);
+    let found = track
+        .times
+        .last()
+        .zip(track.times.first())
+        .map_or(0.0, |(b, a)| b - a);
+    Err(TrainError::ExperimentTooShort {
+        experiment: track.name.clone(),
+        needed: span,
+        found,
+    })
+}
+
 /// A `next` model steps from row to row: every experiment must share one uniform step.
 fn check_uniform(records: &[&Record], step: f64) -> Result<(), TrainError> {
     for record in records {
-        let uniform = record.uniform_step();
-        if uniform.is_none_or(|h| (h - step).abs() > 1e-6 * step) {
-            return Err(TrainError::IrregularForNext {
-                experiment: record.name.clone(),
-                step,
-            });
-        }
+        let found = match record.uniform_step() {
+            Some(h) if (h - step).abs() <= 1e-6 * step => continue,
+            Some(h) => format!("a step of {h:.6} where others step {step:.6}"),
+            None => {
+                let steps: Vec<f64> = record.times.windows(2).map(|w| w[1] - w[0]).collect();
+                let low = steps.iter().copied().fold(f64::INFINITY, f64::min);
+                let high = steps.iter().copied().fold(0.0, f64::max);
+                format!("irregular times (steps from {low:.6} to {high:.6})")
+            }
+        };
+        return Err(TrainError::IrregularForNext {
+            experiment: record.name.clone(),
+            found,
+        });
     }
     Ok(())
 }

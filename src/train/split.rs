@@ -31,9 +31,10 @@ pub const DEFAULT_TRAIN_SHARE: f64 = 0.7;
 /// How much of each training experiment trains.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Part {
-    /// The first `n` one-step pairs of the one training experiment (`None`: all of them
-    /// when other experiments validate, else the first [`DEFAULT_TRAIN_SHARE`]); the pairs
-    /// after them validate when no other experiment does.
+    /// The first `n` one-step pairs after each experiment's embedding history, experiments
+    /// taken in order (`None`: all of them, or with one experiment and nothing else to
+    /// validate the first [`DEFAULT_TRAIN_SHARE`]); with one experiment and nothing else
+    /// to validate, the pairs after them validate.
     FirstPairs(Option<usize>),
     /// The last share of each experiment's rows validates.
     Tail(f64),
@@ -129,18 +130,31 @@ pub fn split_training(
 ) -> Result<(Vec<Training>, Vec<Scoring>), TrainError> {
     match part {
         Part::FirstPairs(count) => {
-            if records.len() != 1 {
-                return Err(TrainError::TrainPointsOnSeveral {
-                    experiments: records.len(),
+            let mut trainings = Vec::new();
+            let mut scorings = Vec::new();
+            let mut left = count;
+            for (index, (record, track)) in records.iter().zip(tracks).enumerate() {
+                let only = records.len() == 1;
+                let (training, scoring) = first_pairs(
+                    model,
+                    (record, track),
+                    (left, only && !has_validation),
+                    fractions,
+                )?;
+                if let Some(left) = left.as_mut() {
+                    *left -= training.knots.len();
+                }
+                trainings.push(training);
+                scorings.extend(scoring.map(|s| Scoring { track: index, ..s }));
+            }
+            if let Some(requested) = count.filter(|_| left.is_some_and(|l| l > 0)) {
+                let available = requested - left.unwrap_or(0);
+                return Err(TrainError::TooManyTrainPoints {
+                    available,
+                    requested,
                 });
             }
-            first_pairs(
-                model,
-                (&records[0], &tracks[0]),
-                count,
-                has_validation,
-                fractions,
-            )
+            Ok((trainings, scorings))
         }
         Part::Tail(share) => {
             let mut trainings = Vec::new();
@@ -173,13 +187,16 @@ pub fn window_start(model: &ir::Model, track: &Track, history: History) -> usize
     }
 }
 
+/// The first `count` pairs of one experiment after its embedding's history (all of them
+/// when `count` is `None` and nothing is to validate; the first
+/// [`DEFAULT_TRAIN_SHARE`] when the rest validates), and with `validate_rest` the scoring
+/// of the pairs after them.
 fn first_pairs(
     model: &ir::Model,
     (record, track): (&Record, &Track),
-    count: Option<usize>,
-    has_validation: bool,
+    (count, validate_rest): (Option<usize>, bool),
     fractions: &[f64],
-) -> Result<(Vec<Training>, Vec<Scoring>), TrainError> {
+) -> Result<(Training, Option<Scoring>), TrainError> {
     let first = first_inside(model, track);
     if track.len() < first + 2 {
         return Err(TrainError::TooFewRows {
@@ -191,33 +208,28 @@ fn first_pairs(
     }
     let available = track.len() - 1 - first;
     let count = match count {
-        Some(requested) if requested > available => {
-            return Err(TrainError::TooManyTrainPoints {
-                available,
-                requested,
-            })
-        }
-        Some(requested) => requested,
-        None if has_validation => available,
+        Some(requested) => requested.min(available),
+        None if !validate_rest => available,
         None => ((available as f64 * DEFAULT_TRAIN_SHARE).round() as usize).clamp(1, available),
     };
     let end = first + count;
-    let last_row = track.rows[end].unwrap_or(record.len() - 1);
+    let last_row = if count == 0 {
+        0
+    } else {
+        track.rows[end].unwrap_or(record.len() - 1) + 1
+    };
     let training = Training {
         knots: first..end,
-        rows: 0..(last_row + 1).min(record.len()),
+        rows: 0..last_row.min(record.len()),
     };
-    let mut scorings = Vec::new();
-    if !has_validation && end + 1 < track.len() {
-        scorings.push(Scoring {
-            name: format!("{} (rest)", record.source),
-            track: 0,
-            run_start: end,
-            scored_from: f64::NEG_INFINITY,
-            pairs: eligible_pairs(model, track, end..track.len() - 1, fractions),
-        });
-    }
-    Ok((vec![training], scorings))
+    let scoring = (validate_rest && end + 1 < track.len()).then(|| Scoring {
+        name: format!("{} (rest)", record.source),
+        track: 0,
+        run_start: end,
+        scored_from: f64::NEG_INFINITY,
+        pairs: eligible_pairs(model, track, end..track.len() - 1, fractions),
+    });
+    Ok((training, scoring))
 }
 
 fn tail(
@@ -287,15 +299,20 @@ pub fn whole_experiments(
 }
 
 /// The pairs of `tracks` that train: inside each training range, every step whose start
-/// states are known from data and whose end has a measured cell. Their embeddings read the
+/// states are known from data (those the experiment measures at all) and whose end has a
+/// measured cell. Their embeddings read the
 /// reference, the model's fill included where the data are too sparse (records spec,
 /// section 3); on a complete record these are exactly the pairs of measured history.
 pub fn training_pairs(model: &ir::Model, tracks: &[Track], trainings: &[Training]) -> Vec<PairAt> {
     let measured = model.states.len();
     let mut pairs = Vec::new();
     for (index, (track, training)) in tracks.iter().zip(trainings).enumerate() {
+        // A state the experiment never measures starts from the model's own run.
+        let observed: Vec<usize> = (0..measured)
+            .filter(|&i| track.measured[i].iter().any(|&m| m))
+            .collect();
         let knots = (training.knots.clone())
-            .filter(|&k| has_target(track, k) && (0..measured).all(|i| track.known[i][k]));
+            .filter(|&k| has_target(track, k) && observed.iter().all(|&i| track.known[i][k]));
         pairs.extend(knots.map(|k| (index, k)));
     }
     pairs

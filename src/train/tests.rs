@@ -187,7 +187,7 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
         )
         .unwrap();
         let errors = online_error(&exact, &record, &run, (&setup.normalisation, f64::MIN));
-        errors.finish(&exact).unwrap().overall
+        errors.finish().unwrap().overall
     };
     let unstable = free_run_error(1);
     assert!(

@@ -23,6 +23,8 @@ pub(super) struct Course {
     pub table: PairTable,
     /// Per measured state, its loss weight.
     pub weights: Vec<f64>,
+    /// The measured model outputs (the normalisation's observables).
+    pub observables: Vec<usize>,
 }
 
 impl Course {
@@ -31,17 +33,19 @@ impl Course {
     pub fn new(
         model: &ir::Model,
         tracks: Vec<Track>,
-        (pairs, weights): (&[PairAt], &[f64]),
+        (pairs, weights, observables): (&[PairAt], &[f64], &[usize]),
         fractions: &[f64],
     ) -> Course {
         let hidden = tracks.iter().map(|t| vec![Vec::new(); t.len()]).collect();
         let mut table = PairTable::build(model, &tracks, pairs, &[], fractions);
         table.scale_weights(weights);
+        table.observe(&tracks, observables);
         Course {
             tracks,
             hidden,
             table,
             weights: weights.to_vec(),
+            observables: observables.to_vec(),
         }
     }
 }
@@ -79,6 +83,9 @@ pub(super) fn refresh(
     Ok(())
 }
 
+/// Offline and online errors pooled over all scorings, and the errors of each.
+pub(super) type Validated = (Option<ErrorSet>, Option<ErrorSet>, Vec<ValidationErrors>);
+
 /// Offline and online errors pooled over `scorings`, and per scoring, with the current
 /// network (hidden states and fill run in first).
 pub(super) fn validate(
@@ -87,17 +94,18 @@ pub(super) fn validate(
     (course, scorings): (&mut Course, &[Scoring]),
     (setup, options, range): (&Setup, &TrainOptions, Option<&PhysicalRange>),
     hidden_init: &[f64],
-) -> Result<(Option<ErrorSet>, Option<ErrorSet>, Vec<ValidationErrors>), TrainError> {
+) -> Result<Validated, TrainError> {
     let fractions = stage_fractions(model.dynamics, setup.substeps);
     refresh(network, model, course, (&fractions, true), hidden_init)?;
     let norm = &setup.normalisation;
-    let measured = model.states.len();
-    let (mut offline_all, mut online_all) = (ErrorSum::new(measured), ErrorSum::new(measured));
+    let (mut offline_all, mut online_all) =
+        (ErrorSum::new(model, norm), ErrorSum::new(model, norm));
     let mut each = Vec::new();
     for scoring in scorings {
         let pairs: Vec<PairAt> = scoring.pairs.iter().map(|&k| (scoring.track, k)).collect();
         let mut table = PairTable::build(model, &course.tracks, &pairs, &course.hidden, &fractions);
         table.scale_weights(&course.weights);
+        table.observe(&course.tracks, &course.observables);
         let offline = offline_error(network, model, &table, norm)?;
         let track = &course.tracks[scoring.track];
         let start = scoring.run_start;
@@ -130,9 +138,9 @@ pub(super) fn validate(
         each.push(ValidationErrors {
             name: scoring.name.clone(),
             pairs: pairs.len(),
-            offline: offline.finish(model),
-            online: online.finish(model),
+            offline: offline.finish(),
+            online: online.finish(),
         });
     }
-    Ok((offline_all.finish(model), online_all.finish(model), each))
+    Ok((offline_all.finish(), online_all.finish(), each))
 }

@@ -72,13 +72,17 @@ pub fn window_embedding(
     (raw, feedback)
 }
 
+/// What rollouts read: the tracks, the hidden-state estimates per track and knot, the
+/// column weights and the measured model outputs.
+pub type RolloutData<'a> = (&'a [Track], &'a [Vec<Vec<f64>>], &'a [f64], &'a [usize]);
+
 /// A batch of `steps`-step windows starting at `starts` (track and knot; every
 /// `start + steps` must be a knot of its track); `hidden[track][knot]` holds the
 /// hidden-state estimates; each measured cell weighs its column's `weights[state]` (empty:
-/// 1).
+/// 1); `observables` are the measured model outputs (the normalisation's).
 pub fn rollout_batch(
     model: &ir::Model,
-    (tracks, hidden, weights): (&[Track], &[Vec<Vec<f64>>], &[f64]),
+    (tracks, hidden, weights, observables): RolloutData,
     starts: &[PairAt],
     steps: usize,
     fractions: &[f64],
@@ -94,6 +98,8 @@ pub fn rollout_batch(
         targets: vec![Vec::new(); steps],
         step_sizes: vec![Vec::new(); steps],
         weights: vec![Vec::new(); steps],
+        observed: vec![Vec::new(); steps],
+        observed_weights: vec![Vec::new(); steps],
     };
     for (window, &(index, start)) in starts.iter().enumerate() {
         let track = &tracks[index];
@@ -112,6 +118,11 @@ pub fn rollout_batch(
                     .map(|(i, m)| f64::from(m[knot + 1]) * weights.get(i).copied().unwrap_or(1.0)),
             );
             batch.step_sizes[step].push(track.steps[knot]);
+            for &output in observables {
+                let cell = track.observed_cell(output, knot + 1);
+                batch.observed[step].push(cell.unwrap_or(0.0));
+                batch.observed_weights[step].push(f64::from(cell.is_some()));
+            }
             for (closure_index, closure) in model.closures.iter().enumerate() {
                 for (offset, &fraction) in fractions.iter().enumerate() {
                     let (raw, feedback) =
@@ -260,7 +271,7 @@ mod tests {
         let tracks = [record.clone()];
         let batch = rollout_batch(
             &model,
-            (&tracks, &[], &[]),
+            (&tracks, &[], &[], &[]),
             &[(0, start)],
             steps,
             &fractions,
@@ -286,7 +297,7 @@ mod tests {
         }
         // One step: the rollout loss is the one-step loss of the same pair.
         let pairs = [(0, start), (0, start + 2)];
-        let single = rollout_batch(&model, (&tracks, &[], &[]), &pairs, 1, &fractions);
+        let single = rollout_batch(&model, (&tracks, &[], &[], &[]), &pairs, 1, &fractions);
         let table = PairTable::build(&model, &tracks, &pairs, &[], &fractions);
         let one_step = network.loss(&table.batch(&[0, 1])).unwrap();
         assert!((network.rollout_loss(&single).unwrap() - one_step).abs() < 1e-14);

@@ -99,7 +99,7 @@ fn init_makes_models_whose_readme_commands_run() {
             let mut train = commands[3].clone();
             train.extend(["--epochs".to_string(), "2".to_string()]);
             let trained = run_ok(&dir, &train);
-            assert!(trained.contains("weights written"), "{trained}");
+            assert!(trained.contains("run written to"), "{trained}");
             run_ok(&dir, &commands[4]);
             assert!(dir.join(&name).join("prediction.csv").exists());
         }

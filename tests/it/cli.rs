@@ -199,6 +199,8 @@ fn stiff_chemostat_warns_and_substeps_give_a_stable_free_run() {
             substeps,
             "--json",
             &json,
+            "-o",
+            &dir.join(format!("run{substeps}")).display().to_string(),
         ]);
         assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
         let report: serde_json::Value =

@@ -8,4 +8,5 @@ mod format;
 mod golden;
 mod lsp;
 mod parser;
+mod records;
 mod whatif;

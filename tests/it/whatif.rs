@@ -78,6 +78,8 @@ fn a_what_if_run_along_the_records_own_light_reproduces_the_online_prediction() 
         &run,
         "--mode",
         "online",
+        "--history",
+        "measured",
         "-o",
         &online,
     ]);

@@ -5,8 +5,8 @@
 use super::Checker;
 use crate::ast::{BinOp, Expr, SExpr};
 use crate::check::Scope;
-use crate::ir::Func;
 use crate::units::Unit;
+use crate::vocabulary::Func;
 
 /// The largest exponent magnitude a unit is raised to (beyond it the unit is unknown).
 const MAX_POWER: f64 = 64.0;

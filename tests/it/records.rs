@@ -1,0 +1,159 @@
+//! `gbc train` and `gbc predict` on data sets: several experiments, irregular times, missing
+//! cells, and every bad data set a clear coded error with exit code 1.
+
+use crate::cli::{gbc, scratch};
+use std::path::Path;
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).to_string()
+}
+
+fn write(dir: &Path, name: &str, contents: &str) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, contents).expect("write");
+    path.display().to_string()
+}
+
+/// A small irregular chemostat-like experiment (the grey box's columns).
+fn experiment(rows: usize, offset: f64) -> String {
+    let mut text = String::from("t [s],E0 [mol/L],S [mol/L]\n");
+    let mut time = 0.0;
+    for row in 0..rows {
+        let e0 = if (row / 7) % 2 == 0 { 0.005 } else { 0.015 };
+        let s = 0.015 + 0.004 * ((time + offset) / 13.0_f64).sin();
+        let cell = if row % 5 == 3 {
+            String::new()
+        } else {
+            format!("{s}")
+        };
+        text.push_str(&format!("{time},{e0},{cell}\n"));
+        time += 1.0 + 0.5 * ((row % 3) as f64);
+    }
+    text
+}
+
+/// The command fails with exit code 1 and stderr holding every one of `expected`.
+fn refused(args: &[&str], expected: &[&str]) {
+    let out = gbc(args);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?}\n{stderr}");
+    for part in expected {
+        assert!(stderr.contains(part), "missing `{part}` in:\n{stderr}");
+    }
+}
+
+const MODEL: &str = "models/mm_chemostat/greybox.gbm";
+
+#[test]
+fn training_on_several_irregular_experiments_validates_the_held_out_one() {
+    let dir = scratch("records-train");
+    let a = write(&dir, "a.csv", &experiment(90, 0.0));
+    let b = write(&dir, "b.csv", &experiment(80, 5.0));
+    let c = write(&dir, "c.csv", &experiment(70, 9.0));
+    let run = dir.join("run").display().to_string();
+    let out = gbc(&[
+        "train",
+        MODEL,
+        &a,
+        &b,
+        &c,
+        "--holdout",
+        "c",
+        "--epochs",
+        "2",
+        "-o",
+        &run,
+    ]);
+    let stdout = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(stdout.contains("validation on c ("), "{stdout}");
+    // Without a choice, the last experiment validates and the user is told.
+    let second = dir.join("run2").display().to_string();
+    let out = gbc(&["train", MODEL, &a, &b, &c, "--epochs", "1", "-o", &second]);
+    assert!(text(&out.stderr).contains("validating on experiment `c`"));
+    // Predictions of two experiments in one file, each row labelled.
+    let predictions = dir.join("p.csv").display().to_string();
+    let out = gbc(&[
+        "predict",
+        MODEL,
+        "--weights",
+        &run,
+        &a,
+        &b,
+        "--mode",
+        "online",
+        "-o",
+        &predictions,
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let table = std::fs::read_to_string(&predictions).unwrap();
+    assert!(table.starts_with("experiment,t,S,r\n"), "{table}");
+    assert_eq!(table.lines().filter(|l| l.starts_with("a,")).count(), 90);
+    assert_eq!(table.lines().filter(|l| l.starts_with("b,")).count(), 80);
+    // Cross-validation reports each fold and the median.
+    let folds = dir.join("cv").display().to_string();
+    let out = gbc(&[
+        "train", MODEL, &a, &b, &c, "--cv", "--epochs", "1", "-o", &folds,
+    ]);
+    let stdout = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(stdout.contains("cross-validation (3 folds)"), "{stdout}");
+    assert!(stdout.contains("median"), "{stdout}");
+}
+
+#[test]
+fn bad_data_sets_are_refused_naming_file_row_and_column() {
+    let dir = scratch("records-bad");
+    let good = write(&dir, "good.csv", &experiment(60, 0.0));
+    let duplicate = write(
+        &dir,
+        "dup.csv",
+        "t,E0,S\n0,0.01,0.02\n1,0.01,0.02\n1,0.01,0.021\n",
+    );
+    refused(
+        &["train", MODEL, &duplicate],
+        &["E0214", "dup.csv", "row 4"],
+    );
+    let empty_state = write(&dir, "nos.csv", "t,E0,S\n0,0.01,\n1,0.01,\n2,0.01,NA\n");
+    refused(&["train", MODEL, &empty_state], &["E0223", "`S`", "nos"]);
+    let no_input = write(&dir, "noin.csv", "t,E0,S\n0,,0.02\n1,0.01,0.02\n");
+    refused(&["train", MODEL, &no_input], &["E0222", "`E0`", "row 2"]);
+    let infinite = write(&dir, "inf.csv", "t,E0,S\n0,0.01,0.02\n1,0.01,inf\n");
+    refused(&["train", MODEL, &infinite], &["E0212", "inf.csv", "row 3"]);
+    let mixed = write(&dir, "mixed.csv", "t;E0;S\n0,0.01,0.02\n1,0.01,0.02\n");
+    refused(&["train", MODEL, &mixed], &["E0217", "mixed.csv"]);
+    refused(
+        &["train", MODEL, &good, "--column", "Q=S"],
+        &["E0218", "unknown `--column` name `Q`"],
+    );
+    // Too short for the embedding's history (40 s) when runs start from measured history.
+    let short = write(&dir, "short.csv", &experiment(20, 0.0));
+    refused(
+        &[
+            "train",
+            MODEL,
+            &good,
+            &short,
+            "--holdout",
+            "short",
+            "--history",
+            "measured",
+        ],
+        &["E0428", "`short`", "40"],
+    );
+    // Hold-outs that leave a part too small say what each part needs and got.
+    refused(
+        &["train", MODEL, &good, "--val-fraction", "0.01"],
+        &["E0424", "at least 2 rows", "59 training and 1 held-out"],
+    );
+    refused(&["train", MODEL, &good, "--holdout", "good"], &["E0427"]);
+    refused(
+        &["train", MODEL, &good, "--holdout", "goood"],
+        &["E0419", "--holdout", "did you mean `good`"],
+    );
+    // A discrete map on irregular times points to the continuous black box.
+    refused(
+        &["train", "models/mm_chemostat/blackbox.gbm", &good],
+        &["E0425", "blackbox_ode.gbm"],
+    );
+}
