@@ -29,7 +29,7 @@ const PROGRESS_THRESHOLD: usize = 20_000;
 /// Arguments of `gbc simulate`.
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
-    /// The model file (no closures).
+    /// The model file (with closures only with --weights).
     pub model: PathBuf,
     /// Time of the last sample.
     #[arg(long, allow_negative_numbers = true)]
@@ -63,7 +63,17 @@ pub struct SimulateArgs {
     /// Apply a candidate effect of the model before simulating (repeatable).
     #[arg(long = "effect", value_name = "NAME")]
     pub effects: Vec<String>,
-    /// An input program, `NAME=PROGRAM`, e.g. `u=steps(hold=5..40, seed=1)` (one per input).
+    /// An input programme, `NAME=PROGRAM`, e.g. `u=steps(hold=5..40, seed=1)` (one per
+    /// input).
+    ///
+    /// Programmes, sampled on the grid t_start + k dt and held between samples:
+    /// `steps(lo=, hi=, hold=MIN..MAX, seed=)` random levels in [lo, hi] (default: the
+    /// input's declared bounds), each held for a random multiple of the step between MIN and
+    /// MAX (model time; default 5 to 40 steps; `hold=H` exactly H); `const(V)` the value V;
+    /// `chirp(lo=, hi=, f0=, f1=, period=)` a sine between lo and hi whose frequency rises
+    /// linearly from f0 to f1 over each period; `csv(FILE)` or `csv(FILE, COLUMN)` a data
+    /// column (default: the input's name), held between rows. Arguments are KEY=VALUE or
+    /// positional in the order shown (docs/language.md).
     #[arg(long = "input", value_name = "NAME=PROGRAM")]
     pub inputs: Vec<String>,
     /// Settle this long at the first input values before recording.

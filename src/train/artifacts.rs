@@ -248,24 +248,7 @@ pub fn run_info(
 
 /// Writes `run.json` and the weights into `directory` (created if missing).
 pub fn save(directory: &Path, info: &RunInfo, network: &Network) -> Result<(), TrainError> {
-    let weights = network.weights();
-    let bytes: Vec<Vec<u8>> = (weights.iter())
-        .map(|t| t.values.iter().flat_map(|v| v.to_le_bytes()).collect())
-        .collect();
-    let views = (weights.iter().zip(&bytes))
-        .map(|(tensor, data)| {
-            let view = safetensors::tensor::TensorView::new(
-                safetensors::Dtype::F64,
-                tensor.shape.clone(),
-                data,
-            );
-            view.map(|v| (tensor.name.clone(), v))
-        })
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
-    let serialized = safetensors::serialize(views, &None)
-        .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
-    crate::io::write_atomic(&directory.join(WEIGHTS_FILE), &serialized)?;
+    write_tensors(&directory.join(WEIGHTS_FILE), &network.weights())?;
     // A loaded run's metadata carries no source text: its copy stays as it is.
     if let Some(file) = info
         .model
@@ -286,31 +269,7 @@ pub fn load(directory: &Path) -> Result<(RunInfo, Vec<NamedTensor>), TrainError>
     let run_path = directory.join(RUN_FILE);
     let text = std::fs::read_to_string(&run_path).map_err(|error| bad_run(&run_path, error))?;
     let info: RunInfo = serde_json::from_str(&text).map_err(|error| bad_run(&run_path, error))?;
-    let weights_path = directory.join(&info.weights);
-    let bytes = std::fs::read(&weights_path).map_err(|error| bad_run(&weights_path, error))?;
-    let tensors = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|error| bad_run(&weights_path, error))?;
-    let mut weights = Vec::new();
-    for (name, view) in tensors.tensors() {
-        if view.dtype() != safetensors::Dtype::F64 {
-            return Err(bad_run(
-                &weights_path,
-                format!("expected f64 tensors, found {:?} in `{name}`", view.dtype()),
-            ));
-        }
-        let values = (view.data().chunks_exact(8))
-            .map(|chunk| {
-                let mut word = [0u8; 8];
-                word.copy_from_slice(chunk);
-                f64::from_le_bytes(word)
-            })
-            .collect();
-        weights.push(NamedTensor {
-            name,
-            shape: view.shape().to_vec(),
-            values,
-        });
-    }
+    let weights = read_tensors(&directory.join(&info.weights))?;
     Ok((info, weights))
 }
 
@@ -446,6 +405,56 @@ fn check_fits(model: &ir::Model, info: &RunInfo, directory: &Path) -> Result<(),
             "expected normalisation, closures and step that fit the model, found others",
         ))
     }
+}
+
+/// Writes `tensors` as little-endian `f64` safetensors to `path` (atomically).
+pub fn write_tensors(path: &Path, tensors: &[NamedTensor]) -> Result<(), TrainError> {
+    let bytes: Vec<Vec<u8>> = (tensors.iter())
+        .map(|t| t.values.iter().flat_map(|v| v.to_le_bytes()).collect())
+        .collect();
+    let views = (tensors.iter().zip(&bytes))
+        .map(|(tensor, data)| {
+            let view = safetensors::tensor::TensorView::new(
+                safetensors::Dtype::F64,
+                tensor.shape.clone(),
+                data,
+            );
+            view.map(|v| (tensor.name.clone(), v))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|error| bad_run(path, error))?;
+    let serialized = safetensors::serialize(views, &None).map_err(|error| bad_run(path, error))?;
+    crate::io::write_atomic(path, &serialized)?;
+    Ok(())
+}
+
+/// Reads the `f64` tensors of a safetensors file, in the file's order.
+pub fn read_tensors(path: &Path) -> Result<Vec<NamedTensor>, TrainError> {
+    let bytes = std::fs::read(path).map_err(|error| bad_run(path, error))?;
+    let tensors =
+        safetensors::SafeTensors::deserialize(&bytes).map_err(|error| bad_run(path, error))?;
+    let mut weights = Vec::new();
+    for (name, view) in tensors.tensors() {
+        if view.dtype() != safetensors::Dtype::F64 {
+            return Err(bad_run(
+                path,
+                format!("expected f64 tensors, found {:?} in `{name}`", view.dtype()),
+            ));
+        }
+        let values = (view.data().chunks_exact(8))
+            .map(|chunk| {
+                let mut word = [0u8; 8];
+                word.copy_from_slice(chunk);
+                f64::from_le_bytes(word)
+            })
+            .collect();
+        weights.push(NamedTensor {
+            name,
+            shape: view.shape().to_vec(),
+            values,
+        });
+    }
+    Ok(weights)
 }
 
 fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {

@@ -268,6 +268,46 @@ pub enum TrainError {
         /// The directory.
         directory: String,
     },
+    /// Training stopped between epochs (Ctrl-C, SIGTERM or a planned stop) and left a
+    /// checkpoint.
+    #[error("training stopped after epoch {epoch} of {epochs}; its checkpoint is in `{directory}`")]
+    #[diagnostic(
+        code(gbm::E0430),
+        help("continue where it stopped with `gbc train --resume {directory}`")
+    )]
+    Interrupted {
+        /// Epochs done.
+        epoch: usize,
+        /// Epochs planned.
+        epochs: usize,
+        /// The run directory holding the checkpoint.
+        directory: String,
+    },
+    /// `gbc train --resume DIR` on a directory without a usable checkpoint.
+    #[error("expected a training checkpoint in `{directory}`, found {found}")]
+    #[diagnostic(
+        code(gbm::E0431),
+        help(
+            "a run stopped by Ctrl-C, SIGTERM or --checkpoint-every holds checkpoint.json; a \
+             finished run has none"
+        )
+    )]
+    NoCheckpoint {
+        /// The run directory.
+        directory: String,
+        /// What was there instead.
+        found: String,
+    },
+    /// The checkpoint does not fit the training being resumed.
+    #[error("expected the files and settings the checkpoint was trained with, found {what}")]
+    #[diagnostic(
+        code(gbm::E0432),
+        help("resume with the model and data the run started with, or start a new run")
+    )]
+    ResumeChanged {
+        /// What changed.
+        what: String,
+    },
     /// Nothing left to train on.
     #[error("expected at least one training experiment, found none")]
     #[diagnostic(

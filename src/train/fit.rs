@@ -13,10 +13,11 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{BackendError, Batch, Network, Setup, StepSettings};
+use crate::backend::{AdamState, BackendError, Batch, NamedTensor, Network, Setup, StepSettings};
 use crate::fused::FusedNetwork;
 use crate::ir;
 
+use super::checkpoint::Safety;
 use super::pairs::stage_fractions;
 use super::split::Training;
 use super::validation::{refresh, Course};
@@ -52,18 +53,21 @@ impl Fit<'_> {
         }
     }
 
-    /// Runs every epoch; returns the mean training loss of each. `network` ends with the
-    /// trained weights and Adam state whichever engine ran the one-step epochs.
+    /// Runs every epoch (from a checkpoint's, and until `safety` stops it); returns the
+    /// mean training loss of each. `network` ends with the trained weights and Adam state
+    /// whichever engine ran the one-step epochs.
     pub fn run(
         &self,
         network: &mut Network,
         training: &mut Course,
         on_event: &mut dyn FnMut(Event),
+        safety: &mut Safety,
     ) -> Result<Vec<f64>, TrainError> {
         let options = self.options;
         let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
+        let first = safety.resume(network, training, &mut rng, &mut losses)?;
         let mut engines = Engines::new(network, options.engine, self.model, self.setup)?;
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
         // A state an experiment never measures is all fill: its estimate is the model's own
@@ -71,7 +75,7 @@ impl Fit<'_> {
         let unmeasured =
             (training.tracks.iter()).any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
         let every = if unmeasured { 1 } else { FILL_REFRESH };
-        for epoch in 1..=options.epochs {
+        for epoch in first..=options.epochs {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
             let fill_due = needs_fill && (epoch - 1) % every == 0;
             if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
@@ -91,8 +95,21 @@ impl Fit<'_> {
                 loss,
                 horizon,
             });
+            let engines = &mut engines;
+            let end = EpochEnd {
+                epoch,
+                horizon,
+                loss,
+                rng: &rng,
+                course: training,
+                engines,
+            };
+            if safety.after_epoch(end, on_event)? {
+                break;
+            }
         }
         engines.graph()?;
+        safety.finish(network)?;
         Ok(losses)
     }
 
@@ -182,6 +199,38 @@ impl Fit<'_> {
             total += loss * chunk.len() as f64;
         }
         Ok(total / starts.len() as f64)
+    }
+}
+
+/// The state after an epoch, for the run's safety hooks ([`Safety`]).
+pub(super) struct EpochEnd<'e, 'n> {
+    /// 1-based epoch.
+    pub epoch: usize,
+    /// Its rollout length (1: one-step).
+    pub horizon: usize,
+    /// Its mean training loss.
+    pub loss: f64,
+    /// The shuffling generator.
+    pub rng: &'e ChaCha8Rng,
+    /// The training tracks.
+    pub course: &'e Course,
+    engines: &'e mut Engines<'n>,
+}
+
+impl EpochEnd<'_, '_> {
+    /// The graph network with the current weights.
+    pub fn network(&mut self) -> Result<&Network, BackendError> {
+        self.engines.current_weights()
+    }
+
+    /// The current weights and Adam state, from whichever engine holds them (nothing is
+    /// handed over, so that looking does not change the run).
+    pub fn state(&self) -> (Vec<NamedTensor>, AdamState) {
+        let engines = &self.engines;
+        match engines.fused.as_ref().filter(|_| engines.fused_holds) {
+            Some(fused) => (fused.weights(), fused.adam_state()),
+            None => (engines.network.weights(), engines.network.adam_state()),
+        }
     }
 }
 

@@ -26,6 +26,7 @@ pub mod analysis;
 pub mod artifacts;
 pub mod balances;
 pub mod bench;
+pub mod checkpoint;
 pub mod cv;
 mod error;
 pub mod evaluate;
@@ -54,6 +55,7 @@ use crate::ir;
 
 pub use analysis::StiffnessWarning;
 pub use balances::BalanceFit;
+pub use checkpoint::{Checkpoint, RunControl};
 pub use error::TrainError;
 pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 pub use initial::{InitialState, Origin};
@@ -138,6 +140,24 @@ pub enum Event<'a> {
         loss: f64,
         /// Steps per window (1: one-step pairs).
         horizon: usize,
+    },
+    /// After an epoch, with early stopping: the pooled validation errors.
+    Validation {
+        /// 1-based epoch.
+        epoch: usize,
+        /// Offline error, if any pair scores it.
+        offline: Option<f64>,
+        /// Online error, if any free run scores it.
+        online: Option<f64>,
+    },
+    /// Early stopping ended training before the planned epochs.
+    EarlyStop {
+        /// The last epoch run.
+        epoch: usize,
+        /// The epoch whose weights are kept.
+        best_epoch: usize,
+        /// Its validation loss.
+        best_loss: f64,
     },
 }
 
@@ -233,6 +253,20 @@ pub fn train_with(
     recipe: &Recipe,
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
+    let control = RunControl::default();
+    train_run(model, data, (options, recipe), &control, on_event)
+}
+
+/// [`train_with`] under `control`: checkpoints, interruption, resuming and early stopping
+/// ([`checkpoint`]).
+pub fn train_run(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+    control: &RunControl,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Trained, TrainError> {
+    let started = std::time::Instant::now();
     check_options(options, recipe)?;
     check_trainable(model)?;
     let train_points = options.train_points.map(Some);
@@ -330,7 +364,16 @@ pub fn train_with(
         freeze_params: balance_fit.is_some(),
         trainings: &layout.trainings,
     };
-    let losses = fit.run(&mut network, &mut training, on_event)?;
+    let losses = {
+        let mut validate_now = |network: &Network| {
+            let scoring = (&mut validating, &layout.scorings[..]);
+            let (offline, online, _) = validate(network, model, scoring, context, &hidden_init)?;
+            Ok((offline.map(|s| s.overall), online.map(|s| s.overall)))
+        };
+        let validate_now = (!layout.scorings.is_empty()).then_some(&mut validate_now as _);
+        let mut safety = checkpoint::Safety::new(control, (options, started), validate_now);
+        fit.run(&mut network, &mut training, on_event, &mut safety)?
+    };
     let mut initial_states = layout.initial.clone();
     let refit = (&mut initial_states[..], hidden_init.as_slice());
     initial::fit_initial_states(

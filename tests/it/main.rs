@@ -9,4 +9,5 @@ mod golden;
 mod lsp;
 mod parser;
 mod records;
+mod safety;
 mod whatif;
