@@ -31,10 +31,10 @@ use crate::backend::Precision;
 use crate::data::MinRows;
 use crate::ir::Model;
 use crate::record::Record;
+use crate::train::checkpoint::EpochRow;
 use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
-use crate::train::checkpoint::EpochRow;
 use crate::train::{
     self, artifacts, Engine, ErrorSet, Event, Objective, ParamSource, Part, Recipe, TrainError,
     TrainOptions, Trained, TrainingData,
@@ -187,7 +187,12 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = DEFAULT_WARMUP_SHARE, value_name = "SHARE")]
     pub warmup_share: f64,
     /// Deprecated spelling of --warmup-share (`gbc simulate --warmup` is a time).
-    #[arg(long, value_name = "SHARE", hide = true, conflicts_with = "warmup_share")]
+    #[arg(
+        long,
+        value_name = "SHARE",
+        hide = true,
+        conflicts_with = "warmup_share"
+    )]
     pub warmup: Option<f64>,
     /// Share of the epochs over which rollouts grow from 2 steps to --horizon.
     #[arg(long, default_value_t = DEFAULT_RAMP_SHARE, value_name = "SHARE")]
@@ -729,12 +734,7 @@ impl Progress {
     }
 }
 
-fn summary(
-    model: &Model,
-    trained: &Trained,
-    seconds: f64,
-    run: Option<&Path>,
-) -> String {
+fn summary(model: &Model, trained: &Trained, seconds: f64, run: Option<&Path>) -> String {
     let mut out = String::new();
     let report = &trained.report;
     line!(

@@ -161,7 +161,10 @@ impl Checkpoint {
         let path = directory.join(CHECKPOINT_FILE);
         let text = std::fs::read_to_string(&path).map_err(|error| TrainError::NoCheckpoint {
             directory: directory.display().to_string(),
-            found: format!("no readable {CHECKPOINT_FILE} ({})", crate::io::describe(&error)),
+            found: format!(
+                "no readable {CHECKPOINT_FILE} ({})",
+                crate::io::describe(&error)
+            ),
         })?;
         let mut checkpoint: Checkpoint =
             serde_json::from_str(&text).map_err(|error| bad(directory, error))?;
@@ -181,14 +184,25 @@ impl Checkpoint {
         let mut take = |group: &str, name: &str| groups.remove(&(group.into(), name.into()));
         for name in &checkpoint.tensors.clone() {
             let missing = || bad(directory, format!("no tensor `{name}`"));
-            checkpoint.weights.push(take("weights", name).ok_or_else(missing)?);
-            checkpoint.adam.first.push(take("adam.first", name).ok_or_else(missing)?.values);
-            checkpoint.adam.second.push(take("adam.second", name).ok_or_else(missing)?.values);
+            checkpoint
+                .weights
+                .push(take("weights", name).ok_or_else(missing)?);
+            checkpoint
+                .adam
+                .first
+                .push(take("adam.first", name).ok_or_else(missing)?.values);
+            checkpoint
+                .adam
+                .second
+                .push(take("adam.second", name).ok_or_else(missing)?.values);
             checkpoint.best_weights.extend(take("best", name));
         }
         for ((group, _), tensor) in groups {
             if group != "reference" {
-                return Err(bad(directory, format!("a tensor `{group}/{}`", tensor.name)));
+                return Err(bad(
+                    directory,
+                    format!("a tensor `{group}/{}`", tensor.name),
+                ));
             }
             let knots = tensor.shape.get(1).copied().unwrap_or(0).max(1);
             let states = tensor.values.chunks(knots).map(<[f64]>::to_vec).collect();
@@ -323,10 +337,12 @@ impl<'a> Safety<'a> {
             }
             track.states.clone_from(states);
         }
-        *rng = checkpoint.generator().ok_or_else(|| TrainError::NoCheckpoint {
-            directory: self.directory(),
-            found: "a damaged generator state".into(),
-        })?;
+        *rng = checkpoint
+            .generator()
+            .ok_or_else(|| TrainError::NoCheckpoint {
+                directory: self.directory(),
+                found: "a damaged generator state".into(),
+            })?;
         *losses = checkpoint.log.iter().map(|row| row.loss).collect();
         self.log.clone_from(&checkpoint.log);
         self.before = checkpoint.log.last().map_or(0.0, |row| row.seconds);
@@ -371,9 +387,11 @@ impl<'a> Safety<'a> {
         }
         self.log.push(row);
         let control = self.control;
-        let stop_asked = control.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
-        let interrupted =
-            (stop_asked || control.stop_after == Some(epoch)) && epoch < self.epochs;
+        let stop_asked = control
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::SeqCst));
+        let interrupted = (stop_asked || control.stop_after == Some(epoch)) && epoch < self.epochs;
         let due = control.every.is_some_and(|n| n > 0 && epoch % n == 0) && epoch < self.epochs;
         if let Some(directory) = control.directory.as_ref().filter(|_| interrupted || due) {
             self.checkpoint(&mut end).save(directory)?;
@@ -468,7 +486,10 @@ mod tests {
             stops(2, &[3.0, 2.0, 2.5, 2.6, 1.0]),
             (Some(4), Some((2, 2.0)))
         );
-        assert_eq!(stops(3, &[1.0, 2.0, 0.9, 1.0, 1.1, 1.2]), (Some(6), Some((3, 0.9))));
+        assert_eq!(
+            stops(3, &[1.0, 2.0, 0.9, 1.0, 1.1, 1.2]),
+            (Some(6), Some((3, 0.9)))
+        );
         // A diverged free run (infinite) or a missing error never counts as better.
         assert_eq!(
             stops(1, &[f64::INFINITY, 2.0, f64::NAN]),

@@ -270,7 +270,9 @@ pub enum TrainError {
     },
     /// Training stopped between epochs (Ctrl-C, SIGTERM or a planned stop) and left a
     /// checkpoint.
-    #[error("training stopped after epoch {epoch} of {epochs}; its checkpoint is in `{directory}`")]
+    #[error(
+        "training stopped after epoch {epoch} of {epochs}; its checkpoint is in `{directory}`"
+    )]
     #[diagnostic(
         code(gbm::E0430),
         help("continue where it stopped with `gbc train --resume {directory}`")

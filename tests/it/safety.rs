@@ -27,11 +27,22 @@ const SHORT: [&str; 12] = [
     "3",
 ];
 
+/// [`SHORT`] with `extra` flags, an `--epochs` among them replacing its 8.
+fn short_with<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    let epochs_given = extra.contains(&"--epochs");
+    let mut args: Vec<&str> = if epochs_given {
+        SHORT[2..].to_vec()
+    } else {
+        SHORT.to_vec()
+    };
+    args.extend(extra);
+    args
+}
+
 fn train(run: &Path, extra: &[&str]) -> std::process::Output {
     let run = run.display().to_string();
     let mut args = vec!["train", GB1, STEPS, "-o", &run];
-    args.extend(SHORT);
-    args.extend(extra);
+    args.extend(short_with(extra));
     gbc(&args)
 }
 
@@ -62,7 +73,10 @@ fn a_run_stopped_and_resumed_ends_bit_for_bit_where_an_uninterrupted_run_ends() 
         // Checkpoints every 3 epochs must not change the run either.
         let output = train(&whole, &["--engine", engine, "--checkpoint-every", "3"]);
         assert!(output.status.success(), "{}", stderr(&output));
-        assert!(!whole.join("checkpoint.json").exists(), "a finished run keeps no checkpoint");
+        assert!(
+            !whole.join("checkpoint.json").exists(),
+            "a finished run keeps no checkpoint"
+        );
         let stopped = dir.join(format!("stopped-{engine}"));
         let output = train(&stopped, &["--engine", engine, "--stop-after-epochs", "5"]);
         assert_eq!(output.status.code(), Some(1));
@@ -102,8 +116,7 @@ fn resuming_needs_a_checkpoint_and_the_same_files() {
     let stopped = dir.join("stopped").display().to_string();
     let data_text = data.display().to_string();
     let mut args = vec!["train", GB1, &data_text, "-o", &stopped];
-    args.extend(SHORT);
-    args.extend(["--stop-after-epochs", "2"]);
+    args.extend(short_with(&["--stop-after-epochs", "2"]));
     assert_eq!(gbc(&args).status.code(), Some(1));
     let mut text = std::fs::read_to_string(&data).unwrap();
     text.push('\n');
@@ -111,7 +124,10 @@ fn resuming_needs_a_checkpoint_and_the_same_files() {
     let output = gbc(&["train", "--resume", &stopped]);
     assert_eq!(output.status.code(), Some(1));
     let message = stderr(&output);
-    assert!(message.contains("E0432") && message.contains("steps.csv"), "{message}");
+    assert!(
+        message.contains("E0432") && message.contains("steps.csv"),
+        "{message}"
+    );
 }
 
 #[cfg(unix)]
@@ -146,7 +162,10 @@ fn ctrl_c_ends_the_epoch_and_leaves_a_checkpoint() {
     assert_eq!(status.code(), Some(1), "{rest:?}");
     let rest = rest.join("\n");
     assert!(rest.contains("stopping after this epoch"), "{rest}");
-    assert!(rest.contains("E0430") && rest.contains("--resume"), "{rest}");
+    assert!(
+        rest.contains("E0430") && rest.contains("--resume"),
+        "{rest}"
+    );
     let checkpoint = std::fs::read_to_string(run.join("checkpoint.json")).unwrap();
     let json: serde_json::Value = serde_json::from_str(&checkpoint).unwrap();
     let epoch = json["epoch"].as_u64().unwrap();
@@ -170,11 +189,18 @@ fn early_stopping_ends_a_run_whose_validation_loss_rises_and_keeps_the_best_epoc
     let early = dir.join("early");
     let output = overfitting(&early, &["--epochs", "40", "--early-stop", "3"]);
     assert!(output.status.success(), "{}", stderr(&output));
-    assert!(stderr(&output).contains("early stop after epoch 4"), "{}", stderr(&output));
+    assert!(
+        stderr(&output).contains("early stop after epoch 4"),
+        "{}",
+        stderr(&output)
+    );
     let rows = log_rows(&early);
     assert_eq!(rows.len(), 4, "{rows:?}");
     let online: Vec<f64> = rows.iter().map(|r| r.2.parse().unwrap()).collect();
-    assert!(online[1..].iter().all(|&later| later > online[0]), "{online:?}");
+    assert!(
+        online[1..].iter().all(|&later| later > online[0]),
+        "{online:?}"
+    );
     // The weights kept are the first epoch's: those of a one-epoch run.
     let first = dir.join("first");
     assert!(overfitting(&first, &["--epochs", "1"]).status.success());
@@ -195,8 +221,14 @@ fn renamed_flags_keep_their_old_spelling_with_a_warning() {
     assert!(train(&new, &["--epochs", "2"]).status.success());
     let run = old.display().to_string();
     let mut args = vec!["train", GB1, STEPS, "-o", &run];
-    args.extend(SHORT.iter().map(|a| if *a == "--warmup-share" { "--warmup" } else { a }));
-    args.extend(["--epochs", "2"]);
+    let short = short_with(&["--epochs", "2"]);
+    args.extend(short.iter().map(|a| {
+        if *a == "--warmup-share" {
+            "--warmup"
+        } else {
+            a
+        }
+    }));
     let output = gbc(&args);
     assert!(output.status.success(), "{}", stderr(&output));
     assert!(stderr(&output).contains("--warmup` is deprecated"));
@@ -211,7 +243,10 @@ fn renamed_flags_keep_their_old_spelling_with_a_warning() {
         all.extend(args);
         let output = gbc(&all);
         assert!(output.status.success(), "{}", stderr(&output));
-        (String::from_utf8_lossy(&output.stdout).to_string(), stderr(&output))
+        (
+            String::from_utf8_lossy(&output.stdout).to_string(),
+            stderr(&output),
+        )
     };
     let (one_step, quiet) = study(&["--objective", "one-step", "--output", "x"]);
     assert!(quiet.is_empty(), "{quiet}");
@@ -228,6 +263,9 @@ fn renamed_flags_keep_their_old_spelling_with_a_warning() {
     let help = gbc(&["simulate", "--help"]);
     let help = String::from_utf8_lossy(&help.stdout);
     for programme in ["steps(lo=", "const(V)", "chirp(lo=", "csv(FILE, COLUMN)"] {
-        assert!(help.contains(programme), "simulate --help lacks {programme}");
+        assert!(
+            help.contains(programme),
+            "simulate --help lacks {programme}"
+        );
     }
 }

@@ -32,7 +32,10 @@ struct SavedArgs {
 /// The command line of this training, for its checkpoints.
 pub fn command(args: &TrainArgs) -> Result<serde_json::Value, CommandError> {
     let argv: Vec<String> = std::env::args().collect();
-    let after = argv.iter().position(|a| a == "train").map_or(argv.len(), |i| i + 1);
+    let after = argv
+        .iter()
+        .position(|a| a == "train")
+        .map_or(argv.len(), |i| i + 1);
     let saved = SavedArgs {
         directory: std::env::current_dir().unwrap_or_default(),
         args: argv[after..].to_vec(),
