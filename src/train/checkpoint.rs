@@ -392,7 +392,10 @@ impl<'a> Safety<'a> {
             .as_ref()
             .is_some_and(|s| s.load(Ordering::SeqCst));
         let interrupted = (stop_asked || control.stop_after == Some(epoch)) && epoch < self.epochs;
-        let due = control.every.is_some_and(|n| n > 0 && epoch % n == 0) && epoch < self.epochs;
+        let due = control
+            .every
+            .is_some_and(|n| n > 0 && epoch.is_multiple_of(n))
+            && epoch < self.epochs;
         if let Some(directory) = control.directory.as_ref().filter(|_| interrupted || due) {
             self.checkpoint(&mut end).save(directory)?;
         }
