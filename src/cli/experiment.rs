@@ -24,11 +24,12 @@ use crate::experiment::{
     RunResult, RunSpec, Shard, Study, Validation,
 };
 
-/// How every run trains.
+/// How every run trains (the values of `gbc train --objective`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum TrainingArg {
-    /// The paper's: one-step loss every epoch, no polish of the params.
-    Paper,
+    /// The paper's: one-step loss every epoch, no polish of the params (also `paper`).
+    #[value(alias = "paper")]
+    OneStep,
     /// gbc's default: one-step epochs, then free-run rollouts of growing length, params polished.
     MultiStep,
 }
@@ -36,7 +37,7 @@ pub enum TrainingArg {
 impl From<TrainingArg> for Training {
     fn from(training: TrainingArg) -> Self {
         match training {
-            TrainingArg::Paper => Training::Paper,
+            TrainingArg::OneStep => Training::Paper,
             TrainingArg::MultiStep => Training::MultiStep,
         }
     }
@@ -65,11 +66,12 @@ pub enum ExperimentAction {
 /// Arguments of `gbc experiment merge`.
 #[derive(Debug, clap::Args)]
 pub struct MergeArgs {
-    /// Experiment directories (written by `gbc experiment --out DIR`).
+    /// Experiment directories (written by `gbc experiment -o DIR`).
     #[arg(required = true, value_name = "DIR")]
     pub dirs: Vec<PathBuf>,
-    /// Where to write the joined tables, figures and report (default: the first DIR).
-    #[arg(short, long, value_name = "DIR")]
+    /// Where to write the joined tables, figures and report (default: the first DIR; also
+    /// `--out`, deprecated).
+    #[arg(short, long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
 }
 
@@ -111,8 +113,12 @@ pub struct RunArgs {
     /// and `gbc bench`; each given overrides the study's).
     #[command(flatten)]
     pub settings: TrainingFlags,
-    /// Training recipe: the paper's one-step loss, or gbc's multi-step rollouts.
+    /// Training loss, as in `gbc train`: the paper's one-step loss, or gbc's multi-step
+    /// rollouts.
     #[arg(long, value_enum)]
+    pub objective: Option<TrainingArg>,
+    /// Deprecated spelling of --objective.
+    #[arg(long, value_enum, hide = true, conflicts_with = "objective")]
     pub training: Option<TrainingArg>,
     /// The mechanistic model behind the data (true rates and params for the figures).
     #[arg(long, value_name = "GBM")]
@@ -132,8 +138,8 @@ pub struct RunArgs {
     /// Run only slice K of N of the grid (1 <= K <= N), e.g. as a job array task.
     #[arg(long, value_name = "K/N")]
     pub shard: Option<String>,
-    /// Experiment directory (default: `experiment-<name>`).
-    #[arg(short, long, value_name = "DIR")]
+    /// Experiment directory (default: `experiment-<name>`; also `--out`, deprecated).
+    #[arg(short, long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print the study as JSON (a config file) and exit.
     #[arg(long)]
@@ -274,7 +280,11 @@ fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandErr
     set(&mut study.replicates, args.replicates);
     study.first_seed = args.first_seed.unwrap_or(study.first_seed);
     args.settings.apply(&mut study.settings);
-    study.training = args.training.map_or(study.training, Into::into);
+    if args.training.is_some() {
+        eprintln!("warning: `gbc experiment --training` is deprecated: use --objective");
+    }
+    let objective = args.objective.or(args.training);
+    study.training = objective.map_or(study.training, Into::into);
     if args.truth.is_some() {
         study.truth = args.truth.clone();
     }

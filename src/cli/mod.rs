@@ -13,6 +13,7 @@ mod demo;
 mod diagnose;
 mod experiment;
 mod explain;
+mod export;
 mod fmt;
 mod init;
 mod lsp;
@@ -74,7 +75,8 @@ pub enum Command {
     Check(check::CheckArgs),
     /// Compile a model and print a stage of it (AST or IR).
     Compile(compile::CompileArgs),
-    /// Simulate a model without closures (adaptive Dormand–Prince), writing a CSV record.
+    /// Simulate a model without closures (adaptive Dormand–Prince), or a trained one
+    /// (`--weights`: a what-if run), writing a CSV record.
     Simulate(simulate::SimulateArgs),
     /// Train a grey-box (or black-box) model on a data record.
     Train(Box<train::TrainArgs>),
@@ -82,6 +84,8 @@ pub enum Command {
     Predict(predict::PredictArgs),
     /// Diagnose the gap between a mechanistic model and data: where, which effect, how much.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Export a trained model's one-step map (ONNX) for other runtimes.
+    Export(export::ExportArgs),
     /// Train models over a grid of training sizes and seeds, with results and figures.
     Experiment(experiment::ExperimentArgs),
     /// The main job: both paper studies, scaled down, with an HTML report.
@@ -110,6 +114,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Predict(args) => predict::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Experiment(args) => experiment::run(args),
+        Command::Export(args) => export::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Fmt(args) => fmt::run(args),

@@ -1,10 +1,16 @@
 //! `gbc simulate MODEL --t-end T --dt H -o OUT.csv`: integrate a model without closures
-//! and write the sampled record as CSV.
+//! and write the sampled record as CSV; with `--weights RUN_DIR`, a what-if run of a trained
+//! model ([`whatif`]).
 //!
 //! Columns: `t`, the inputs, the measured states, the hidden states (with `--hidden`), then
 //! the outputs. `--noise S` perturbs the measured states only, relatively:
 //! `y * (1 + S * N(0, 1))`, drawn row by row from a ChaCha8 generator seeded with `--seed`;
-//! hidden states and outputs stay noise-free.
+//! hidden states and outputs stay noise-free. `--init X=V` replaces a state's declared
+//! initial value; `--params FILE` sets the params to those `gbc train` or `gbc diagnose`
+//! fitted ([`params`]); `--effect NAME` applies a candidate effect before lowering.
+
+mod params;
+mod whatif;
 
 use super::{CommandError, CommandResult};
 use crate::ir::Model;
@@ -23,21 +29,51 @@ const PROGRESS_THRESHOLD: usize = 20_000;
 /// Arguments of `gbc simulate`.
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
-    /// The model file (no closures).
+    /// The model file (with closures only with --weights).
     pub model: PathBuf,
     /// Time of the last sample.
     #[arg(long, allow_negative_numbers = true)]
     pub t_end: f64,
-    /// Sampling step (also the step of a `next` model).
+    /// Sampling step (also the step of a `next` model; with --weights, default: the run's
+    /// step).
     #[arg(long, allow_negative_numbers = true)]
-    pub dt: f64,
+    pub dt: Option<f64>,
     /// The CSV file to write.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Time of the first sample.
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub t_start: f64,
-    /// An input program, `NAME=PROGRAM`, e.g. `u=steps(hold=5..40, seed=1)` (one per input).
+    /// Time of the first sample (default 0; with --history, its last row).
+    #[arg(long, allow_negative_numbers = true)]
+    pub t_start: Option<f64>,
+    /// A trained run (`gbc train -o DIR`): free-run the trained model (a what-if run).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["params", "noise", "warmup"])]
+    pub weights: Option<PathBuf>,
+    /// With --weights: measured data before the start (its rows up to --t-start are the
+    /// history the embedding reads; its row at --t-start is the initial state).
+    #[arg(long, value_name = "FILE", requires = "weights")]
+    pub history: Option<PathBuf>,
+    /// How the history's columns are named.
+    #[command(flatten)]
+    pub columns: super::data::ColumnArgs,
+    /// An initial value, `NAME=VALUE` (a measured or hidden state; repeatable).
+    #[arg(long = "init", value_name = "NAME=VALUE", value_parser = parse_init)]
+    pub init: Vec<(String, f64)>,
+    /// Params fitted by `gbc train` (run.json or `--json` file) or `gbc diagnose --json`.
+    #[arg(long, value_name = "FILE")]
+    pub params: Option<PathBuf>,
+    /// Apply a candidate effect of the model before simulating (repeatable).
+    #[arg(long = "effect", value_name = "NAME")]
+    pub effects: Vec<String>,
+    /// An input programme, `NAME=PROGRAM`, e.g. `u=steps(hold=5..40, seed=1)` (one per
+    /// input).
+    ///
+    /// Programmes, sampled on the grid t_start + k dt and held between samples:
+    /// `steps(lo=, hi=, hold=MIN..MAX, seed=)` random levels in [lo, hi] (default: the
+    /// input's declared bounds), each held for a random multiple of the step between MIN and
+    /// MAX (model time; default 5 to 40 steps; `hold=H` exactly H); `const(V)` the value V;
+    /// `chirp(lo=, hi=, f0=, f1=, period=)` a sine between lo and hi whose frequency rises
+    /// linearly from f0 to f1 over each period; `csv(FILE)` or `csv(FILE, COLUMN)` a data
+    /// column (default: the input's name), held between rows. Arguments are KEY=VALUE or
+    /// positional in the order shown (docs/language.md).
     #[arg(long = "input", value_name = "NAME=PROGRAM")]
     pub inputs: Vec<String>,
     /// Settle this long at the first input values before recording.
@@ -49,7 +85,7 @@ pub struct SimulateArgs {
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Also write the hidden states.
+    /// Also write the hidden states (a what-if run, `--weights`, always does).
     #[arg(long)]
     pub hidden: bool,
     /// Relative tolerance of the integrator.
@@ -89,6 +125,75 @@ pub enum SimulateError {
         /// The level given.
         found: f64,
     },
+    /// `--init` names no state of the model.
+    #[error("expected a state of the model in `--init`, found `{name}`")]
+    #[diagnostic(code(gbm::E0715), help("{states}"))]
+    UnknownInitState {
+        /// The name given.
+        name: String,
+        /// The states, with a suggestion.
+        states: String,
+    },
+    /// The params file cannot be used.
+    #[error("cannot read params from `{path}`: {reason}")]
+    #[diagnostic(
+        code(gbm::E0716),
+        help(
+            "pass the run.json of `gbc train -o DIR` (or its `--json` file) or the file of \
+             `gbc diagnose --json`"
+        )
+    )]
+    BadParams {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The history holds several experiments.
+    #[error("expected one experiment in the history `{path}`, found {found}")]
+    #[diagnostic(
+        code(gbm::E0717),
+        help("pass a file with one experiment, or one without an experiment column")
+    )]
+    SeveralHistories {
+        /// The file.
+        path: String,
+        /// Experiments found.
+        found: usize,
+    },
+}
+
+/// `NAME=VALUE` with a number.
+fn parse_init(argument: &str) -> Result<(String, f64), String> {
+    let (name, value) = argument
+        .split_once('=')
+        .ok_or_else(|| format!("expected NAME=VALUE (e.g. `X=0.2`), found `{argument}`"))?;
+    let value: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected a number after `=`, found `{}`", value.trim()))?;
+    if !value.is_finite() {
+        return Err(format!("expected a finite initial value, found `{value}`"));
+    }
+    Ok((name.trim().to_string(), value))
+}
+
+/// The `--init` values in the model's state order (measured, then hidden).
+fn initial_values(model: &Model, init: &[(String, f64)]) -> Result<Vec<Option<f64>>, CommandError> {
+    let names: Vec<&str> = (model.states.iter().chain(&model.hidden))
+        .map(|s| s.name.as_str())
+        .collect();
+    let mut values = vec![None; names.len()];
+    for (name, value) in init {
+        let index = names.iter().position(|n| n == name).ok_or_else(|| {
+            CommandError::user(SimulateError::UnknownInitState {
+                name: name.clone(),
+                states: crate::suggest::did_you_mean(name, &names, "states"),
+            })
+        })?;
+        values[index] = Some(*value);
+    }
+    Ok(values)
 }
 
 /// Simulates the model and writes the record.
@@ -98,17 +203,32 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
             found: args.noise,
         }));
     }
-    crate::io::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
-    let model = super::load_model(&args.model)?;
-    let signals = input_signals(&model, args)?;
+    let mut inputs: Vec<&Path> = vec![&args.model];
+    inputs.extend(args.history.as_deref());
+    inputs.extend(args.params.as_deref());
+    crate::io::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
+    let effects: Vec<&str> = args.effects.iter().map(String::as_str).collect();
+    let mut model = crate::driver::compile_file(&args.model, &effects)?.model;
+    if let Some(weights) = &args.weights {
+        return whatif::run(&model, weights, args);
+    }
+    if let Some(path) = &args.params {
+        for note in params::apply(&mut model, path, &effects)? {
+            eprintln!("note: {note}");
+        }
+    }
+    let t_start = args.t_start.unwrap_or(0.0);
+    let dt = args.dt.ok_or_else(missing_dt)?;
+    let signals = input_signals(&model, args, (t_start, args.t_end, dt))?;
     let options = SimOptions {
-        t_start: args.t_start,
+        t_start,
         warmup: args.warmup,
         tolerances: Tolerances {
             rtol: args.rtol,
             atol: args.atol,
         },
-        ..SimOptions::new(args.t_end, args.dt)
+        initial: initial_values(&model, &args.init)?,
+        ..SimOptions::new(args.t_end, dt)
     };
     let mut bar: Option<indicatif::ProgressBar> = None;
     let mut progress = |done: usize, total: usize| {
@@ -128,8 +248,20 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
     Ok(())
 }
 
-/// One signal per model input, from the `--input` programs.
-fn input_signals(model: &Model, args: &SimulateArgs) -> Result<Vec<Signal>, CommandError> {
+/// `--dt` is needed without `--weights`.
+fn missing_dt() -> CommandError {
+    CommandError::user(crate::sim::SimError::Options(
+        "expected --dt (the sampling step), found none".into(),
+    ))
+}
+
+/// One signal per model input, from the `--input` programs, sampled on the grid
+/// `t_start + k dt` up to `t_end`.
+fn input_signals(
+    model: &Model,
+    args: &SimulateArgs,
+    (t_start, t_end, dt): (f64, f64, f64),
+) -> Result<Vec<Signal>, CommandError> {
     let mut programs = vec![None; model.inputs.len()];
     let mut reports = Vec::new();
     for text in &args.inputs {
@@ -155,7 +287,7 @@ fn input_signals(model: &Model, args: &SimulateArgs) -> Result<Vec<Signal>, Comm
             }));
             continue;
         };
-        match program.generate(input, args.t_start, args.t_end, args.dt) {
+        match program.generate(input, t_start, t_end, dt) {
             Ok(signal) => signals.push(signal),
             Err(error) => reports.push(report(error)),
         }

@@ -20,8 +20,12 @@ macro_rules! line {
         let _ = writeln!($out, $($arg)*);
     }};
 }
-use std::io::IsTerminal;
 use std::time::Instant;
+
+mod progress;
+mod safety;
+
+use progress::Progress;
 
 use super::data::{hold_out, load_records, ColumnArgs, HistoryArg};
 use super::options::TrainingFlags;
@@ -33,8 +37,8 @@ use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, ErrorSet, Event, Objective, ParamSource, Part, Recipe, TrainError,
-    TrainOptions, Trained, TrainingData,
+    self, artifacts, ErrorSet, Objective, ParamSource, Part, Recipe, TrainError, TrainOptions,
+    Trained, TrainingData,
 };
 
 /// The loss training minimises.
@@ -72,10 +76,11 @@ pub enum ParamsArg {
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
     /// The model file (with closures or params).
-    pub model: PathBuf,
+    #[arg(required_unless_present = "resume")]
+    pub model: Option<PathBuf>,
     /// The data set: one or more CSV files, each an experiment (or several, with an
     /// `experiment` column); `t`, the inputs and the measured states, cells may be empty.
-    #[arg(required = true, num_args = 1..)]
+    #[arg(required_unless_present = "resume", num_args = 1..)]
     pub data: Vec<PathBuf>,
     /// Files of whole experiments that validate (repeatable).
     #[arg(long, value_name = "FILE", num_args = 1..)]
@@ -128,7 +133,15 @@ pub struct TrainArgs {
     pub horizon: usize,
     /// Share of the epochs trained one-step before rollouts start.
     #[arg(long, default_value_t = DEFAULT_WARMUP_SHARE, value_name = "SHARE")]
-    pub warmup: f64,
+    pub warmup_share: f64,
+    /// Deprecated spelling of --warmup-share (`gbc simulate --warmup` is a time).
+    #[arg(
+        long,
+        value_name = "SHARE",
+        hide = true,
+        conflicts_with = "warmup_share"
+    )]
+    pub warmup: Option<f64>,
     /// Share of the epochs over which rollouts grow from 2 steps to --horizon.
     #[arg(long, default_value_t = DEFAULT_RAMP_SHARE, value_name = "SHARE")]
     pub ramp: f64,
@@ -165,12 +178,40 @@ pub struct TrainArgs {
     /// output; the summary then goes to standard error).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Continue the stopped run in DIR (Ctrl-C or SIGTERM end training after the current
+    /// epoch with a checkpoint): the same command line, from the checkpoint on; with the
+    /// same seed the run ends bit for bit where an uninterrupted one ends.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["model", "data"])]
+    pub resume: Option<PathBuf>,
+    /// Also write a checkpoint into the run directory after every N epochs.
+    #[arg(long, value_name = "N")]
+    pub checkpoint_every: Option<usize>,
+    /// Stop when the validation loss (the pooled online error, else the offline one,
+    /// computed after every epoch) has not improved for PATIENCE epochs; the weights of
+    /// the best epoch are kept.
+    #[arg(long, value_name = "PATIENCE")]
+    pub early_stop: Option<usize>,
+    /// Stop after this epoch as if interrupted (tests of --resume).
+    #[arg(long, value_name = "N", hide = true)]
+    pub stop_after_epochs: Option<usize>,
 }
 
 /// Trains the model and reports.
 pub fn run(args: &TrainArgs) -> CommandResult {
-    let model = super::load_model(&args.model)?;
-    let source = read_source(&args.model)?;
+    let resumed;
+    let (args, checkpoint) = match &args.resume {
+        Some(directory) => {
+            let (saved, checkpoint) = safety::resumed(directory)?;
+            resumed = saved;
+            (&resumed, Some(checkpoint))
+        }
+        None => (args, None),
+    };
+    let model_file = (args.model.clone()).ok_or_else(|| {
+        CommandError::Internal("a training without a model file or --resume".into())
+    })?;
+    let model = super::load_model(&model_file)?;
+    let source = read_source(&model_file)?;
     let records = load_records(&model, &args.data, &args.columns)?;
     let (mut train_records, mut validation) = hold_out(records, &args.holdout)?;
     validation.extend(load_records(&model, &args.val, &args.columns)?);
@@ -184,11 +225,24 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         column_weights: args.weight.clone(),
         ..TrainOptions::with(&args.settings.settings()?)
     };
+    if args.warmup.is_some() {
+        eprintln!(
+            "warning: `gbc train --warmup` is deprecated: use --warmup-share (a share of the \
+             epochs; `gbc simulate --warmup` is a time)"
+        );
+    }
     let recipe = recipe_of(args);
-    let directory = run_directory(args)?;
-    if args.cv {
+    let directory = match &checkpoint {
+        Some(_) => args.output.clone().unwrap_or_default(),
+        None => run_directory(args)?,
+    };
+    if checkpoint.is_none() && args.cv {
         cross_validate(&model, &train_records, (&options, &recipe))?;
     }
+    let command = match &checkpoint {
+        Some(checkpoint) => checkpoint.command.clone(),
+        None => safety::command(args)?,
+    };
     let data = TrainingData {
         train: &train_records,
         validation: &validation,
@@ -196,12 +250,35 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     };
     let started = Instant::now();
     let mut progress = Progress::default();
-    let outcome = train::train_with(&model, &data, &options, &recipe, &mut |event| {
+    if let Some(checkpoint) = &checkpoint {
+        progress.resume_from(checkpoint);
+        eprintln!(
+            "resuming {} after epoch {} of {}",
+            directory.display(),
+            checkpoint.epoch,
+            checkpoint.epochs
+        );
+    }
+    let control = train::RunControl {
+        directory: Some(directory.clone()),
+        every: args.checkpoint_every,
+        stop: safety::stop_on_signal(),
+        stop_after: args.stop_after_epochs,
+        early_stop: args.early_stop,
+        resume: checkpoint,
+        command,
+    };
+    let outcome = train::train_run(&model, &data, (&options, &recipe), &control, &mut |event| {
         progress.observe(event, options.epochs)
     });
     progress.finish();
+    if let Err(TrainError::Interrupted { .. }) = &outcome {
+        let log = progress.log(None, options.learning_rate);
+        crate::io::write_atomic(&directory.join(LOG_FILE), log.as_bytes())
+            .map_err(CommandError::user)?;
+    }
     let trained = outcome.map_err(train_error)?;
-    let model_path = args.model.display().to_string();
+    let model_path = model_file.display().to_string();
     let data_path = (args.data.iter())
         .map(|p| p.display().to_string())
         .collect::<Vec<_>>()
@@ -214,10 +291,11 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         &trained,
     );
     artifacts::save(&directory, &info, &trained.network).map_err(train_error)?;
-    let log = progress.log(&trained.report);
+    train::Checkpoint::remove(&directory);
+    let log = progress.log(Some(&trained.report), options.learning_rate);
     crate::io::write_atomic(&directory.join(LOG_FILE), log.as_bytes())
         .map_err(CommandError::user)?;
-    let title = (args.model.file_stem()).map_or(model.name.clone(), |s| s.to_string_lossy().into());
+    let title = (model_file.file_stem()).map_or(model.name.clone(), |s| s.to_string_lossy().into());
     let page = train::page::run_page(
         &model,
         &trained,
@@ -237,7 +315,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
     let seconds = started.elapsed().as_secs_f64();
-    let text = summary(&model, &trained, seconds, Some(&directory), args);
+    let text = summary(&model, &trained, seconds, Some(&directory));
     if json_to_stdout {
         eprint!("{text}");
     } else {
@@ -271,8 +349,8 @@ fn run_directory(args: &TrainArgs) -> Result<PathBuf, CommandError> {
         }
         return Ok(directory.clone());
     }
-    let stem =
-        (args.model.file_stem()).map_or("run".to_string(), |s| s.to_string_lossy().to_string());
+    let stem = (args.model.as_ref().and_then(|m| m.file_stem()))
+        .map_or("run".to_string(), |s| s.to_string_lossy().to_string());
     let stamp = utc_stamp(std::time::SystemTime::now());
     let mut directory = PathBuf::from("runs").join(format!("{stem}-{stamp}"));
     let mut attempt = 1;
@@ -416,7 +494,7 @@ pub fn recipe_of(args: &TrainArgs) -> Recipe {
             ObjectiveArg::MultiStep => Objective::MultiStep,
         },
         horizon: args.horizon,
-        warmup_share: args.warmup,
+        warmup_share: args.warmup.unwrap_or(args.warmup_share),
         ramp_share: args.ramp,
         windows_per_batch: args.windows,
         param_learning_rate: args.param_lr,
@@ -459,123 +537,7 @@ pub fn train_error(error: TrainError) -> CommandError {
     CommandError::user(super::options::with_flag(error))
 }
 
-/// The progress bar and warnings on stderr.
-#[derive(Default)]
-struct Progress {
-    bar: Option<indicatif::ProgressBar>,
-    started: Option<Instant>,
-    /// Per epoch: rollout steps, mean loss, seconds since the start.
-    epochs: Vec<(usize, f64, f64)>,
-}
-
-impl Progress {
-    fn observe(&mut self, event: Event, epochs: usize) {
-        match event {
-            Event::Warning(warning) => eprintln!("warning: {warning}"),
-            Event::Started {
-                train_pairs,
-                validation_pairs,
-                ..
-            } => {
-                self.started = Some(Instant::now());
-                self.epochs.clear();
-                let message =
-                    format!("training on {train_pairs} pairs, validating on {validation_pairs}");
-                if !std::io::stderr().is_terminal() {
-                    eprintln!("{message}");
-                    return;
-                }
-                let bar = indicatif::ProgressBar::new(epochs as u64);
-                let template = "epoch {pos}/{len} [{bar:30}] {msg} ETA {eta}";
-                if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
-                    bar.set_style(style.progress_chars("=> "));
-                }
-                bar.println(message);
-                self.bar = Some(bar);
-            }
-            Event::Epoch {
-                epoch,
-                loss,
-                horizon,
-            } => {
-                let seconds = self.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
-                self.epochs.push((horizon, loss, seconds));
-                match &self.bar {
-                    Some(bar) => {
-                        bar.set_message(format!("{horizon} step loss {loss:.3e}"));
-                        bar.set_position(epoch as u64);
-                    }
-                    // Without a terminal, a line every twentieth of the run (and the last).
-                    None if epoch % epochs.div_ceil(20).max(1) == 0 || epoch == epochs => {
-                        eprintln!(
-                            "epoch {epoch}/{epochs}: {horizon}-step loss {loss:.4e} ({seconds:.1} s)"
-                        );
-                    }
-                    None => {}
-                }
-            }
-        }
-    }
-
-    /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,
-    /// seconds) and the validation errors where they were computed (before the first epoch
-    /// and after the last).
-    /// Each epoch's rollout length (1: one-step).
-    fn horizons(&self) -> Vec<usize> {
-        self.epochs.iter().map(|(horizon, ..)| *horizon).collect()
-    }
-
-    fn log(&self, report: &train::TrainReport) -> String {
-        let metrics = &report.metrics;
-        let overall = |set: &Option<ErrorSet>| {
-            set.as_ref()
-                .map_or(String::new(), |s| crate::data::format_number(s.overall))
-        };
-        let mut text = String::from(
-            "epoch,phase,horizon,train_loss,validation_offline,validation_online,learning_rate,seconds\n",
-        );
-        text.push_str(&format!(
-            "0,initial,,,{},{},,0\n",
-            overall(&metrics.initial_offline),
-            overall(&metrics.initial_online)
-        ));
-        let last = self.epochs.len();
-        for (index, &(horizon, loss, seconds)) in self.epochs.iter().enumerate() {
-            let phase = if horizon > 1 {
-                "multi-step"
-            } else {
-                "one-step"
-            };
-            let (offline, online) = if index + 1 == last {
-                (overall(&metrics.offline), overall(&metrics.online))
-            } else {
-                (String::new(), String::new())
-            };
-            text.push_str(&format!(
-                "{},{phase},{horizon},{},{offline},{online},{},{}\n",
-                index + 1,
-                crate::data::format_number(loss),
-                crate::data::format_number(report.learning_rate),
-                crate::data::format_number(seconds)
-            ));
-        }
-        text
-    }
-
-    fn finish(&mut self) {
-        if let Some(bar) = self.bar.take() {
-            bar.finish_and_clear();
-        }
-    }
-}
-
-fn summary(
-    model: &Model,
-    trained: &Trained,
-    seconds: f64,
-    run: Option<&Path>,
-    args: &TrainArgs,
-) -> String {
+fn summary(model: &Model, trained: &Trained, seconds: f64, run: Option<&Path>) -> String {
     let mut out = String::new();
     let report = &trained.report;
     line!(
@@ -583,7 +545,7 @@ fn summary(
         "trained `{}` on {} pairs for {} epochs ({}) in {seconds:.1} s (final loss {})",
         model.name,
         report.train_pairs,
-        (args.settings.epochs).unwrap_or(crate::train::Settings::default().epochs),
+        report.losses.len(),
         report.recipe.objective.name(),
         report
             .losses

@@ -3,17 +3,19 @@
 //! Gaps of free runs that diverged are infinite, written as `null` in JSON and "diverged" in
 //! text.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// A complete diagnosis.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Report {
     /// Model name.
     pub model: String,
     /// Held-out gap of the model with its own params fitted.
+    #[serde(with = "crate::json")]
     pub gap_before: f64,
     /// Gap a perfect model would show: the measurement noise in normalised units.
+    #[serde(with = "crate::json")]
     pub noise_floor: f64,
     /// Whether the gap clearly exceeds the noise (see [`super::SIGNIFICANCE`]).
     pub significant: bool,
@@ -41,6 +43,7 @@ pub struct Report {
     /// Formulas for the correction at the best locus (sparse regression).
     pub hints: Vec<Formula>,
     /// The model's own params after fitting.
+    #[serde(with = "crate::json")]
     pub fitted_params: BTreeMap<String, f64>,
     /// The fit of the model without effects: uncertainty, criteria, cost.
     pub base_fit: FitSummary,
@@ -56,25 +59,29 @@ pub struct Report {
 }
 
 /// The error of one measured state.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StateGap {
     /// State name.
     pub name: String,
     /// Its share of the held-out free-run error.
+    #[serde(with = "crate::json")]
     pub share: f64,
     /// Free-run (online) mean squared z-scored error at its held-out cells (`None`: none).
+    #[serde(with = "crate::json")]
     pub online: Option<f64>,
     /// One-step (offline) error at its held-out cells whose previous row is measured
     /// (`None`: no such cell).
+    #[serde(with = "crate::json")]
     pub offline: Option<f64>,
     /// Its measurement noise variance, normalised.
+    #[serde(with = "crate::json")]
     pub noise: f64,
     /// Held-out cells of this state.
     pub cells: usize,
 }
 
 /// What kind of place a locus is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, PartialOrd, Ord)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, PartialOrd, Ord)]
 #[serde(rename_all = "lowercase")]
 pub enum LocusKind {
     /// A `let` (rate law).
@@ -90,7 +97,7 @@ pub enum LocusKind {
 }
 
 /// A place where a free correction was tried.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Locus {
     /// The let's name, the group's members joined by `+`, or the state's for a balance.
     pub name: String,
@@ -99,10 +106,13 @@ pub struct Locus {
     /// The corrected lets (or the balance's state).
     pub members: Vec<String>,
     /// Held-out gap with the best correction there.
+    #[serde(with = "crate::json")]
     pub bound_after: f64,
     /// Held-out gap with a correction that sees the present only.
+    #[serde(with = "crate::json")]
     pub bound_present: f64,
     /// Held-out gap with a correction that also sees the history.
+    #[serde(with = "crate::json")]
     pub bound_history: f64,
     /// Whether the held-out data cannot tell this locus from the best one (block
     /// bootstrap; always true for the first).
@@ -110,11 +120,12 @@ pub struct Locus {
     /// Lets between it and the balances it reaches (0 for a balance): larger is upstream.
     pub depth: usize,
     /// Seconds spent fitting and scoring its corrections.
+    #[serde(with = "crate::json")]
     pub seconds: f64,
 }
 
 /// Whether closing the gap needs memory, and why.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Memory {
     /// The verdict.
     pub history_needed: bool,
@@ -122,36 +133,44 @@ pub struct Memory {
     /// present by the margin, see [`super::locus::HISTORY_MARGIN`]).
     pub probe: bool,
     /// The longest time constant of the history features, chosen from the data.
+    #[serde(with = "crate::json")]
     pub span: f64,
     /// The time constants of the history features.
+    #[serde(with = "crate::json")]
     pub time_constants: Vec<f64>,
     /// Why, in words.
     pub reason: String,
 }
 
 /// A time window of the held-out part.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Window {
     /// The experiment.
     pub experiment: String,
     /// First measured time.
+    #[serde(with = "crate::json")]
     pub t_start: f64,
     /// Last measured time.
+    #[serde(with = "crate::json")]
     pub t_end: f64,
     /// Share of the held-out error.
+    #[serde(with = "crate::json")]
     pub share: f64,
 }
 
 /// A range of one variable where the error concentrates.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Regime {
     /// Input or measured state.
     pub variable: String,
     /// `[lo, hi]` of the range.
+    #[serde(with = "crate::json")]
     pub range: [f64; 2],
     /// Share of the held-out error in that range.
+    #[serde(with = "crate::json")]
     pub share: f64,
     /// Share of the held-out rows in that range.
+    #[serde(with = "crate::json")]
     pub row_share: f64,
     /// Whether the range is the variable's lowest bin ("below hi").
     pub lowest: bool,
@@ -160,22 +179,25 @@ pub struct Regime {
 }
 
 /// A fitted param with its uncertainty.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParamEstimate {
     /// Param name (or `X@experiment` for a fitted initial value).
     pub name: String,
     /// Fitted value.
+    #[serde(with = "crate::json")]
     pub value: f64,
     /// Linearised standard error (infinite when the data do not determine it).
+    #[serde(with = "crate::json")]
     pub std_error: f64,
     /// `std_error / |value|`.
+    #[serde(with = "crate::json")]
     pub relative_error: f64,
     /// Whether the relative error is below 5 %.
     pub identified: bool,
 }
 
 /// How a fit went: params with uncertainty, the direction the data leave free, criteria.
-#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct FitSummary {
     /// Every fitted unknown with its standard error.
     pub estimates: Vec<ParamEstimate>,
@@ -184,62 +206,76 @@ pub struct FitSummary {
     /// params), largest first.
     pub free_direction: Vec<(String, f64)>,
     /// Training gap.
+    #[serde(with = "crate::json")]
     pub gap_train: f64,
     /// Akaike's criterion on the training cells: `n ln(RSS / n) + 2 k`.
+    #[serde(with = "crate::json")]
     pub aic: f64,
     /// Schwarz's (Bayesian) criterion: `n ln(RSS / n) + k ln n`.
+    #[serde(with = "crate::json")]
     pub bic: f64,
     /// Fitted unknowns `k`.
     pub unknowns: usize,
     /// Starts run (the first and the random restarts spent).
     pub starts: usize,
     /// Seconds the fit took.
+    #[serde(with = "crate::json")]
     pub seconds: f64,
 }
 
 /// A candidate effect after fitting.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EffectScore {
     /// Effect name.
     pub name: String,
     /// Description.
     pub description: Option<String>,
     /// Held-out gap with the effect applied and all params fitted.
+    #[serde(with = "crate::json")]
     pub gap_after: f64,
     /// `1 - gap_after / gap_before`.
+    #[serde(with = "crate::json")]
     pub shrink: f64,
     /// Fitted params: the effect's own and the model's.
+    #[serde(with = "crate::json")]
     pub params: BTreeMap<String, f64>,
     /// The fit: uncertainty, criteria and cost.
     pub fit: FitSummary,
     /// Hidden states the effect adds.
     pub adds_hidden: Vec<String>,
     /// Share of bootstrap draws in which it is best.
+    #[serde(with = "crate::json")]
     pub probability_best: f64,
     /// Standard error of its gap minus the best's (0 for the best).
+    #[serde(with = "crate::json")]
     pub spread: f64,
     /// Whether the held-out data cannot tell it from the best.
     pub tied: bool,
 }
 
 /// One step of forward selection.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SelectionStep {
     /// The effect this step adds.
     pub added: String,
     /// The effects applied together after it.
     pub effects: Vec<String>,
     /// Held-out gap of the set.
+    #[serde(with = "crate::json")]
     pub gap_after: f64,
     /// `1 - gap_after / gap_before`.
+    #[serde(with = "crate::json")]
     pub shrink: f64,
     /// Akaike's criterion of the set's fit.
+    #[serde(with = "crate::json")]
     pub aic: f64,
     /// Schwarz's criterion of the set's fit.
+    #[serde(with = "crate::json")]
     pub bic: f64,
     /// Fitted unknowns.
     pub unknowns: usize,
     /// Standard error of the held-out gap's decrease from the previous set.
+    #[serde(with = "crate::json")]
     pub spread: f64,
     /// The other additions tried at this step, with their held-out gaps.
     pub alternatives: Vec<(String, f64)>,
@@ -250,28 +286,32 @@ pub struct SelectionStep {
 }
 
 /// Forward selection over the effects.
-#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Selection {
     /// The steps, in order.
     pub steps: Vec<SelectionStep>,
     /// The effects credited, in order.
     pub credited: Vec<String>,
     /// Held-out gap of the credited set (the gap before when none).
+    #[serde(with = "crate::json")]
     pub gap_after: f64,
     /// Why the selection stopped, in words.
     pub stop: String,
 }
 
 /// How sure the ranking of the single effects is.
-#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Confidence {
     /// Whether the best effect is told apart from every other one.
     pub separated: bool,
     /// `(gap after of the second - gap after of the first) / gap_before`.
+    #[serde(with = "crate::json")]
     pub margin: f64,
     /// The margin's standard error (block bootstrap), in the same units.
+    #[serde(with = "crate::json")]
     pub margin_error: f64,
     /// Share of bootstrap draws in which the best is best.
+    #[serde(with = "crate::json")]
     pub probability_best: f64,
     /// The effects the held-out data cannot tell from the best (the best included).
     pub indistinguishable: Vec<String>,
@@ -282,46 +322,50 @@ pub struct Confidence {
 }
 
 /// A formula found by sparse regression.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Formula {
     /// What it approximates (e.g. "correction of mu").
     pub target: String,
     /// The formula, e.g. `-0.31 * mu * E_B`.
     pub text: String,
     /// Coefficient of determination on the training rows.
+    #[serde(with = "crate::json")]
     pub r2: f64,
     /// Number of terms.
     pub terms: usize,
 }
 
 /// A measured state's initial value that no cell gives.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InitialState {
     /// The experiment.
     pub experiment: String,
     /// The state.
     pub state: String,
     /// Its value (under the model's fitted params).
+    #[serde(with = "crate::json")]
     pub value: f64,
     /// `declared`, `fitted` or `first measured value`.
     pub origin: String,
 }
 
 /// One scored part.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ScoredPart {
     /// The experiment.
     pub experiment: String,
     /// First scored time.
+    #[serde(with = "crate::json")]
     pub t_start: f64,
     /// Last scored time.
+    #[serde(with = "crate::json")]
     pub t_end: f64,
     /// Scored rows with a measured cell.
     pub rows: usize,
 }
 
 /// Sizes of the split.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SplitSummary {
     /// Measured rows that train.
     pub train_rows: usize,
@@ -334,21 +378,27 @@ pub struct SplitSummary {
     /// `tail` (the last share of each experiment) or `experiments` (whole ones).
     pub holdout: String,
     /// The share of a tail split.
+    #[serde(with = "crate::json")]
     pub share: Option<f64>,
 }
 
 /// Where the time went, in seconds of wall time.
-#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Timing {
     /// The whole diagnosis.
+    #[serde(with = "crate::json")]
     pub total: f64,
     /// Fitting the model without effects.
+    #[serde(with = "crate::json")]
     pub base_fit: f64,
     /// Fitting every effect alone.
+    #[serde(with = "crate::json")]
     pub effects: f64,
     /// Forward selection beyond the first effect.
+    #[serde(with = "crate::json")]
     pub selection: f64,
     /// The free corrections.
+    #[serde(with = "crate::json")]
     pub loci: f64,
     /// Worker threads.
     pub jobs: usize,

@@ -680,18 +680,12 @@ fn save_weights(
 ) -> Result<(), train::TrainError> {
     let model_path = loaded.path.display().to_string();
     let data_path = prepared.study.data.describe();
-    let mut info = artifacts::run_info(
+    let info = artifacts::run_info(
         &loaded.model,
         (&model_path, &loaded.source),
         &data_path,
         options,
         trained,
     );
-    // JSON has no infinity: a diverged free run's errors would be written as `null` and the
-    // run could not be restored. Its errors are in the run's result file; leave them out.
-    let json = serde_json::to_string(&info).unwrap_or_default();
-    if serde_json::from_str::<artifacts::RunInfo>(&json).is_err() {
-        info.metrics = train::Metrics::default();
-    }
     artifacts::save(directory, &info, &trained.network)
 }

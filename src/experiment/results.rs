@@ -61,6 +61,7 @@ pub struct Measure {
     /// Name (a state, a param, a data file).
     pub name: String,
     /// The value; `None` when it was not finite.
+    #[serde(with = "crate::json")]
     pub value: Option<f64>,
 }
 
@@ -109,9 +110,11 @@ pub struct RunResult {
     /// Why it failed.
     pub error: Option<String>,
     /// Offline validation MSE (one step from the true history), mean over states.
+    #[serde(with = "crate::json")]
     pub offline_mse: Option<f64>,
     /// Online validation MSE (one free run over the whole validation window, never stopped),
     /// mean over states.
+    #[serde(with = "crate::json")]
     pub online_mse: Option<f64>,
     /// Offline MSE per measured state.
     pub offline_per_state: Vec<Measure>,
@@ -123,12 +126,14 @@ pub struct RunResult {
     /// Trained param values.
     pub params: Vec<Measure>,
     /// Mean training loss of the last epoch.
+    #[serde(with = "crate::json")]
     pub final_loss: Option<f64>,
     /// Training pairs used.
     pub train_pairs: usize,
     /// Validation pairs.
     pub validation_pairs: usize,
     /// Wall time of training and evaluation, seconds.
+    #[serde(with = "crate::json")]
     pub wall_seconds: f64,
     /// Stiffness warnings issued before training.
     #[serde(default)]
@@ -268,10 +273,13 @@ pub const BLOWN_UP_MSE: f64 = 1e6;
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Spread {
     /// Median (the mean of the two middle values for an even count).
+    #[serde(with = "crate::json")]
     pub median: f64,
     /// Smallest.
+    #[serde(with = "crate::json")]
     pub min: f64,
     /// Largest.
+    #[serde(with = "crate::json")]
     pub max: f64,
 }
 
@@ -307,6 +315,7 @@ pub struct SummaryRow {
     /// Online MSE per generalisation record: `(file, spread)`.
     pub generalisation: Vec<(String, Option<Spread>)>,
     /// Median wall time, seconds.
+    #[serde(with = "crate::json")]
     pub wall_seconds: Option<f64>,
 }
 

@@ -16,7 +16,7 @@ mod lower;
 mod print;
 
 pub use lower::{lower, uses_closure, LowerError};
-pub use print::print;
+pub use print::{expr_text, print, var_name};
 
 /// A resolved reference to a model quantity.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

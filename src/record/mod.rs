@@ -143,19 +143,25 @@ pub fn uniform_step(times: &[f64]) -> Option<f64> {
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Normalisation {
     /// Mean of each measured state.
+    #[serde(with = "crate::json")]
     pub state_mean: Vec<f64>,
     /// Standard deviation of each measured state (never zero).
+    #[serde(with = "crate::json")]
     pub state_std: Vec<f64>,
     /// Mean of each input.
+    #[serde(with = "crate::json")]
     pub input_mean: Vec<f64>,
     /// Standard deviation of each input (never zero).
+    #[serde(with = "crate::json")]
     pub input_std: Vec<f64>,
     /// Smallest measured value of each state over the training split (empty when unknown,
     /// as in runs saved before it was recorded).
     #[serde(default)]
+    #[serde(with = "crate::json")]
     pub state_min: Vec<f64>,
     /// Largest measured value of each state over the training split (empty when unknown).
     #[serde(default)]
+    #[serde(with = "crate::json")]
     pub state_max: Vec<f64>,
     /// The model outputs that are measured (observables), as indices into the model's
     /// outputs: every output measured in some training experiment.
@@ -163,9 +169,11 @@ pub struct Normalisation {
     pub observables: Vec<usize>,
     /// Mean of each observable, in [`Normalisation::observables`] order.
     #[serde(default)]
+    #[serde(with = "crate::json")]
     pub observable_mean: Vec<f64>,
     /// Standard deviation of each observable (never zero).
     #[serde(default)]
+    #[serde(with = "crate::json")]
     pub observable_std: Vec<f64>,
 }
 

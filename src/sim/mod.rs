@@ -93,7 +93,10 @@ pub enum SimError {
     #[error("cannot simulate model `{model}`: it has closures ({closures})")]
     #[diagnostic(
         code(gbm::E0701),
-        help("closures are learned from data with `gbc train`; to simulate, replace each by a rate law")
+        help(
+            "closures are learned from data with `gbc train`; run the trained model with \
+             `gbc simulate MODEL --weights RUN_DIR`, or replace each closure by a rate law"
+        )
     )]
     HasClosures {
         /// Model name.

@@ -42,12 +42,15 @@ pub struct StiffnessWarning {
     /// The state whose balance it is.
     pub balance: String,
     /// Estimated most negative local eigenvalue (1st percentile).
+    #[serde(with = "crate::json")]
     pub eigenvalue: f64,
     /// The longest grid step among the training pairs.
+    #[serde(with = "crate::json")]
     pub step: f64,
     /// RK4 sub-steps in use.
     pub substeps: usize,
     /// Largest stable step for this eigenvalue.
+    #[serde(with = "crate::json")]
     pub stable_step: f64,
     /// Sub-steps per sample that would make the step stable.
     pub substeps_needed: usize,

@@ -1,9 +1,17 @@
-//! A training run on disk: `weights.safetensors` (every trainable tensor, `f64`) and
-//! `run.json` (everything needed to rebuild the network: the model source hash, step and
-//! sub-steps, normalisation, closure magnitudes, embeddings, params, seed, metrics and the
-//! gbc version). Reloading checks the model source against the recorded hash.
+//! A training run on disk: `weights.safetensors` (every trainable tensor, `f64`),
+//! `run.json` (everything needed to rebuild the network: the model's structure and source
+//! hash, step and sub-steps, normalisation, closure magnitudes, embeddings, params, seed,
+//! metrics and the gbc version) and `model.gbm`, a copy of the model source trained on.
+//!
+//! Reloading matches the weights to a model by its structure ([`structure`]), not its
+//! text: a changed comment, const or balance is accepted with notes saying what changed; a
+//! changed structure is refused (E0416) naming each changed part.
+
+mod structure;
 
 use std::path::Path;
+
+pub use structure::{compare, differences, fingerprint, structure, Change, Structure};
 
 use sha2::{Digest, Sha256};
 
@@ -19,6 +27,8 @@ use super::{
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
 /// File name of the metadata inside a run directory.
 pub const RUN_FILE: &str = "run.json";
+/// File name of the copy of the model source inside a run directory.
+pub const SOURCE_FILE: &str = "model.gbm";
 
 /// The metadata of a run (`run.json`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -36,6 +46,7 @@ pub struct RunInfo {
     /// Seed.
     pub seed: u64,
     /// Sampling step `h`.
+    #[serde(with = "crate::json")]
     pub step: f64,
     /// RK4 sub-steps per sample.
     pub substeps: usize,
@@ -78,8 +89,22 @@ pub struct ModelInfo {
     pub name: String,
     /// The model file as given.
     pub path: String,
-    /// sha256 of the model file's text.
+    /// sha256 of the model file's text (for information: weights are matched by
+    /// structure).
     pub source_sha256: String,
+    /// The structure the weights mean (empty in runs saved before it was recorded).
+    #[serde(default)]
+    pub structure: Structure,
+    /// sha256 of the structure's canonical text ([`fingerprint`]).
+    #[serde(default)]
+    pub structure_sha256: String,
+    /// The copy of the model source in the run directory, if one was written.
+    #[serde(default)]
+    pub source_file: Option<String>,
+    /// The model's text, written to [`SOURCE_FILE`] by [`save`] (not part of `run.json`;
+    /// empty after [`load`]: read the copy with [`trained_source`]).
+    #[serde(skip)]
+    pub source: String,
 }
 
 /// A closure's embedding and magnitudes.
@@ -90,6 +115,7 @@ pub struct ClosureInfo {
     /// Observed variables.
     pub observe: Vec<String>,
     /// Embedding delay.
+    #[serde(with = "crate::json")]
     pub delay: f64,
     /// Embedding dimension.
     pub dim: usize,
@@ -103,6 +129,7 @@ pub struct NamedValue {
     /// Name.
     pub name: String,
     /// Value.
+    #[serde(with = "crate::json")]
     pub value: f64,
 }
 
@@ -114,12 +141,14 @@ pub struct TrainingInfo {
     /// Batch size.
     pub batch_size: usize,
     /// Learning rate.
+    #[serde(with = "crate::json")]
     pub learning_rate: f64,
     /// Training pairs.
     pub train_pairs: usize,
     /// Validation pairs.
     pub validation_pairs: usize,
     /// Mean loss of the last epoch.
+    #[serde(with = "crate::json")]
     pub final_loss: Option<f64>,
     /// What ran the one-step epochs (runs saved before it was recorded: the graph backend).
     #[serde(default)]
@@ -174,6 +203,10 @@ pub fn run_info(
             name: model.name.clone(),
             path: model_path.to_string(),
             source_sha256: source_hash(source),
+            structure: structure(model),
+            structure_sha256: fingerprint(&structure(model)),
+            source_file: Some(SOURCE_FILE.to_string()),
+            source: source.to_string(),
         },
         data: data_path.to_string(),
         dynamics: match model.dynamics {
@@ -215,24 +248,16 @@ pub fn run_info(
 
 /// Writes `run.json` and the weights into `directory` (created if missing).
 pub fn save(directory: &Path, info: &RunInfo, network: &Network) -> Result<(), TrainError> {
-    let weights = network.weights();
-    let bytes: Vec<Vec<u8>> = (weights.iter())
-        .map(|t| t.values.iter().flat_map(|v| v.to_le_bytes()).collect())
-        .collect();
-    let views = (weights.iter().zip(&bytes))
-        .map(|(tensor, data)| {
-            let view = safetensors::tensor::TensorView::new(
-                safetensors::Dtype::F64,
-                tensor.shape.clone(),
-                data,
-            );
-            view.map(|v| (tensor.name.clone(), v))
-        })
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
-    let serialized = safetensors::serialize(views, &None)
-        .map_err(|error| bad_run(&directory.join(WEIGHTS_FILE), error))?;
-    crate::io::write_atomic(&directory.join(WEIGHTS_FILE), &serialized)?;
+    write_tensors(&directory.join(WEIGHTS_FILE), &network.weights())?;
+    // A loaded run's metadata carries no source text: its copy stays as it is.
+    if let Some(file) = info
+        .model
+        .source_file
+        .as_ref()
+        .filter(|_| !info.model.source.is_empty())
+    {
+        crate::io::write_atomic(&directory.join(file), info.model.source.as_bytes())?;
+    }
     let json = serde_json::to_string_pretty(info)
         .map_err(|error| bad_run(&directory.join(RUN_FILE), error))?;
     crate::io::write_atomic(&directory.join(RUN_FILE), json.as_bytes())?;
@@ -244,50 +269,43 @@ pub fn load(directory: &Path) -> Result<(RunInfo, Vec<NamedTensor>), TrainError>
     let run_path = directory.join(RUN_FILE);
     let text = std::fs::read_to_string(&run_path).map_err(|error| bad_run(&run_path, error))?;
     let info: RunInfo = serde_json::from_str(&text).map_err(|error| bad_run(&run_path, error))?;
-    let weights_path = directory.join(&info.weights);
-    let bytes = std::fs::read(&weights_path).map_err(|error| bad_run(&weights_path, error))?;
-    let tensors = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|error| bad_run(&weights_path, error))?;
-    let mut weights = Vec::new();
-    for (name, view) in tensors.tensors() {
-        if view.dtype() != safetensors::Dtype::F64 {
-            return Err(bad_run(
-                &weights_path,
-                format!("expected f64 tensors, found {:?} in `{name}`", view.dtype()),
-            ));
-        }
-        let values = (view.data().chunks_exact(8))
-            .map(|chunk| {
-                let mut word = [0u8; 8];
-                word.copy_from_slice(chunk);
-                f64::from_le_bytes(word)
-            })
-            .collect();
-        weights.push(NamedTensor {
-            name,
-            shape: view.shape().to_vec(),
-            values,
-        });
-    }
+    let weights = read_tensors(&directory.join(&info.weights))?;
     Ok((info, weights))
 }
 
-/// Rebuilds the network of a run for `model`, whose file text is `source`; a model whose
-/// text changed since training is refused.
+/// A run rebuilt for a model, with notes on how the model differs from the one trained.
+pub struct Restored {
+    /// The network with the trained weights.
+    pub network: Network,
+    /// Its setup.
+    pub setup: Setup,
+    /// The run's metadata.
+    pub info: RunInfo,
+    /// What differs from the model trained on, outside the structure (for stderr).
+    pub notes: Vec<String>,
+}
+
+/// Rebuilds the network of a run for `model`, whose file text is `source` (see
+/// [`restore_with_notes`]).
 pub fn restore(
     model: &ir::Model,
     source: &str,
     directory: &Path,
 ) -> Result<(Network, Setup, RunInfo), TrainError> {
+    let restored = restore_with_notes(model, source, directory)?;
+    Ok((restored.network, restored.setup, restored.info))
+}
+
+/// Rebuilds the network of a run for `model`, whose file text is `source`: a model whose
+/// structure differs from the one trained is refused, one whose text differs otherwise is
+/// accepted with notes on what changed.
+pub fn restore_with_notes(
+    model: &ir::Model,
+    source: &str,
+    directory: &Path,
+) -> Result<Restored, TrainError> {
     let (info, mut weights) = load(directory)?;
-    let found = source_hash(source);
-    if found != info.model.source_sha256 {
-        return Err(TrainError::ModelChanged {
-            run: directory.display().to_string(),
-            expected: info.model.source_sha256.clone(),
-            found,
-        });
-    }
+    let notes = check_structure(model, source, &info, directory)?;
     check_fits(model, &info, directory)?;
     let setup = Setup {
         step: info.step,
@@ -308,7 +326,63 @@ pub fn restore(
             .unwrap_or(usize::MAX)
     });
     network.set_weights(&weights)?;
-    Ok((network, setup, info))
+    Ok(Restored {
+        network,
+        setup,
+        info,
+        notes,
+    })
+}
+
+/// The copy of the model source trained on, when the run directory holds one.
+pub fn trained_source(directory: &Path, info: &RunInfo) -> Option<String> {
+    let file = info.model.source_file.as_ref()?;
+    std::fs::read_to_string(directory.join(file)).ok()
+}
+
+/// Refuses a model whose structure differs from the one trained; notes how its text
+/// differs otherwise.
+fn check_structure(
+    model: &ir::Model,
+    source: &str,
+    info: &RunInfo,
+    directory: &Path,
+) -> Result<Vec<String>, TrainError> {
+    let found = structure(model);
+    let changes = compare(&info.model.structure, &found);
+    if !info.model.structure.is_empty() && !changes.is_empty() {
+        return Err(TrainError::ModelChanged {
+            run: directory.display().to_string(),
+            changes: changes.iter().map(ToString::to_string).collect(),
+        });
+    }
+    let mut notes = Vec::new();
+    if source_hash(source) == info.model.source_sha256 {
+        return Ok(notes);
+    }
+    if info.model.structure.is_empty() {
+        notes.push(format!(
+            "the model text differs from the one the weights in `{}` were trained with; the \
+             run predates structure records, so only the weights' shapes were checked",
+            directory.display()
+        ));
+        return Ok(notes);
+    }
+    notes.push(format!(
+        "the model text differs from the one the weights in `{}` were trained with; its \
+         structure is the same, so the weights apply",
+        directory.display()
+    ));
+    let trained = trained_source(directory, info)
+        .and_then(|text| crate::driver::compile(SOURCE_FILE, &text, &[]).ok());
+    if let Some(trained) = trained {
+        notes.extend(
+            differences(&trained.model, model)
+                .into_iter()
+                .map(|line| format!("changed: {line}")),
+        );
+    }
+    Ok(notes)
 }
 
 /// Refuses a `run.json` whose vectors do not fit the model (an edited file).
@@ -331,6 +405,56 @@ fn check_fits(model: &ir::Model, info: &RunInfo, directory: &Path) -> Result<(),
             "expected normalisation, closures and step that fit the model, found others",
         ))
     }
+}
+
+/// Writes `tensors` as little-endian `f64` safetensors to `path` (atomically).
+pub fn write_tensors(path: &Path, tensors: &[NamedTensor]) -> Result<(), TrainError> {
+    let bytes: Vec<Vec<u8>> = (tensors.iter())
+        .map(|t| t.values.iter().flat_map(|v| v.to_le_bytes()).collect())
+        .collect();
+    let views = (tensors.iter().zip(&bytes))
+        .map(|(tensor, data)| {
+            let view = safetensors::tensor::TensorView::new(
+                safetensors::Dtype::F64,
+                tensor.shape.clone(),
+                data,
+            );
+            view.map(|v| (tensor.name.clone(), v))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|error| bad_run(path, error))?;
+    let serialized = safetensors::serialize(views, &None).map_err(|error| bad_run(path, error))?;
+    crate::io::write_atomic(path, &serialized)?;
+    Ok(())
+}
+
+/// Reads the `f64` tensors of a safetensors file, in the file's order.
+pub fn read_tensors(path: &Path) -> Result<Vec<NamedTensor>, TrainError> {
+    let bytes = std::fs::read(path).map_err(|error| bad_run(path, error))?;
+    let tensors =
+        safetensors::SafeTensors::deserialize(&bytes).map_err(|error| bad_run(path, error))?;
+    let mut weights = Vec::new();
+    for (name, view) in tensors.tensors() {
+        if view.dtype() != safetensors::Dtype::F64 {
+            return Err(bad_run(
+                path,
+                format!("expected f64 tensors, found {:?} in `{name}`", view.dtype()),
+            ));
+        }
+        let values = (view.data().chunks_exact(8))
+            .map(|chunk| {
+                let mut word = [0u8; 8];
+                word.copy_from_slice(chunk);
+                f64::from_le_bytes(word)
+            })
+            .collect();
+        weights.push(NamedTensor {
+            name,
+            shape: view.shape().to_vec(),
+            values,
+        });
+    }
+    Ok(weights)
 }
 
 fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {

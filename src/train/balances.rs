@@ -77,6 +77,7 @@ pub struct BalanceFit {
     /// Accepted Levenberg-Marquardt steps.
     pub steps: usize,
     /// Root mean square of the scaled residuals at the end.
+    #[serde(with = "crate::json")]
     pub rms_residual: f64,
     /// Each param's value and standard error.
     pub estimates: Vec<ParamEstimate>,

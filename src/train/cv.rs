@@ -19,6 +19,7 @@ pub struct Fold {
     /// Its online error.
     pub online: Option<ErrorSet>,
     /// Wall-clock seconds of the fold.
+    #[serde(with = "crate::json")]
     pub seconds: f64,
 }
 
@@ -28,8 +29,10 @@ pub struct CrossValidation {
     /// The folds, in data-set order.
     pub folds: Vec<Fold>,
     /// Median over folds of the overall offline error.
+    #[serde(with = "crate::json")]
     pub median_offline: Option<f64>,
     /// Median over folds of the overall online error (infinite where a fold diverged).
+    #[serde(with = "crate::json")]
     pub median_online: Option<f64>,
 }
 

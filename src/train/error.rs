@@ -91,22 +91,25 @@ pub enum TrainError {
         /// The offending loss value.
         loss: f64,
     },
-    /// Weights reused with a model that changed since training.
+    /// Weights reused with a model whose structure changed since training.
     #[error(
-        "expected the model the weights in `{run}` were trained with (sha256 {expected}), found \
-         a changed model (sha256 {found})"
+        "expected the model structure the weights in `{run}` were trained with, found a \
+         changed one: {}",
+        changes.join("; ")
     )]
     #[diagnostic(
         code(gbm::E0416),
-        help("train the changed model again, or pass the model file the weights came from")
+        help(
+            "weights fit a model by its closures, embeddings, network shapes, states, inputs \
+             and params; train the changed model again, or pass the model file the weights \
+             came from (a copy is in the run directory as `model.gbm`)"
+        )
     )]
     ModelChanged {
         /// The run directory.
         run: String,
-        /// Hash recorded at training.
-        expected: String,
-        /// Hash of the model given now.
-        found: String,
+        /// Each changed part: `part: expected ..., found ...`.
+        changes: Vec<String>,
     },
     /// A run directory that cannot be read back.
     #[error("cannot read trained weights from `{path}`: {reason}")]
@@ -264,6 +267,48 @@ pub enum TrainError {
     RunExists {
         /// The directory.
         directory: String,
+    },
+    /// Training stopped between epochs (Ctrl-C, SIGTERM or a planned stop) and left a
+    /// checkpoint.
+    #[error(
+        "training stopped after epoch {epoch} of {epochs}; its checkpoint is in `{directory}`"
+    )]
+    #[diagnostic(
+        code(gbm::E0430),
+        help("continue where it stopped with `gbc train --resume {directory}`")
+    )]
+    Interrupted {
+        /// Epochs done.
+        epoch: usize,
+        /// Epochs planned.
+        epochs: usize,
+        /// The run directory holding the checkpoint.
+        directory: String,
+    },
+    /// `gbc train --resume DIR` on a directory without a usable checkpoint.
+    #[error("expected a training checkpoint in `{directory}`, found {found}")]
+    #[diagnostic(
+        code(gbm::E0431),
+        help(
+            "a run stopped by Ctrl-C, SIGTERM or --checkpoint-every holds checkpoint.json; a \
+             finished run has none"
+        )
+    )]
+    NoCheckpoint {
+        /// The run directory.
+        directory: String,
+        /// What was there instead.
+        found: String,
+    },
+    /// The checkpoint does not fit the training being resumed.
+    #[error("expected the files and settings the checkpoint was trained with, found {what}")]
+    #[diagnostic(
+        code(gbm::E0432),
+        help("resume with the model and data the run started with, or start a new run")
+    )]
+    ResumeChanged {
+        /// What changed.
+        what: String,
     },
     /// Nothing left to train on.
     #[error("expected at least one training experiment, found none")]

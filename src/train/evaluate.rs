@@ -18,14 +18,15 @@ use super::pairs::{embedding_row, PairTable};
 const EVALUATION_CHUNK: usize = 512;
 
 /// Mean squared errors of z-scored measured states, each over its measured cells. Infinite
-/// errors (a diverged free run) are written to JSON as `null` and read back as infinite.
+/// errors (a diverged free run) are written to JSON as `"inf"` ([`crate::json`]; a `null`
+/// of older files reads as infinite).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorSet {
     /// Per measured state with at least one scored cell, in model order: `(name, mse)`.
-    #[serde(deserialize_with = "lenient::per_state")]
+    #[serde(with = "crate::json::null_is_infinite")]
     pub per_state: Vec<(String, f64)>,
     /// Mean over those states.
-    #[serde(deserialize_with = "lenient::number")]
+    #[serde(with = "crate::json::null_is_infinite")]
     pub overall: f64,
     /// Number of predicted knots the errors average over (up to the stop of a diverged
     /// run).
@@ -94,13 +95,15 @@ pub struct Divergence {
     /// Knot of the offending state.
     pub row: usize,
     /// Its time.
+    #[serde(with = "crate::json")]
     pub time: f64,
     /// The measured state.
     pub state: String,
-    /// Its predicted value (a non-finite one is written as `null`, read back as NaN).
-    #[serde(deserialize_with = "lenient::not_a_number")]
+    /// Its predicted value (a non-finite one is written by name, see [`crate::json`]).
+    #[serde(with = "crate::json")]
     pub value: f64,
     /// The range it had to stay in.
+    #[serde(with = "crate::json")]
     pub range: (f64, f64),
 }
 
@@ -414,31 +417,6 @@ pub fn offline_error(
     }
     sum.rows = table.len();
     Ok(sum)
-}
-
-/// JSON has no infinity or NaN: `serde_json` writes them as `null`; read `null` back.
-mod lenient {
-    use serde::{Deserialize, Deserializer};
-
-    /// A number, `null` read as infinity.
-    pub fn number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
-        Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::INFINITY))
-    }
-
-    /// A number, `null` read as NaN.
-    pub fn not_a_number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
-        Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::NAN))
-    }
-
-    /// `(name, number)` pairs, `null` read as infinity.
-    pub fn per_state<'de, D: Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Vec<(String, f64)>, D::Error> {
-        let pairs = Vec::<(String, Option<f64>)>::deserialize(deserializer)?;
-        Ok((pairs.into_iter())
-            .map(|(name, value)| (name, value.unwrap_or(f64::INFINITY)))
-            .collect())
-    }
 }
 
 /// Online error of a free run against the track's measured cells at knots after its start

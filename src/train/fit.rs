@@ -14,10 +14,11 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{BackendError, Network, Setup, StepSettings};
+use crate::backend::{AdamState, BackendError, NamedTensor, Network, Setup, StepSettings};
 use crate::fused::FusedNetwork;
 use crate::ir;
 
+use super::checkpoint::Safety;
 use super::pairs::stage_fractions;
 use super::split::Training;
 use super::step::{Optimiser, Step, StepBatch};
@@ -51,21 +52,26 @@ impl Fit<'_> {
         }
     }
 
-    /// Runs every epoch; returns the mean training loss of each. `network` ends with the
-    /// trained weights whichever engine ran the one-step epochs.
+    /// Runs every epoch (from a checkpoint's, and until `safety` stops it); returns the
+    /// mean training loss of each. `network` ends with the trained weights and Adam state
+    /// whichever engine ran the one-step epochs.
     pub fn run(
         &self,
         network: &mut Network,
         training: &mut Course,
         on_event: &mut dyn FnMut(Event),
+        safety: &mut Safety,
     ) -> Result<Vec<f64>, TrainError> {
         let options = self.options;
         let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
+        // A checkpoint puts its weights and Adam state into `network`; the optimiser starts
+        // from them.
+        let first = safety.resume(network, training, &mut rng, &mut losses)?;
         let mut engines = Engines {
             fused: options.engine.fused_step(self.model, self.setup)?,
-            optimiser: Optimiser::new(network, options.precision),
+            optimiser: Optimiser::from_network(network, options.precision)?,
             network,
         };
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
@@ -74,7 +80,7 @@ impl Fit<'_> {
         let unmeasured =
             (training.tracks.iter()).any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
         let every = if unmeasured { 1 } else { FILL_REFRESH };
-        for epoch in 1..=options.epochs {
+        for epoch in first..=options.epochs {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
             let fill_due = needs_fill && (epoch - 1) % every == 0;
             if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
@@ -94,8 +100,21 @@ impl Fit<'_> {
                 loss,
                 horizon,
             });
+            let engines = &mut engines;
+            let end = EpochEnd {
+                epoch,
+                horizon,
+                loss,
+                rng: &rng,
+                course: training,
+                engines,
+            };
+            if safety.after_epoch(end, on_event)? {
+                break;
+            }
         }
-        engines.graph_with_weights()?;
+        engines.graph_with_state()?;
+        safety.finish(network)?;
         Ok(losses)
     }
 
@@ -181,6 +200,42 @@ impl Fit<'_> {
     }
 }
 
+/// The state after an epoch, for the run's safety hooks ([`Safety`]).
+pub(super) struct EpochEnd<'e, 'n> {
+    /// 1-based epoch.
+    pub epoch: usize,
+    /// Its rollout length (1: one-step).
+    pub horizon: usize,
+    /// Its mean training loss.
+    pub loss: f64,
+    /// The shuffling generator.
+    pub rng: &'e ChaCha8Rng,
+    /// The training tracks.
+    pub course: &'e Course,
+    engines: &'e mut Engines<'n>,
+}
+
+impl EpochEnd<'_, '_> {
+    /// The graph network with the current weights.
+    pub fn network(&mut self) -> Result<&Network, BackendError> {
+        self.engines.graph_with_weights()
+    }
+
+    /// The current weights and Adam state, from the optimiser (looking changes nothing).
+    pub fn state(&self) -> (Vec<NamedTensor>, AdamState) {
+        let engines = &self.engines;
+        let mut tensors = engines.network.weights();
+        let flat = engines.optimiser.weights();
+        let mut at = 0;
+        for tensor in &mut tensors {
+            let size = tensor.values.len();
+            tensor.values.copy_from_slice(&flat[at..at + size]);
+            at += size;
+        }
+        (tensors, engines.optimiser.adam_state())
+    }
+}
+
 /// The optimiser, the graph network and, where the engine asks for it, the fused step.
 struct Engines<'n> {
     network: &'n mut Network,
@@ -202,6 +257,14 @@ impl Engines<'_> {
     /// The graph network with the optimiser's current weights.
     fn graph_with_weights(&mut self) -> Result<&Network, BackendError> {
         self.network.set_flat_weights(&self.optimiser.weights())?;
+        Ok(self.network)
+    }
+
+    /// The graph network with the optimiser's weights and Adam state (what a checkpoint or
+    /// the saved run keeps).
+    fn graph_with_state(&mut self) -> Result<&Network, BackendError> {
+        self.network.set_flat_weights(&self.optimiser.weights())?;
+        self.network.set_adam_state(&self.optimiser.adam_state())?;
         Ok(self.network)
     }
 }

@@ -26,6 +26,7 @@ pub mod analysis;
 pub mod artifacts;
 pub mod balances;
 pub mod bench;
+pub mod checkpoint;
 pub mod cv;
 mod error;
 pub mod evaluate;
@@ -58,12 +59,13 @@ use crate::ir;
 
 pub use analysis::StiffnessWarning;
 pub use balances::BalanceFit;
+pub use checkpoint::{Checkpoint, RunControl};
 pub use error::TrainError;
 pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 pub use initial::{InitialState, Origin};
 pub use polish::{ParamEstimate, PolishSummary};
 pub use recipe::{Engine, Objective, ParamSource, Recipe};
-pub use run::train_with;
+pub use run::{train_run, train_with};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
 
@@ -161,6 +163,24 @@ pub enum Event<'a> {
         loss: f64,
         /// Steps per window (1: one-step pairs).
         horizon: usize,
+    },
+    /// After an epoch, with early stopping: the pooled validation errors.
+    Validation {
+        /// 1-based epoch.
+        epoch: usize,
+        /// Offline error, if any pair scores it.
+        offline: Option<f64>,
+        /// Online error, if any free run scores it.
+        online: Option<f64>,
+    },
+    /// Early stopping ended training before the planned epochs.
+    EarlyStop {
+        /// The last epoch run.
+        epoch: usize,
+        /// The epoch whose weights are kept.
+        best_epoch: usize,
+        /// Its validation loss.
+        best_loss: f64,
     },
 }
 

@@ -55,10 +55,13 @@ pub struct ParamEstimate {
     /// Param name.
     pub name: String,
     /// Trained value.
+    #[serde(with = "crate::json")]
     pub value: f64,
     /// Linearised standard error (infinite when the data do not determine it).
+    #[serde(with = "crate::json")]
     pub std_error: f64,
     /// `std_error / |value|`.
+    #[serde(with = "crate::json")]
     pub relative_error: f64,
     /// Whether `relative_error` is below [`IDENTIFIABILITY_LIMIT`].
     pub well_identified: bool,
@@ -70,10 +73,13 @@ pub struct PolishSummary {
     /// Accepted Levenberg-Marquardt steps.
     pub steps: usize,
     /// Mean squared normalised one-step residual before.
+    #[serde(with = "crate::json")]
     pub loss_before: f64,
     /// And after.
+    #[serde(with = "crate::json")]
     pub loss_after: f64,
     /// Param values before, in declaration order.
+    #[serde(with = "crate::json")]
     pub params_before: Vec<f64>,
 }
 

@@ -25,6 +25,8 @@ use super::recipe::DEFAULT_RANGE_FACTOR;
 use super::split::{window_start, History};
 use super::{hidden_initial_values, TrainError};
 
+pub mod whatif;
+
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
@@ -79,7 +81,7 @@ pub fn predict_in_range(
     record: &Record,
     (mode, history, range): (Mode, History, Option<&PhysicalRange>),
 ) -> Result<PredictionTable, TrainError> {
-    let mut track = track_of(model, setup, record)?;
+    let track = track_of(model, setup, record)?;
     let first = window_start(model, &track, history);
     if track.len() < first + 2 {
         return Err(TrainError::TooFewRows {
@@ -89,13 +91,49 @@ pub fn predict_in_range(
             reason: format!("{first} rows of embedding history and one step"),
         });
     }
-    let fractions = stage_fractions(model.dynamics, setup.substeps);
     let initial = hidden_initial_values(model)?;
+    let start = Start {
+        knot: first,
+        hidden_initial: &initial,
+        hidden_at_start: &[],
+    };
+    predict_on_track(model, network, setup, track, start, (mode, range))
+}
+
+/// Where a prediction along a track starts.
+#[derive(Debug, Clone, Copy)]
+pub struct Start<'a> {
+    /// The knot the rows (and an online run) start at.
+    pub knot: usize,
+    /// The hidden states at the track's first knot, from which they are run in.
+    pub hidden_initial: &'a [f64],
+    /// Hidden states that replace the run-in values at `knot` (`None` or missing: keep).
+    pub hidden_at_start: &'a [Option<f64>],
+}
+
+/// Predicts along `track` from `start.knot` to its end (at least one step after it); an
+/// online run stops when it leaves `range` (none: never).
+pub fn predict_on_track(
+    model: &ir::Model,
+    network: &Network,
+    setup: &Setup,
+    mut track: Track,
+    start: Start,
+    (mode, range): (Mode, Option<&PhysicalRange>),
+) -> Result<PredictionTable, TrainError> {
+    let first = start.knot;
+    let initial = start.hidden_initial.to_vec();
+    let fractions = stage_fractions(model.dynamics, setup.substeps);
     let run_in = run_in(network, model, &track, &fractions, &initial)?;
     for (state, values) in run_in.states.iter().enumerate() {
         track.fill(state, values);
     }
-    let hidden_start = run_in.hidden.get(first).cloned().unwrap_or(initial);
+    let mut hidden_start = run_in.hidden.get(first).cloned().unwrap_or(initial);
+    for (value, given) in hidden_start.iter_mut().zip(start.hidden_at_start) {
+        if let Some(given) = given {
+            *value = *given;
+        }
+    }
     let last = track.len() - 1;
     let feed = match mode {
         Mode::Offline => Feed::Data,

@@ -128,14 +128,18 @@ pub struct Recipe {
     /// Longest rollout in steps (multi-step objective).
     pub horizon: usize,
     /// Share of the epochs trained one-step first (multi-step objective).
+    #[serde(with = "crate::json")]
     pub warmup_share: f64,
     /// Share of the epochs over which the rollout grows from 2 steps to `horizon`.
+    #[serde(with = "crate::json")]
     pub ramp_share: f64,
     /// Windows per Adam step (multi-step objective); `None`: the batch size.
     pub windows_per_batch: Option<usize>,
     /// Adam learning rate of the params; `None`: the network's.
+    #[serde(with = "crate::json")]
     pub param_learning_rate: Option<f64>,
     /// Clip the gradient to this Euclidean norm; `None`: no clipping.
+    #[serde(with = "crate::json")]
     pub max_gradient_norm: Option<f64>,
     /// After training, fit the params by Levenberg-Marquardt with the network frozen
     /// ([`super::polish`]); `None`: on for the multi-step objective, off for one-step.
@@ -143,6 +147,7 @@ pub struct Recipe {
     /// A free run stops when a measured state leaves `[-0.1 * max, factor * max]` (states
     /// never negative in training; see [`super::evaluate::UNDERSHOOT`]) or `[-factor * max|x|, factor * max|x|]`, the extremes taken
     /// over the training split, or becomes non-finite.
+    #[serde(with = "crate::json")]
     pub range_factor: f64,
     /// Where the params come from (`Auto`: from the balances where they determine them).
     #[serde(default)]

@@ -10,6 +10,7 @@ use crate::backend::{Network, Setup};
 use crate::ir;
 
 use super::balances::{self, BalanceFit};
+use super::checkpoint::{RunControl, Safety};
 use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
@@ -29,9 +30,23 @@ pub fn train_with(
     recipe: &Recipe,
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
+    let control = RunControl::default();
+    train_run(model, data, (options, recipe), &control, on_event)
+}
+
+/// [`train_with`] under `control`: checkpoints, interruption, resuming and early stopping
+/// ([`super::checkpoint`]).
+pub fn train_run(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+    control: &RunControl,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Trained, TrainError> {
+    let started = std::time::Instant::now();
     let mut run = prepare(model, data, options, recipe, on_event)?;
     let initial = run.validate(options, recipe)?;
-    let losses = run.fit(options, recipe, on_event)?;
+    let losses = run.fit((options, recipe), (control, started), on_event)?;
     let evaluation = run.evaluate(options, recipe)?;
     Ok(run.report(options, recipe, (initial, evaluation), losses))
 }
@@ -180,8 +195,8 @@ impl Run<'_> {
     /// Runs the epochs; the mean training loss of each.
     fn fit(
         &mut self,
-        options: &TrainOptions,
-        recipe: &Recipe,
+        (options, recipe): (&TrainOptions, &Recipe),
+        (control, started): (&RunControl, std::time::Instant),
         on_event: &mut dyn FnMut(Event),
     ) -> Result<Vec<f64>, TrainError> {
         let fit = fit::Fit {
@@ -193,7 +208,22 @@ impl Run<'_> {
             freeze_params: self.balance_fit.is_some(),
             trainings: &self.layout.trainings,
         };
-        fit.run(&mut self.network, &mut self.training, on_event)
+        let range = PhysicalRange::new(&self.setup.normalisation, recipe.range_factor);
+        let context = (&self.setup, options, range.as_ref());
+        let (validating, scorings, hidden_init) = (
+            &mut self.validating,
+            &self.layout.scorings,
+            &self.hidden_init,
+        );
+        let model: &ir::Model = &self.model;
+        let mut validate_now = |network: &Network| {
+            let scoring = (&mut *validating, &scorings[..]);
+            let (offline, online, _) = validate(network, model, scoring, context, hidden_init)?;
+            Ok((offline.map(|s| s.overall), online.map(|s| s.overall)))
+        };
+        let validate_now = (!scorings.is_empty()).then_some(&mut validate_now as _);
+        let mut safety = Safety::new(control, (options, started), validate_now);
+        fit.run(&mut self.network, &mut self.training, on_event, &mut safety)
     }
 
     /// After the epochs: initial states re-fitted on the training and validation data,

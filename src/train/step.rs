@@ -82,6 +82,8 @@ pub struct Optimiser {
     state: State,
     /// Where the params sit in the flat vector (none: the model has none).
     params: Option<Range<usize>>,
+    /// The length of each of the network's tensors, in order (for Adam's state per tensor).
+    lengths: Vec<usize>,
 }
 
 enum State {
@@ -102,7 +104,33 @@ impl Optimiser {
             Precision::F32 => State::Single(flat.map(|v| v as f32).collect(), Adam::new(size)),
             Precision::F64 => State::Double(flat.collect(), Adam::new(size)),
         };
-        Optimiser { state, params }
+        let lengths = tensors.iter().map(|t| t.values.len()).collect();
+        Optimiser {
+            state,
+            params,
+            lengths,
+        }
+    }
+
+    /// Starts from `network`'s weights and Adam state (a resumed run's moments).
+    pub fn from_network(network: &Network, precision: Precision) -> Result<Self, BackendError> {
+        let mut optimiser = Optimiser::new(network, precision);
+        let state = network.adam_state();
+        let lengths = optimiser.lengths.clone();
+        let set = match &mut optimiser.state {
+            State::Single(_, adam) => adam.set_state(&state, &lengths),
+            State::Double(_, adam) => adam.set_state(&state, &lengths),
+        };
+        set.map_err(BackendError::WeightsMismatch)?;
+        Ok(optimiser)
+    }
+
+    /// Adam's step count and moments, per tensor.
+    pub fn adam_state(&self) -> crate::numeric::AdamState {
+        match &self.state {
+            State::Single(_, adam) => adam.state(&self.lengths),
+            State::Double(_, adam) => adam.state(&self.lengths),
+        }
     }
 
     /// The current weights, flat, as `f64` (exact in either precision).

@@ -224,7 +224,7 @@ fn scratch_directory(name: &str) -> std::path::PathBuf {
 }
 
 #[test]
-fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
+fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_structure() {
     let (data, _) = chemostat::data(150, (0.002, 0.02), 8);
     let model = chemostat::grey_box();
     let options = options(2, 80);
@@ -257,8 +257,22 @@ fn saved_weights_reload_to_the_same_predictions_and_refuse_a_changed_model() {
     {
         assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-12), "{a} vs {b}");
     }
-    let changed = artifacts::restore(&model, "model chemostat_gb  # edited\n", &directory);
-    assert!(matches!(changed, Err(TrainError::ModelChanged { .. })));
+    // Another text of the same structure is accepted, with a note; another structure is not.
+    let edited =
+        artifacts::restore_with_notes(&model, "model chemostat_gb  # edited\n", &directory);
+    assert!(edited.unwrap().notes[0].contains("structure is the same"));
+    let mut wider = model.clone();
+    wider.closures[0].network.hidden[0] += 1;
+    match artifacts::restore(&wider, source, &directory) {
+        Err(TrainError::ModelChanged { changes, .. }) => {
+            assert_eq!(changes.len(), 1, "{changes:?}");
+            assert!(
+                changes[0].contains("network: expected `hidden [20"),
+                "{changes:?}"
+            );
+        }
+        _ => panic!("a wider network must be refused"),
+    }
     std::fs::remove_dir_all(&directory).unwrap();
 }
 

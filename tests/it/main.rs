@@ -1,5 +1,6 @@
 //! Integration tests: one binary, a module per feature.
 
+mod artifacts;
 mod authoring;
 mod cli;
 mod diagnose;
@@ -9,3 +10,5 @@ mod golden;
 mod lsp;
 mod parser;
 mod records;
+mod safety;
+mod whatif;

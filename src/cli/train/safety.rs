@@ -1,0 +1,133 @@
+//! `gbc train`'s run safety at the edge: the command line kept in the run directory for
+//! `--resume`, and Ctrl-C / SIGTERM turned into a stop after the current epoch.
+//!
+//! Every checkpoint keeps the command line (its `command`): the arguments after `train`,
+//! the working directory they were given in, and the sha256 of every model and data file.
+//! `gbc train --resume DIR` parses those arguments again (relative paths against that
+//! working directory), checks that no file changed (E0432) and hands the checkpoint to
+//! training.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use clap::Parser;
+use sha2::{Digest, Sha256};
+
+use super::{train_error, TrainArgs};
+use crate::cli::{Cli, Command, CommandError};
+use crate::train::{Checkpoint, TrainError};
+
+/// The command line a checkpoint keeps.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct SavedArgs {
+    /// The working directory the arguments were given in.
+    directory: PathBuf,
+    /// The arguments after `train`.
+    args: Vec<String>,
+    /// Each model and data file with the sha256 of its bytes.
+    files: Vec<(PathBuf, String)>,
+}
+
+/// The command line of this training, for its checkpoints.
+pub fn command(args: &TrainArgs) -> Result<serde_json::Value, CommandError> {
+    let argv: Vec<String> = std::env::args().collect();
+    let after = argv
+        .iter()
+        .position(|a| a == "train")
+        .map_or(argv.len(), |i| i + 1);
+    let saved = SavedArgs {
+        directory: std::env::current_dir().unwrap_or_default(),
+        args: argv[after..].to_vec(),
+        files: input_files(args)
+            .into_iter()
+            .map(|path| {
+                let hash = file_hash(&path);
+                (path, hash)
+            })
+            .collect(),
+    };
+    serde_json::to_value(&saved)
+        .map_err(|error| CommandError::Internal(format!("cannot encode arguments: {error}")))
+}
+
+/// The arguments and the checkpoint of the stopped run in `directory`.
+pub fn resumed(directory: &Path) -> Result<(TrainArgs, Checkpoint), CommandError> {
+    let no_checkpoint = |found: String| {
+        train_error(TrainError::NoCheckpoint {
+            directory: directory.display().to_string(),
+            found,
+        })
+    };
+    let checkpoint = Checkpoint::load(directory).map_err(train_error)?;
+    let saved: SavedArgs = serde_json::from_value(checkpoint.command.clone())
+        .map_err(|error| no_checkpoint(format!("a checkpoint without its command ({error})")))?;
+    let argv = ["gbc".to_string(), "train".to_string()]
+        .into_iter()
+        .chain(saved.args.iter().cloned());
+    let cli = Cli::try_parse_from(argv)
+        .map_err(|error| no_checkpoint(format!("arguments that no longer parse ({error})")))?;
+    let Command::Train(args) = cli.command else {
+        return Err(no_checkpoint("another command's arguments".into()));
+    };
+    let mut args = *args;
+    let base = &saved.directory;
+    let anchor = |path: &mut PathBuf| {
+        if path.is_relative() && path.as_os_str() != crate::io::STDOUT {
+            *path = base.join(&*path);
+        }
+    };
+    args.model.iter_mut().for_each(anchor);
+    args.data.iter_mut().for_each(anchor);
+    args.val.iter_mut().for_each(anchor);
+    args.json.iter_mut().for_each(anchor);
+    for (path, hash) in &saved.files {
+        let path = base.join(path);
+        if file_hash(&path) != *hash {
+            return Err(train_error(TrainError::ResumeChanged {
+                what: format!("`{}` changed since the run started", path.display()),
+            }));
+        }
+    }
+    args.output = Some(directory.to_path_buf());
+    args.force = true;
+    args.resume = None;
+    args.stop_after_epochs = None;
+    Ok((args, checkpoint))
+}
+
+/// A flag that Ctrl-C or SIGTERM sets (the run stops after the current epoch and writes a
+/// checkpoint); a second signal ends the process at once. `None` when no handler could be
+/// installed (the default handling then stays).
+pub fn stop_on_signal() -> Option<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let seen = Arc::clone(&flag);
+    let installed = ctrlc::set_handler(move || {
+        if seen.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!(
+            "\nstopping after this epoch with a checkpoint (interrupt again to stop at once)"
+        );
+    });
+    installed.is_ok().then_some(flag)
+}
+
+/// The model and data files of a training.
+fn input_files(args: &TrainArgs) -> Vec<PathBuf> {
+    (args.model.iter())
+        .chain(&args.data)
+        .chain(&args.val)
+        .cloned()
+        .collect()
+}
+
+/// sha256 of a file's bytes (empty when it cannot be read).
+fn file_hash(path: &Path) -> String {
+    std::fs::read(path).map_or(String::new(), |bytes| {
+        Sha256::digest(&bytes)
+            .iter()
+            .map(|byte| format!("{byte:02x}"))
+            .collect()
+    })
+}

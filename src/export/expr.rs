@@ -1,0 +1,230 @@
+//! The physics of a compiled model as ONNX nodes: one general translation of
+//! [`ir::Expr`] (balances, priors, `output`s), closure outputs from network outputs (prior,
+//! magnitude and constraint, spec section 3) and params through their transforms, the same
+//! arithmetic as the trainable network's physics program (`backend::program`).
+//!
+//! Every value is a `[batch, 1]` column or a constant folded at export time in `f64`, as
+//! the physics program folds literal sub-expressions; identical sub-expressions of one
+//! stage share their nodes.
+
+use std::collections::HashMap;
+
+use super::graph::{Builder, Value};
+use crate::ir::{self, BinOp, Constraint, Func, PriorKind, Var};
+
+/// What the physics reads besides the stage state: the held inputs and the raw params.
+pub struct Physics<'m> {
+    model: &'m ir::Model,
+    scales: &'m [Vec<f64>],
+    /// `[batch, inputs]`, when the model has inputs.
+    inputs: Option<String>,
+    /// `[params]` raw (unconstrained) values, when the model has params.
+    raw_params: Option<String>,
+    held: HashMap<Var, Value>,
+}
+
+/// The tensors of one stage: the stage state and every closure's network output.
+pub struct Stage {
+    /// `[batch, measured + hidden]`.
+    pub state: String,
+    /// Per closure, `[batch, outputs]` before prior and magnitude.
+    pub nets: Vec<String>,
+    memo: HashMap<String, Value>,
+}
+
+impl Stage {
+    /// A stage at `state` with network outputs `nets`.
+    pub fn new(state: String, nets: Vec<String>) -> Self {
+        Stage {
+            state,
+            nets,
+            memo: HashMap::new(),
+        }
+    }
+}
+
+impl<'m> Physics<'m> {
+    /// The physics of `model` with closure magnitudes `scales`, reading `inputs`
+    /// (`[batch, inputs]`) and `raw_params` (`[params]`).
+    pub fn new(
+        model: &'m ir::Model,
+        scales: &'m [Vec<f64>],
+        inputs: Option<String>,
+        raw_params: Option<String>,
+    ) -> Self {
+        Physics {
+            model,
+            scales,
+            inputs,
+            raw_params,
+            held: HashMap::new(),
+        }
+    }
+
+    /// The value of `expr` at `stage`.
+    pub fn expr(&mut self, graph: &mut Builder, stage: &mut Stage, expr: &ir::Expr) -> Value {
+        let key = format!("{expr:?}");
+        if let Some(value) = stage.memo.get(&key) {
+            return value.clone();
+        }
+        let value = match expr {
+            ir::Expr::Num(number) => Value::Const(*number),
+            ir::Expr::Var(var) => self.var(graph, stage, *var),
+            ir::Expr::Neg(inner) => match self.expr(graph, stage, inner) {
+                Value::Const(number) => Value::Const(-number),
+                other => graph.map(&other, |g, x| g.unary("Neg", x)),
+            },
+            ir::Expr::Bin(op, left, right) => {
+                let a = self.expr(graph, stage, left);
+                let b = self.expr(graph, stage, right);
+                let op = match op {
+                    BinOp::Add => "Add",
+                    BinOp::Sub => "Sub",
+                    BinOp::Mul => "Mul",
+                    BinOp::Div => "Div",
+                    BinOp::Pow => "Pow",
+                };
+                graph.binary(op, &a, &b)
+            }
+            ir::Expr::Call(func, args) => {
+                let values: Vec<Value> = args.iter().map(|a| self.expr(graph, stage, a)).collect();
+                call(graph, *func, &values)
+            }
+        };
+        stage.memo.insert(key, value.clone());
+        value
+    }
+
+    /// The value of closure output `output` of closure `closure` at `stage`.
+    pub fn closure_output(
+        &mut self,
+        graph: &mut Builder,
+        stage: &mut Stage,
+        (closure, output): (usize, usize),
+    ) -> Value {
+        let key = format!("closure {closure}.{output}");
+        if let Some(value) = stage.memo.get(&key) {
+            return value.clone();
+        }
+        let spec = &self.model.closures[closure].outputs[output];
+        let scale = self.scales[closure][output];
+        let net = Value::Column(graph.column(&stage.nets[closure], output));
+        let combined = match &spec.prior {
+            None => graph.binary("Mul", &Value::Const(scale), &net),
+            Some(prior) => {
+                let p = self.expr(graph, stage, &prior.expr);
+                match prior.kind {
+                    PriorKind::Mul => {
+                        let factor = graph.binary("Add", &Value::Const(1.0), &net);
+                        graph.binary("Mul", &p, &factor)
+                    }
+                    PriorKind::Add => {
+                        let correction = graph.binary("Mul", &Value::Const(scale), &net);
+                        graph.binary("Add", &p, &correction)
+                    }
+                }
+            }
+        };
+        let value = match spec.constraint {
+            Constraint::Bounds(lo, hi) => {
+                let centred = graph.binary("Add", &combined, &Value::Const(-(lo + hi) / 2.0));
+                let argument = graph.binary("Mul", &Value::Const(4.0 / (hi - lo)), &centred);
+                constrain(graph, &argument, spec.constraint, 1.0)
+            }
+            other => constrain(graph, &combined, other, scale),
+        };
+        stage.memo.insert(key, value.clone());
+        value
+    }
+
+    fn var(&mut self, graph: &mut Builder, stage: &mut Stage, var: Var) -> Value {
+        match var {
+            Var::State(i) => Value::Column(graph.column(&stage.state, i)),
+            Var::Hidden(j) => {
+                Value::Column(graph.column(&stage.state, self.model.states.len() + j))
+            }
+            Var::Const(i) => Value::Const(self.model.consts[i].value),
+            Var::ClosureOutput { closure, output } => {
+                self.closure_output(graph, stage, (closure, output))
+            }
+            Var::Input(_) | Var::Param(_) => {
+                if let Some(value) = self.held.get(&var) {
+                    return value.clone();
+                }
+                let value = match var {
+                    Var::Input(i) => {
+                        let inputs = self.inputs.clone().unwrap_or_default();
+                        Value::Column(graph.column(&inputs, i))
+                    }
+                    _ => self.param(graph, var),
+                };
+                self.held.insert(var, value.clone());
+                value
+            }
+        }
+    }
+
+    /// A param's constrained value: its raw value through the transform of its
+    /// constraint (`positive`: softplus; `in [lo, hi]`: `lo + (hi - lo) sigmoid`).
+    fn param(&mut self, graph: &mut Builder, var: Var) -> Value {
+        let Var::Param(index) = var else {
+            return Value::Const(f64::NAN);
+        };
+        let raw_params = self.raw_params.clone().unwrap_or_default();
+        let indices = graph.ints("param_index", &[], &[index as i64]);
+        let raw = Value::Scalar(graph.node("Gather", &[&raw_params, &indices], &[("axis", 0)]));
+        constrain(graph, &raw, self.model.params[index].constraint, 1.0)
+    }
+}
+
+/// `scale * softplus(raw / scale)` for `positive`, `lo + (hi - lo) sigmoid(raw)` for
+/// bounds (multiplications by 1 left out: they are exact).
+fn constrain(graph: &mut Builder, raw: &Value, constraint: Constraint, scale: f64) -> Value {
+    match constraint {
+        Constraint::Free => raw.clone(),
+        Constraint::Positive => {
+            let scaled = if scale == 1.0 {
+                raw.clone()
+            } else {
+                graph.binary("Mul", raw, &Value::Const(1.0 / scale))
+            };
+            let soft = unary(graph, Func::Softplus, &scaled);
+            if scale == 1.0 {
+                soft
+            } else {
+                graph.binary("Mul", &Value::Const(scale), &soft)
+            }
+        }
+        Constraint::Bounds(lo, hi) => {
+            let squashed = unary(graph, Func::Sigmoid, raw);
+            let spread = graph.binary("Mul", &Value::Const(hi - lo), &squashed);
+            graph.binary("Add", &Value::Const(lo), &spread)
+        }
+    }
+}
+
+/// A built-in function on its arguments.
+fn call(graph: &mut Builder, func: Func, args: &[Value]) -> Value {
+    match func {
+        Func::Min => graph.binary("Min", &args[0], &args[1]),
+        Func::Max => graph.binary("Max", &args[0], &args[1]),
+        Func::Pow => graph.binary("Pow", &args[0], &args[1]),
+        _ => unary(graph, func, &args[0]),
+    }
+}
+
+/// A one-argument function, folded on a constant.
+fn unary(graph: &mut Builder, func: Func, arg: &Value) -> Value {
+    if let Value::Const(number) = arg {
+        return Value::Const(func.apply(*number, 0.0));
+    }
+    graph.map(arg, |graph, x| match func {
+        Func::Exp => graph.unary("Exp", x),
+        Func::Log => graph.unary("Log", x),
+        Func::Sqrt => graph.unary("Sqrt", x),
+        Func::Abs => graph.unary("Abs", x),
+        Func::Tanh => graph.unary("Tanh", x),
+        Func::Sigmoid => graph.sigmoid(x),
+        _ => graph.softplus(x),
+    })
+}

@@ -1,0 +1,251 @@
+//! Every file gbc writes, it reads back: run directories, experiment results and study
+//! records, diagnosis reports and cross-validation results holding infinities, NaNs and
+//! unidentified params (written by name, `"inf"`, `"nan"`; see `src/json.rs`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use gbc::diagnose::{Confidence, EffectScore, Locus, LocusKind, Report, SplitSummary, StateGap};
+use gbc::experiment::results::{self, Measure};
+use gbc::experiment::{RunResult, RunStatus, Study, StudyRecord};
+use gbc::train::artifacts;
+use gbc::train::cv::{CrossValidation, Fold};
+use gbc::train::{BalanceFit, Divergence, ErrorSet, ParamEstimate};
+
+use crate::cli::{gbc, scratch};
+
+/// The JSON text of a value: equal texts mean equal values, NaNs included.
+fn text<T: serde::Serialize>(value: &T) -> String {
+    serde_json::to_string_pretty(value).unwrap()
+}
+
+/// A diverged error set, as a free run that left the physical range gives.
+fn diverged(state: &str) -> ErrorSet {
+    ErrorSet {
+        per_state: vec![(state.to_string(), f64::INFINITY)],
+        overall: f64::INFINITY,
+        rows: 12,
+        cells: 12,
+        divergence: Some(Divergence {
+            experiment: "steps".into(),
+            row: 13,
+            time: 58.0,
+            state: state.into(),
+            value: f64::NAN,
+            range: (f64::NEG_INFINITY, 4.5),
+        }),
+    }
+}
+
+/// A param the data do not determine.
+fn unidentified(name: &str) -> ParamEstimate {
+    ParamEstimate {
+        name: name.into(),
+        value: 0.5,
+        std_error: f64::INFINITY,
+        relative_error: f64::INFINITY,
+        well_identified: false,
+    }
+}
+
+#[test]
+fn a_run_with_unidentified_params_and_a_diverged_free_run_reads_back_and_predicts() {
+    let dir = scratch("artifacts-run");
+    let (model_path, data) = (
+        "models/bioreactor/gb1.gbm",
+        "models/bioreactor/data/steps.csv",
+    );
+    let run = dir.join("run");
+    let run_text = run.display().to_string();
+    let trained = gbc(&[
+        "train",
+        model_path,
+        data,
+        "--epochs",
+        "1",
+        "--objective",
+        "one-step",
+        "--train-points",
+        "100",
+        "-o",
+        &run_text,
+    ]);
+    assert!(
+        trained.status.success(),
+        "{}",
+        String::from_utf8_lossy(&trained.stderr)
+    );
+    let model = gbc::driver::compile_file(Path::new(model_path), &[])
+        .unwrap()
+        .model;
+    let source = std::fs::read_to_string(model_path).unwrap();
+    let (network, _, mut info) = artifacts::restore(&model, &source, &run).unwrap();
+    info.estimates = vec![
+        unidentified("Y_X"),
+        unidentified("Y_A"),
+        unidentified("Y_B"),
+    ];
+    info.balance_fit = Some(BalanceFit {
+        intervals: 90,
+        steps: 4,
+        rms_residual: f64::NAN,
+        estimates: info.estimates.clone(),
+        raw: Vec::new(),
+    });
+    info.metrics.online = Some(diverged("X"));
+    info.metrics.initial_online = Some(diverged("S"));
+    info.training.final_loss = Some(f64::NAN);
+    info.model.source = source;
+    artifacts::save(&run, &info, &network).unwrap();
+    let written = std::fs::read_to_string(run.join("run.json")).unwrap();
+    for expected in [
+        "\"std_error\": \"inf\"",
+        "\"rms_residual\": \"nan\"",
+        "\"overall\": \"inf\"",
+        "\"value\": \"nan\"",
+        "\"-inf\"",
+        "\"final_loss\": \"nan\"",
+    ] {
+        assert!(written.contains(expected), "{expected} not in {written}");
+    }
+    let (again, _) = artifacts::load(&run).unwrap();
+    assert_eq!(text(&again), text(&info));
+    assert_eq!(again.estimates[0].std_error, f64::INFINITY);
+    let online = again.metrics.online.unwrap();
+    assert!(online.divergence.unwrap().value.is_nan());
+    // The user's view: the run predicts.
+    let out = dir.join("offline.csv").display().to_string();
+    let predicted = gbc(&[
+        "predict",
+        model_path,
+        data,
+        "--weights",
+        &run_text,
+        "-o",
+        &out,
+    ]);
+    assert!(
+        predicted.status.success(),
+        "{}",
+        String::from_utf8_lossy(&predicted.stderr)
+    );
+}
+
+#[test]
+fn experiment_results_and_study_records_read_back() {
+    let dir = scratch("artifacts-experiment");
+    std::fs::create_dir_all(dir.join(results::RUNS_DIR)).unwrap();
+    let result = RunResult {
+        id: "greybox-n100-r0".into(),
+        model: "greybox".into(),
+        size: 100,
+        replicate: 0,
+        seed: 1,
+        epochs: 3,
+        status: RunStatus::Ok,
+        error: None,
+        offline_mse: Some(0.25),
+        online_mse: Some(f64::INFINITY),
+        offline_per_state: vec![Measure {
+            name: "S".into(),
+            value: Some(f64::NAN),
+        }],
+        online_per_state: vec![Measure {
+            name: "S".into(),
+            value: None,
+        }],
+        generalisation: vec![Measure {
+            name: "chirp.csv".into(),
+            value: Some(f64::NEG_INFINITY),
+        }],
+        params: vec![Measure::new("Y_X", f64::INFINITY)],
+        final_loss: Some(f64::NAN),
+        train_pairs: 100,
+        validation_pairs: 40,
+        wall_seconds: 1.5,
+        warnings: Vec::new(),
+        left_range: Some("the free run left the physical range".into()),
+    };
+    results::write_result(&dir, &result).unwrap();
+    let again = results::read_result(&dir, &result.id).expect("the result reads back");
+    assert_eq!(text(&again), text(&result));
+    assert_eq!(again.online_mse, Some(f64::INFINITY));
+    let mut study = Study::chemostat_demo();
+    study.learning_rate = f64::INFINITY;
+    let record = StudyRecord {
+        gbc_version: "0".into(),
+        study,
+        files: Vec::new(),
+    };
+    std::fs::write(dir.join(results::STUDY_FILE), text(&record)).unwrap();
+    let again = results::read_study_record(&dir).unwrap().unwrap();
+    assert_eq!(text(&again), text(&record));
+}
+
+#[test]
+fn diagnosis_reports_and_cross_validations_read_back() {
+    let report = Report {
+        model: "chemostat".into(),
+        gap_before: f64::INFINITY,
+        noise_floor: f64::NAN,
+        significant: true,
+        states: vec![StateGap {
+            name: "S".into(),
+            share: f64::NAN,
+            online: f64::INFINITY,
+            offline: 0.5,
+            noise: 0.0,
+        }],
+        locus: vec![Locus {
+            name: "rate".into(),
+            kind: LocusKind::Let,
+            bound_after: f64::INFINITY,
+            bound_present: f64::NAN,
+            bound_history: -0.0,
+            tied: true,
+        }],
+        history_dependent: false,
+        windows: Vec::new(),
+        regime: Vec::new(),
+        effects: vec![EffectScore {
+            name: "product_inhibition".into(),
+            description: None,
+            gap_after: f64::INFINITY,
+            shrink: f64::NEG_INFINITY,
+            params: BTreeMap::from([("K_P".to_string(), f64::NAN)]),
+            gap_after_halves: [f64::INFINITY, 0.1],
+        }],
+        credited: None,
+        combined: None,
+        confidence: Confidence {
+            stable: false,
+            margin: f64::NAN,
+            best_by_half: [None, Some("product_inhibition".into())],
+        },
+        hints: Vec::new(),
+        fitted_params: BTreeMap::from([("kcat".to_string(), f64::INFINITY)]),
+        split: SplitSummary {
+            train_rows: 100,
+            test_rows: 50,
+            t_test_start: 100.0,
+            t_test_end: 149.0,
+            separate_test: false,
+        },
+        series: Default::default(),
+    };
+    let again: Report = serde_json::from_str(&text(&report)).unwrap();
+    assert_eq!(text(&again), text(&report));
+    assert_eq!(again.fitted_params["kcat"], f64::INFINITY);
+    let folds = CrossValidation {
+        folds: vec![Fold {
+            held_out: "run2".into(),
+            offline: None,
+            online: Some(diverged("X")),
+            seconds: 2.0,
+        }],
+        median_offline: None,
+        median_online: Some(f64::INFINITY),
+    };
+    let again: CrossValidation = serde_json::from_str(&text(&folds)).unwrap();
+    assert_eq!(text(&again), text(&folds));
+}

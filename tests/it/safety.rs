@@ -1,0 +1,271 @@
+//! Runs that are never lost (`gbc train`): a run stopped after some epochs and resumed ends
+//! bit for bit where the uninterrupted run ends; Ctrl-C leaves a checkpoint; early stopping
+//! keeps the best epoch; the renamed flags and their deprecated spellings.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use crate::cli::{gbc, scratch};
+
+const GB1: &str = "models/bioreactor/gb1.gbm";
+const STEPS: &str = "models/bioreactor/data/steps.csv";
+
+/// A short multi-step training of GB1 that crosses the curriculum's switch to rollouts.
+const SHORT: [&str; 12] = [
+    "--epochs",
+    "8",
+    "--train-points",
+    "200",
+    "--horizon",
+    "4",
+    "--warmup-share",
+    "0.5",
+    "--ramp",
+    "0.25",
+    "--seed",
+    "3",
+];
+
+/// [`SHORT`] with `extra` flags, an `--epochs` among them replacing its 8.
+fn short_with<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    let epochs_given = extra.contains(&"--epochs");
+    let mut args: Vec<&str> = if epochs_given {
+        SHORT[2..].to_vec()
+    } else {
+        SHORT.to_vec()
+    };
+    args.extend(extra);
+    args
+}
+
+fn train(run: &Path, extra: &[&str]) -> std::process::Output {
+    let run = run.display().to_string();
+    let mut args = vec!["train", GB1, STEPS, "-o", &run];
+    args.extend(short_with(extra));
+    gbc(&args)
+}
+
+fn stderr(output: &std::process::Output) -> String {
+    String::from_utf8_lossy(&output.stderr).to_string()
+}
+
+fn bytes(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Epoch rows of a run's log.csv: (epoch, train loss, online validation).
+fn log_rows(run: &Path) -> Vec<(usize, String, String)> {
+    let text = std::fs::read_to_string(run.join("log.csv")).unwrap();
+    (text.lines().skip(2))
+        .map(|line| {
+            let cells: Vec<&str> = line.split(',').collect();
+            (cells[0].parse().unwrap(), cells[3].into(), cells[5].into())
+        })
+        .collect()
+}
+
+#[test]
+fn a_run_stopped_and_resumed_ends_bit_for_bit_where_an_uninterrupted_run_ends() {
+    let dir = scratch("resume");
+    for engine in ["graph", "fused"] {
+        let whole = dir.join(format!("whole-{engine}"));
+        // Checkpoints every 3 epochs must not change the run either.
+        let output = train(&whole, &["--engine", engine, "--checkpoint-every", "3"]);
+        assert!(output.status.success(), "{}", stderr(&output));
+        assert!(
+            !whole.join("checkpoint.json").exists(),
+            "a finished run keeps no checkpoint"
+        );
+        let stopped = dir.join(format!("stopped-{engine}"));
+        let output = train(&stopped, &["--engine", engine, "--stop-after-epochs", "5"]);
+        assert_eq!(output.status.code(), Some(1));
+        let message = stderr(&output);
+        assert!(message.contains("E0430"), "{message}");
+        assert!(message.contains("gbc train --resume"), "{message}");
+        assert!(stopped.join("checkpoint.json").exists());
+        assert!(!stopped.join("weights.safetensors").exists());
+        assert_eq!(log_rows(&stopped).len(), 5);
+        let resumed = gbc(&["train", "--resume", &stopped.display().to_string()]);
+        assert!(resumed.status.success(), "{}", stderr(&resumed));
+        assert!(stderr(&resumed).contains("after epoch 5 of 8"));
+        assert_eq!(
+            bytes(&whole.join("weights.safetensors")),
+            bytes(&stopped.join("weights.safetensors")),
+            "{engine}: the resumed run's weights differ"
+        );
+        let losses = |run: &Path| -> Vec<String> {
+            log_rows(run).into_iter().map(|(_, loss, _)| loss).collect()
+        };
+        assert_eq!(losses(&whole), losses(&stopped));
+        assert!(!stopped.join("checkpoint.json").exists());
+    }
+}
+
+#[test]
+fn resuming_needs_a_checkpoint_and_the_same_files() {
+    let dir = scratch("resume-refused");
+    let finished = dir.join("finished");
+    assert!(train(&finished, &["--epochs", "1"]).status.success());
+    let output = gbc(&["train", "--resume", &finished.display().to_string()]);
+    assert_eq!(output.status.code(), Some(1));
+    assert!(stderr(&output).contains("E0431"), "{}", stderr(&output));
+    // The data changed since the checkpoint: refused, naming the file.
+    let data = dir.join("steps.csv");
+    std::fs::copy(STEPS, &data).unwrap();
+    let stopped = dir.join("stopped").display().to_string();
+    let data_text = data.display().to_string();
+    let mut args = vec!["train", GB1, &data_text, "-o", &stopped];
+    args.extend(short_with(&["--stop-after-epochs", "2"]));
+    assert_eq!(gbc(&args).status.code(), Some(1));
+    let mut text = std::fs::read_to_string(&data).unwrap();
+    text.push('\n');
+    std::fs::write(&data, text).unwrap();
+    let output = gbc(&["train", "--resume", &stopped]);
+    assert_eq!(output.status.code(), Some(1));
+    let message = stderr(&output);
+    assert!(
+        message.contains("E0432") && message.contains("steps.csv"),
+        "{message}"
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_ends_the_epoch_and_leaves_a_checkpoint() {
+    let dir = scratch("sigint");
+    let run = dir.join("run");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gbc"))
+        .args(["train", GB1, STEPS, "--objective", "one-step"])
+        .args(["--epochs", "1000000", "--train-points", "200", "-o"])
+        .arg(&run)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gbc runs");
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    for line in lines.by_ref() {
+        if line.unwrap().starts_with("training on") {
+            break;
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let signal = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(signal.success());
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(1), "{rest:?}");
+    let rest = rest.join("\n");
+    assert!(rest.contains("stopping after this epoch"), "{rest}");
+    assert!(
+        rest.contains("E0430") && rest.contains("--resume"),
+        "{rest}"
+    );
+    let checkpoint = std::fs::read_to_string(run.join("checkpoint.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&checkpoint).unwrap();
+    let epoch = json["epoch"].as_u64().unwrap();
+    assert!((1..1_000_000).contains(&epoch), "{epoch}");
+    assert_eq!(log_rows(&run).len() as u64, epoch);
+}
+
+/// One-step training of GB1 on 100 pairs at a high learning rate: the free run on the
+/// validation part diverges after the first epoch while the training loss keeps falling.
+fn overfitting(run: &Path, extra: &[&str]) -> std::process::Output {
+    let run = run.display().to_string();
+    let mut args = vec!["train", GB1, STEPS, "-o", &run, "--objective", "one-step"];
+    args.extend(["--train-points", "100", "--lr", "0.01"]);
+    args.extend(extra);
+    gbc(&args)
+}
+
+#[test]
+fn early_stopping_ends_a_run_whose_validation_loss_rises_and_keeps_the_best_epoch() {
+    let dir = scratch("early-stop");
+    let early = dir.join("early");
+    let output = overfitting(&early, &["--epochs", "40", "--early-stop", "3"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        stderr(&output).contains("early stop after epoch 4"),
+        "{}",
+        stderr(&output)
+    );
+    let rows = log_rows(&early);
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    let online: Vec<f64> = rows.iter().map(|r| r.2.parse().unwrap()).collect();
+    assert!(
+        online[1..].iter().all(|&later| later > online[0]),
+        "{online:?}"
+    );
+    // The weights kept are the first epoch's: those of a one-epoch run.
+    let first = dir.join("first");
+    assert!(overfitting(&first, &["--epochs", "1"]).status.success());
+    assert_eq!(
+        bytes(&early.join("weights.safetensors")),
+        bytes(&first.join("weights.safetensors"))
+    );
+    let without = dir.join("without");
+    assert!(overfitting(&without, &["--epochs", "8"]).status.success());
+    assert_eq!(log_rows(&without).len(), 8);
+}
+
+#[test]
+fn renamed_flags_keep_their_old_spelling_with_a_warning() {
+    let dir = scratch("renamed");
+    let new = dir.join("new");
+    let old = dir.join("old");
+    assert!(train(&new, &["--epochs", "2"]).status.success());
+    let run = old.display().to_string();
+    let mut args = vec!["train", GB1, STEPS, "-o", &run];
+    let short = short_with(&["--epochs", "2"]);
+    args.extend(short.iter().map(|a| {
+        if *a == "--warmup-share" {
+            "--warmup"
+        } else {
+            a
+        }
+    }));
+    let output = gbc(&args);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stderr(&output).contains("--warmup` is deprecated"));
+    assert_eq!(
+        bytes(&new.join("weights.safetensors")),
+        bytes(&old.join("weights.safetensors"))
+    );
+    // gbc experiment: --objective (one-step, or `paper`) and -o/--output; --training and
+    // --out still read.
+    let study = |args: &[&str]| {
+        let mut all = vec!["experiment", "--preset", "chemostat", "--print-study"];
+        all.extend(args);
+        let output = gbc(&all);
+        assert!(output.status.success(), "{}", stderr(&output));
+        (
+            String::from_utf8_lossy(&output.stdout).to_string(),
+            stderr(&output),
+        )
+    };
+    let (one_step, quiet) = study(&["--objective", "one-step", "--output", "x"]);
+    assert!(quiet.is_empty(), "{quiet}");
+    let (multi, _) = study(&["--objective", "multi-step", "-o", "x"]);
+    assert_ne!(one_step, multi);
+    assert_eq!(study(&["--objective", "paper"]).0, one_step);
+    let (old_spelling, warning) = study(&["--training", "one-step", "--out", "x"]);
+    assert_eq!(old_spelling, one_step);
+    assert!(warning.contains("--training` is deprecated"), "{warning}");
+    let help = gbc(&["train", "--help"]);
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(help.contains("--warmup-share") && !help.contains("--warmup <"));
+    assert!(help.contains("--resume") && help.contains("--early-stop"));
+    let help = gbc(&["simulate", "--help"]);
+    let help = String::from_utf8_lossy(&help.stdout);
+    for programme in ["steps(lo=", "const(V)", "chirp(lo=", "csv(FILE, COLUMN)"] {
+        assert!(
+            help.contains(programme),
+            "simulate --help lacks {programme}"
+        );
+    }
+}
