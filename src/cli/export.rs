@@ -47,12 +47,9 @@ pub fn run(args: &ExportArgs) -> CommandResult {
         eprintln!("note: {note}");
     }
     let exported = match args.format {
-        FormatArg::Onnx => crate::export::onnx(
-            &model,
-            &restored.network,
-            &restored.setup,
-            args.precision.into(),
-        ),
+        FormatArg::Onnx => {
+            crate::export::onnx(&model, &restored.network, &restored.setup, args.precision)
+        }
     }
     .map_err(|error| CommandError::Internal(error.to_string()))?;
     crate::io::write_atomic(&args.output, &exported.bytes).map_err(CommandError::user)?;

@@ -20,6 +20,7 @@ pub struct Settings {
     /// Pairs per Adam step.
     pub batch_size: usize,
     /// Adam learning rate.
+    #[serde(with = "crate::json")]
     pub learning_rate: f64,
     /// Element type.
     pub precision: Precision,

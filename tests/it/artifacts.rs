@@ -2,10 +2,8 @@
 //! records, diagnosis reports and cross-validation results holding infinities, NaNs and
 //! unidentified params (written by name, `"inf"`, `"nan"`; see `src/json.rs`).
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
-use gbc::diagnose::{Confidence, EffectScore, Locus, LocusKind, Report, SplitSummary, StateGap};
 use gbc::experiment::results::{self, Measure};
 use gbc::experiment::{RunResult, RunStatus, Study, StudyRecord};
 use gbc::train::artifacts;
@@ -171,7 +169,7 @@ fn experiment_results_and_study_records_read_back() {
     assert_eq!(text(&again), text(&result));
     assert_eq!(again.online_mse, Some(f64::INFINITY));
     let mut study = Study::chemostat_demo();
-    study.learning_rate = f64::INFINITY;
+    study.settings.learning_rate = f64::INFINITY;
     let record = StudyRecord {
         gbc_version: "0".into(),
         study,
@@ -183,59 +181,7 @@ fn experiment_results_and_study_records_read_back() {
 }
 
 #[test]
-fn diagnosis_reports_and_cross_validations_read_back() {
-    let report = Report {
-        model: "chemostat".into(),
-        gap_before: f64::INFINITY,
-        noise_floor: f64::NAN,
-        significant: true,
-        states: vec![StateGap {
-            name: "S".into(),
-            share: f64::NAN,
-            online: f64::INFINITY,
-            offline: 0.5,
-            noise: 0.0,
-        }],
-        locus: vec![Locus {
-            name: "rate".into(),
-            kind: LocusKind::Let,
-            bound_after: f64::INFINITY,
-            bound_present: f64::NAN,
-            bound_history: -0.0,
-            tied: true,
-        }],
-        history_dependent: false,
-        windows: Vec::new(),
-        regime: Vec::new(),
-        effects: vec![EffectScore {
-            name: "product_inhibition".into(),
-            description: None,
-            gap_after: f64::INFINITY,
-            shrink: f64::NEG_INFINITY,
-            params: BTreeMap::from([("K_P".to_string(), f64::NAN)]),
-            gap_after_halves: [f64::INFINITY, 0.1],
-        }],
-        credited: None,
-        combined: None,
-        confidence: Confidence {
-            stable: false,
-            margin: f64::NAN,
-            best_by_half: [None, Some("product_inhibition".into())],
-        },
-        hints: Vec::new(),
-        fitted_params: BTreeMap::from([("kcat".to_string(), f64::INFINITY)]),
-        split: SplitSummary {
-            train_rows: 100,
-            test_rows: 50,
-            t_test_start: 100.0,
-            t_test_end: 149.0,
-            separate_test: false,
-        },
-        series: Default::default(),
-    };
-    let again: Report = serde_json::from_str(&text(&report)).unwrap();
-    assert_eq!(text(&again), text(&report));
-    assert_eq!(again.fitted_params["kcat"], f64::INFINITY);
+fn cross_validations_read_back() {
     let folds = CrossValidation {
         folds: vec![Fold {
             held_out: "run2".into(),
