@@ -18,7 +18,13 @@ use crate::experiment::{execute, grid, prepare, report, ExperimentError, RunSpec
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
     /// Output directory.
-    #[arg(short, long, value_name = "DIR", default_value = "demo")]
+    #[arg(
+        short,
+        long = "output",
+        alias = "out",
+        value_name = "DIR",
+        default_value = "demo"
+    )]
     pub out: PathBuf,
     /// Trainings run at once (default: the number of cores).
     #[arg(short, long, value_name = "N")]
