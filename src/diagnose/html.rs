@@ -31,7 +31,7 @@ pub fn page(report: &Report) -> String {
         out,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{}</title>\n\
          <style>body{{font-family:sans-serif;max-width:800px;margin:1em auto;color:#222}}\
-         pre{{background:#f6f6f6;padding:0.8em;overflow-x:auto;font-size:11px}}\
+         pre{{background:#f6f6f6;padding:0.8em;white-space:pre-wrap;font-size:11px}}\
          svg{{display:block;margin:0.3em 0 1em 0}}.legend span{{margin-right:1.2em}}</style>\n</head>\n<body>\n\
          <h1>{}</h1>\n",
         escape(&title),

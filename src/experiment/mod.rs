@@ -42,7 +42,14 @@ pub use study::{DataFiles, Study, StudyModel, Validation};
 
 use crate::ir;
 
-/// Whether a model is a black box: a discrete map (`next`) rather than balances (`der`).
+/// Whether a model is a black box: a discrete map (`next`), or balances that are each a
+/// closure output alone (`der X = dX`).
 pub fn is_black_box(model: &ir::Model) -> bool {
+    // A continuous model is a black box when every balance is a bare closure output (its
+    // derivative learned whole, as `blackbox_ode.gbm`): no physics left in it.
+    let learned = |balance: &ir::Balance| {
+        matches!(balance.expr, ir::Expr::Var(ir::Var::ClosureOutput { .. }))
+    };
     model.dynamics == ir::Dynamics::Discrete
+        || (!model.balances.is_empty() && model.balances.iter().all(learned))
 }
