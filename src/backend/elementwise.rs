@@ -44,6 +44,7 @@ pub enum Binary {
 }
 
 /// `op(x)`.
+#[inline(always)]
 pub fn unary<E: Real>(op: Unary, x: E) -> E {
     match op {
         Unary::Neg => -x,
@@ -58,6 +59,7 @@ pub fn unary<E: Real>(op: Unary, x: E) -> E {
 }
 
 /// `d op(x) / dx` given the input `x` and the output `y`.
+#[inline(always)]
 pub fn unary_derivative<E: Real>(op: Unary, x: E, y: E) -> E {
     match op {
         Unary::Neg => -E::ONE,
@@ -82,6 +84,7 @@ fn sign<E: Real>(x: E) -> E {
 }
 
 /// `op(a, b)`.
+#[inline(always)]
 pub fn binary<E: Real>(op: Binary, a: E, b: E) -> E {
     match op {
         Binary::Add => a + b,
@@ -108,6 +111,7 @@ pub fn binary<E: Real>(op: Binary, a: E, b: E) -> E {
 
 /// `(d op / da, d op / db)` given the operands and the output `y`. `min`/`max` send the
 /// whole derivative to the operand they select; `a^b` has no `b` derivative where `a <= 0`.
+#[inline(always)]
 pub fn binary_derivatives<E: Real>(op: Binary, a: E, b: E, y: E) -> (E, E) {
     match op {
         Binary::Add => (E::ONE, E::ONE),
@@ -134,6 +138,155 @@ pub fn binary_derivatives<E: Real>(op: Binary, a: E, b: E, y: E) -> (E, E) {
             }
         }
     }
+}
+
+/// Runs `$body` with `$op` bound to a constant of the variant `$value` holds, so that a
+/// loop over a column evaluates one operation without matching it row by row.
+macro_rules! with_unary {
+    ($value:expr, $op:ident => $body:expr) => {
+        match $value {
+            Unary::Neg => {
+                const $op: Unary = Unary::Neg;
+                $body
+            }
+            Unary::Exp => {
+                const $op: Unary = Unary::Exp;
+                $body
+            }
+            Unary::Log => {
+                const $op: Unary = Unary::Log;
+                $body
+            }
+            Unary::Sqrt => {
+                const $op: Unary = Unary::Sqrt;
+                $body
+            }
+            Unary::Abs => {
+                const $op: Unary = Unary::Abs;
+                $body
+            }
+            Unary::Tanh => {
+                const $op: Unary = Unary::Tanh;
+                $body
+            }
+            Unary::Sigmoid => {
+                const $op: Unary = Unary::Sigmoid;
+                $body
+            }
+            Unary::Softplus => {
+                const $op: Unary = Unary::Softplus;
+                $body
+            }
+        }
+    };
+}
+
+/// [`with_unary`] for binary operations.
+macro_rules! with_binary {
+    ($value:expr, $op:ident => $body:expr) => {
+        match $value {
+            Binary::Add => {
+                const $op: Binary = Binary::Add;
+                $body
+            }
+            Binary::Sub => {
+                const $op: Binary = Binary::Sub;
+                $body
+            }
+            Binary::Mul => {
+                const $op: Binary = Binary::Mul;
+                $body
+            }
+            Binary::Div => {
+                const $op: Binary = Binary::Div;
+                $body
+            }
+            Binary::Pow => {
+                const $op: Binary = Binary::Pow;
+                $body
+            }
+            Binary::Min => {
+                const $op: Binary = Binary::Min;
+                $body
+            }
+            Binary::Max => {
+                const $op: Binary = Binary::Max;
+                $body
+            }
+        }
+    };
+}
+
+/// `out[i] = op(x[i])` over a column.
+pub fn unary_column<E: Real>(op: Unary, out: &mut [E], x: &[E]) {
+    with_unary!(op, OP => {
+        for (y, &x) in out.iter_mut().zip(x) {
+            *y = unary(OP, x);
+        }
+    })
+}
+
+/// `out[i] = op(a[i], b[i])` over a column.
+pub fn binary_column<E: Real>(op: Binary, out: &mut [E], a: &[E], b: &[E]) {
+    with_binary!(op, OP => {
+        for ((y, &a), &b) in out.iter_mut().zip(a).zip(b) {
+            *y = binary(OP, a, b);
+        }
+    })
+}
+
+/// The reverse of [`unary_column`]: `adjoint_x[i] += upstream[i] op'(x[i])` given the
+/// column's input `x` and output `y`.
+pub fn unary_column_reverse<E: Real>(
+    op: Unary,
+    adjoint_x: &mut [E],
+    upstream: &[E],
+    (x, y): (&[E], &[E]),
+) {
+    with_unary!(op, OP => {
+        for (((slot, &up), &x), &y) in adjoint_x.iter_mut().zip(upstream).zip(x).zip(y) {
+            *slot += up * unary_derivative(OP, x, y);
+        }
+    })
+}
+
+/// The adjoints a reverse step of a binary column adds to: its two operands' (distinct
+/// registers) or one register that is both operands.
+pub enum Operands<'a, E> {
+    /// `op(a, b)` with `a` and `b` different registers.
+    Distinct(&'a mut [E], &'a mut [E]),
+    /// `op(a, a)`.
+    Same(&'a mut [E]),
+}
+
+/// The reverse of [`binary_column`]: adds `upstream * d op / da` and `upstream * d op / db`
+/// to the operands' adjoints, given the operand columns and the output `y`.
+pub fn binary_column_reverse<E: Real>(
+    op: Binary,
+    adjoints: Operands<E>,
+    upstream: &[E],
+    (a, b, y): (&[E], &[E], &[E]),
+) {
+    with_binary!(op, OP => match adjoints {
+        Operands::Distinct(adjoint_a, adjoint_b) => {
+            let columns = upstream.iter().zip(a).zip(b).zip(y);
+            for ((slot_a, slot_b), (((&up, &a), &b), &y)) in
+                adjoint_a.iter_mut().zip(adjoint_b.iter_mut()).zip(columns)
+            {
+                let (da, db) = binary_derivatives(OP, a, b, y);
+                *slot_a += up * da;
+                *slot_b += up * db;
+            }
+        }
+        Operands::Same(adjoint) => {
+            let columns = upstream.iter().zip(a).zip(b).zip(y);
+            for (slot, (((&up, &a), &b), &y)) in adjoint.iter_mut().zip(columns) {
+                let (da, db) = binary_derivatives(OP, a, b, y);
+                *slot += up * da;
+                *slot += up * db;
+            }
+        }
+    })
 }
 
 #[cfg(test)]

@@ -10,7 +10,10 @@
 
 use std::collections::HashMap;
 
-use super::elementwise::{binary, binary_derivatives, unary, unary_derivative, Binary, Unary};
+use super::elementwise::{
+    binary, binary_column, binary_column_reverse, binary_derivatives, unary, unary_column,
+    unary_column_reverse, unary_derivative, Binary, Operands, Unary,
+};
 use super::BackendError;
 use crate::ir::{self, BinOp, Constraint, Func, PriorKind, Var};
 use crate::numeric::Real;
@@ -80,6 +83,9 @@ pub struct Program {
     instrs: Vec<Instr>,
     /// Whether register `r` depends on a state, a raw param or a network output.
     active: Vec<bool>,
+    /// Whether register `r` holds the same value on every row (literals, raw params and
+    /// what is computed from them alone): evaluated once per batch, not per row.
+    uniform: Vec<bool>,
     shape: ProgramShape,
     /// Per state-vector entry, the register of its balance (derivative or next value).
     pub balances: Vec<usize>,
@@ -150,9 +156,11 @@ impl Program {
             nets: model.closures.iter().map(|c| c.outputs.len()).collect(),
         };
         let active = activity(&compiler.instrs);
+        let uniform = uniformity(&compiler.instrs);
         Ok(Program {
             instrs: compiler.instrs,
             active,
+            uniform,
             shape,
             balances,
             closure_outputs,
@@ -180,10 +188,26 @@ impl Program {
     pub fn forward<E: Real>(&self, inputs: &ProgramInputs<E>) -> Vec<E> {
         let rows = inputs.rows;
         let mut values = vec![E::ZERO; self.instrs.len() * rows];
+        if rows == 0 {
+            return values;
+        }
         for (index, instr) in self.instrs.iter().enumerate() {
             let (before, rest) = values.split_at_mut(index * rows);
             let out = &mut rest[..rows];
             let column = |reg: usize| &before[reg * rows..(reg + 1) * rows];
+            if self.uniform[index] {
+                // The same value on every row: computed once, then spread.
+                let first = |reg: usize| before[reg * rows];
+                let value = match *instr {
+                    Instr::Const(bits) => E::from_double(f64::from_bits(bits)),
+                    Instr::RawParam(i) => inputs.params[i],
+                    Instr::Unary(op, a) => unary(op, first(a)),
+                    Instr::Binary(op, a, b) => binary(op, first(a), first(b)),
+                    Instr::State(_) | Instr::Input(_) | Instr::Net { .. } => E::ZERO,
+                };
+                out.fill(value);
+                continue;
+            }
             match *instr {
                 Instr::Const(bits) => out.fill(E::from_double(f64::from_bits(bits))),
                 Instr::State(i) => gather(out, inputs.states, self.shape.states, i),
@@ -192,16 +216,8 @@ impl Program {
                 Instr::Net { closure, output } => {
                     gather(out, inputs.nets[closure], self.shape.nets[closure], output)
                 }
-                Instr::Unary(op, a) => {
-                    for (y, &x) in out.iter_mut().zip(column(a)) {
-                        *y = unary(op, x);
-                    }
-                }
-                Instr::Binary(op, a, b) => {
-                    for ((y, &x), &z) in out.iter_mut().zip(column(a)).zip(column(b)) {
-                        *y = binary(op, x, z);
-                    }
-                }
+                Instr::Unary(op, a) => unary_column(op, out, column(a)),
+                Instr::Binary(op, a, b) => binary_column(op, out, column(a), column(b)),
             }
         }
         values
@@ -243,6 +259,9 @@ impl Program {
                 .map(|&width| vec![E::ZERO; rows * width])
                 .collect(),
         };
+        if rows == 0 {
+            return gradients;
+        }
         for index in (0..self.instrs.len()).rev() {
             if !self.active[index] {
                 continue;
@@ -250,6 +269,26 @@ impl Program {
             let (adjoint_before, adjoint_rest) = adjoint.split_at_mut(index * rows);
             let upstream = &adjoint_rest[..rows];
             let value = |reg: usize| &values[reg * rows..(reg + 1) * rows];
+            if self.uniform[index] {
+                // Every row holds the same value: the row sum of the adjoint goes to the
+                // operands' first rows (their own sweep sums their rows in turn).
+                let total = upstream.iter().fold(E::ZERO, |sum, &g| sum + g);
+                let first = |reg: usize| values[reg * rows];
+                match self.instrs[index] {
+                    Instr::RawParam(i) => gradients.params[i] += total,
+                    Instr::Unary(op, a) => {
+                        adjoint_before[a * rows] +=
+                            total * unary_derivative(op, first(a), first(index));
+                    }
+                    Instr::Binary(op, a, b) => {
+                        let (da, db) = binary_derivatives(op, first(a), first(b), first(index));
+                        adjoint_before[a * rows] += total * da;
+                        adjoint_before[b * rows] += total * db;
+                    }
+                    Instr::Const(_) | Instr::State(_) | Instr::Input(_) | Instr::Net { .. } => {}
+                }
+                continue;
+            }
             match self.instrs[index] {
                 Instr::Const(_) | Instr::Input(_) => {}
                 Instr::State(i) => scatter(&mut gradients.states, self.shape.states, i, upstream),
@@ -266,23 +305,31 @@ impl Program {
                 ),
                 Instr::Unary(op, a) => {
                     let target = &mut adjoint_before[a * rows..(a + 1) * rows];
-                    let own = value(index);
-                    for row in 0..rows {
-                        target[row] +=
-                            upstream[row] * unary_derivative(op, value(a)[row], own[row]);
-                    }
+                    unary_column_reverse(op, target, upstream, (value(a), value(index)));
                 }
                 Instr::Binary(op, a, b) => {
-                    for row in 0..rows {
-                        let (da, db) =
-                            binary_derivatives(op, value(a)[row], value(b)[row], value(index)[row]);
-                        adjoint_before[a * rows + row] += upstream[row] * da;
-                        adjoint_before[b * rows + row] += upstream[row] * db;
-                    }
+                    let operands = operand_adjoints(adjoint_before, rows, a, b);
+                    let columns = (value(a), value(b), value(index));
+                    binary_column_reverse(op, operands, upstream, columns);
                 }
             }
         }
         gradients
+    }
+}
+
+/// The adjoint columns of registers `a` and `b` (both below the current one).
+fn operand_adjoints<E>(adjoint: &mut [E], rows: usize, a: usize, b: usize) -> Operands<'_, E> {
+    if a == b {
+        return Operands::Same(&mut adjoint[a * rows..(a + 1) * rows]);
+    }
+    let (low, high) = (a.min(b), a.max(b));
+    let (head, tail) = adjoint.split_at_mut(high * rows);
+    let (low_column, high_column) = (&mut head[low * rows..(low + 1) * rows], &mut tail[..rows]);
+    if a < b {
+        Operands::Distinct(low_column, high_column)
+    } else {
+        Operands::Distinct(high_column, low_column)
     }
 }
 
@@ -519,6 +566,22 @@ fn activity(instrs: &[Instr]) -> Vec<bool> {
         active.push(is_active);
     }
     active
+}
+
+/// Marks registers that hold one value for every row: literals, raw params, and operations
+/// on those alone.
+fn uniformity(instrs: &[Instr]) -> Vec<bool> {
+    let mut uniform = Vec::with_capacity(instrs.len());
+    for instr in instrs {
+        let is_uniform = match *instr {
+            Instr::Const(_) | Instr::RawParam(_) => true,
+            Instr::State(_) | Instr::Input(_) | Instr::Net { .. } => false,
+            Instr::Unary(_, a) => uniform[a],
+            Instr::Binary(_, a, b) => uniform[a] && uniform[b],
+        };
+        uniform.push(is_uniform);
+    }
+    uniform
 }
 
 fn gather<E: Real>(out: &mut [E], block: &[E], width: usize, column: usize) {
