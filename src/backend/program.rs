@@ -186,10 +186,18 @@ impl Program {
 
     /// Evaluates every register on a batch; register `r` is `values[r * rows..][..rows]`.
     pub fn forward<E: Real>(&self, inputs: &ProgramInputs<E>) -> Vec<E> {
+        let mut values = Vec::new();
+        self.forward_into(inputs, &mut values);
+        values
+    }
+
+    /// [`Program::forward`] into a buffer kept from call to call (every register is
+    /// written, so what it held does not matter).
+    pub fn forward_into<E: Real>(&self, inputs: &ProgramInputs<E>, values: &mut Vec<E>) {
         let rows = inputs.rows;
-        let mut values = vec![E::ZERO; self.instrs.len() * rows];
+        values.resize(self.instrs.len() * rows, E::ZERO);
         if rows == 0 {
-            return values;
+            return;
         }
         for (index, instr) in self.instrs.iter().enumerate() {
             let (before, rest) = values.split_at_mut(index * rows);
@@ -220,7 +228,6 @@ impl Program {
                 Instr::Binary(op, a, b) => binary_column(op, out, column(a), column(b)),
             }
         }
-        values
     }
 
     /// Reads registers `targets` from forward `values` as a row-major `rows x targets.len()`
@@ -245,22 +252,37 @@ impl Program {
         targets: &[usize],
         seed: &[E],
     ) -> ProgramGradients<E> {
+        let mut scratch = ReverseScratch::default();
+        self.backward_into(inputs, values, (targets, seed), &mut scratch);
+        scratch.gradients
+    }
+
+    /// [`Program::backward`] into buffers kept from call to call; the gradients are left in
+    /// `scratch.gradients`.
+    pub fn backward_into<E: Real>(
+        &self,
+        inputs: &ProgramInputs<E>,
+        values: &[E],
+        (targets, seed): (&[usize], &[E]),
+        scratch: &mut ReverseScratch<E>,
+    ) {
         let rows = inputs.rows;
-        let mut adjoint = vec![E::ZERO; values.len()];
+        let ReverseScratch { adjoint, gradients } = scratch;
+        adjoint.clear();
+        adjoint.resize(values.len(), E::ZERO);
         for (column, &reg) in targets.iter().enumerate() {
             for row in 0..rows {
                 adjoint[reg * rows + row] += seed[row * targets.len() + column];
             }
         }
-        let mut gradients = ProgramGradients {
-            states: vec![E::ZERO; rows * self.shape.states],
-            params: vec![E::ZERO; self.shape.params],
-            nets: (self.shape.nets.iter())
-                .map(|&width| vec![E::ZERO; rows * width])
-                .collect(),
-        };
+        refill(&mut gradients.states, rows * self.shape.states);
+        refill(&mut gradients.params, self.shape.params);
+        (gradients.nets).resize_with(self.shape.nets.len(), Vec::new);
+        for (net, &width) in gradients.nets.iter_mut().zip(&self.shape.nets) {
+            refill(net, rows * width);
+        }
         if rows == 0 {
-            return gradients;
+            return;
         }
         for index in (0..self.instrs.len()).rev() {
             if !self.active[index] {
@@ -314,8 +336,35 @@ impl Program {
                 }
             }
         }
-        gradients
     }
+}
+
+/// Buffers of [`Program::backward_into`].
+#[derive(Debug, Clone)]
+pub struct ReverseScratch<E> {
+    /// One adjoint per register and row.
+    adjoint: Vec<E>,
+    /// The gradients of the last sweep.
+    pub gradients: ProgramGradients<E>,
+}
+
+impl<E> Default for ReverseScratch<E> {
+    fn default() -> Self {
+        ReverseScratch {
+            adjoint: Vec::new(),
+            gradients: ProgramGradients {
+                states: Vec::new(),
+                params: Vec::new(),
+                nets: Vec::new(),
+            },
+        }
+    }
+}
+
+/// Zeroes `buffer` at `length` entries.
+fn refill<E: Real>(buffer: &mut Vec<E>, length: usize) {
+    buffer.clear();
+    buffer.resize(length, E::ZERO);
 }
 
 /// The adjoint columns of registers `a` and `b` (both below the current one).

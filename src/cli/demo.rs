@@ -77,7 +77,7 @@ pub fn run(args: &DemoArgs) -> CommandResult {
     let intro = format!(
         "<p>Both studies of Lovelett, Avalos &amp; Kevrekidis (2020), scaled down (3 \
          replicates instead of 20 and 10, and 300 instead of 1000 epochs for the bioreactor), \
-         trained with {jobs} parallel jobs in {seconds:.0} s. The first half trains with \
+         trained with {jobs} parallel {} in {seconds:.0} s. The first half trains with \
          gbc's default recipe (one-step epochs, then free-run rollouts of growing length, \
          the params polished); the second half, labelled <i>paper's recipe</i>, with the \
          paper's (the one-step loss every epoch). Each study's runs, tables \
@@ -85,6 +85,7 @@ pub fn run(args: &DemoArgs) -> CommandResult {
          SVG figures are in <code>{}/&lt;study&gt;/</code>. Errors are MSEs of states z-scored \
          with the validation window's statistics. The full-scale studies and their results \
          are in <code>docs/reproduction.md</code>.</p>",
+        if jobs == 1 { "job" } else { "jobs" },
         crate::plot::escape(&args.out.display().to_string())
     );
     let page = report::page(

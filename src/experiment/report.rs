@@ -179,55 +179,66 @@ pub fn section(
 /// it loses (by median, size by size) and why.
 fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
     let rows = summarise(&prepared.study, results);
-    let median = |label: &str, size: usize, online: bool| {
+    let summary = |label: &str, size: usize, online: bool| {
         (rows.iter())
             .find(|r| r.model == label && r.size == size)
             .and_then(|r| if online { r.online } else { r.offline })
-            .map(|s| s.median)
     };
     let Some(black) = prepared.models.iter().find(|m| is_black_box(&m.model)) else {
         return String::new();
     };
     let sizes = prepared.study.sorted_sizes();
+    let list = |sizes: &[usize]| {
+        let names: Vec<String> = sizes.iter().map(ToString::to_string).collect();
+        names.join(", ")
+    };
     let mut html = String::new();
     for grey in prepared.models.iter().filter(|m| !is_black_box(&m.model)) {
+        // Sizes where the grey box's median is below the black box's, the others, and
+        // those of either kind where each median lies inside the other's replicate range.
         let split = |online: bool| {
-            let (mut wins, mut losses) = (Vec::new(), Vec::new());
+            let (mut wins, mut losses, mut ties) = (Vec::new(), Vec::new(), Vec::new());
             for &size in &sizes {
-                if let (Some(g), Some(b)) = (
-                    median(&grey.label, size, online),
-                    median(&black.label, size, online),
-                ) {
-                    if g < b {
+                let pair = (
+                    summary(&grey.label, size, online),
+                    summary(&black.label, size, online),
+                );
+                if let (Some(g), Some(b)) = pair {
+                    if g.median < b.median {
                         wins.push(size);
                     } else {
                         losses.push(size);
                     }
+                    let inside = |x: f64, range: &Spread| range.min <= x && x <= range.max;
+                    if inside(g.median, &b) && inside(b.median, &g) {
+                        ties.push(size);
+                    }
                 }
             }
-            (wins, losses)
+            (wins, losses, ties)
         };
-        let (online_wins, online_losses) = split(true);
-        let (offline_wins, offline_losses) = split(false);
-        let list = |sizes: &[usize]| {
-            let names: Vec<String> = sizes.iter().map(ToString::to_string).collect();
-            names.join(", ")
-        };
+        let (online_wins, online_losses, online_ties) = split(true);
+        let (offline_wins, offline_losses, _) = split(false);
         let largest = sizes.last().copied().unwrap_or(0);
         let at_largest = match (
-            median(&grey.label, largest, true),
-            median(&black.label, largest, true),
+            summary(&grey.label, largest, true),
+            summary(&black.label, largest, true),
         ) {
             (Some(g), Some(b)) => format!(
-                " (at {largest} points: online MSE {} against {})",
-                number(g),
-                number(b)
+                "; at {largest} points online MSE {} against {}",
+                number(g.median),
+                number(b.median)
             ),
             _ => String::new(),
         };
+        let (win_note, loss_note) = if online_wins.contains(&largest) {
+            (at_largest, String::new())
+        } else {
+            (String::new(), at_largest)
+        };
         let wins = match (online_wins.is_empty(), offline_wins.is_empty()) {
             (false, _) => format!(
-                "the free run at {} of {} sizes ({}){at_largest}, and one step ahead at {} \
+                "the free run at {} of {} sizes ({}{win_note}), and one step ahead at {} \
                  of them. The balances carry the grey box: the network learns only the \
                  unknown rates, and an error in a rate shifts the trajectory without breaking \
                  mass conservation, so it does not compound the way a black box's does",
@@ -252,9 +263,9 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
                 list(&offline_losses)
             ),
             (false, _) => format!(
-                "the free run at sizes {}: with these few pairs or epochs the learned rates \
-                 are not yet right over the whole range of states the free run visits, and \
-                 the balances then carry a wrong rate forward{}",
+                "the free run at sizes {}{loss_note}: with these training pairs and epochs \
+                 the learned rates are not yet right over the whole range of states the free \
+                 run visits, and the balances then carry a wrong rate forward{}",
                 list(&online_losses),
                 if offline_losses.is_empty() {
                     String::new()
@@ -263,10 +274,24 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
                 }
             ),
         };
+        let ties = if online_ties.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " At {} {} the two free-run medians lie inside each other's replicate range: \
+                 a tie more than a win or a loss.",
+                if online_ties.len() == 1 {
+                    "size"
+                } else {
+                    "sizes"
+                },
+                list(&online_ties)
+            )
+        };
         let _ = writeln!(
             html,
             "<p><b>{}</b> against <b>{}</b>. <i>Where the grey box wins:</i> {wins}. \
-             <i>Where it loses:</i> {losses}.</p>",
+             <i>Where it loses:</i> {losses}.{ties}</p>",
             escape(&grey.label),
             escape(&black.label)
         );

@@ -27,17 +27,38 @@ impl Lane for f64 {
 
 impl Lane for f32 {
     fn softplus_with_slope(values: &mut [f32], slopes: &mut [f32]) {
-        for (value, slope) in values.iter_mut().zip(slopes.iter_mut()) {
-            // e = exp(-|z|); one division serves 1 / (1 + e) and e / (2 + e).
-            let z = *value;
-            let decay = exp_nonpositive(-z.abs());
-            let (one_plus, two_plus) = (1.0 + decay, 2.0 + decay);
-            let reciprocal = 1.0 / (one_plus * two_plus);
-            let numerator = if z >= 0.0 { 1.0 } else { decay };
-            *slope = numerator * two_plus * reciprocal;
-            let positive_part = if z > 0.0 { z } else { 0.0 };
-            *value = positive_part + two_atanh(decay * one_plus * reciprocal);
-        }
+        super::wide::dispatch(SoftplusLayer { values, slopes });
+    }
+}
+
+/// One `f32` softplus layer, for [`super::wide::dispatch`].
+struct SoftplusLayer<'a> {
+    values: &'a mut [f32],
+    slopes: &'a mut [f32],
+}
+
+impl pulp::WithSimd for SoftplusLayer<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        softplus_layer(self.values, self.slopes);
+    }
+}
+
+/// The `f32` softplus layer (inlined into each build that [`super::wide::dispatch`] makes).
+#[inline(always)]
+fn softplus_layer(values: &mut [f32], slopes: &mut [f32]) {
+    for (value, slope) in values.iter_mut().zip(slopes.iter_mut()) {
+        // e = exp(-|z|); one division serves 1 / (1 + e) and e / (2 + e).
+        let z = *value;
+        let decay = exp_nonpositive(-z.abs());
+        let (one_plus, two_plus) = (1.0 + decay, 2.0 + decay);
+        let reciprocal = 1.0 / (one_plus * two_plus);
+        let numerator = if z >= 0.0 { 1.0 } else { decay };
+        *slope = numerator * two_plus * reciprocal;
+        let positive_part = if z > 0.0 { z } else { 0.0 };
+        *value = positive_part + two_atanh(decay * one_plus * reciprocal);
     }
 }
 
@@ -99,6 +120,7 @@ const ROUNDING_SHIFT: f32 = 12_582_912.0;
 /// `|r| <= ln 2 / 2`, a degree-6 polynomial for `e^r`, `2^n` assembled from bits). Below
 /// `-86` it returns `e^-86` (about `4.5e-38`, still a normal number) rather than go
 /// through subnormals: an absolute error under `5e-38`.
+#[inline(always)]
 pub fn exp_nonpositive(x: f32) -> f32 {
     let x = if x > -86.0 { x } else { -86.0 };
     let shifted = x * std::f32::consts::LOG2_E + ROUNDING_SHIFT;
@@ -122,6 +144,7 @@ pub fn ln_one_plus_unit(e: f32) -> f32 {
 
 /// `2 atanh(s) = ln((1 + s) / (1 - s))` for `0 <= s <= 1/3`: the odd series summed to
 /// `s^13` (truncation below `1.5e-8` relative).
+#[inline(always)]
 fn two_atanh(s: f32) -> f32 {
     let s2 = s * s;
     let mut sum = 1.0 / 13.0_f32;
@@ -192,6 +215,27 @@ mod tests {
             let slope_ulps = ulps(single_slopes[index], slope);
             assert!(slope_ulps < 3.0 || slope < 1e-37, "{z}: {slope_ulps} ulps");
         }
+    }
+
+    /// The softplus layer in the build `pulp` picks for this CPU and in the baseline build
+    /// gives the same bits.
+    #[test]
+    fn the_wide_softplus_gives_the_portable_numbers_bit_for_bit() {
+        use pulp::WithSimd;
+        let points: Vec<f32> = (-2000..=2000).map(|i| i as f32 * 0.0517).collect();
+        let (mut wide, mut portable) = (points.clone(), points.clone());
+        let (mut wide_slopes, mut portable_slopes) = (vec![0.0; 4001], vec![0.0; 4001]);
+        pulp::Arch::new().dispatch(SoftplusLayer {
+            values: &mut wide,
+            slopes: &mut wide_slopes,
+        });
+        SoftplusLayer {
+            values: &mut portable,
+            slopes: &mut portable_slopes,
+        }
+        .with_simd(pulp::Scalar::new());
+        assert_eq!(wide, portable);
+        assert_eq!(wide_slopes, portable_slopes);
     }
 
     #[test]

@@ -82,6 +82,24 @@ impl<E: Real> Gemm<E> {
     fn product<const ADD: bool>(
         &mut self,
         out: &mut [E],
+        shape: (usize, usize, usize),
+        lhs: View<E>,
+        rhs: View<E>,
+    ) {
+        let work = Product::<E, ADD> {
+            gemm: self,
+            out,
+            shape,
+            lhs,
+            rhs,
+        };
+        super::wide::dispatch(work);
+    }
+
+    #[inline(always)]
+    fn product_portable<const ADD: bool>(
+        &mut self,
+        out: &mut [E],
         (rows, columns, inner): (usize, usize, usize),
         lhs: View<E>,
         rhs: View<E>,
@@ -110,6 +128,7 @@ impl<E: Real> Gemm<E> {
     }
 
     /// Rows `row..row + R` of the product, strip by strip.
+    #[inline(always)]
     fn row_block<const R: usize, const ADD: bool>(
         &mut self,
         out: &mut [E],
@@ -133,7 +152,26 @@ impl<E: Real> Gemm<E> {
     }
 }
 
+/// One product, for [`super::wide::dispatch`].
+struct Product<'a, E, const ADD: bool> {
+    gemm: &'a mut Gemm<E>,
+    out: &'a mut [E],
+    shape: (usize, usize, usize),
+    lhs: View<'a, E>,
+    rhs: View<'a, E>,
+}
+
+impl<E: Real, const ADD: bool> pulp::WithSimd for Product<'_, E, ADD> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        (self.gemm).product_portable::<ADD>(self.out, self.shape, self.lhs, self.rhs);
+    }
+}
+
 /// Appends columns `start..start + N` of `rhs` (all `inner` rows) to `out`, row by row.
+#[inline(always)]
 fn pack_panel<E: Real, const N: usize>(out: &mut Vec<E>, rhs: View<E>, start: usize, inner: usize) {
     let (rows, columns) = (rhs.row_stride, rhs.column_stride);
     for k in 0..inner {
@@ -149,6 +187,7 @@ fn pack_panel<E: Real, const N: usize>(out: &mut Vec<E>, rhs: View<E>, start: us
 
 /// Writes rows `row..row + R` of `lhs` into `packed` interleaved: entry `k * R + j` is
 /// `lhs(row + j, k)`.
+#[inline(always)]
 fn pack_rows<E: Real, const R: usize>(packed: &mut Vec<E>, lhs: View<E>, row: usize, inner: usize) {
     packed.resize(inner * R, E::ZERO);
     let (rows, columns) = (lhs.row_stride, lhs.column_stride);
@@ -287,6 +326,41 @@ mod tests {
             for (found, expected) in fresh.iter().zip(&product) {
                 assert!((found - expected).abs() < 1e-12, "{shape:?} overwritten");
             }
+        }
+    }
+
+    /// The build `pulp` picks for this CPU (AVX2 where there is one) and the baseline
+    /// build give the same bits: the same operations in the same order, only wider.
+    #[test]
+    fn the_wide_build_gives_the_portable_numbers_bit_for_bit() {
+        use pulp::WithSimd;
+        for (rows, columns, inner) in [(50, 20, 50), (7, 3, 20), (13, 17, 5)] {
+            let lhs: Vec<f32> = (0..rows * inner).map(|i| (i as f32 * 0.37).sin()).collect();
+            let rhs: Vec<f32> = (0..inner * columns)
+                .map(|i| (i as f32 * 0.11).cos())
+                .collect();
+            let start: Vec<f32> = (0..rows * columns).map(|i| i as f32 * 0.01).collect();
+            let (mut wide, mut portable) = (start.clone(), start.clone());
+            let (mut first, mut second) = (Gemm::default(), Gemm::default());
+            let shape = (rows, columns, inner);
+            let (a, b) = (View::row_major(&lhs, inner), View::row_major(&rhs, columns));
+            pulp::Arch::new().dispatch(Product::<f32, true> {
+                gemm: &mut first,
+                out: &mut wide,
+                shape,
+                lhs: a,
+                rhs: b,
+            });
+            let product = Product::<f32, true> {
+                gemm: &mut second,
+                out: &mut portable,
+                shape,
+                lhs: a,
+                rhs: b,
+            };
+            product.with_simd(pulp::Scalar::new());
+            assert_eq!(wide, portable, "{rows} x {columns} x {inner}");
+            assert_ne!(wide, start);
         }
     }
 

@@ -338,7 +338,7 @@ impl<E: Lane> Kernel<E> {
             params: &self.weights[start..start + length],
             nets: &nets,
         };
-        stage.values = self.program.forward(&inputs);
+        self.program.forward_into(&inputs, &mut stage.values);
         stage.balances = self
             .program
             .read(&stage.values, rows, &self.program.balances);

@@ -33,6 +33,7 @@ pub mod dense;
 mod kernel;
 mod plan;
 mod reverse;
+mod wide;
 
 #[cfg(test)]
 mod tests;

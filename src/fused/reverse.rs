@@ -2,7 +2,7 @@
 //! network's layers from the output down to the first, whose weight gradient is completed
 //! per stage time by the kernel (see [`super::kernel`]).
 
-use crate::backend::program::ProgramInputs;
+use crate::backend::program::{ProgramInputs, ReverseScratch};
 
 use super::activation::Lane;
 use super::dense::{add_column_sums, Gemm, View};
@@ -24,6 +24,8 @@ pub(super) struct Scratch<E> {
     estimate_weights: Vec<E>,
     estimate_gradient: Vec<E>,
     estimate_weight_gradient: Vec<E>,
+    /// The physics program's reverse sweep.
+    physics: ReverseScratch<E>,
 }
 
 impl<E: Lane> Kernel<E> {
@@ -44,17 +46,20 @@ impl<E: Lane> Kernel<E> {
             params: &self.weights[start..start + length],
             nets: &nets,
         };
-        let physics = (self.program).backward(&inputs, &stage.values, &self.program.balances, seed);
-        let mut state_gradient = physics.states;
+        let targets = (self.program.balances.as_slice(), seed);
+        let physics = &mut self.scratch.physics;
+        (self.program).backward_into(&inputs, &stage.values, targets, physics);
+        let physics = &physics.gradients;
+        let mut state_gradient = physics.states.clone();
         let param_gradient = &mut self.gradient[start..start + length];
         for (slot, &value) in param_gradient.iter_mut().zip(&physics.params) {
             *slot += value;
         }
         let scratch = &mut self.scratch;
-        for (closure_index, (closure, net_gradient)) in
-            (self.plan.closures.iter().zip(physics.nets)).enumerate()
-        {
-            scratch.delta = net_gradient;
+        for closure_index in 0..self.plan.closures.len() {
+            let closure = &self.plan.closures[closure_index];
+            scratch.delta.clear();
+            (scratch.delta).extend_from_slice(&scratch.physics.gradients.nets[closure_index]);
             let mut backprop = Backprop {
                 gemm: &mut self.gemm,
                 closure,
