@@ -190,7 +190,7 @@ fn error_plot(series: &ExperimentSeries) -> String {
     Chart::new(
         &format!("experiment {}: error of the fitted model", series.name),
         &time_title(series),
-        "squared error (z-scored, summed over states)",
+        "squared z-scored error",
     )
     .including_y(0.0)
     .with(Series::line("fitted model", thin(points, MAX_POINTS)).colored(BEFORE))
