@@ -234,13 +234,13 @@ fn write_series(
     y: &Axis,
 ) -> std::fmt::Result {
     if let Some(band) = &series.band {
-        let drawable = |((px, _), (lo, hi)): &(&(f64, f64), &(f64, f64))| {
-            x.valid(*px) && y.valid(*lo) && y.valid(*hi)
-        };
-        let pairs: Vec<(&(f64, f64), &(f64, f64))> =
-            series.points.iter().zip(band).filter(drawable).collect();
-        let upper = (pairs.iter()).map(|((px, _), (_, hi))| pixel_pair(x, y, *px, *hi));
-        let lower = (pairs.iter().rev()).map(|((px, _), (lo, _))| pixel_pair(x, y, *px, *lo));
+        // (x, lower, upper) of each point whose band can be drawn.
+        let edges: Vec<(f64, f64, f64)> = (series.points.iter().zip(band))
+            .map(|((px, _), (lo, hi))| (*px, *lo, *hi))
+            .filter(|(px, lo, hi)| x.valid(*px) && y.valid(*lo) && y.valid(*hi))
+            .collect();
+        let upper = (edges.iter()).map(|(px, _, hi)| pixel_pair(x, y, *px, *hi));
+        let lower = (edges.iter().rev()).map(|(px, lo, _)| pixel_pair(x, y, *px, *lo));
         writeln!(
             svg,
             r#"<polygon points="{}" fill="{color}" fill-opacity="0.18" stroke="none"/>"#,

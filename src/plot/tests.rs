@@ -326,3 +326,30 @@ fn figures_escape_their_captions() {
     assert_eq!(figure("<svg/>", ""), "<figure><svg/></figure>\n");
     assert_eq!(escape("a<b & \"c\">"), "a&lt;b &amp; &quot;c&quot;&gt;");
 }
+
+/// A band is one polygon: the upper edge left to right, then the lower edge back; points
+/// whose band cannot be drawn (NaN) are left out.
+#[test]
+fn bands_run_along_the_upper_edge_and_back_along_the_lower() {
+    let series = Series::line("m", vec![(0.0, 2.0), (1.0, 2.0), (2.0, 2.0)]).with_band(vec![
+        (1.0, 3.0),
+        (f64::NAN, 3.0),
+        (1.0, 3.0),
+    ]);
+    let svg = Chart::new("", "", "").with(series).to_svg(400.0, 300.0);
+    let polygon = (svg.lines())
+        .find(|l| l.starts_with("<polygon"))
+        .unwrap_or_default();
+    let corners: Vec<(f64, f64)> = (polygon.split('"').nth(1).unwrap_or_default())
+        .split(' ')
+        .filter_map(|p| p.split_once(','))
+        .filter_map(|(a, b)| Some((a.parse().ok()?, b.parse().ok()?)))
+        .collect();
+    assert_eq!(corners.len(), 4, "{polygon}");
+    assert!(corners[0].0 < corners[1].0 && corners[2].0 > corners[3].0);
+    assert_eq!(corners[1].0, corners[2].0);
+    assert!(
+        corners[0].1 < corners[3].1,
+        "the upper edge is drawn higher"
+    );
+}
