@@ -222,24 +222,8 @@ fn name_every_float(value: &mut serde_json::Value, count: &mut usize) {
 fn a_diagnosis_json_reads_back_into_its_report() {
     let dir = scratch("artifacts-diagnosis");
     let (data, json) = (dir.join("two.csv"), dir.join("diagnosis.json"));
+    crate::diagnose::simulate_chemostat("truth_two", "200", &data);
     let (data, json) = (data.display().to_string(), json.display().to_string());
-    let simulated = gbc(&[
-        "simulate",
-        "models/diagnose/chemostat/truth_two.gbm",
-        "--t-end",
-        "200",
-        "--dt",
-        "1",
-        "--input",
-        "E0=steps(hold=10..60, seed=4)",
-        "--noise",
-        "0.01",
-        "--seed",
-        "7",
-        "-o",
-        &data,
-    ]);
-    assert!(simulated.status.success(), "{simulated:?}");
     let model = "models/diagnose/chemostat/model.gbm";
     let options = ["--json", &json, "--restarts", "0", "--jobs", "1"];
     let diagnosed = gbc(&[&["diagnose", model, &data][..], &options[..]].concat());
