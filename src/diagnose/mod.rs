@@ -489,4 +489,6 @@ fn origin(start: Start) -> &'static str {
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_json;
+#[cfg(test)]
 mod tests_sets;

@@ -1,7 +1,8 @@
 //! The result of a diagnosis: plain data, serialised as the JSON of spec section 5 (with
 //! extra fields), rendered as text by [`super::render`] and as HTML by [`super::html`].
-//! Gaps of free runs that diverged are infinite, written as `null` in JSON and "diverged" in
-//! text.
+//! Gaps of free runs that diverged are infinite, written by name in JSON (`"inf"`, see
+//! [`crate::json`]: every number field goes through it, so the file reads back) and
+//! "diverged" in text.
 
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -204,6 +205,7 @@ pub struct FitSummary {
     /// When some param is not identified: the direction in which the fit is (nearly) free,
     /// as unit-normalised components in transformed coordinates (logarithms of `positive`
     /// params), largest first.
+    #[serde(with = "crate::json")]
     pub free_direction: Vec<(String, f64)>,
     /// Training gap.
     #[serde(with = "crate::json")]
@@ -278,6 +280,7 @@ pub struct SelectionStep {
     #[serde(with = "crate::json")]
     pub spread: f64,
     /// The other additions tried at this step, with their held-out gaps.
+    #[serde(with = "crate::json")]
     pub alternatives: Vec<(String, f64)>,
     /// Whether the addition is credited.
     pub accepted: bool,

@@ -431,6 +431,7 @@ fn the_json_has_the_spec_fields_and_the_html_its_figures() {
     // The bars, the loci, the selection, one plot per measured state and the error.
     assert_eq!(page.matches("<svg").count(), 3 + 2 + 1);
     assert!(page.contains("after product_decay") && page.contains("</html>"));
-    assert!(page.contains("P [mol/L]") && page.contains("t [s], experiment"));
+    assert!(page.contains("P [mol/L]") && page.contains(">time [s]</text>"));
+    assert!(page.contains(">held-out part starts</text>"));
     assert_eq!(html::figures(&report).len(), 3 + 2 + 1);
 }

@@ -16,7 +16,7 @@ use super::reference::{first_predicted_row, free_run, true_params, truth_along, 
 use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::backend::{Network, Setup};
 use crate::data::Dataset;
-use crate::plot::{BarChart, Chart, Series, Style, PALETTE};
+use crate::plot::{clip, thin, widened_range, BarChart, Chart, Series, Style, MAX_POINTS, PALETTE};
 use crate::train::predict::{predict, Mode, PredictionTable};
 use crate::train::{artifacts, History};
 
@@ -29,9 +29,6 @@ pub const DATA_COLOR: &str = "#000000";
 /// Errors above this are drawn at it in the MSE figures (an MSE of 1 is the error of
 /// predicting the mean; 100 is a free run ten standard deviations off).
 pub const MSE_CEILING: f64 = 100.0;
-/// Most points drawn per series (longer series keep every k-th point and the last): a
-/// figure 640 pixels wide shows no more.
-pub const MAX_POINTS: usize = 1000;
 /// Largest deviation (in standard deviations) of the truth from the data before the
 /// closure figures carry a warning.
 pub const TRUTH_TOLERANCE: f64 = 0.05;
@@ -281,7 +278,7 @@ fn state_charts(
         let range = widened_range(&actual[first..]);
         let (time, axis) = axis_titles(prepared, state);
         let mut chart = Chart::new(&format!("{title}: {state}"), &time, &axis)
-            .with(Series::line("data", thin(truth)).colored(DATA_COLOR));
+            .with(Series::line("data", thin(truth, MAX_POINTS)).colored(DATA_COLOR));
         for ((index, ..), table) in tables {
             let Some(values) = column(table, state) else {
                 continue;
@@ -297,58 +294,6 @@ fn state_charts(
         charts.push((state.to_string(), chart.to_svg(WIDTH, HEIGHT)));
     }
     charts
-}
-
-/// The range of `values` widened by half its span on each side: the visible window of a
-/// trajectory chart.
-pub fn widened_range(values: &[f64]) -> (f64, f64) {
-    let finite = values.iter().copied().filter(|v| v.is_finite());
-    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-        (lo.min(v), hi.max(v))
-    });
-    let pad = if hi > lo {
-        0.5 * (hi - lo)
-    } else {
-        lo.abs().max(1.0) * 0.5
-    };
-    (lo - pad, hi + pad)
-}
-
-/// A model's trajectory clamped to `range` (so that one free run that runs away does not
-/// flatten the others); the name says `(clipped)` when any point was moved.
-pub fn clip(
-    name: &str,
-    points: impl Iterator<Item = (f64, f64)>,
-    (lo, hi): (f64, f64),
-) -> (String, Vec<(f64, f64)>) {
-    let mut clipped = false;
-    let points = (points.filter(|(_, y)| !y.is_nan()))
-        .map(|(x, y)| {
-            let inside = y.clamp(lo, hi);
-            clipped |= inside != y;
-            (x, inside)
-        })
-        .collect();
-    let points = thin(points);
-    let name = if clipped {
-        format!("{name} (clipped)")
-    } else {
-        name.to_string()
-    };
-    (name, points)
-}
-
-/// Every k-th point and the last, so that at most about [`MAX_POINTS`] remain.
-pub fn thin(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
-    let stride = points.len().div_ceil(MAX_POINTS).max(1);
-    if stride == 1 {
-        return points;
-    }
-    let last = points.len() - 1;
-    (points.into_iter().enumerate())
-        .filter(|(index, _)| index % stride == 0 || *index == last)
-        .map(|(_, point)| point)
-        .collect()
 }
 
 fn trajectory_figures(
@@ -459,11 +404,11 @@ fn closure_figure(
             let start = loaded.offset + first_predicted_row(&loaded.validation, table);
             let truth = true_values[start.min(true_values.len())..].iter().copied();
             let points = times.iter().copied().zip(truth).collect();
-            chart = chart.with(Series::line("truth", thin(points)).colored(DATA_COLOR));
+            chart = chart.with(Series::line("truth", thin(points, MAX_POINTS)).colored(DATA_COLOR));
             truth_added = true;
         }
         let points = times.iter().copied().zip(values.iter().copied()).collect();
-        let series = Series::line(&loaded.label, thin(points)).styled(Style::Dashed);
+        let series = Series::line(&loaded.label, thin(points, MAX_POINTS)).styled(Style::Dashed);
         chart = chart.with(series.colored(color(*index)));
     }
     Figure {

@@ -156,13 +156,8 @@ pub fn section(
     html.push_str(&summary_table(&summarise(study, results)));
     html.push_str(&params_table(prepared, results));
     html.push_str(&representatives(prepared, results));
-    for figure in figures {
-        let _ = writeln!(
-            html,
-            "<figure>{}<figcaption>{}</figcaption></figure>",
-            figure.svg,
-            escape(&figure.caption)
-        );
+    for shown in figures {
+        html.push_str(&crate::plot::figure(&shown.svg, &shown.caption));
     }
     if !notes.is_empty() {
         html.push_str("<ul class=\"notes\">\n");

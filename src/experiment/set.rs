@@ -121,8 +121,8 @@ pub fn held_out_figures(
     trained: &[super::figures::TrainedModel],
     size: usize,
 ) -> Vec<super::figures::Figure> {
-    use super::figures::{clip, color, thin, widened_range, Figure, DATA_COLOR, HEIGHT, WIDTH};
-    use crate::plot::{Chart, Series, Style};
+    use super::figures::{color, Figure, DATA_COLOR, HEIGHT, WIDTH};
+    use crate::plot::{clip, thin, widened_range, Chart, Series, Style, MAX_POINTS};
     use crate::train::predict::{predict, Mode};
     let mut figures = Vec::new();
     let Some(first) = prepared.models.iter().find_map(|m| m.set.as_ref()) else {
@@ -170,7 +170,7 @@ pub fn held_out_figures(
                     (table.columns[0].iter().copied()).zip(table.columns[column].iter().copied());
                 let (label, points) = clip(&loaded.label, points, range);
                 chart = chart.with(
-                    Series::line(&label, thin(points))
+                    Series::line(&label, thin(points, MAX_POINTS))
                         .styled(Style::Dashed)
                         .colored(color(*model)),
                 );

@@ -409,23 +409,6 @@ fn shipped_study_files_are_the_presets() {
 }
 
 #[test]
-fn runaway_trajectories_are_clipped_to_the_data_window_and_say_so() {
-    let range = super::figures::widened_range(&[1.0, 3.0, f64::NAN]);
-    assert_eq!(range, (0.0, 4.0));
-    let points = [
-        (0.0, 2.0),
-        (1.0, 9.0),
-        (2.0, f64::NEG_INFINITY),
-        (3.0, f64::NAN),
-    ];
-    let (name, clipped) = super::figures::clip("bb", points.into_iter(), range);
-    assert_eq!(name, "bb (clipped)");
-    assert_eq!(clipped, vec![(0.0, 2.0), (1.0, 4.0), (2.0, 0.0)]);
-    let (name, kept) = super::figures::clip("gb", [(0.0, 1.5)].into_iter(), range);
-    assert_eq!((name.as_str(), kept), ("gb", vec![(0.0, 1.5)]));
-}
-
-#[test]
 fn the_job_queue_runs_every_item_once_and_stops_at_the_first_failure() {
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
@@ -449,19 +432,6 @@ fn the_job_queue_runs_every_item_once_and_stops_at_the_first_failure() {
     });
     assert!(matches!(outcome, Err(super::ExperimentFailure::Internal(m)) if m == "disk full"));
     assert_eq!(done.into_inner(), 3, "nothing runs after the failure");
-}
-
-#[test]
-fn long_series_are_thinned_to_every_kth_point_and_the_last() {
-    use super::figures::{thin, MAX_POINTS};
-    let short: Vec<(f64, f64)> = (0..MAX_POINTS).map(|i| (i as f64, 0.0)).collect();
-    assert_eq!(thin(short.clone()), short);
-    let long: Vec<(f64, f64)> = (0..2 * MAX_POINTS + 1).map(|i| (i as f64, 0.0)).collect();
-    let kept = thin(long);
-    assert!(kept.len() <= MAX_POINTS + 1, "{}", kept.len());
-    assert_eq!(kept.first().map(|p| p.0), Some(0.0));
-    assert_eq!(kept.last().map(|p| p.0), Some(2.0 * MAX_POINTS as f64));
-    assert!(kept.windows(2).all(|w| w[1].0 - w[0].0 <= 3.0));
 }
 
 #[test]

@@ -9,7 +9,7 @@ use std::fmt::Write;
 use super::predict::{predict, Mode, PredictionTable};
 use super::{History, Trained};
 use crate::ir;
-use crate::plot::{escape, page, tick_label, Chart, Series, Style, PALETTE};
+use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style, PALETTE};
 use crate::record::Record;
 
 /// Figure width in pixels.
@@ -76,7 +76,7 @@ pub fn run_page(
         report.recipe.objective,
         tick_label(report.learning_rate),
         tick_label(report.dt),
-        figure(&loss_chart(report.losses.as_slice(), horizons, title))
+        figure(&loss_chart(report.losses.as_slice(), horizons, title), "")
     ));
     sections.push(fit_section(model, trained, &shown));
     sections.push(params_section(report));
@@ -91,10 +91,6 @@ pub fn run_page(
         ),
         &sections,
     )
-}
-
-fn figure(svg: &str) -> String {
-    format!("<figure>{svg}</figure>\n")
 }
 
 /// The mean training loss per epoch (log scale), one series per phase: one-step epochs and
@@ -292,7 +288,7 @@ fn states_section(model: &ir::Model, trained: &Trained, shown: &[Shown], title: 
                 &model.axis_label(&state.name),
             )
             .with(
-                Series::line("measured", thinned(cells))
+                Series::line("measured", thin(cells, MARKERS))
                     .styled(Style::Markers)
                     .colored(DATA),
             );
@@ -308,10 +304,9 @@ fn states_section(model: &ir::Model, trained: &Trained, shown: &[Shown], title: 
                 }
             }
             if let Some(time) = split {
-                let line = vec![(time, lo), (time, hi)];
-                chart = chart.with(Series::line("validated from", line).colored(SPLIT));
+                chart = chart.with_mark("validated from", time, Style::Line, SPLIT);
             }
-            html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT)));
+            html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT), ""));
         }
     }
     html
@@ -347,7 +342,7 @@ fn closures_section(model: &ir::Model, shown: &[Shown], title: &str) -> String {
             let series = Series::line(&name, points).colored(PALETTE[index % PALETTE.len()]);
             chart = chart.with(series);
         }
-        html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT)));
+        html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT), ""));
     }
     html
 }
@@ -373,13 +368,7 @@ fn column_points(table: &PredictionTable, column: usize, (lo, hi): (f64, f64)) -
         .collect()
 }
 
-/// At most [`MARKERS`] points: every k-th (dots denser than that hide the lines).
-fn thinned(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
-    let stride = points.len().div_ceil(MARKERS).max(1);
-    points.into_iter().step_by(stride).collect()
-}
-
-/// Most measured cells drawn as dots per figure.
+/// Most measured cells drawn as dots per figure (dots denser than that hide the lines).
 const MARKERS: usize = 300;
 
 /// The smallest and largest of `values`.

@@ -195,3 +195,53 @@ fn cross_validations_read_back() {
     let again: CrossValidation = serde_json::from_str(&text(&folds)).unwrap();
     assert_eq!(text(&again), text(&folds));
 }
+
+/// Every float in `value` replaced by a non-finite number's name (`"inf"`, `"nan"`,
+/// `"-inf"` in turn); returns how many.
+fn name_every_float(value: &mut serde_json::Value, count: &mut usize) {
+    match value {
+        serde_json::Value::Number(number) if number.is_f64() => {
+            *value = ["inf", "nan", "-inf"][*count % 3].into();
+            *count += 1;
+        }
+        serde_json::Value::Array(items) => {
+            (items.iter_mut()).for_each(|item| name_every_float(item, count));
+        }
+        serde_json::Value::Object(map) => {
+            (map.values_mut()).for_each(|item| name_every_float(item, count));
+        }
+        _ => {}
+    }
+}
+
+/// A diagnosis JSON written by `gbc diagnose` (200 s of the two-effect chemostat case, one
+/// start per fit) reads back into the report it was written from: written again, it is the
+/// same text. The same file with every float turned infinite or NaN by name reads back
+/// too, and writes those names again.
+#[test]
+fn a_diagnosis_json_reads_back_into_its_report() {
+    let dir = scratch("artifacts-diagnosis");
+    let (data, json) = (dir.join("two.csv"), dir.join("diagnosis.json"));
+    crate::diagnose::simulate_chemostat("truth_two", "200", &data);
+    let (data, json) = (data.display().to_string(), json.display().to_string());
+    let model = "models/diagnose/chemostat/model.gbm";
+    let options = ["--json", &json, "--restarts", "0", "--jobs", "1"];
+    let diagnosed = gbc(&[&["diagnose", model, &data][..], &options[..]].concat());
+    assert!(
+        diagnosed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&diagnosed.stderr)
+    );
+    let written = std::fs::read_to_string(&json).unwrap();
+    let report: gbc::diagnose::Report = serde_json::from_str(&written).unwrap();
+    assert!(!report.effects.is_empty() && !report.locus.is_empty());
+    assert_eq!(format!("{}\n", text(&report)), written);
+
+    let mut value: serde_json::Value = serde_json::from_str(&written).unwrap();
+    let mut count = 0;
+    name_every_float(&mut value, &mut count);
+    assert!(count > 100, "{count} floats");
+    let named: gbc::diagnose::Report = serde_json::from_value(value.clone()).unwrap();
+    assert!(named.gap_before.is_infinite() && named.noise_floor.is_nan());
+    assert_eq!(serde_json::to_value(&named).unwrap(), value);
+}

@@ -11,17 +11,14 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).to_string()
 }
 
-/// The decay case simulated for 600 s and cut into three experiments of 200 s, each keeping
-/// its first row and then the cell of S at rows 3k + 1 and of P at rows 3k + 2 (a third of
-/// the cells, never both at once: irregular times per state) and rows 3k only where the
-/// input changes (logged at every change), written as e1..e3.csv.
-fn thinned_files(dir: &Path) -> Vec<String> {
-    let full = dir.join("full.csv");
+/// The chemostat truth `models/diagnose/chemostat/<truth>.gbm` simulated from 0 to
+/// `t_end` s at 1 s under the README's enzyme programme with 1 % noise, written to `path`.
+pub fn simulate_chemostat(truth: &str, t_end: &str, path: &Path) {
     let out = gbc(&[
         "simulate",
-        "models/diagnose/chemostat/truth_decay.gbm",
+        &format!("models/diagnose/chemostat/{truth}.gbm"),
         "--t-end",
-        "599",
+        t_end,
         "--dt",
         "1",
         "--input",
@@ -31,9 +28,18 @@ fn thinned_files(dir: &Path) -> Vec<String> {
         "--seed",
         "7",
         "-o",
-        &full.display().to_string(),
+        &path.display().to_string(),
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
+/// The decay case simulated for 600 s and cut into three experiments of 200 s, each keeping
+/// its first row and then the cell of S at rows 3k + 1 and of P at rows 3k + 2 (a third of
+/// the cells, never both at once: irregular times per state) and rows 3k only where the
+/// input changes (logged at every change), written as e1..e3.csv.
+fn thinned_files(dir: &Path) -> Vec<String> {
+    let full = dir.join("full.csv");
+    simulate_chemostat("truth_decay", "599", &full);
     let content = std::fs::read_to_string(&full).expect("simulated");
     let mut lines = content.lines();
     let header = lines.next().expect("header").to_string();
