@@ -3,6 +3,7 @@
 //!
 //! | file | paper | what |
 //! |---|---|---|
+//! | `data_<state>.svg`, `data_inputs.svg` | 2a, 3a | the record: measured states and inputs, the start of validation marked ([`super::data_figure`]) |
 //! | `mse_offline.svg`, `mse_online.svg` | 2b, 3b | validation MSE against training points (log-log), median line and min–max band over replicates |
 //! | `trajectory_<state>.svg` | 2c, 3c | free runs over the validation window against the data |
 //! | `closure_<output>.svg` | 2c (lower), 3d | learned closure outputs (one step from the true history) against the truth's rates |
@@ -53,10 +54,9 @@ pub fn draw(
     results: &[RunResult],
     weights: WeightsLookup,
 ) -> (Vec<Figure>, Vec<String>) {
-    let mut figures = vec![
-        mse_figure(prepared, results, Metric::Offline),
-        mse_figure(prepared, results, Metric::Online),
-    ];
+    let mut figures = super::data_figure::data_figures(prepared);
+    figures.push(mse_figure(prepared, results, Metric::Offline));
+    figures.push(mse_figure(prepared, results, Metric::Online));
     let mut notes = Vec::new();
     let size = prepared.study.figure_size();
     let mut trained = Vec::new();

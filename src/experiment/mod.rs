@@ -17,6 +17,7 @@
 //! - **Representative runs** for the trajectory figures: at the study's representative size,
 //!   the replicate with the median online error (the lower middle one for an even count).
 
+pub mod data_figure;
 mod error;
 pub mod execute;
 pub mod figures;

@@ -183,9 +183,11 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
         return String::new();
     };
     let sizes = prepared.study.sorted_sizes();
+    // "size 100" or "sizes 100, 200".
     let list = |sizes: &[usize]| {
         let names: Vec<String> = sizes.iter().map(ToString::to_string).collect();
-        names.join(", ")
+        let noun = if sizes.len() == 1 { "size" } else { "sizes" };
+        format!("{noun} {}", names.join(", "))
     };
     let mut html = String::new();
     for grey in prepared.models.iter().filter(|m| !is_black_box(&m.model)) {
@@ -239,11 +241,13 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
                  mass conservation, so it does not compound the way a black box's does",
                 online_wins.len(),
                 sizes.len(),
-                list(&online_wins),
+                (online_wins.iter().map(ToString::to_string))
+                    .collect::<Vec<_>>()
+                    .join(", "),
                 offline_wins.len()
             ),
             (true, false) => format!(
-                "one step ahead only, at sizes {}: the balances help the one-step fit, \
+                "one step ahead only, at {}: the balances help the one-step fit, \
                  but this grid gives no size where its free run is the better one",
                 list(&offline_wins)
             ),
@@ -252,20 +256,20 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
         let losses = match (online_losses.is_empty(), offline_losses.is_empty()) {
             (true, true) => "nowhere in this grid".to_string(),
             (true, false) => format!(
-                "one step ahead at sizes {}: judged from the measured history, the black \
+                "one step ahead at {}: judged from the measured history, the black \
                  box's direct map to the next state fits as well or better, and its freedom \
                  only costs it in the free run",
                 list(&offline_losses)
             ),
             (false, _) => format!(
-                "the free run at sizes {}{loss_note}: with these training pairs and epochs \
+                "the free run at {}{loss_note}: with these training pairs and epochs \
                  the learned rates are not yet right over the whole range of states the free \
                  run visits, and the balances then carry a wrong rate forward{}",
                 list(&online_losses),
                 if offline_losses.is_empty() {
                     String::new()
                 } else {
-                    format!("; one step ahead too at sizes {}", list(&offline_losses))
+                    format!("; one step ahead too at {}", list(&offline_losses))
                 }
             ),
         };
@@ -273,13 +277,8 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
             String::new()
         } else {
             format!(
-                " At {} {} the two free-run medians lie inside each other's replicate range: \
+                " At {} the two free-run medians lie inside each other's replicate range: \
                  a tie more than a win or a loss.",
-                if online_ties.len() == 1 {
-                    "size"
-                } else {
-                    "sizes"
-                },
                 list(&online_ties)
             )
         };

@@ -121,6 +121,8 @@ fn a_sharded_experiment_reruns_nothing_and_merges_into_tables_figures_and_report
         .map(|f| f.name.as_str())
         .collect();
     for expected in [
+        "data_S",
+        "data_inputs",
         "mse_offline",
         "mse_online",
         "trajectory_S",
