@@ -77,15 +77,15 @@ impl ClosureLayout {
     /// one embedding normalisation of training, which the fused step calls too.
     pub fn normalise_into<E: Real>(&self, raw: &[f64], values: &mut Vec<E>) {
         values.clear();
-        for (index, &value) in raw.iter().enumerate() {
-            let column = index % self.width;
-            let (mean, std) = (self.column_mean[column], self.column_std[column]);
-            let source = if self.is_stage_state[column] {
-                0.0
-            } else {
-                value
-            };
-            values.push(E::from_double((source - mean) / std));
+        values.reserve(raw.len());
+        let columns = (self.column_mean.iter())
+            .zip(&self.column_std)
+            .zip(&self.is_stage_state);
+        for row in raw.chunks(self.width) {
+            for (&value, ((&mean, &std), &stage)) in row.iter().zip(columns.clone()) {
+                let source = if stage { 0.0 } else { value };
+                values.push(E::from_double((source - mean) / std));
+            }
         }
     }
 

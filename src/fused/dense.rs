@@ -1,6 +1,8 @@
 //! The one matrix kernel of the fused step, `out += lhs @ rhs` on small blocks, with the
 //! operands copied into packed panels first so that the inner loop has no index arithmetic
-//! or bounds checks and keeps a `4 x 8` tile of the output in registers.
+//! or bounds checks and keeps a tile of the output in registers: 4 rows by two vector
+//! registers (`4 x 8` `f32` in the portable SSE2 build, `4 x 16` in the AVX2 one; the
+//! tiling changes no sum's order, so both give the same bits).
 //!
 //! Every product of a training step has this shape: the affine layers (`z = a W + b`, `out`
 //! starting at the bias), the input gradients (`g_a = delta W^T`) and the weight gradients
@@ -11,10 +13,11 @@ use crate::numeric::Real;
 
 /// Output rows computed together, sharing each load of `rhs`.
 const BLOCK: usize = 4;
-/// Columns of `out` accumulated in registers at once.
-const STRIP: usize = 8;
-/// Width of the strips that cover what is left after the wide ones.
-const NARROW: usize = 4;
+/// Bytes of the narrowest vector register the builds have (SSE2's, the `x86_64` baseline
+/// that the portable build autovectorises for).
+const BASELINE_VECTOR: usize = 16;
+/// The widest strip of output columns: `16` `f32` columns are two AVX2 registers a row.
+const WIDEST: usize = 16;
 
 /// A read-only matrix: entry `(i, j)` is `values[i * row_stride + j * column_stride]`.
 #[derive(Debug, Clone, Copy)]
@@ -96,23 +99,26 @@ impl<E: Real> Gemm<E> {
         super::wide::dispatch(work);
     }
 
+    /// The product with strips at most `widest` columns wide: two vector registers per
+    /// tile row, so that the `4 x 2` independent sums hide the adds' latency.
     #[inline(always)]
     fn product_portable<const ADD: bool>(
         &mut self,
         out: &mut [E],
         (rows, columns, inner): (usize, usize, usize),
-        lhs: View<E>,
-        rhs: View<E>,
+        (lhs, rhs): (View<E>, View<E>),
+        widest: usize,
     ) {
         if rows == 0 || columns == 0 {
             return;
         }
-        let strips = strips(columns);
+        let strips = strips(columns, widest);
         self.rhs.clear();
         for &(start, width) in &strips {
             match width {
-                STRIP => pack_panel::<E, STRIP>(&mut self.rhs, rhs, start, inner),
-                NARROW => pack_panel::<E, NARROW>(&mut self.rhs, rhs, start, inner),
+                16 => pack_panel::<E, 16>(&mut self.rhs, rhs, start, inner),
+                8 => pack_panel::<E, 8>(&mut self.rhs, rhs, start, inner),
+                4 => pack_panel::<E, 4>(&mut self.rhs, rhs, start, inner),
                 _ => pack_panel::<E, 1>(&mut self.rhs, rhs, start, inner),
             }
         }
@@ -144,8 +150,9 @@ impl<E: Real> Gemm<E> {
             panel_start += inner * width;
             let place = (start, columns);
             match width {
-                STRIP => tile::<E, R, STRIP, ADD>(out, &self.lhs, panel, place),
-                NARROW => tile::<E, R, NARROW, ADD>(out, &self.lhs, panel, place),
+                16 => tile::<E, R, 16, ADD>(out, &self.lhs, panel, place),
+                8 => tile::<E, R, 8, ADD>(out, &self.lhs, panel, place),
+                4 => tile::<E, R, 4, ADD>(out, &self.lhs, panel, place),
                 _ => tile::<E, R, 1, ADD>(out, &self.lhs, panel, place),
             }
         }
@@ -166,7 +173,10 @@ impl<E: Real, const ADD: bool> pulp::WithSimd for Product<'_, E, ADD> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        (self.gemm).product_portable::<ADD>(self.out, self.shape, self.lhs, self.rhs);
+        let vector = std::mem::size_of::<S::f32s>().max(BASELINE_VECTOR);
+        let widest = (2 * vector / std::mem::size_of::<E>()).min(WIDEST);
+        let operands = (self.lhs, self.rhs);
+        (self.gemm).product_portable::<ADD>(self.out, self.shape, operands, widest);
     }
 }
 
@@ -213,16 +223,21 @@ fn pack_rows<E: Real, const R: usize>(packed: &mut Vec<E>, lhs: View<E>, row: us
     }
 }
 
-/// `(start, width)` of the column strips: wide ones, narrow ones, then single columns.
-fn strips(columns: usize) -> Vec<(usize, usize)> {
-    let wide = columns / STRIP * STRIP;
-    let narrow = wide + (columns - wide) / NARROW * NARROW;
-    (0..wide)
-        .step_by(STRIP)
-        .map(|start| (start, STRIP))
-        .chain((wide..narrow).step_by(NARROW).map(|start| (start, NARROW)))
-        .chain((narrow..columns).map(|start| (start, 1)))
-        .collect()
+/// `(start, width)` of the column strips: as many of the widest (at most `widest`) as fit,
+/// then narrower ones (16, 8, 4), then single columns.
+fn strips(columns: usize, widest: usize) -> Vec<(usize, usize)> {
+    let mut strips = Vec::new();
+    let mut start = 0;
+    for width in [16, 8, 4, 1] {
+        if width > widest {
+            continue;
+        }
+        while columns - start >= width {
+            strips.push((start, width));
+            start += width;
+        }
+    }
+    strips
 }
 
 /// Columns `start..start + N` of the `R` rows of `out`, from the packed `lhs` (`inner x R`)
@@ -334,7 +349,7 @@ mod tests {
     #[test]
     fn the_wide_build_gives_the_portable_numbers_bit_for_bit() {
         use pulp::WithSimd;
-        for (rows, columns, inner) in [(50, 20, 50), (7, 3, 20), (13, 17, 5)] {
+        for (rows, columns, inner) in [(50, 20, 50), (7, 3, 20), (13, 17, 5), (6, 37, 9)] {
             let lhs: Vec<f32> = (0..rows * inner).map(|i| (i as f32 * 0.37).sin()).collect();
             let rhs: Vec<f32> = (0..inner * columns)
                 .map(|i| (i as f32 * 0.11).cos())
@@ -362,6 +377,17 @@ mod tests {
             assert_eq!(wide, portable, "{rows} x {columns} x {inner}");
             assert_ne!(wide, start);
         }
+    }
+
+    #[test]
+    fn strips_cover_the_columns_widest_first() {
+        assert_eq!(strips(20, 16), [(0, 16), (16, 4)]);
+        assert_eq!(strips(20, 8), [(0, 8), (8, 8), (16, 4)]);
+        assert_eq!(
+            strips(31, 16),
+            [(0, 16), (16, 8), (24, 4), (28, 1), (29, 1), (30, 1)]
+        );
+        assert_eq!(strips(3, 4), [(0, 1), (1, 1), (2, 1)]);
     }
 
     #[test]
