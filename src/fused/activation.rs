@@ -119,7 +119,8 @@ const ROUNDING_SHIFT: f32 = 12_582_912.0;
 /// `e^x` for `x <= 0` in `f32` without branches (Cephes' `expf`: `x = n ln 2 + r`,
 /// `|r| <= ln 2 / 2`, a degree-6 polynomial for `e^r`, `2^n` assembled from bits). Below
 /// `-86` it returns `e^-86` (about `4.5e-38`, still a normal number) rather than go
-/// through subnormals: an absolute error under `5e-38`.
+/// through subnormals: an absolute error under `5e-38`. Within 2 ulps of the exact
+/// exponential over `[-86, 0]` (tested against libm on a million points over every binade).
 #[inline(always)]
 pub fn exp_nonpositive(x: f32) -> f32 {
     let x = if x > -86.0 { x } else { -86.0 };
@@ -137,7 +138,9 @@ pub fn exp_nonpositive(x: f32) -> f32 {
 }
 
 /// `ln(1 + e)` for `0 <= e <= 1` in `f32` without branches, as `2 atanh(s)` with
-/// `s = e / (2 + e)`; it keeps full relative accuracy for tiny `e`.
+/// `s = e / (2 + e)`; it keeps full relative accuracy for tiny `e`: within 2 ulps of the
+/// exact value for `e` in `[e^-86, 1]`, the range softplus feeds it (tested on a million
+/// points over every binade; subnormal `e` lose relative accuracy and never occur).
 pub fn ln_one_plus_unit(e: f32) -> f32 {
     two_atanh(e / (2.0 + e))
 }
@@ -163,31 +166,43 @@ mod tests {
         (found as f64 - expected).abs() / (expected.abs() * f32::EPSILON as f64)
     }
 
+    /// Every 997th `f32` of `[lo, hi]` (both non-negative) by bit pattern: about a million
+    /// points covering every binade of the range, the ends included.
+    fn sweep(lo: f32, hi: f32) -> impl Iterator<Item = f32> {
+        let (first, last) = (lo.to_bits(), hi.to_bits());
+        (first..=last)
+            .step_by(997)
+            .chain([last])
+            .map(f32::from_bits)
+    }
+
+    /// The stated bound over the whole range softplus uses, `[-86, 0]`: within 2 ulps of
+    /// the exact exponential (libm's `f64` `exp`, itself within 1 ulp of `f64`).
     #[test]
-    fn fast_exp_is_within_two_ulps_of_the_f64_exponential() {
+    fn fast_exp_is_within_two_ulps_of_libm_over_its_whole_range() {
         let mut worst: f64 = 0.0;
-        for step in 0..86_000 {
-            let x = -(step as f32) * 1e-3;
+        let mut count = 0;
+        for magnitude in sweep(0.0, 86.0) {
+            let x = -magnitude;
             worst = worst.max(ulps(exp_nonpositive(x), (x as f64).exp()));
+            count += 1;
         }
+        assert!(count > 1_000_000, "{count} points");
         assert!(worst < 2.0, "worst {worst} ulps");
         assert!(exp_nonpositive(-1000.0) < 5e-38 && exp_nonpositive(-1000.0) > 0.0);
         assert_eq!(exp_nonpositive(0.0), 1.0);
     }
 
+    /// `ln(1 + e)` over the whole range softplus uses, `e` in `[e^-86, 1]` (what
+    /// [`exp_nonpositive`] returns; every binade): within 2 ulps of libm's `f64` `ln_1p`.
     #[test]
-    fn fast_ln_one_plus_is_within_two_ulps_from_tiny_to_one() {
+    fn fast_ln_one_plus_is_within_two_ulps_of_libm_over_its_whole_range() {
         let mut worst: f64 = 0.0;
-        for step in 0..=10_000 {
-            let e = step as f32 * 1e-4;
-            if e > 0.0 {
-                worst = worst.max(ulps(ln_one_plus_unit(e), (e as f64).ln_1p()));
-            }
-        }
-        for e in [1e-30_f32, 1e-12, 3e-8, 1e-5] {
+        for e in sweep(exp_nonpositive(-86.0), 1.0) {
             worst = worst.max(ulps(ln_one_plus_unit(e), (e as f64).ln_1p()));
         }
         assert!(worst < 2.0, "worst {worst} ulps");
+        assert_eq!(ln_one_plus_unit(0.0), 0.0);
     }
 
     /// Both element types against the f64 definition `ln(1 + e^z)` and its derivative.
