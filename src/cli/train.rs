@@ -665,7 +665,7 @@ fn print_params(out: &mut String, trained: &Trained) {
         (None, None) => line!(out, "params (+- standard error):"),
     }
     for estimate in &report.estimates {
-        let flag = if estimate.well_identified {
+        let flag = if estimate.identified {
             ""
         } else {
             "  poorly identified"

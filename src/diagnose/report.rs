@@ -179,23 +179,7 @@ pub struct Regime {
     pub highest: bool,
 }
 
-/// A fitted param with its uncertainty.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ParamEstimate {
-    /// Param name (or `X@experiment` for a fitted initial value).
-    pub name: String,
-    /// Fitted value.
-    #[serde(with = "crate::json")]
-    pub value: f64,
-    /// Linearised standard error (infinite when the data do not determine it).
-    #[serde(with = "crate::json")]
-    pub std_error: f64,
-    /// `std_error / |value|`.
-    #[serde(with = "crate::json")]
-    pub relative_error: f64,
-    /// Whether the relative error is below 5 %.
-    pub identified: bool,
-}
+pub use crate::train::polish::ParamEstimate;
 
 /// How a fit went: params with uncertainty, the direction the data leave free, criteria.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]

@@ -371,7 +371,7 @@ impl Problem {
                     value: values[i],
                     std_error,
                     relative_error,
-                    well_identified: relative_error < IDENTIFIABILITY_LIMIT,
+                    identified: relative_error < IDENTIFIABILITY_LIMIT,
                 }
             })
             .collect::<Vec<_>>();
@@ -489,7 +489,7 @@ mod tests {
                     (estimate.value / truth - 1.0).abs() < 1e-6,
                     "{file}: {estimate:?}"
                 );
-                assert!(estimate.well_identified, "{file}: {estimate:?}");
+                assert!(estimate.identified, "{file}: {estimate:?}");
             }
         }
     }
@@ -547,10 +547,10 @@ mod tests {
             .unwrap();
         // Steady state: r = 0.05 from X, then 0.05 * 0.5 = 0.05 / k from S, so k = 2.
         assert!((fit.estimates[0].value - 2.0).abs() < 1e-6, "{fit:?}");
-        assert!(fit.estimates[0].well_identified, "{fit:?}");
+        assert!(fit.estimates[0].identified, "{fit:?}");
         let unused = &fit.estimates[1];
         assert!(
-            unused.std_error.is_infinite() && !unused.well_identified,
+            unused.std_error.is_infinite() && !unused.identified,
             "{unused:?}"
         );
         assert_eq!(unused.value, 2.0);

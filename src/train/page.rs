@@ -241,7 +241,7 @@ fn params_section(report: &super::TrainReport) -> String {
             Some(e) if e.std_error.is_finite() => (
                 tick_label(e.std_error),
                 format!("{:.1} %", 100.0 * e.relative_error),
-                if e.well_identified { "yes" } else { "poorly" },
+                if e.identified { "yes" } else { "poorly" },
             ),
             Some(_) => ("∞".into(), "–".into(), "no (the data leave it free)"),
             None => ("–".into(), "–".into(), "not estimated"),

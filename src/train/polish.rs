@@ -14,7 +14,7 @@
 //!   with `J` over the raw params *and* the output-layer biases of every closure (nuisance
 //!   parameters: a constant shift of each closure output that could absorb a change of a
 //!   param is allowed for). A param's standard error is its marginal one, mapped through
-//!   its transform; [`ParamEstimate::well_identified`] says whether it is below
+//!   its transform; [`ParamEstimate::identified`] says whether it is below
 //!   [`IDENTIFIABILITY_LIMIT`] of the value. The residuals of a fitted model are model
 //!   error more than noise and are correlated in time, so the error is a measure of how
 //!   sharply the data pin the param given the network, not a confidence interval.
@@ -49,12 +49,13 @@ const DAMPING: Damping = Damping {
 /// Pairs per prediction batch.
 const CHUNK: usize = 512;
 
-/// A trained param with its uncertainty.
+/// A fitted param with its uncertainty: what training's polish and balance fit report,
+/// and what `diagnose` reports of its fits.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ParamEstimate {
-    /// Param name.
+    /// Param name (in `diagnose`, `X@experiment` for a fitted initial value).
     pub name: String,
-    /// Trained value.
+    /// Fitted value.
     #[serde(with = "crate::json")]
     pub value: f64,
     /// Linearised standard error (infinite when the data do not determine it).
@@ -63,8 +64,10 @@ pub struct ParamEstimate {
     /// `std_error / |value|`.
     #[serde(with = "crate::json")]
     pub relative_error: f64,
-    /// Whether `relative_error` is below [`IDENTIFIABILITY_LIMIT`].
-    pub well_identified: bool,
+    /// Whether `relative_error` is below [`IDENTIFIABILITY_LIMIT`] (runs written before
+    /// the name was shared with `diagnose` call it `well_identified`).
+    #[serde(alias = "well_identified")]
+    pub identified: bool,
 }
 
 /// What the polish did.
@@ -258,7 +261,7 @@ impl<'a> Probe<'a> {
                 value,
                 std_error,
                 relative_error,
-                well_identified: relative_error < IDENTIFIABILITY_LIMIT,
+                identified: relative_error < IDENTIFIABILITY_LIMIT,
             });
         }
         Ok(estimates)
@@ -316,4 +319,24 @@ fn output_biases(weights: &[NamedTensor]) -> Vec<usize> {
                 .is_none_or(|next| closure_of(&next.name) != own)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ParamEstimate;
+
+    /// One estimate type for training and `diagnose`: runs written under the old field name
+    /// still read, and what is written reads back, infinite standard error included.
+    #[test]
+    fn estimates_read_under_either_name_and_round_trip() {
+        let old = r#"{"name":"Y_X","value":0.4,"std_error":"inf","relative_error":"inf","well_identified":false}"#;
+        let read: ParamEstimate = serde_json::from_str(old).unwrap();
+        assert!(read.std_error.is_infinite() && !read.identified);
+        let written = serde_json::to_string(&read).unwrap();
+        assert!(written.contains(r#""identified":false"#), "{written}");
+        assert_eq!(
+            serde_json::from_str::<ParamEstimate>(&written).unwrap(),
+            read
+        );
+    }
 }

@@ -155,7 +155,7 @@ fn the_polish_recovers_a_rate_constant_and_flags_an_unidentifiable_pair() {
         (kcat.value / chemostat::KCAT - 1.0).abs() < 1e-3,
         "{kcat:?}"
     );
-    assert!(kcat.well_identified && kcat.std_error < 1e-3 * kcat.value);
+    assert!(kcat.identified && kcat.std_error < 1e-3 * kcat.value);
     let polish = report.polish.unwrap();
     assert!(polish.loss_after < polish.loss_before / 100.0);
     assert!((polish.params_before[0] / (chemostat::KCAT / 2.0) - 1.0).abs() < 1e-12);
@@ -170,7 +170,7 @@ fn the_polish_recovers_a_rate_constant_and_flags_an_unidentifiable_pair() {
     let report = fit(&product);
     let values: Vec<f64> = report.estimates.iter().map(|e| e.value).collect();
     assert!((values[0] * values[1] / chemostat::KCAT - 1.0).abs() < 1e-3);
-    assert!(report.estimates.iter().all(|e| !e.well_identified));
+    assert!(report.estimates.iter().all(|e| !e.identified));
 }
 
 /// Whole experiments validate each on its own, and the headline pools their cells: per

@@ -42,7 +42,7 @@ fn unidentified(name: &str) -> ParamEstimate {
         value: 0.5,
         std_error: f64::INFINITY,
         relative_error: f64::INFINITY,
-        well_identified: false,
+        identified: false,
     }
 }
 
