@@ -33,12 +33,16 @@ pub mod dense;
 mod kernel;
 mod plan;
 mod reverse;
+mod rollout;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_rollout;
 
 use crate::backend::{
-    dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, Setup, StepSettings,
+    dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, RolloutBatch, Setup,
+    StepSettings,
 };
 use crate::ir;
 use crate::numeric::Real;
@@ -110,6 +114,24 @@ impl FusedNetwork {
             let loss = kernel.loss_and_gradient(batch)?;
             Ok((loss, split(kernel.plan(), &kernel.gradient)))
         })
+    }
+
+    /// The loss of a rollout batch, the mean normalised squared error over every step of
+    /// every window as [`Network::rollout_loss`], and its gradient through the whole
+    /// rollout with respect to every tensor of [`FusedNetwork::weights`].
+    pub fn rollout_gradient(
+        &mut self,
+        batch: &RolloutBatch,
+    ) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
+        dispatch!(mut self, kernel => {
+            let loss = kernel.rollout_loss_and_gradient(batch)?;
+            Ok((loss, split(kernel.plan(), &kernel.gradient)))
+        })
+    }
+
+    /// The loss of a rollout batch (see [`FusedNetwork::rollout_gradient`]).
+    pub fn rollout_loss(&mut self, batch: &RolloutBatch) -> Result<f64, BackendError> {
+        dispatch!(mut self, kernel => kernel.rollout_loss(batch))
     }
 
     /// Replaces the trainable values from one flat vector (the tensors of
