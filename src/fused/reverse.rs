@@ -17,6 +17,9 @@ pub(super) struct Scratch<E> {
     pub offset_deltas: Vec<Vec<Vec<E>>>,
     /// The adjoints of the four stages' balances of the sub-step being reversed.
     pub stage_seeds: Vec<Vec<E>>,
+    /// `rows x widths[0]`: the gradient of one closure's network input at one stage time
+    /// (for the predictions a rollout feeds back).
+    pub input_gradient: Vec<E>,
     /// The gradient being passed down a network, and the layer below it.
     delta: Vec<E>,
     below: Vec<E>,

@@ -24,6 +24,7 @@
 use crate::backend::{BackendError, Batch, Feedback, RolloutBatch};
 
 use super::activation::Lane;
+use super::dense::View;
 use super::kernel::{add_scaled, Kernel};
 
 /// What one step of a loaded window reads.
@@ -283,21 +284,28 @@ impl<E: Lane> Kernel<E> {
     }
 
     /// Adds the adjoint of every prediction step `step` read back: `factor` times the
-    /// step's first-layer delta at the entry's stage time and row, dotted with row `column`
-    /// of the first weight matrix.
+    /// gradient of the network input it entered, `delta W0^T` of the step's first-layer
+    /// delta at the entry's stage time (one product per closure and stage time that has
+    /// entries; they sit together, in load order).
     fn feedback_adjoints(&mut self, step: usize) {
-        let states = self.states;
-        for entry in &self.window[step].feedback {
-            let closure = &self.plan.closures[entry.closure];
-            let width = closure.widths[1];
-            let deltas = &self.scratch.offset_deltas[entry.closure][entry.offset];
-            let delta = &deltas[entry.row * width..][..width];
-            let weights = &self.weights[closure.weight_at[0] + entry.column * width..][..width];
-            let mut sum = E::ZERO;
-            for (&d, &w) in delta.iter().zip(weights) {
-                sum += d * w;
+        let (rows, states) = (self.rows, self.states);
+        let entries = &self.window[step].feedback;
+        for group in entries.chunk_by(|a, b| (a.closure, a.offset) == (b.closure, b.offset)) {
+            let (closure, offset) = (group[0].closure, group[0].offset);
+            let plan = &self.plan.closures[closure];
+            let (inner, width) = (plan.widths[0], plan.widths[1]);
+            let gradient = &mut self.scratch.input_gradient;
+            gradient.resize(rows * inner, E::ZERO);
+            self.gemm.multiply(
+                gradient,
+                (rows, inner, width),
+                View::row_major(&self.scratch.offset_deltas[closure][offset], width),
+                View::transposed(&self.weights[plan.weight_at[0]..][..inner * width], width),
+            );
+            for entry in group {
+                let value = gradient[entry.row * inner + entry.column];
+                self.adjoints[entry.sample][entry.row * states + entry.state] += value * entry.factor;
             }
-            self.adjoints[entry.sample][entry.row * states + entry.state] += sum * entry.factor;
         }
     }
 
