@@ -180,7 +180,8 @@ impl<E: Lane> Kernel<E> {
         convert(&mut data.targets, source.targets);
         convert(&mut data.inputs, source.inputs);
         data.feedback.clear();
-        data.constants.resize_with(self.plan.closures.len(), Vec::new);
+        data.constants
+            .resize_with(self.plan.closures.len(), Vec::new);
         for ((closure, raw), normalised) in (self.plan.closures.iter())
             .zip(source.embeddings)
             .zip(&mut data.constants)
@@ -304,7 +305,8 @@ impl<E: Lane> Kernel<E> {
             );
             for entry in group {
                 let value = gradient[entry.row * inner + entry.column];
-                self.adjoints[entry.sample][entry.row * states + entry.state] += value * entry.factor;
+                self.adjoints[entry.sample][entry.row * states + entry.state] +=
+                    value * entry.factor;
             }
         }
     }

@@ -201,10 +201,16 @@ pub(super) const SHIPPED: [(&str, &str); 10] = [
     ("bioreactor/blackbox_ode", "bioreactor/data/steps.csv"),
     ("bioreactor/blackbox_residual", "bioreactor/data/steps.csv"),
     ("mm_chemostat/greybox", "mm_chemostat/data/steps.csv"),
-    ("mm_chemostat/greybox_positive", "mm_chemostat/data/steps.csv"),
+    (
+        "mm_chemostat/greybox_positive",
+        "mm_chemostat/data/steps.csv",
+    ),
     ("mm_chemostat/blackbox", "mm_chemostat/data/steps.csv"),
     ("mm_chemostat/blackbox_ode", "mm_chemostat/data/steps.csv"),
-    ("mm_chemostat/blackbox_residual", "mm_chemostat/data/steps.csv"),
+    (
+        "mm_chemostat/blackbox_residual",
+        "mm_chemostat/data/steps.csv",
+    ),
 ];
 
 /// Every shipped trainable model on its shipped record, in `f64` at the initial weights:

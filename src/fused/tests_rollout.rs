@@ -53,7 +53,13 @@ fn assert_rollout_matches(
 }
 
 fn feedback_entries(batch: &RolloutBatch) -> usize {
-    batch.feedback.iter().flatten().flatten().map(Vec::len).sum()
+    batch
+        .feedback
+        .iter()
+        .flatten()
+        .flatten()
+        .map(Vec::len)
+        .sum()
 }
 
 /// Every row its own step (0.6 to 1.4 of its own) and about one cell in five unmeasured,
@@ -217,7 +223,12 @@ fn fixtures_roll_out_as_the_graph_backend_on_an_irregular_record() {
             let weights = random_weights(&template, 4);
             let loss = assert_rollout_matches(&model, &setup, &batch, Some(&weights), 1e-9);
             let mut without = batch.clone();
-            without.feedback.iter_mut().flatten().flatten().for_each(Vec::clear);
+            without
+                .feedback
+                .iter_mut()
+                .flatten()
+                .flatten()
+                .for_each(Vec::clear);
             let mut fused = FusedNetwork::build(&model, &setup).unwrap();
             fused.set_weights(&weights).unwrap();
             let blind = fused.rollout_loss(&without).unwrap();
@@ -303,7 +314,10 @@ fn a_multi_step_run_on_the_fused_engine_follows_the_graph_engine() {
         assert!(fused.runs(batch));
         let a = on_graph.step(&mut graph, batch, &settings).unwrap();
         let b = on_fused.step(&mut fused, batch, &settings).unwrap();
-        assert!((a - b).abs() <= 1e-10 * a.abs(), "{steps} steps: {a} vs {b}");
+        assert!(
+            (a - b).abs() <= 1e-10 * a.abs(),
+            "{steps} steps: {a} vs {b}"
+        );
     }
     let initial = Optimiser::new(&graph, Precision::F64).weights();
     assert_ne!(on_graph.weights(), initial, "training moved the weights");
@@ -331,7 +345,10 @@ fn malformed_windows_are_refused() {
     let bad = [
         Feedback { sample: 2, ..entry },
         Feedback { row: 9, ..entry },
-        Feedback { column: 99, ..entry },
+        Feedback {
+            column: 99,
+            ..entry
+        },
     ];
     for wrong in bad {
         let mut broken = batch.clone();

@@ -17,8 +17,9 @@ use super::prepare::Layout;
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
-    polish, with_initial_params, Engine, Event, InitialState, Metrics, ParamSource, Part, PhysicalRange,
-    Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
+    polish, with_initial_params, Engine, Event, InitialState, Metrics, ParamSource, Part,
+    PhysicalRange, Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained,
+    TrainingData,
 };
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,

@@ -270,7 +270,11 @@ fn train_both(
     };
     let (graph, fused) = (run(Engine::Graph), run(Engine::Auto));
     assert_eq!(graph.report.engine, Engine::Graph);
-    assert_eq!(fused.report.engine, Engine::Fused, "auto runs the fused step");
+    assert_eq!(
+        fused.report.engine,
+        Engine::Fused,
+        "auto runs the fused step"
+    );
     (graph, fused)
 }
 
