@@ -89,6 +89,13 @@ impl ClosureLayout {
         }
     }
 
+    /// The factor of a prediction fed back into network input `column` with interpolation
+    /// weight `weight`: `weight / std` of the column (none outside the layout); the graph
+    /// and the fused step both scale feedback by it.
+    pub fn feedback_factor(&self, column: usize, weight: f64) -> Option<f64> {
+        self.column_std.get(column).map(|std| weight / std)
+    }
+
     /// The stage-estimate entries plus a rollout's feedback entries (each for its own
     /// row), each scaled by its column's `1 / std`.
     fn with_feedback(
@@ -98,14 +105,14 @@ impl ClosureLayout {
     ) -> Result<EmbedColumns, BackendError> {
         let mut columns = (*self.state_columns).clone();
         for entry in feedback {
-            let std = (self.column_std.get(entry.column))
+            let factor = (self.feedback_factor(entry.column, entry.weight))
                 .filter(|_| entry.sample >= 1 && entry.row < rows)
                 .ok_or_else(|| BackendError::internal("feedback outside the embedding"))?;
             columns.entries.push(EmbedEntry {
                 column: entry.column,
                 source: entry.sample,
                 state: entry.state,
-                factor: entry.weight / std,
+                factor,
                 row: Some(entry.row),
             });
         }

@@ -28,7 +28,7 @@ pub struct TrainingFlags {
     #[arg(long, value_name = "K", help = with_default("RK4 sub-steps per sample (for stiff balances)", Settings::default().substeps))]
     pub substeps: Option<usize>,
     /// What runs the training steps (`gbc bench`: both when left out).
-    #[arg(long, value_enum, help = with_default("What runs the training steps: the fastest that runs the model, the graph backend, or the hand-fused step for one-step epochs (`gbc bench`: graph and fused when left out)", Settings::default().engine.name()))]
+    #[arg(long, value_enum, help = with_default("What runs the training steps: the fastest that runs the model, the graph backend, or the hand-fused step (`gbc bench`: graph and fused when left out)", Settings::default().engine.name()))]
     pub engine: Option<Engine>,
 }
 

@@ -1,6 +1,12 @@
 //! The fused training step in one element type: the forward RK4 step of the paper (eq. 4-7)
-//! through every closure network and the physics program, the normalised loss, the reverse
-//! pass ([`super::reverse`]) and Adam, over buffers kept from step to step.
+//! through every closure network and the physics program, its reverse pass
+//! ([`super::reverse`] for each stage) and Adam, over buffers kept from step to step.
+//!
+//! The kernel runs a window of steps ([`super::rollout`]): one step for a batch of one-step
+//! pairs, `K` steps for a batch of rollout windows. Here are the pieces of one step of the
+//! window: [`Kernel::forward_step`] from the state the window reached to the next, and
+//! [`Kernel::backward_step`] from the adjoint of that next state back to the adjoint of the
+//! state it started from.
 //!
 //! **First layers by stage time.** A closure's network input at a stage is the batch's
 //! normalised embedding at that stage time plus the stage estimate in the lag-0 state
@@ -8,7 +14,8 @@
 //! and third stages share `t + h/2`), so its product with the first weight matrix is formed
 //! once per stage time, and the estimate enters as a rank-`states` update; in the reverse
 //! pass the first weight matrix's gradient is likewise one product per stage time. This
-//! saves two of the eight large products of a GB2 step.
+//! saves two of the eight large products of a GB2 step. (A rollout's predicted states fed
+//! back into the embedding are part of that constant part: they are known before the step.)
 
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{BackendError, Batch, Setup, StepSettings};
@@ -19,11 +26,14 @@ use super::activation::{activate, Lane};
 use super::dense::{Gemm, View};
 use super::plan::{ClosurePlan, Plan};
 use super::reverse::Scratch;
+use super::rollout::StepData;
 use crate::numeric::{Adam, AdamState, Update};
 
 /// What one stage evaluation keeps for the reverse pass.
 #[derive(Debug, Default)]
 pub(super) struct Stage<E> {
+    /// The step of the window the stage belongs to.
+    pub step: usize,
     /// Index of the stage time (into each closure's embeddings).
     pub offset: usize,
     /// `rows x states`: the state estimate the stage is evaluated at.
@@ -43,26 +53,31 @@ pub(super) struct Stage<E> {
 pub struct Kernel<E: Lane> {
     pub(super) plan: Plan,
     pub(super) program: Program,
-    dynamics: Dynamics,
-    step: f64,
-    substeps: usize,
+    pub(super) dynamics: Dynamics,
+    /// The nominal step `h` (rows that give none).
+    pub(super) step: f64,
+    pub(super) substeps: usize,
     pub(super) states: usize,
-    inverse_std: Vec<E>,
+    /// `1 / std` of each measured state (the loss's z-score).
+    pub(super) inverse_std: Vec<E>,
     /// Every trainable value, tensors back to back in [`Plan::tensors`] order.
     pub weights: Vec<E>,
     /// The gradient of the last [`Kernel::loss_and_gradient`], same layout.
     pub gradient: Vec<E>,
     adam: Adam<E>,
     pub(super) rows: usize,
-    /// The sub-step `h / K` of each row of the loaded batch.
-    substep_sizes: Vec<f64>,
-    /// `rows x measured` loss weights of the loaded batch (empty: every cell weighs 1).
-    loss_weights: Vec<f64>,
-    pub(super) inputs: Vec<E>,
-    /// `constants[closure][offset]`: normalised embeddings (lag-0 state entries `-mean/std`).
-    pub(super) constants: Vec<Vec<Vec<E>>>,
-    /// `first_products[closure][offset]`: `constants @ W0 + b0`.
+    /// Steps of the loaded window (1 for one-step pairs).
+    pub(super) steps: usize,
+    /// What each step of the loaded window reads (the first `steps` entries are current;
+    /// the buffers of all are kept).
+    pub(super) window: Vec<StepData<E>>,
+    /// `trajectory[k]`: `rows x states` after `k` steps of the window (0: its start).
+    pub(super) trajectory: Vec<Vec<E>>,
+    /// `adjoints[k]`: the loss's gradient with respect to `trajectory[k]`.
+    pub(super) adjoints: Vec<Vec<E>>,
+    /// `first_products[closure][offset]`: `constants @ W0 + b0` of the step being run.
     first_products: Vec<Vec<Vec<E>>>,
+    /// The stages of every step, step after step.
     pub(super) stages: Vec<Stage<E>>,
     pub(super) gemm: Gemm<E>,
     pub(super) scratch: Scratch<E>,
@@ -77,11 +92,6 @@ impl<E: Lane> Kernel<E> {
         weights: &[f64],
     ) -> Result<Self, BackendError> {
         let program = Program::compile(model, &setup.scales)?;
-        let count = if model.dynamics == Dynamics::Discrete {
-            1
-        } else {
-            4 * setup.substeps.max(1)
-        };
         let inverse_std = (setup.normalisation.state_std.iter())
             .map(|&s| E::from_double(1.0 / s))
             .collect();
@@ -98,12 +108,12 @@ impl<E: Lane> Kernel<E> {
             gradient: vec![E::ZERO; size],
             adam: Adam::new(size),
             rows: 0,
-            substep_sizes: Vec::new(),
-            loss_weights: Vec::new(),
-            inputs: Vec::new(),
-            constants: vec![Vec::new(); plan.closures.len()],
+            steps: 0,
+            window: Vec::new(),
+            trajectory: Vec::new(),
+            adjoints: Vec::new(),
             first_products: vec![Vec::new(); plan.closures.len()],
-            stages: (0..count).map(|_| Stage::default()).collect(),
+            stages: Vec::new(),
             gemm: Gemm::default(),
             scratch: Scratch::default(),
             plan,
@@ -148,67 +158,7 @@ impl<E: Lane> Kernel<E> {
         (self.adam.set_state(state, &self.lengths())).map_err(BackendError::WeightsMismatch)
     }
 
-    /// The normalised one-step loss of the batch; its gradient is left in
-    /// [`Kernel::gradient`].
-    pub fn loss_and_gradient(&mut self, batch: &Batch) -> Result<f64, BackendError> {
-        self.load(batch)?;
-        let next = self.forward();
-        let (loss, seed) = self.loss(&next, &batch.targets);
-        self.gradient.fill(E::ZERO);
-        self.backward(seed);
-        Ok(loss)
-    }
-
-    /// Converts the batch into the element type and normalises its embeddings.
-    fn load(&mut self, batch: &Batch) -> Result<(), BackendError> {
-        let rows = batch.rows;
-        let shape = self.program.shape();
-        let measured = self.inverse_std.len();
-        let fits = batch.states.len() == rows * shape.states
-            && batch.inputs.len() == rows * shape.inputs
-            && batch.targets.len() == rows * measured
-            && batch.embeddings.len() == self.plan.closures.len()
-            && (batch.step_sizes.is_empty() || batch.step_sizes.len() == rows)
-            && (batch.weights.is_empty() || batch.weights.len() == rows * measured);
-        let valid_steps = (batch.step_sizes.iter()).all(|h| *h >= 0.0 && h.is_finite());
-        let valid_weights = (batch.weights.iter()).all(|w| *w >= 0.0 && w.is_finite());
-        if !(fits && valid_steps && valid_weights) {
-            return Err(BackendError::internal("the batch does not fit the model"));
-        }
-        self.rows = rows;
-        let substeps = self.substeps as f64;
-        self.substep_sizes.clear();
-        if batch.step_sizes.is_empty() {
-            self.substep_sizes.resize(rows, self.step / substeps);
-        } else {
-            (self.substep_sizes).extend(batch.step_sizes.iter().map(|h| h / substeps));
-        }
-        self.loss_weights.clear();
-        self.loss_weights.extend_from_slice(&batch.weights);
-        self.inputs.clear();
-        self.inputs
-            .extend(batch.inputs.iter().map(|&v| E::from_double(v)));
-        let offsets = self.stage_offsets();
-        for ((closure, raw), normalised) in (self.plan.closures.iter())
-            .zip(&batch.embeddings)
-            .zip(&mut self.constants)
-        {
-            if raw.len() < offsets || raw.iter().any(|r| r.len() != rows * closure.width()) {
-                return Err(BackendError::internal(
-                    "a batch embedding has the wrong size",
-                ));
-            }
-            normalised.resize_with(offsets, Vec::new);
-            for (out, values) in normalised.iter_mut().zip(raw) {
-                closure.layout.normalise_into(values, out);
-            }
-        }
-        let first = &mut self.stages[0].state;
-        first.clear();
-        first.extend(batch.states.iter().map(|&v| E::from_double(v)));
-        Ok(())
-    }
-
+    /// Distinct stage times of a step: `2K + 1` for `der` models, 1 for `next` models.
     pub(super) fn stage_offsets(&self) -> usize {
         match self.dynamics {
             Dynamics::Discrete => 1,
@@ -216,55 +166,77 @@ impl<E: Lane> Kernel<E> {
         }
     }
 
-    /// The forward pass: `x(t + h)` for every row.
-    fn forward(&mut self) -> Vec<E> {
-        self.first_layer_products();
-        if self.dynamics == Dynamics::Discrete {
-            self.stages[0].offset = 0;
-            self.evaluate(0);
-            return self.stages[0].balances.clone();
+    /// Stages of a step: `4K` for `der` models, 1 for `next` models.
+    pub(super) fn stages_per_step(&self) -> usize {
+        match self.dynamics {
+            Dynamics::Discrete => 1,
+            Dynamics::Continuous => 4 * self.substeps,
         }
-        let width = self.states;
-        let mut state = self.stages[0].state.clone();
-        for substep in 0..self.substeps {
-            let (first, base) = (4 * substep, 2 * substep);
-            let fractions = [
-                (0.0, base),
-                (0.5, base + 1),
-                (0.5, base + 1),
-                (1.0, base + 2),
-            ];
-            for (index, &(fraction, offset)) in fractions.iter().enumerate() {
-                let stage = first + index;
-                let estimate = if index == 0 {
-                    state.clone()
-                } else {
-                    let previous = &self.stages[stage - 1].balances;
-                    axpy_rows(
-                        &state,
-                        (&self.substep_sizes, fraction, 1.0),
-                        previous,
-                        width,
-                    )
-                };
-                self.stages[stage].state = estimate;
-                self.stages[stage].offset = offset;
-                self.evaluate(stage);
-            }
-            let k = |index: usize| &self.stages[first + index].balances;
-            let mut sum = axpy(k(0), 2.0, k(1));
-            sum = axpy(&sum, 2.0, k(2));
-            sum = axpy(&sum, 1.0, k(3));
-            state = axpy_rows(&state, (&self.substep_sizes, 1.0, 6.0), &sum, width);
-        }
-        state
     }
 
-    /// `constants @ W0 + b0` for every closure and stage time.
-    fn first_layer_products(&mut self) {
+    /// Step `step` of the window: `trajectory[step + 1]` from `trajectory[step]` (the
+    /// step's embeddings complete, feedback included), keeping every stage.
+    pub(super) fn forward_step(&mut self, step: usize) {
+        self.first_layer_products(step);
+        let base = step * self.stages_per_step();
+        let mut state = std::mem::take(&mut self.trajectory[step + 1]);
+        state.clear();
+        state.extend_from_slice(&self.trajectory[step]);
+        if self.dynamics == Dynamics::Discrete {
+            let stage = &mut self.stages[base];
+            (stage.step, stage.offset) = (step, 0);
+            stage.state.clear();
+            stage.state.extend_from_slice(&state);
+            self.evaluate(base);
+            state.clear();
+            state.extend_from_slice(&self.stages[base].balances);
+            self.trajectory[step + 1] = state;
+            return;
+        }
+        let width = self.states;
+        for substep in 0..self.substeps {
+            let (first, offset) = (base + 4 * substep, 2 * substep);
+            let fractions = [
+                (0.0, offset),
+                (0.5, offset + 1),
+                (0.5, offset + 1),
+                (1.0, offset + 2),
+            ];
+            for (index, &(fraction, offset)) in fractions.iter().enumerate() {
+                let (before, after) = self.stages.split_at_mut(first + index);
+                let stage = &mut after[0];
+                (stage.step, stage.offset) = (step, offset);
+                stage.state.clear();
+                if index == 0 {
+                    stage.state.extend_from_slice(&state);
+                } else {
+                    let sizes = (self.window[step].substep_sizes.as_slice(), fraction, 1.0);
+                    let previous = &before[first + index - 1].balances;
+                    axpy_rows_into(&mut stage.state, &state, sizes, previous, width);
+                }
+                self.evaluate(first + index);
+            }
+            // x += dt / 6 (k1 + 2 k2 + 2 k3 + k4), row by row.
+            let k = |index: usize| self.stages[first + index].balances.as_slice();
+            let (k1, k2, k3, k4) = (k(0), k(1), k(2), k(3));
+            let two = E::from_double(2.0);
+            let sizes = &self.window[step].substep_sizes;
+            for (row, &dt) in sizes.iter().enumerate() {
+                let factor = E::from_double(dt / 6.0);
+                for i in row * width..(row + 1) * width {
+                    let sum = k1[i] + two * k2[i] + two * k3[i] + k4[i];
+                    state[i] += factor * sum;
+                }
+            }
+        }
+        self.trajectory[step + 1] = state;
+    }
+
+    /// `constants @ W0 + b0` for every closure and stage time of step `step`.
+    fn first_layer_products(&mut self, step: usize) {
         let rows = self.rows;
         for ((closure, constants), products) in (self.plan.closures.iter())
-            .zip(&self.constants)
+            .zip(&self.window[step].constants)
             .zip(&mut self.first_products)
         {
             let (inner, width) = (closure.widths[0], closure.widths[1]);
@@ -334,7 +306,7 @@ impl<E: Lane> Kernel<E> {
         let inputs = ProgramInputs {
             rows,
             states: &stage.state,
-            inputs: &self.inputs,
+            inputs: &self.window[stage.step].inputs,
             params: &self.weights[start..start + length],
             nets: &nets,
         };
@@ -344,78 +316,53 @@ impl<E: Lane> Kernel<E> {
             .read(&stage.values, rows, &self.program.balances);
     }
 
-    /// The loss and its gradient with respect to the predicted next states.
-    /// Weighted as the graph backend's loss: `sum(w r^2) / #(w > 0)`.
-    fn loss(&self, next: &[E], targets: &[f64]) -> (f64, Vec<E>) {
-        let measured = self.inverse_std.len();
-        let weight = |cell: usize| self.loss_weights.get(cell).copied().unwrap_or(1.0);
-        let cells = (0..self.rows * measured)
-            .filter(|&cell| weight(cell) > 0.0)
-            .count();
-        let count = E::from_double(cells.max(1) as f64);
-        let mut seed = vec![E::ZERO; next.len()];
-        let mut total = E::ZERO;
-        for (row, ((predicted, target), seed_row)) in (next.chunks_exact(self.states))
-            .zip(targets.chunks_exact(measured))
-            .zip(seed.chunks_exact_mut(self.states))
-            .enumerate()
-        {
-            for state in 0..measured {
-                let w = weight(row * measured + state);
-                if w <= 0.0 {
-                    continue;
-                }
-                let w = E::from_double(w);
-                let scaled =
-                    (predicted[state] - E::from_double(target[state])) * self.inverse_std[state];
-                total += w * scaled * scaled;
-                seed_row[state] =
-                    E::from_double(2.0) * (w * scaled) * self.inverse_std[state] / count;
-            }
-        }
-        ((total / count).to_double(), seed)
-    }
-
-    /// The reverse pass from the seed on `x(t + h)`, accumulating into the gradient.
-    fn backward(&mut self, seed: Vec<E>) {
+    /// The reverse of step `step`: `upstream` holds the adjoint of `trajectory[step + 1]`
+    /// and leaves with that of `trajectory[step]`; the weight and param gradients are
+    /// accumulated, and the step's first-layer deltas per stage time are left in the
+    /// scratch's `offset_deltas` (for the adjoint of fed-back predictions).
+    pub(super) fn backward_step(&mut self, step: usize, upstream: &mut [E]) {
         self.clear_offset_deltas();
+        let base = step * self.stages_per_step();
         if self.dynamics == Dynamics::Discrete {
-            self.reverse_stage(0, &seed);
+            let gradient = self.reverse_stage(base, upstream);
+            upstream.copy_from_slice(&gradient);
         } else {
-            let (sizes, width) = (self.substep_sizes.clone(), self.states);
-            let mut upstream = seed;
+            let width = self.states;
+            let mut seeds = std::mem::take(&mut self.scratch.stage_seeds);
+            seeds.resize_with(4, Vec::new);
             for substep in (0..self.substeps).rev() {
-                let first = 4 * substep;
-                let mut stage_seeds: Vec<Vec<E>> = [1.0, 2.0, 2.0, 1.0]
-                    .iter()
-                    .map(|&weight| scaled_rows(&upstream, (&sizes, weight, 6.0), width))
-                    .collect();
-                let mut start_gradient = upstream;
+                let first = base + 4 * substep;
+                let sizes = &self.window[step].substep_sizes;
+                for (seed, weight) in seeds.iter_mut().zip([1.0, 2.0, 2.0, 1.0]) {
+                    scaled_rows_into(seed, upstream, (sizes, weight, 6.0), width);
+                }
+                // The start state reaches x(t + h) directly and through every estimate.
                 for index in (0..4).rev() {
-                    let estimate_gradient = self.reverse_stage(first + index, &stage_seeds[index]);
+                    let estimate_gradient = self.reverse_stage(first + index, &seeds[index]);
                     if index > 0 {
                         let fraction = if index == 3 { 1.0 } else { 0.5 };
+                        let sizes = self.window[step].substep_sizes.as_slice();
                         add_scaled_rows(
-                            &mut stage_seeds[index - 1],
-                            (&sizes, fraction, 1.0),
+                            &mut seeds[index - 1],
+                            (sizes, fraction, 1.0),
                             &estimate_gradient,
                             width,
                         );
                     }
-                    add_scaled(&mut start_gradient, 1.0, &estimate_gradient);
+                    add_scaled(upstream, 1.0, &estimate_gradient);
                 }
-                upstream = start_gradient;
             }
+            self.scratch.stage_seeds = seeds;
         }
-        self.first_layer_gradients();
+        self.first_layer_gradients(step);
     }
 
-    /// `dW0 += constants^T delta` per closure and stage time, `delta` summed over the
-    /// stages at that time.
-    fn first_layer_gradients(&mut self) {
+    /// `dW0 += constants^T delta` per closure and stage time of step `step`, `delta`
+    /// summed over the stages at that time.
+    fn first_layer_gradients(&mut self, step: usize) {
         let rows = self.rows;
         for ((closure, constants), deltas) in (self.plan.closures.iter())
-            .zip(&self.constants)
+            .zip(&self.window[step].constants)
             .zip(&self.scratch.offset_deltas)
         {
             let (inner, width) = (closure.widths[0], closure.widths[1]);
@@ -470,41 +417,36 @@ fn add_stage_state<E: Real>(
     }
 }
 
-pub(super) fn axpy<E: Real>(a: &[E], factor: f64, b: &[E]) -> Vec<E> {
-    let factor = E::from_double(factor);
-    a.iter().zip(b).map(|(&x, &y)| x + factor * y).collect()
-}
-
 /// Row `i`'s sub-step `dt_i` times `multiple / divisor`, as `dt * multiple / divisor`.
 type RowFactors<'a> = (&'a [f64], f64, f64);
 
-/// `a + (dt_i * multiple / divisor) b` row by row (`width` values a row).
-fn axpy_rows<E: Real>(
+/// `out = a + (dt_i * multiple / divisor) b` row by row (`width` values a row; `out`
+/// empty on entry).
+fn axpy_rows_into<E: Real>(
+    out: &mut Vec<E>,
     a: &[E],
     (substeps, multiple, divisor): RowFactors,
     b: &[E],
     width: usize,
-) -> Vec<E> {
-    let mut out = Vec::with_capacity(a.len());
+) {
     for ((a_row, b_row), &dt) in a.chunks(width).zip(b.chunks(width)).zip(substeps) {
         let factor = E::from_double(dt * multiple / divisor);
         out.extend(a_row.iter().zip(b_row).map(|(&x, &y)| x + factor * y));
     }
-    out
 }
 
-/// `(dt_i * multiple / divisor) values` row by row.
-fn scaled_rows<E: Real>(
+/// `out = (dt_i * multiple / divisor) values` row by row.
+fn scaled_rows_into<E: Real>(
+    out: &mut Vec<E>,
     values: &[E],
     (substeps, multiple, divisor): RowFactors,
     width: usize,
-) -> Vec<E> {
-    let mut out = Vec::with_capacity(values.len());
+) {
+    out.clear();
     for (row, &dt) in values.chunks(width).zip(substeps) {
         let factor = E::from_double(dt * multiple / divisor);
         out.extend(row.iter().map(|&v| v * factor));
     }
-    out
 }
 
 /// `target += (dt_i * multiple / divisor) values` row by row.
@@ -526,6 +468,7 @@ fn add_scaled_rows<E: Real>(
     }
 }
 
+/// `target += factor * values`.
 pub(super) fn add_scaled<E: Real>(target: &mut [E], factor: f64, values: &[E]) {
     let factor = E::from_double(factor);
     for (slot, &value) in target.iter_mut().zip(values) {

@@ -1,45 +1,53 @@
-//! A hand-fused training step (performance study, issue 8): the same one-step loss, gradient
-//! and Adam update as [`crate::backend::Network`], written as plain loops over buffers that
-//! live from step to step instead of a recorded dfdx graph.
+//! The hand-fused training engine (performance study, issue 8; rollouts, issue 15): the
+//! same losses and gradients as [`crate::backend::Network`], one-step pairs and rollout
+//! windows, written as plain loops over buffers that live from step to step instead of a
+//! recorded dfdx graph.
 //!
-//! It measures how far the graph backend is from what the step costs when nothing but its
-//! arithmetic is done (see `docs/performance.md`). It is driven by the compiled
-//! [`ir::Model`] like the backend: any number of closures of any sizes and activations,
-//! `der` models (RK4 with `K` sub-steps, networks at every stage on the delay embedding
-//! completed by the stage estimate) and `next` models, hidden states, and the physics,
-//! priors and param transforms through the backend's own [`Program`]. What it saves:
+//! It is driven by the compiled [`ir::Model`] like the backend: any number of closures of
+//! any sizes and activations, `der` models (RK4 with `K` sub-steps, networks at every stage
+//! on the delay embedding completed by the stage estimate) and `next` models, hidden states,
+//! and the physics, priors and param transforms through the backend's own [`Program`]. A
+//! batch is a window of steps (`rollout.rs`): one step for one-step pairs, `K` steps for a
+//! [`RolloutBatch`], whose predictions are fed back into later steps' embeddings. What it
+//! saves:
 //!
-//! - no tape: the reverse pass is written out (RK4 adjoint, then per stage the physics
-//!   program's reverse sweep and each network's layers), so there is no per-operation
-//!   allocation, boxing or tape merging;
+//! - no tape: the reverse pass is written out (RK4 adjoint step by step, then per stage the
+//!   physics program's reverse sweep and each network's layers, and the adjoint of every
+//!   fed-back prediction), so there is no per-operation allocation, boxing or tape merging;
 //! - one matrix kernel ([`dense::multiply_add`]) that keeps output strips in registers, for
 //!   the layers, their input gradients and their weight gradients;
 //! - softplus value and slope from one exponential, in `f32` through vectorisable
 //!   polynomials ([`activation`]);
-//! - buffers for activations, slopes and embeddings reused across steps, and one flat
-//!   weight vector with a single Adam loop.
+//! - buffers for activations, slopes, embeddings and every step of a window reused across
+//!   batches, and one flat weight vector.
 //!
-//! Its loss and gradients agree with the graph backend's to rounding (tested in both
-//! precisions); it starts from the same weights as [`crate::backend::Network::build`],
-//! takes the same [`StepSettings`] (params at their own learning rate, global-norm
-//! clipping) and reads and writes the same [`NamedTensor`] lists and [`AdamState`], so a
-//! training run can hand over between the two mid-way (`gbc train --engine fused` runs its
-//! one-step epochs here and its rollouts on the graph backend).
+//! Its losses and gradients agree with the graph backend's to rounding (tested in both
+//! precisions, for every shipped model and both objectives); it starts from the same
+//! weights as [`crate::backend::Network::build`] and reads and writes the same
+//! [`NamedTensor`] lists, so training runs it under the one optimiser of
+//! [`crate::train::step`] (`--engine fused`, and `auto` wherever it supports the model: all
+//! but measured outputs). Its own Adam step ([`FusedNetwork::train_step_with`], with
+//! [`StepSettings`] and [`AdamState`] as the graph backend's) serves `gbc bench`.
 //!
 //! [`Program`]: crate::backend::program::Program
+//! [`dense::multiply_add`]: dense::Gemm::multiply_add
 
 pub mod activation;
 pub mod dense;
 mod kernel;
 mod plan;
 mod reverse;
+mod rollout;
 mod wide;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_rollout;
 
 use crate::backend::{
-    dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, Setup, StepSettings,
+    dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, RolloutBatch, Setup,
+    StepSettings,
 };
 use crate::ir;
 use crate::numeric::Real;
@@ -111,6 +119,24 @@ impl FusedNetwork {
             let loss = kernel.loss_and_gradient(batch)?;
             Ok((loss, split(kernel.plan(), &kernel.gradient)))
         })
+    }
+
+    /// The loss of a rollout batch, the mean normalised squared error over every step of
+    /// every window as [`Network::rollout_loss`], and its gradient through the whole
+    /// rollout with respect to every tensor of [`FusedNetwork::weights`].
+    pub fn rollout_gradient(
+        &mut self,
+        batch: &RolloutBatch,
+    ) -> Result<(f64, Vec<Vec<f64>>), BackendError> {
+        dispatch!(mut self, kernel => {
+            let loss = kernel.rollout_loss_and_gradient(batch)?;
+            Ok((loss, split(kernel.plan(), &kernel.gradient)))
+        })
+    }
+
+    /// The loss of a rollout batch (see [`FusedNetwork::rollout_gradient`]).
+    pub fn rollout_loss(&mut self, batch: &RolloutBatch) -> Result<f64, BackendError> {
+        dispatch!(mut self, kernel => kernel.rollout_loss(batch))
     }
 
     /// Replaces the trainable values from one flat vector (the tensors of

@@ -15,6 +15,11 @@ pub(super) struct Scratch<E> {
     /// `offset_deltas[closure][stage time]`: first-layer deltas summed over the stages at
     /// that time (`rows x widths[1]`).
     pub offset_deltas: Vec<Vec<Vec<E>>>,
+    /// The adjoints of the four stages' balances of the sub-step being reversed.
+    pub stage_seeds: Vec<Vec<E>>,
+    /// `rows x widths[0]`: the gradient of one closure's network input at one stage time
+    /// (for the predictions a rollout feeds back).
+    pub input_gradient: Vec<E>,
     /// The gradient being passed down a network, and the layer below it.
     delta: Vec<E>,
     below: Vec<E>,
@@ -42,7 +47,7 @@ impl<E: Lane> Kernel<E> {
         let inputs = ProgramInputs {
             rows: self.rows,
             states: &stage.state,
-            inputs: &self.inputs,
+            inputs: &self.window[stage.step].inputs,
             params: &self.weights[start..start + length],
             nets: &nets,
         };

@@ -32,7 +32,7 @@ fn setup(model: &ir::Model, precision: Precision, substeps: usize) -> Setup {
 }
 
 /// Weights of order one everywhere, so every path carries gradient.
-fn random_weights(template: &[NamedTensor], seed: u64) -> Vec<NamedTensor> {
+pub(super) fn random_weights(template: &[NamedTensor], seed: u64) -> Vec<NamedTensor> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut weights = template.to_vec();
     for tensor in &mut weights {
@@ -144,7 +144,25 @@ fn shipped(
     rows: usize,
     precision: Precision,
 ) -> (ir::Model, Batch, Setup) {
-    use crate::train::pairs::{first_pair_row, stage_fractions, PairTable};
+    use crate::train::pairs::{stage_fractions, PairTable};
+    let (model, track, first, setup) = shipped_track(model, data, rows + 1, (precision, 1));
+    let pairs: Vec<(usize, usize)> = (first..first + rows).map(|k| (0, k)).collect();
+    let fractions = stage_fractions(model.dynamics, 1);
+    let table = PairTable::build(&model, &[track], &pairs, &[], &fractions);
+    let batch = table.batch(&(0..rows).collect::<Vec<_>>());
+    (model, batch, setup)
+}
+
+/// A shipped model, a shipped record laid on its grid, the first knot whose embedding lies
+/// in the record, and the setup `gbc train` would use in `precision` with `substeps` for the
+/// `knots` knots from there (normalisation over them, closure magnitudes 1).
+pub(super) fn shipped_track(
+    model: &str,
+    data: &str,
+    knots: usize,
+    (precision, substeps): (Precision, usize),
+) -> (ir::Model, crate::record::Track, usize, Setup) {
+    use crate::train::pairs::first_pair_row;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let model = crate::driver::compile_file(&root.join(model), &[])
         .unwrap()
@@ -162,46 +180,44 @@ fn shipped(
     let track = crate::train::fixtures::track(&model, &data);
     let step = track.steps[0];
     let first = first_pair_row(&model, step);
-    let pairs: Vec<(usize, usize)> = (first..first + rows).map(|k| (0, k)).collect();
-    let fractions = stage_fractions(model.dynamics, 1);
-    let table = PairTable::build(&model, &[track], &pairs, &[], &fractions);
-    let batch = table.batch(&(0..rows).collect::<Vec<_>>());
     let setup = Setup {
         step,
-        substeps: 1,
+        substeps,
         precision,
         seed: 0,
-        normalisation: crate::train::fixtures::normalise(&record, first + rows + 1),
+        normalisation: crate::train::fixtures::normalise(&record, first + knots),
         scales: (model.closures.iter())
             .map(|c| vec![1.0; c.outputs.len()])
             .collect(),
     };
-    (model, batch, setup)
+    (model, track, first, setup)
 }
+
+/// Every shipped trainable model and the record it is trained on.
+pub(super) const SHIPPED: [(&str, &str); 10] = [
+    ("bioreactor/gb1", "bioreactor/data/steps.csv"),
+    ("bioreactor/gb2", "bioreactor/data/steps.csv"),
+    ("bioreactor/blackbox", "bioreactor/data/steps.csv"),
+    ("bioreactor/blackbox_ode", "bioreactor/data/steps.csv"),
+    ("bioreactor/blackbox_residual", "bioreactor/data/steps.csv"),
+    ("mm_chemostat/greybox", "mm_chemostat/data/steps.csv"),
+    (
+        "mm_chemostat/greybox_positive",
+        "mm_chemostat/data/steps.csv",
+    ),
+    ("mm_chemostat/blackbox", "mm_chemostat/data/steps.csv"),
+    ("mm_chemostat/blackbox_ode", "mm_chemostat/data/steps.csv"),
+    (
+        "mm_chemostat/blackbox_residual",
+        "mm_chemostat/data/steps.csv",
+    ),
+];
 
 /// Every shipped trainable model on its shipped record, in `f64` at the initial weights:
 /// the fused step's loss and gradient are the graph backend's to 1e-9 (relative).
 #[test]
 fn every_shipped_model_agrees_with_the_backend_in_f64() {
-    let models = [
-        ("bioreactor/gb1", "bioreactor/data/steps.csv"),
-        ("bioreactor/gb2", "bioreactor/data/steps.csv"),
-        ("bioreactor/blackbox", "bioreactor/data/steps.csv"),
-        ("bioreactor/blackbox_ode", "bioreactor/data/steps.csv"),
-        ("bioreactor/blackbox_residual", "bioreactor/data/steps.csv"),
-        ("mm_chemostat/greybox", "mm_chemostat/data/steps.csv"),
-        (
-            "mm_chemostat/greybox_positive",
-            "mm_chemostat/data/steps.csv",
-        ),
-        ("mm_chemostat/blackbox", "mm_chemostat/data/steps.csv"),
-        ("mm_chemostat/blackbox_ode", "mm_chemostat/data/steps.csv"),
-        (
-            "mm_chemostat/blackbox_residual",
-            "mm_chemostat/data/steps.csv",
-        ),
-    ];
-    for (model, data) in models {
+    for (model, data) in SHIPPED {
         let (model, batch, setup) = shipped(
             &format!("models/{model}.gbm"),
             &format!("models/{data}"),

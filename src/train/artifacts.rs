@@ -150,7 +150,9 @@ pub struct TrainingInfo {
     /// Mean loss of the last epoch.
     #[serde(with = "crate::json")]
     pub final_loss: Option<f64>,
-    /// What ran the one-step epochs (runs saved before it was recorded: the graph backend).
+    /// The engine that ran the training steps, graph or fused (`auto` resolved; runs saved
+    /// before it was recorded: the graph backend; runs saved before rollouts ran on the
+    /// fused step: `fused` ran their one-step epochs only).
     #[serde(default)]
     pub engine: Engine,
 }
@@ -234,7 +236,7 @@ pub fn run_info(
             train_pairs: report.train_pairs,
             validation_pairs: report.validation_pairs,
             final_loss: report.losses.last().copied(),
-            engine: options.engine,
+            engine: report.engine,
         },
         recipe: Some(report.recipe.clone()),
         estimates: report.estimates.clone(),

@@ -3,12 +3,12 @@
 //! [`super::recipe`]).
 //!
 //! Every step goes through one [`Optimiser`] (weights and Adam's state) on top of a
-//! [`Step`]: with [`super::Engine::Fused`] (and [`super::Engine::Auto`] where the fused step runs the
-//! model) the one-step batches on a [`FusedNetwork`], everything else on the graph
-//! [`Network`]. The engines only compute gradients at the optimiser's weights, so nothing is
-//! handed over at the curriculum's switch to rollouts; the graph network is given the
-//! current weights before hidden states are refreshed and at the end, so that the polish
-//! and the evaluation see the trained network.
+//! [`Step`]: with [`Engine::Fused`] (and [`Engine::Auto`] where the fused step runs the
+//! model) every batch, pairs and windows, on a [`FusedNetwork`], else on the graph
+//! [`Network`]; a run never changes engine. The engines only compute gradients at the
+//! optimiser's weights; the graph network is given the current weights before hidden
+//! states are refreshed and at the end, so that the polish and the evaluation see the
+//! trained network.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -24,7 +24,7 @@ use super::split::Training;
 use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
 use super::windows::{rollout_batch, shooting_starts};
-use super::{Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
+use super::{Engine, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -53,15 +53,16 @@ impl Fit<'_> {
     }
 
     /// Runs every epoch (from a checkpoint's, and until `safety` stops it); returns the
-    /// mean training loss of each. `network` ends with the trained weights and Adam state
-    /// whichever engine ran the one-step epochs.
+    /// mean training loss of each and the engine that ran them ([`Engine::Graph`] or
+    /// [`Engine::Fused`]). `network` ends with the trained weights and Adam state whichever
+    /// engine ran the epochs.
     pub fn run(
         &self,
         network: &mut Network,
         training: &mut Course,
         on_event: &mut dyn FnMut(Event),
         safety: &mut Safety,
-    ) -> Result<Vec<f64>, TrainError> {
+    ) -> Result<(Vec<f64>, Engine), TrainError> {
         let options = self.options;
         let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
@@ -113,9 +114,13 @@ impl Fit<'_> {
                 break;
             }
         }
+        let engine = match engines.fused {
+            Some(_) => Engine::Fused,
+            None => Engine::Graph,
+        };
         engines.graph_with_state()?;
         safety.finish(network)?;
-        Ok(losses)
+        Ok((losses, engine))
     }
 
     /// One epoch of `horizon`-step windows (1: one-step pairs) on the engine that runs it.
@@ -236,7 +241,8 @@ impl EpochEnd<'_, '_> {
     }
 }
 
-/// The optimiser, the graph network and, where the engine asks for it, the fused step.
+/// The optimiser, the graph network and, where the engine asks for it, the fused step
+/// (which then runs every batch).
 struct Engines<'n> {
     network: &'n mut Network,
     fused: Option<FusedNetwork>,

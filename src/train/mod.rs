@@ -91,7 +91,7 @@ pub struct TrainOptions {
     pub substeps: usize,
     /// Length (model time) of the online free run; `None` runs to the end.
     pub online_horizon: Option<f64>,
-    /// Which implementation runs the one-step epochs.
+    /// Which implementation runs the training steps.
     pub engine: Engine,
     /// Longest grid step (`None`: the median spacing of the densest measured column).
     pub dt: Option<f64>,
@@ -247,6 +247,9 @@ pub struct TrainReport {
     /// Each training experiment whose later part validates (`--train-points`,
     /// `--val-fraction`), with the time its validated part starts.
     pub validated_from: Vec<(String, f64)>,
+    /// The engine that ran the training steps ([`Engine::Auto`] resolved: graph or
+    /// fused).
+    pub engine: Engine,
 }
 
 /// A trained network with everything needed to reuse it.

@@ -38,7 +38,7 @@ impl Objective {
     }
 }
 
-/// Which implementation runs the one-step training epochs.
+/// Which implementation runs the training steps (one-step pairs and rollout windows).
 #[derive(
     Debug,
     Clone,
@@ -52,16 +52,15 @@ impl Objective {
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Engine {
-    /// The fastest engine that runs the model: the hand-fused step for the one-step
-    /// epochs where it supports the model (no measured outputs), the graph backend for
-    /// everything else.
+    /// The fastest engine that runs the model: the hand-fused step where it supports the
+    /// model (no measured outputs), the graph backend otherwise.
     #[default]
     Auto,
     /// The graph backend (dfdx) for every epoch.
     Graph,
-    /// The hand-fused step for the one-step epochs: the same results up to rounding, about
-    /// 2x faster per one-step epoch (rollouts, polish and evaluation run on the graph
-    /// backend).
+    /// The hand-fused step for every epoch, one-step and rollout: the same results up to
+    /// rounding, several times faster (an error for a model it does not support; the polish
+    /// and the evaluation run on the graph backend).
     Fused,
 }
 

@@ -17,8 +17,9 @@ use super::prepare::Layout;
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
-    polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part, PhysicalRange,
-    Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
+    polish, with_initial_params, Engine, Event, InitialState, Metrics, ParamSource, Part,
+    PhysicalRange, Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained,
+    TrainingData,
 };
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
@@ -46,9 +47,9 @@ pub fn train_run(
     let started = std::time::Instant::now();
     let mut run = prepare(model, data, options, recipe, on_event)?;
     let initial = run.validate(options, recipe)?;
-    let losses = run.fit((options, recipe), (control, started), on_event)?;
+    let fitted = run.fit((options, recipe), (control, started), on_event)?;
     let evaluation = run.evaluate(options, recipe)?;
-    Ok(run.report(options, recipe, (initial, evaluation), losses))
+    Ok(run.report(options, recipe, (initial, evaluation), fitted))
 }
 
 /// A run between its steps.
@@ -192,13 +193,13 @@ impl Run<'_> {
         Ok(metrics)
     }
 
-    /// Runs the epochs; the mean training loss of each.
+    /// Runs the epochs; the mean training loss of each and the engine that ran them.
     fn fit(
         &mut self,
         (options, recipe): (&TrainOptions, &Recipe),
         (control, started): (&RunControl, std::time::Instant),
         on_event: &mut dyn FnMut(Event),
-    ) -> Result<Vec<f64>, TrainError> {
+    ) -> Result<(Vec<f64>, Engine), TrainError> {
         let fit = fit::Fit {
             model: &self.model,
             setup: &self.setup,
@@ -283,7 +284,7 @@ impl Run<'_> {
         options: &TrainOptions,
         recipe: &Recipe,
         (initial, evaluation): (Metrics, Evaluation),
-        losses: Vec<f64>,
+        (losses, engine): (Vec<f64>, Engine),
     ) -> Trained {
         let metrics = Metrics {
             initial_offline: initial.offline,
@@ -308,6 +309,7 @@ impl Run<'_> {
             dt: self.layout.grid.max_step,
             learning_rate: options.learning_rate,
             validated_from: super::validated_from(&self.layout),
+            engine,
         };
         Trained {
             network: self.network,

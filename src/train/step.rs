@@ -3,11 +3,12 @@
 //!
 //! A [`Step`] is what an engine offers: given the weights (one flat vector, tensors back to
 //! back in [`Network::weights`] order) and a batch (one-step pairs or rollout windows), the
-//! loss and its flat gradient. The graph backend runs every batch; the fused step runs
-//! one-step pairs. The [`Optimiser`] holds the weights and Adam's state in the run's
-//! precision and takes every step ([`crate::numeric::Adam`]: bias correction, per-group
-//! learning rates, clipping), whichever engine computed the gradient, so nothing is handed
-//! over when the curriculum switches engines.
+//! loss and its flat gradient. Both engines run both kinds of batch: the graph backend
+//! ([`Network`]) every model, the fused step ([`FusedNetwork`]) every model without measured
+//! outputs, so a run stays on one engine from its first epoch to its last. The
+//! [`Optimiser`] holds the weights and Adam's state in the run's precision and takes every
+//! step ([`crate::numeric::Adam`]: bias correction, per-group learning rates, clipping),
+//! whichever engine computed the gradient.
 
 use std::ops::Range;
 
@@ -56,8 +57,9 @@ impl Step for Network {
 }
 
 impl Step for FusedNetwork {
-    fn runs(&self, batch: StepBatch) -> bool {
-        matches!(batch, StepBatch::Pairs(_))
+    /// Every batch: [`FusedNetwork::build`] refuses the models whose batches it cannot run.
+    fn runs(&self, _: StepBatch) -> bool {
+        true
     }
 
     fn loss_and_gradient(
@@ -65,13 +67,11 @@ impl Step for FusedNetwork {
         weights: &[f64],
         batch: StepBatch,
     ) -> Result<(f64, Vec<f64>), BackendError> {
-        let StepBatch::Pairs(batch) = batch else {
-            return Err(BackendError::internal(
-                "rollout windows given to the fused step",
-            ));
-        };
         self.set_flat_weights(weights)?;
-        let (loss, gradient) = self.gradient(batch)?;
+        let (loss, gradient) = match batch {
+            StepBatch::Pairs(batch) => self.gradient(batch)?,
+            StepBatch::Windows(batch) => self.rollout_gradient(batch)?,
+        };
         Ok((loss, gradient.concat()))
     }
 }

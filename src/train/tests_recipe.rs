@@ -252,8 +252,8 @@ fn bad_recipe_values_are_refused_naming_the_flag() {
     assert_eq!(refused(rate), "param_learning_rate");
 }
 
-/// Trains `model` on `data` with both engines from the same seed in f64; returns the
-/// graph run and the fused run.
+/// Trains `model` on `data` with the graph engine and the default one from the same seed in
+/// f64; returns the graph run and the default run, which ran on the fused step.
 fn train_both(
     model: &ir::Model,
     data: &crate::data::Dataset,
@@ -268,7 +268,14 @@ fn train_both(
         };
         train_one(model, data, None, &options, recipe).unwrap()
     };
-    (run(Engine::Graph), run(Engine::Fused))
+    let (graph, fused) = (run(Engine::Graph), run(Engine::Auto));
+    assert_eq!(graph.report.engine, Engine::Graph);
+    assert_eq!(
+        fused.report.engine,
+        Engine::Fused,
+        "auto runs the fused step"
+    );
+    (graph, fused)
 }
 
 /// Epoch losses, final weights and validation errors of two runs agree to `tolerance`
@@ -306,14 +313,14 @@ fn one_step_epochs_on_the_fused_step_train_as_the_graph_backend() {
     assert_same_training(&graph, &fused, 1e-9);
 }
 
-/// The fused step runs the warm-up and hands weights and Adam state to the graph backend
-/// for the rollouts: the rollout epochs are the graph run's (a fresh Adam state would take
-/// first steps of the full learning rate and change them at once).
+/// The default engine runs the warm-up and the rollouts on the fused step, long enough
+/// (12 steps, the embedding reaching 10 back) that predictions are fed back into the
+/// embedding: every epoch is the graph run's to rounding.
 #[test]
-fn the_fused_warm_up_hands_over_to_the_rollouts_mid_training() {
+fn the_fused_step_runs_the_warm_up_and_the_rollouts_as_the_graph_backend() {
     let (data, _) = chemostat::data(300, (0.002, 0.02), 9);
     let recipe = Recipe {
-        horizon: 4,
+        horizon: 12,
         warmup_share: 0.5,
         ramp_share: 0.25,
         polish: Some(false),
@@ -322,6 +329,7 @@ fn the_fused_warm_up_hands_over_to_the_rollouts_mid_training() {
     let (graph, fused) = train_both(&chemostat::grey_box(), &data, &options(6, 200), &recipe);
     assert_eq!(recipe.horizon_at(3, 6), 1);
     assert_eq!(recipe.horizon_at(4, 6), 2);
+    assert_eq!(recipe.horizon_at(6, 6), 12);
     assert_same_training(&graph, &fused, 1e-8);
 }
 

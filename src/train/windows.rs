@@ -27,11 +27,23 @@ pub fn window_embedding(
     (start, row): (usize, usize),
     (step, fraction): (usize, f64),
 ) -> (Vec<f64>, Vec<Feedback>) {
-    let delay = closure.embedding.delay;
     let layout = closure.embedding.layout();
-    let mut raw = Vec::with_capacity(layout.len());
-    let mut feedback = Vec::new();
-    for (column, (var, lag)) in layout.into_iter().enumerate() {
+    let (mut raw, mut feedback) = (Vec::with_capacity(layout.len()), Vec::new());
+    let at = (start, row, step, fraction);
+    let into = (&mut raw, &mut feedback);
+    window_embedding_into((&layout, closure.embedding.delay), track, at, into);
+    (raw, feedback)
+}
+
+/// [`window_embedding`] for an embedding `layout` of delay `delay`, appended to `raw` and
+/// `feedback`.
+fn window_embedding_into(
+    (layout, delay): (&[(Var, usize)], f64),
+    track: &Track,
+    (start, row, step, fraction): (usize, usize, usize, f64),
+    (raw, feedback): (&mut Vec<f64>, &mut Vec<Feedback>),
+) {
+    for (column, &(var, lag)) in layout.iter().enumerate() {
         let position = track.stage_position(start + step, fraction, (lag, delay));
         let value = match var {
             Var::Input(i) => hold(&track.inputs[i], position, fraction >= 1.0),
@@ -69,7 +81,6 @@ pub fn window_embedding(
         };
         raw.push(value);
     }
-    (raw, feedback)
 }
 
 /// What rollouts read: the tracks, the hidden-state estimates per track and knot, the
@@ -88,12 +99,26 @@ pub fn rollout_batch(
     fractions: &[f64],
 ) -> RolloutBatch {
     let closures = model.closures.len();
+    let rows = starts.len();
+    let layouts: Vec<_> = (model.closures.iter())
+        .map(|c| (c.embedding.layout(), c.embedding.delay))
+        .collect();
+    // Each embedding block sized once (a clone would drop the capacity).
+    let embeddings = || -> Vec<Vec<Vec<f64>>> {
+        (layouts.iter())
+            .map(|(layout, _)| {
+                (fractions.iter())
+                    .map(|_| Vec::with_capacity(rows * layout.len()))
+                    .collect()
+            })
+            .collect()
+    };
     let mut batch = RolloutBatch {
-        rows: starts.len(),
+        rows,
         steps,
         states: Vec::new(),
         inputs: vec![Vec::new(); steps],
-        embeddings: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
+        embeddings: (0..steps).map(|_| embeddings()).collect(),
         feedback: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
         targets: vec![Vec::new(); steps],
         step_sizes: vec![Vec::new(); steps],
@@ -123,12 +148,14 @@ pub fn rollout_batch(
                 batch.observed[step].push(cell.unwrap_or(0.0));
                 batch.observed_weights[step].push(f64::from(cell.is_some()));
             }
-            for (closure_index, closure) in model.closures.iter().enumerate() {
+            for (closure, (layout, delay)) in layouts.iter().enumerate() {
                 for (offset, &fraction) in fractions.iter().enumerate() {
-                    let (raw, feedback) =
-                        window_embedding(closure, track, (start, window), (step, fraction));
-                    batch.embeddings[step][closure_index][offset].extend(raw);
-                    batch.feedback[step][closure_index][offset].extend(feedback);
+                    let at = (start, window, step, fraction);
+                    let into = (
+                        &mut batch.embeddings[step][closure][offset],
+                        &mut batch.feedback[step][closure][offset],
+                    );
+                    window_embedding_into((layout, *delay), track, at, into);
                 }
             }
         }
