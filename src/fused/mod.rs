@@ -134,6 +134,26 @@ impl FusedNetwork {
         })
     }
 
+    /// The loss of one-step pairs (`Ok`) or rollout windows (`Err`), with the gradient
+    /// written flat into `gradient` (tensors back to back, as
+    /// [`FusedNetwork::set_flat_weights`] reads them): the training loop's call, with no
+    /// allocation once `gradient` has its size.
+    pub fn flat_gradient(
+        &mut self,
+        batch: Result<&Batch, &RolloutBatch>,
+        gradient: &mut Vec<f64>,
+    ) -> Result<f64, BackendError> {
+        dispatch!(mut self, kernel => {
+            let loss = match batch {
+                Ok(pairs) => kernel.loss_and_gradient(pairs)?,
+                Err(windows) => kernel.rollout_loss_and_gradient(windows)?,
+            };
+            gradient.clear();
+            gradient.extend(kernel.gradient.iter().map(|g| g.to_double()));
+            Ok(loss)
+        })
+    }
+
     /// The loss of a rollout batch (see [`FusedNetwork::rollout_gradient`]).
     pub fn rollout_loss(&mut self, batch: &RolloutBatch) -> Result<f64, BackendError> {
         dispatch!(mut self, kernel => kernel.rollout_loss(batch))

@@ -14,12 +14,12 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{Batch, Network, Precision, Setup};
-use crate::fused::FusedNetwork;
+use crate::backend::{Network, Precision, Setup, StepSettings};
 use crate::ir;
 
 use super::pairs::stage_fractions;
 use super::prepare::Layout;
+use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
 use super::{analysis, hidden_initial_values, Part, TrainError, TrainOptions, TrainingData};
 
@@ -98,15 +98,23 @@ pub fn bench(
         &hidden_init,
     )?;
     let table = course.table;
-    let mut step = Step::new(options.engine, network, model, &setup)?;
+    // What `gbc train` runs: the engine under the one optimiser.
+    let mut optimiser = Optimiser::new(&network, options.precision);
+    let mut step: Box<dyn Step> = match options.engine.fused_step(model, &setup)? {
+        Some(fused) => Box::new(fused),
+        None => Box::new(network),
+    };
+    let settings = StepSettings::plain(learning_rate);
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let mut order: Vec<usize> = (0..table.len()).collect();
     let batch_size = options.batch_size.max(1);
-    let mut epoch = |step: &mut Step| -> Result<f64, TrainError> {
+    let mut epoch = |step: &mut Box<dyn Step>| -> Result<f64, TrainError> {
         order.shuffle(&mut rng);
         let mut total = 0.0;
         for chunk in order.chunks(batch_size) {
-            total += step.train(&table.batch(chunk), learning_rate)? * chunk.len() as f64;
+            let batch = table.batch(chunk);
+            let loss = optimiser.step(step.as_mut(), StepBatch::Pairs(&batch), &settings)?;
+            total += loss * chunk.len() as f64;
         }
         Ok(total / order.len().max(1) as f64)
     };
@@ -131,35 +139,6 @@ pub fn bench(
         median_step_seconds: median_epoch_seconds / steps_per_epoch as f64,
         final_loss,
     })
-}
-
-/// The training step being timed (one value per benchmark: its size does not matter).
-#[allow(clippy::large_enum_variant)]
-enum Step {
-    Graph(Network),
-    Fused(Box<FusedNetwork>),
-}
-
-impl Step {
-    fn new(
-        engine: Engine,
-        network: Network,
-        model: &ir::Model,
-        setup: &Setup,
-    ) -> Result<Step, TrainError> {
-        Ok(match engine.fused_step(model, setup)? {
-            Some(fused) => Step::Fused(Box::new(fused)),
-            None => Step::Graph(network),
-        })
-    }
-
-    /// One Adam step at `learning_rate`; the loss before it.
-    fn train(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, TrainError> {
-        Ok(match self {
-            Step::Graph(network) => network.train_step(batch, learning_rate)?,
-            Step::Fused(fused) => fused.train_step(batch, learning_rate)?,
-        })
-    }
 }
 
 #[cfg(test)]

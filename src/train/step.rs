@@ -29,12 +29,14 @@ pub enum StepBatch<'a> {
 pub trait Step {
     /// Whether this engine runs `batch`.
     fn runs(&self, batch: StepBatch) -> bool;
-    /// The loss of `batch` at the flat `weights` and its flat gradient.
+    /// The loss of `batch` at the flat `weights`, its flat gradient written into
+    /// `gradient` (kept by the caller from step to step).
     fn loss_and_gradient(
         &mut self,
         weights: &[f64],
         batch: StepBatch,
-    ) -> Result<(f64, Vec<f64>), BackendError>;
+        gradient: &mut Vec<f64>,
+    ) -> Result<f64, BackendError>;
 }
 
 impl Step for Network {
@@ -46,18 +48,20 @@ impl Step for Network {
         &mut self,
         weights: &[f64],
         batch: StepBatch,
-    ) -> Result<(f64, Vec<f64>), BackendError> {
+        gradient: &mut Vec<f64>,
+    ) -> Result<f64, BackendError> {
         self.set_flat_weights(weights)?;
-        let (loss, gradient) = match batch {
+        let (loss, tensors) = match batch {
             StepBatch::Pairs(batch) => self.gradient(batch)?,
             StepBatch::Windows(batch) => self.rollout_gradient(batch)?,
         };
-        Ok((loss, gradient.concat()))
+        gradient.clear();
+        gradient.extend(tensors.into_iter().flatten());
+        Ok(loss)
     }
 }
 
 impl Step for FusedNetwork {
-    /// Every batch: [`FusedNetwork::build`] refuses the models whose batches it cannot run.
     fn runs(&self, _: StepBatch) -> bool {
         true
     }
@@ -66,13 +70,14 @@ impl Step for FusedNetwork {
         &mut self,
         weights: &[f64],
         batch: StepBatch,
-    ) -> Result<(f64, Vec<f64>), BackendError> {
+        gradient: &mut Vec<f64>,
+    ) -> Result<f64, BackendError> {
         self.set_flat_weights(weights)?;
-        let (loss, gradient) = match batch {
-            StepBatch::Pairs(batch) => self.gradient(batch)?,
-            StepBatch::Windows(batch) => self.rollout_gradient(batch)?,
+        let batch = match batch {
+            StepBatch::Pairs(pairs) => Ok(pairs),
+            StepBatch::Windows(windows) => Err(windows),
         };
-        Ok((loss, gradient.concat()))
+        self.flat_gradient(batch, gradient)
     }
 }
 
@@ -80,6 +85,8 @@ impl Step for FusedNetwork {
 /// training.
 pub struct Optimiser {
     state: State,
+    /// The weights as `f64` and the gradient, kept from step to step.
+    buffers: (Vec<f64>, Vec<f64>),
     /// Where the params sit in the flat vector (none: the model has none).
     params: Option<Range<usize>>,
     /// The length of each of the network's tensors, in order (for Adam's state per tensor).
@@ -107,6 +114,7 @@ impl Optimiser {
         let lengths = tensors.iter().map(|t| t.values.len()).collect();
         Optimiser {
             state,
+            buffers: (Vec::new(), Vec::new()),
             params,
             lengths,
         }
@@ -135,9 +143,16 @@ impl Optimiser {
 
     /// The current weights, flat, as `f64` (exact in either precision).
     pub fn weights(&self) -> Vec<f64> {
+        let mut flat = Vec::new();
+        self.weights_into(&mut flat);
+        flat
+    }
+
+    fn weights_into(&self, flat: &mut Vec<f64>) {
+        flat.clear();
         match &self.state {
-            State::Single(weights, _) => weights.iter().map(|&v| f64::from(v)).collect(),
-            State::Double(weights, _) => weights.clone(),
+            State::Single(weights, _) => flat.extend(weights.iter().map(|&v| f64::from(v))),
+            State::Double(weights, _) => flat.extend_from_slice(weights),
         }
     }
 
@@ -149,16 +164,21 @@ impl Optimiser {
         batch: StepBatch,
         settings: &StepSettings,
     ) -> Result<f64, BackendError> {
-        let (loss, gradient) = engine.loss_and_gradient(&self.weights(), batch)?;
-        match &mut self.state {
-            State::Single(weights, adam) => {
-                update(weights, adam, &gradient, settings, &self.params)
-            }
-            State::Double(weights, adam) => {
-                update(weights, adam, &gradient, settings, &self.params)
+        let (mut flat, mut gradient) = std::mem::take(&mut self.buffers);
+        self.weights_into(&mut flat);
+        let loss = engine.loss_and_gradient(&flat, batch, &mut gradient);
+        if loss.is_ok() {
+            match &mut self.state {
+                State::Single(weights, adam) => {
+                    update(weights, adam, &gradient, settings, &self.params)
+                }
+                State::Double(weights, adam) => {
+                    update(weights, adam, &gradient, settings, &self.params)
+                }
             }
         }
-        Ok(loss)
+        self.buffers = (flat, gradient);
+        loss
     }
 }
 
