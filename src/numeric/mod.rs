@@ -1,7 +1,8 @@
 //! The numeric helpers every stage shares: statistics ([`stats`]), dense linear algebra
 //! ([`linalg`]: Cholesky, normal equations; [`eigen`]: symmetric eigen-decomposition), one
 //! Levenberg–Marquardt driver ([`lm`]), the training element types with the one safe
-//! softplus ([`real`]) and the one optimiser of training, Adam with clipping ([`adam`]).
+//! softplus ([`real`]), the one optimiser of training, Adam with clipping ([`adam`]), and
+//! library-call-free exact rounding ([`rounding`]).
 //!
 //! Training (`train::polish`, `train::balances`), the gap diagnosis (`diagnose::fit`,
 //! `diagnose::correction`, `diagnose::symbolic`) and the experiments all call these; none
@@ -14,6 +15,7 @@ pub mod eigen;
 pub mod linalg;
 pub mod lm;
 pub mod real;
+pub mod rounding;
 pub mod stats;
 
 #[cfg(test)]

@@ -20,6 +20,7 @@
 //!   and to the last after it.
 
 use super::Record;
+use crate::numeric::rounding;
 
 /// How a record is laid on its grid.
 #[derive(Debug, Clone, PartialEq)]
@@ -284,7 +285,7 @@ fn held_rows(rows: &[Option<usize>]) -> Vec<usize> {
 
 /// A position snapped onto the nearest knot when within rounding of it.
 pub fn snap(position: f64) -> f64 {
-    let nearest = position.round();
+    let nearest = rounding::round(position);
     if (position - nearest).abs() < SNAP {
         nearest
     } else {
@@ -296,7 +297,7 @@ pub fn snap(position: f64) -> f64 {
 pub fn interpolate(values: &[f64], position: f64) -> f64 {
     let last = values.len().saturating_sub(1);
     let position = snap(position).clamp(0.0, last as f64);
-    let below = position.floor() as usize;
+    let below = rounding::floor(position) as usize;
     let fraction = position - below as f64;
     if fraction == 0.0 || below >= last {
         return values[below.min(last)];
@@ -311,9 +312,9 @@ pub fn hold(values: &[f64], position: f64, left_limit: bool) -> f64 {
     let last = values.len().saturating_sub(1) as f64;
     let position = snap(position);
     let index = if left_limit {
-        position.ceil() - 1.0
+        rounding::ceil(position) - 1.0
     } else {
-        position.floor()
+        rounding::floor(position)
     };
     values[index.clamp(0.0, last) as usize]
 }

@@ -53,7 +53,7 @@ fn window_embedding_into(
                 if offset <= 0.0 {
                     interpolate(&track.states[i], position)
                 } else {
-                    let below = offset.floor();
+                    let below = crate::numeric::rounding::floor(offset);
                     let weight_above = offset - below;
                     let below = below as usize;
                     let mut data_share = 0.0;
