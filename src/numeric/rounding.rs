@@ -11,6 +11,12 @@
 /// Below this magnitude an `f64` may have a fractional part.
 const FRACTIONAL: f64 = 4_503_599_627_370_496.0; // 2^52
 
+/// Whether `x` may have a fractional part (false for NaN, infinities and `|x| >= 2^52`).
+#[inline(always)]
+fn fractional(x: f64) -> bool {
+    x.abs() < FRACTIONAL
+}
+
 /// `x` rounded toward zero, for `|x| < 2^52`.
 #[inline(always)]
 fn truncate(x: f64) -> f64 {
@@ -22,7 +28,7 @@ fn truncate(x: f64) -> f64 {
 /// Exactly `x.round()` (half away from zero).
 #[inline(always)]
 pub fn round(x: f64) -> f64 {
-    if !(x.abs() < FRACTIONAL) {
+    if !fractional(x) {
         return x;
     }
     let whole = truncate(x);
@@ -37,7 +43,7 @@ pub fn round(x: f64) -> f64 {
 /// Exactly `x.floor()`.
 #[inline(always)]
 pub fn floor(x: f64) -> f64 {
-    if !(x.abs() < FRACTIONAL) {
+    if !fractional(x) {
         return x;
     }
     let whole = truncate(x);
@@ -51,7 +57,7 @@ pub fn floor(x: f64) -> f64 {
 /// Exactly `x.ceil()`.
 #[inline(always)]
 pub fn ceil(x: f64) -> f64 {
-    if !(x.abs() < FRACTIONAL) {
+    if !fractional(x) {
         return x;
     }
     let whole = truncate(x);
