@@ -193,6 +193,15 @@ pub struct RolloutBatch {
     pub observed_weights: Vec<Vec<f64>>,
 }
 
+/// A batch of the training loss: one-step pairs or rollout windows.
+#[derive(Debug, Clone, Copy)]
+pub enum StepBatch<'a> {
+    /// One-step pairs.
+    Pairs(&'a Batch),
+    /// Rollout windows.
+    Windows(&'a RolloutBatch),
+}
+
 /// How one optimiser step is taken.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepSettings {

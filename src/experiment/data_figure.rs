@@ -8,7 +8,7 @@ use super::study::Validation;
 use crate::plot::{thin, Chart, Series, Style, MAX_POINTS};
 
 /// Colour of the validation rows and of the mark where they start.
-const VALIDATION_COLOR: &str = "#888888";
+const VALIDATION_COLOR: &str = crate::plot::SPLIT_COLOR;
 
 /// One figure per measured state and one of the inputs, over the whole record (empty on a
 /// data set, whose held-out figures show each experiment).

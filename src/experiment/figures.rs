@@ -25,8 +25,7 @@ use crate::train::{artifacts, History};
 pub const WIDTH: f64 = 640.0;
 /// Figure height in pixels.
 pub const HEIGHT: f64 = 380.0;
-/// Colour of data and truth series.
-pub const DATA_COLOR: &str = "#000000";
+pub use crate::plot::DATA_COLOR;
 /// Errors above this are drawn at it in the MSE figures (an MSE of 1 is the error of
 /// predicting the mean; 100 is a free run ten standard deviations off).
 pub const MSE_CEILING: f64 = 100.0;

@@ -47,7 +47,7 @@ mod tests_rollout;
 
 use crate::backend::{
     dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, RolloutBatch, Setup,
-    StepSettings,
+    StepBatch, StepSettings,
 };
 use crate::ir;
 use crate::numeric::Real;
@@ -134,19 +134,19 @@ impl FusedNetwork {
         })
     }
 
-    /// The loss of one-step pairs (`Ok`) or rollout windows (`Err`), with the gradient
+    /// The loss of one-step pairs or rollout windows, with the gradient
     /// written flat into `gradient` (tensors back to back, as
     /// [`FusedNetwork::set_flat_weights`] reads them): the training loop's call, with no
     /// allocation once `gradient` has its size.
     pub fn flat_gradient(
         &mut self,
-        batch: Result<&Batch, &RolloutBatch>,
+        batch: StepBatch,
         gradient: &mut Vec<f64>,
     ) -> Result<f64, BackendError> {
         dispatch!(mut self, kernel => {
             let loss = match batch {
-                Ok(pairs) => kernel.loss_and_gradient(pairs)?,
-                Err(windows) => kernel.rollout_loss_and_gradient(windows)?,
+                StepBatch::Pairs(pairs) => kernel.loss_and_gradient(pairs)?,
+                StepBatch::Windows(windows) => kernel.rollout_loss_and_gradient(windows)?,
             };
             gradient.clear();
             gradient.extend(kernel.gradient.iter().map(|g| g.to_double()));

@@ -7,29 +7,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::*;
-use crate::backend::Normalisation;
 use crate::ir::Activation;
-use crate::train::fixtures::{chemostat, kitchen_sink, random_batch};
-
-fn setup(model: &ir::Model, precision: Precision, substeps: usize) -> Setup {
-    let measured = model.states.len();
-    Setup {
-        step: 0.4,
-        substeps,
-        precision,
-        seed: 5,
-        normalisation: Normalisation {
-            state_mean: vec![1.0; measured],
-            state_std: (0..measured).map(|i| 0.5 + 0.3 * i as f64).collect(),
-            input_mean: vec![0.5; model.inputs.len()],
-            input_std: vec![0.3; model.inputs.len()],
-            ..Normalisation::default()
-        },
-        scales: (model.closures.iter())
-            .map(|c| vec![0.7; c.outputs.len()])
-            .collect(),
-    }
-}
+use crate::train::fixtures::{chemostat, kitchen_sink, random_batch, setup};
 
 /// Weights of order one everywhere, so every path carries gradient.
 pub(super) fn random_weights(template: &[NamedTensor], seed: u64) -> Vec<NamedTensor> {

@@ -12,7 +12,7 @@ use crate::ir::{Activation, Constraint};
 use crate::record::{GridOptions, Record, Track};
 use crate::train::fixtures::{kitchen_sink, ClosureSpec, ModelBuilder, OutputSpec};
 use crate::train::pairs::stage_fractions;
-use crate::train::step::{Optimiser, Step, StepBatch};
+use crate::train::step::{Optimiser, StepBatch};
 use crate::train::windows::rollout_batch;
 
 /// Loss and every gradient entry of the fused rollout against the graph backend's at
@@ -311,7 +311,6 @@ fn a_multi_step_run_on_the_fused_engine_follows_the_graph_engine() {
             1 => StepBatch::Pairs(&pairs),
             _ => StepBatch::Windows(&windows),
         };
-        assert!(fused.runs(batch));
         let a = on_graph.step(&mut graph, batch, &settings).unwrap();
         let b = on_fused.step(&mut fused, batch, &settings).unwrap();
         assert!(

@@ -28,6 +28,11 @@ pub use line::{Chart, Mark, Series, Style, MARKER_RADIUS};
 pub use page::{figure, page};
 pub use points::{clip, thin, titled, widened_range, MAX_POINTS};
 
+/// Colour of measured data and of the truth in every report.
+pub const DATA_COLOR: &str = "#000000";
+/// Colour of the line where training ends and validation starts, in every report.
+pub const SPLIT_COLOR: &str = "#888888";
+
 /// Colours cycled through by series without an explicit colour.
 pub const PALETTE: [&str; 8] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",

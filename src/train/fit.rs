@@ -250,10 +250,10 @@ struct Engines<'n> {
 }
 
 impl Engines<'_> {
-    /// One optimiser step on `batch`, on the fused step where it runs the batch, else on
-    /// the graph network.
+    /// One optimiser step on `batch`, on the fused step where the run has one (it runs
+    /// every batch of the models it builds for), else on the graph network.
     fn step(&mut self, batch: StepBatch, settings: &StepSettings) -> Result<f64, BackendError> {
-        let engine: &mut dyn Step = match self.fused.as_mut().filter(|f| f.runs(batch)) {
+        let engine: &mut dyn Step = match self.fused.as_mut() {
             Some(fused) => fused,
             None => self.network,
         };

@@ -566,6 +566,28 @@ pub fn kitchen_sink(activation: Activation) -> ir::Model {
         .build()
 }
 
+/// A setup for engine tests: step 0.4, non-trivial normalisation (state std growing with
+/// the index), closure output scale 0.7, seed 5.
+pub fn setup(model: &ir::Model, precision: crate::backend::Precision, substeps: usize) -> Setup {
+    let measured = model.states.len();
+    Setup {
+        step: 0.4,
+        substeps,
+        precision,
+        seed: 5,
+        normalisation: crate::backend::Normalisation {
+            state_mean: vec![1.0; measured],
+            state_std: (0..measured).map(|i| 0.5 + 0.3 * i as f64).collect(),
+            input_mean: vec![0.5; model.inputs.len()],
+            input_std: vec![0.3; model.inputs.len()],
+            ..Default::default()
+        },
+        scales: (model.closures.iter())
+            .map(|c| vec![0.7; c.outputs.len()])
+            .collect(),
+    }
+}
+
 /// Random states in [0.5, 2] (so that `S ^ k` is defined), inputs and embeddings.
 pub fn random_batch(model: &ir::Model, setup: &Setup, rows: usize, seed: u64) -> Batch {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);

@@ -19,13 +19,13 @@ const HEIGHT: f64 = 330.0;
 /// Experiments drawn per role (the tables cover every experiment).
 const DRAWN: usize = 3;
 /// Colour of measured cells.
-const DATA: &str = "#000000";
+const DATA: &str = crate::plot::DATA_COLOR;
 /// Colour of one-step predictions.
 const OFFLINE: &str = "#1f77b4";
 /// Colour of free runs.
 const ONLINE: &str = "#d62728";
 /// Colour of the training/validation boundary.
-const SPLIT: &str = "#888888";
+const SPLIT: &str = crate::plot::SPLIT_COLOR;
 
 /// One experiment with its role and both predictions.
 struct Shown<'a> {
@@ -67,16 +67,25 @@ pub fn run_page(
     let report = &trained.report;
     let mut sections = Vec::new();
     sections.push(format!(
-        "<h2>Training</h2>\n<p>{} pairs, {} epochs ({:?} recipe), learning rate {}, grid step up to \
+        "<h2>Training</h2>\n<p>{} pairs, {} epochs ({} recipe), learning rate {}, grid step up to \
          {}. Errors are over measured cells only; NMSE is the paper's (squared error over the \
          training data's variance), fit is MATLAB's <code>100 (1 - |y - ŷ| / |y - mean y|)</code> \
          (100 %: exact; 0 %: no better than the mean).</p>\n{}",
         report.train_pairs,
         report.losses.len(),
-        report.recipe.objective,
+        report.recipe.objective.name(),
         tick_label(report.learning_rate),
         tick_label(report.dt),
-        figure(&loss_chart(report.losses.as_slice(), horizons, title), "")
+        figure(
+            &loss_chart(report.losses.as_slice(), horizons, title),
+            if horizons.iter().any(|&h| h > 1) {
+                "Mean training loss per epoch. Rollout epochs score free runs over windows \
+                 that grow along the curriculum, so their loss is not comparable with the \
+                 one-step epochs' and rises as the windows lengthen."
+            } else {
+                "Mean training loss per epoch."
+            }
+        )
     ));
     sections.push(fit_section(model, trained, &shown));
     sections.push(params_section(report));

@@ -12,23 +12,13 @@
 
 use std::ops::Range;
 
-use crate::backend::{BackendError, Batch, Network, Precision, RolloutBatch, StepSettings};
+pub use crate::backend::StepBatch;
+use crate::backend::{BackendError, Network, Precision, StepSettings};
 use crate::fused::FusedNetwork;
 use crate::numeric::{Adam, Real, Update};
 
-/// A batch of the training loss.
-#[derive(Clone, Copy)]
-pub enum StepBatch<'a> {
-    /// One-step pairs.
-    Pairs(&'a Batch),
-    /// Rollout windows.
-    Windows(&'a RolloutBatch),
-}
-
 /// An engine: the loss of a batch and its gradient at given weights.
 pub trait Step {
-    /// Whether this engine runs `batch`.
-    fn runs(&self, batch: StepBatch) -> bool;
     /// The loss of `batch` at the flat `weights`, its flat gradient written into
     /// `gradient` (kept by the caller from step to step).
     fn loss_and_gradient(
@@ -40,10 +30,6 @@ pub trait Step {
 }
 
 impl Step for Network {
-    fn runs(&self, _: StepBatch) -> bool {
-        true
-    }
-
     fn loss_and_gradient(
         &mut self,
         weights: &[f64],
@@ -62,10 +48,6 @@ impl Step for Network {
 }
 
 impl Step for FusedNetwork {
-    fn runs(&self, _: StepBatch) -> bool {
-        true
-    }
-
     fn loss_and_gradient(
         &mut self,
         weights: &[f64],
@@ -73,10 +55,6 @@ impl Step for FusedNetwork {
         gradient: &mut Vec<f64>,
     ) -> Result<f64, BackendError> {
         self.set_flat_weights(weights)?;
-        let batch = match batch {
-            StepBatch::Pairs(pairs) => Ok(pairs),
-            StepBatch::Windows(windows) => Err(windows),
-        };
         self.flat_gradient(batch, gradient)
     }
 }
@@ -201,29 +179,8 @@ fn update<E: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::{Normalisation, Setup};
     use crate::ir::Activation;
-    use crate::train::fixtures::{kitchen_sink, random_batch};
-
-    fn setup(model: &crate::ir::Model, precision: Precision) -> Setup {
-        let measured = model.states.len();
-        Setup {
-            step: 0.4,
-            substeps: 1,
-            precision,
-            seed: 3,
-            normalisation: Normalisation {
-                state_mean: vec![1.0; measured],
-                state_std: (0..measured).map(|i| 0.5 + 0.3 * i as f64).collect(),
-                input_mean: vec![0.5; model.inputs.len()],
-                input_std: vec![0.3; model.inputs.len()],
-                ..Normalisation::default()
-            },
-            scales: (model.closures.iter())
-                .map(|c| vec![0.7; c.outputs.len()])
-                .collect(),
-        }
-    }
+    use crate::train::fixtures::{kitchen_sink, random_batch, setup};
 
     fn settings() -> StepSettings {
         StepSettings {
@@ -239,7 +196,7 @@ mod tests {
     fn the_optimiser_steps_as_the_engines_own_adam() {
         let model = kitchen_sink(Activation::Softplus);
         for precision in [Precision::F32, Precision::F64] {
-            let setup = setup(&model, precision);
+            let setup = setup(&model, precision, 1);
             let mut reference = Network::build(&model, &setup).unwrap();
             let mut engine = Network::build(&model, &setup).unwrap();
             let mut optimiser = Optimiser::new(&engine, precision);
@@ -262,7 +219,7 @@ mod tests {
     #[test]
     fn the_fused_engine_follows_the_graph_engine_under_one_optimiser() {
         let model = kitchen_sink(Activation::Softplus);
-        let setup = setup(&model, Precision::F64);
+        let setup = setup(&model, Precision::F64, 1);
         let mut graph = Network::build(&model, &setup).unwrap();
         let mut fused = FusedNetwork::build(&model, &setup).unwrap();
         let mut on_graph = Optimiser::new(&graph, Precision::F64);
@@ -277,7 +234,5 @@ mod tests {
         for (a, b) in on_graph.weights().iter().zip(on_fused.weights()) {
             assert!((a - b).abs() <= 1e-9 * (1.0 + a.abs()), "{a} vs {b}");
         }
-        let batch = random_batch(&model, &setup, 2, 9);
-        assert!(fused.runs(StepBatch::Pairs(&batch)));
     }
 }
