@@ -51,7 +51,7 @@ pub struct Graph<E: Element> {
 /// One state-fed entry of a closure's network input: column `column` gains
 /// `factor * sources[source][state]` (the factor folds in `1 / std` and an interpolation
 /// weight).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct EmbedEntry {
     /// Network input column.
     pub column: usize,
@@ -62,8 +62,8 @@ pub struct EmbedEntry {
     pub state: usize,
     /// Multiplier.
     pub factor: f64,
-    /// The one batch row it applies to (`None`: every row).
-    pub row: Option<usize>,
+    /// The batch rows it applies to (`None`: every row).
+    pub rows: Option<std::ops::Range<usize>>,
 }
 
 /// One block of the loss: a prediction compared with its targets.
@@ -250,7 +250,7 @@ where
         for entry in &columns.entries {
             let (state_width, state_values) = (source_values.get(entry.source))
                 .filter(|(width, _)| entry.state < *width)
-                .filter(|_| entry.row.is_none_or(|row| row < rows))
+                .filter(|_| (entry.rows.as_ref()).is_none_or(|r| r.start < r.end && r.end <= rows))
                 .ok_or_else(|| BackendError::internal("embedding entry without a source"))?;
             let factor = E::from_double(entry.factor);
             for row in entry_rows(entry, rows) {
@@ -432,8 +432,8 @@ where
 
 /// The batch rows an embedding entry adds to.
 fn entry_rows(entry: &EmbedEntry, rows: usize) -> std::ops::Range<usize> {
-    match entry.row {
-        Some(row) => row..row + 1,
+    match &entry.rows {
+        Some(range) => range.clone(),
         None => 0..rows,
     }
 }

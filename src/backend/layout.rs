@@ -97,7 +97,7 @@ impl ClosureLayout {
     }
 
     /// The stage-estimate entries plus a rollout's feedback entries (each for its own
-    /// row), each scaled by its column's `1 / std`.
+    /// rows), each scaled by its column's `1 / std`.
     fn with_feedback(
         &self,
         feedback: &[super::Feedback],
@@ -106,14 +106,15 @@ impl ClosureLayout {
         let mut columns = (*self.state_columns).clone();
         for entry in feedback {
             let factor = (self.feedback_factor(entry.column, entry.weight))
-                .filter(|_| entry.sample >= 1 && entry.row < rows)
+                .filter(|_| entry.sample >= 1 && entry.rows.start < entry.rows.end)
+                .filter(|_| entry.rows.end <= rows)
                 .ok_or_else(|| BackendError::internal("feedback outside the embedding"))?;
             columns.entries.push(EmbedEntry {
                 column: entry.column,
                 source: entry.sample,
                 state: entry.state,
                 factor,
-                row: Some(entry.row),
+                rows: Some(entry.rows.clone()),
             });
         }
         Ok(columns)
@@ -356,7 +357,7 @@ pub fn closure_layout(
                 source: 0,
                 state: state_index(model, var)?,
                 factor: 1.0 / std,
-                row: None,
+                rows: None,
             });
         }
         is_stage_state.push(stage_state);

@@ -144,13 +144,15 @@ pub struct Batch {
 }
 
 /// A predicted state fed back into a later step's embedding: at a rollout step, network
-/// input `column` of a closure in batch row `row` gains `weight` times state `state` as
-/// predicted `sample` steps into the window (linear interpolation between predicted
-/// samples; `sample >= 1`, sample 0 being the data the window starts from).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// input `column` of a closure in each batch row of `rows` gains `weight` times state
+/// `state` as predicted `sample` steps into that row's window (linear interpolation between
+/// predicted samples; `sample >= 1`, sample 0 being the data the window starts from).
+/// Windows that read their predictions alike (on a uniform track, every window of the same
+/// length) share one entry over their rows.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Feedback {
-    /// Batch row (window) it applies to.
-    pub row: usize,
+    /// Batch rows (windows) it applies to.
+    pub rows: std::ops::Range<usize>,
     /// Network input column of the closure.
     pub column: usize,
     /// Steps into the window of the predicted state (at least 1).

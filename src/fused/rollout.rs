@@ -50,7 +50,9 @@ pub(super) struct StepData<E> {
 struct FedBack<E> {
     closure: usize,
     offset: usize,
-    row: usize,
+    /// Its batch rows, `first..end`.
+    first: usize,
+    end: usize,
     column: usize,
     /// Index into the trajectory (`1..=step`).
     sample: usize,
@@ -249,13 +251,15 @@ impl<E: Lane> Kernel<E> {
                 for entry in entries {
                     let factor = (closure.layout.feedback_factor(entry.column, entry.weight))
                         .filter(|_| (1..=step).contains(&entry.sample))
-                        .filter(|_| entry.row < rows && entry.state < states)
+                        .filter(|_| entry.rows.start < entry.rows.end && entry.rows.end <= rows)
+                        .filter(|_| entry.state < states)
                         .ok_or_else(|| unfit("feedback outside the window"))?;
                     if offset < offsets {
                         data.feedback.push(FedBack {
                             closure: closure_index,
                             offset,
-                            row: entry.row,
+                            first: entry.rows.start,
+                            end: entry.rows.end,
                             column: entry.column,
                             sample: entry.sample,
                             state: entry.state,
@@ -278,9 +282,12 @@ impl<E: Lane> Kernel<E> {
         } = &mut self.window[step];
         for entry in feedback.iter() {
             let width = self.plan.closures[entry.closure].width();
-            let predicted = self.trajectory[entry.sample][entry.row * states + entry.state];
-            constants[entry.closure][entry.offset][entry.row * width + entry.column] +=
-                predicted * entry.factor;
+            let predicted = &self.trajectory[entry.sample];
+            let constants = &mut constants[entry.closure][entry.offset];
+            for row in entry.first..entry.end {
+                constants[row * width + entry.column] +=
+                    predicted[row * states + entry.state] * entry.factor;
+            }
         }
     }
 
@@ -304,9 +311,11 @@ impl<E: Lane> Kernel<E> {
                 View::transposed(&self.weights[plan.weight_at[0]..][..inner * width], width),
             );
             for entry in group {
-                let value = gradient[entry.row * inner + entry.column];
-                self.adjoints[entry.sample][entry.row * states + entry.state] +=
-                    value * entry.factor;
+                let adjoints = &mut self.adjoints[entry.sample];
+                for row in entry.first..entry.end {
+                    adjoints[row * states + entry.state] +=
+                        gradient[row * inner + entry.column] * entry.factor;
+                }
             }
         }
     }

@@ -108,6 +108,52 @@ fn every_shipped_model_rolls_out_as_the_graph_backend_in_f64() {
     }
 }
 
+/// Windows on one uniform track share their feedback entries, each over all their rows;
+/// both engines give the loss and gradient of the same entries written out row by row.
+#[test]
+fn shared_feedback_is_each_windows_own() {
+    let steps = 9;
+    let (path, data) = SHIPPED[0];
+    let (model, track, first, setup) = shipped_track(
+        &format!("models/{path}.gbm"),
+        &format!("models/{data}"),
+        3 * steps + 1,
+        (Precision::F64, 1),
+    );
+    assert!(track.uniform.is_some());
+    let fractions = stage_fractions(model.dynamics, 1);
+    let starts = [(0, first + 4), (0, first), (0, first + 2 * steps)];
+    let tracks = [track];
+    let data = (&tracks[..], &[][..], &[][..], &[][..]);
+    let shared = rollout_batch(&model, data, &starts, steps, &fractions);
+    let entries = || shared.feedback.iter().flatten().flatten().flatten();
+    assert!(entries().next().is_some(), "{path} feeds nothing back");
+    assert!(entries().all(|f| f.rows == (0..3)));
+    let mut own = shared.clone();
+    for list in own.feedback.iter_mut().flatten().flatten() {
+        *list = (list.iter())
+            .flat_map(|f| {
+                (f.rows.clone()).map(move |row| Feedback {
+                    rows: row..row + 1,
+                    ..f.clone()
+                })
+            })
+            .collect();
+    }
+    assert_eq!(feedback_entries(&own), 3 * feedback_entries(&shared));
+    let network = Network::build(&model, &setup).unwrap();
+    let mut fused = FusedNetwork::build(&model, &setup).unwrap();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (a.abs() + b.abs()).max(1e-300);
+    let graph = [&shared, &own].map(|b| network.rollout_gradient(b).unwrap());
+    let fast = [&shared, &own].map(|b| fused.rollout_gradient(b).unwrap());
+    for (one, other) in [(&graph[0], &graph[1]), (&fast[0], &fast[1])] {
+        assert!(close(one.0, other.0), "loss {} vs {}", one.0, other.0);
+        for (a, b) in one.1.iter().flatten().zip(other.1.iter().flatten()) {
+            assert!(close(*a, *b), "{a} vs {b}");
+        }
+    }
+}
+
 /// Two closures of different delays, activations and depths, a hidden state, a positive and
 /// a bounded param.
 fn two_closures() -> ir::Model {
@@ -325,8 +371,8 @@ fn a_multi_step_run_on_the_fused_engine_follows_the_graph_engine() {
     }
 }
 
-/// Feedback that names a sample the window has not reached, a row outside the batch or a
-/// column outside the embedding is refused, as a missing step is.
+/// Feedback that names a sample the window has not reached, rows outside the batch (or
+/// none) or a column outside the embedding is refused, as a missing step is.
 #[test]
 fn malformed_windows_are_refused() {
     let model = two_closures();
@@ -335,23 +381,33 @@ fn malformed_windows_are_refused() {
     let batch = fixture_batch(&model, 1, 4);
     assert!(fused.rollout_loss(&batch).is_ok());
     let entry = Feedback {
-        row: 0,
+        rows: 0..1,
         column: 1,
         sample: 1,
         state: 0,
         weight: 0.5,
     };
     let bad = [
-        Feedback { sample: 2, ..entry },
-        Feedback { row: 9, ..entry },
+        Feedback {
+            sample: 2,
+            ..entry.clone()
+        },
+        Feedback {
+            rows: 3..9,
+            ..entry.clone()
+        },
+        Feedback {
+            rows: 1..1,
+            ..entry.clone()
+        },
         Feedback {
             column: 99,
-            ..entry
+            ..entry.clone()
         },
     ];
     for wrong in bad {
         let mut broken = batch.clone();
-        broken.feedback[1][0][0].push(wrong);
+        broken.feedback[1][0][0].push(wrong.clone());
         assert!(fused.rollout_loss(&broken).is_err(), "{wrong:?}");
     }
     let mut short = batch.clone();

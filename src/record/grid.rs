@@ -163,6 +163,24 @@ impl Track {
         }
     }
 
+    /// [`Track::stage_position`] of the stage at `fraction` of step `step` of a window
+    /// starting at knot `start`, counted from `start` (snapped onto a knot within rounding).
+    /// On a uniform track it is `step + fraction - lag (delay / h)` whatever the start.
+    pub fn stage_offset(
+        &self,
+        start: usize,
+        (step, fraction): (usize, f64),
+        (lag, delay): (usize, f64),
+    ) -> f64 {
+        match self.uniform {
+            Some(h) => snap(step as f64 + fraction - lag as f64 * (delay / h)),
+            None => {
+                let position = self.stage_position(start + step, fraction, (lag, delay));
+                snap(position - start as f64)
+            }
+        }
+    }
+
     /// Whether the reference of state `state` is known from data all along the stretch
     /// between positions `from` and `to` (the knots around each end included).
     pub fn known_between(&self, state: usize, from: f64, to: f64) -> bool {

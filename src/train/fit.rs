@@ -23,8 +23,9 @@ use super::pairs::stage_fractions;
 use super::split::Training;
 use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
-use super::windows::{rollout_batch, shooting_starts};
+use super::windows::{rollout_batch_into, shooting_starts};
 use super::{Engine, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
+use crate::backend::RolloutBatch;
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -74,6 +75,7 @@ impl Fit<'_> {
             fused: options.engine.fused_step(self.model, self.setup)?,
             optimiser: Optimiser::from_network(network, options.precision)?,
             network,
+            windows: RolloutBatch::default(),
         };
         let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
         // A state an experiment never measures is all fill: its estimate is the model's own
@@ -184,23 +186,26 @@ impl Fit<'_> {
             .unwrap_or(self.options.batch_size)
             .max(1);
         let mut total = 0.0;
+        // The buffers of the last epoch's batches (a failed step loses them with the run).
+        let mut batch = std::mem::take(&mut engines.windows);
+        let mut ordered = Vec::with_capacity(per_batch);
         for chunk in starts.chunks(per_batch) {
-            let batch = rollout_batch(
-                self.model,
-                (
-                    &training.tracks,
-                    &training.hidden,
-                    &training.weights,
-                    &self.setup.normalisation.observables,
-                ),
-                chunk,
-                horizon,
-                fractions,
+            // In track order, so that windows of one uniform track share their feedback.
+            ordered.clear();
+            ordered.extend_from_slice(chunk);
+            ordered.sort_by_key(|&(track, _)| track);
+            let data = (
+                &training.tracks[..],
+                &training.hidden[..],
+                &training.weights[..],
+                &self.setup.normalisation.observables[..],
             );
+            rollout_batch_into(&mut batch, self.model, data, &ordered, (horizon, fractions));
             let loss = engines.step(StepBatch::Windows(&batch), &settings)?;
             finite(loss)?;
             total += loss * chunk.len() as f64;
         }
+        engines.windows = batch;
         Ok(total / starts.len() as f64)
     }
 }
@@ -247,6 +252,8 @@ struct Engines<'n> {
     network: &'n mut Network,
     fused: Option<FusedNetwork>,
     optimiser: Optimiser,
+    /// The rollout batch, its buffers kept from batch to batch.
+    windows: RolloutBatch,
 }
 
 impl Engines<'_> {

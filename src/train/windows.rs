@@ -11,12 +11,219 @@
 //! backend adds it with its interpolation weight ([`Feedback`]) and gradients flow through
 //! it. Sample 0 is the window's measured start. With one step and no `q > 0` a window is
 //! exactly a one-step pair.
+//!
+//! **Plans.** Where each entry of a window comes from ([`Source`]: a held input, the
+//! reference at a position, or predictions) is worked out once per window as a
+//! [`WindowPlan`], relative to the window's start knot, and then read off the track. On a
+//! uniform track positions are arithmetic ([`Track::stage_offset`]), so one plan serves
+//! every window of the batch on that track; on an irregular track each window has its own.
+//! Consecutive windows of one plan read their predictions alike, so they share its
+//! feedback entries, each over their rows (the epoch puts a batch's windows in track
+//! order): a batch of `W` windows on one uniform track carries one window's feedback, not
+//! `W` copies.
 
 use crate::backend::{Feedback, RolloutBatch};
 use crate::ir::{self, Var};
-use crate::record::grid::{hold, interpolate, snap, Track};
+use crate::numeric::rounding;
+use crate::record::grid::Track;
 
 use super::pairs::PairAt;
+
+/// Where one embedding entry of a window comes from, relative to the window's start knot
+/// `s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Source {
+    /// Input `input` held at knot `s + knot` (clamped to the track).
+    Held { input: usize, knot: isize },
+    /// A lag-0 state: the stage's own estimate, which the backend supplies (left at zero).
+    Stage,
+    /// Measured state `state`'s reference at position `s + below + fraction` (clamped to
+    /// the track), before the window starts.
+    Data {
+        state: usize,
+        below: isize,
+        fraction: f64,
+    },
+    /// Measured state `state` inside the window: `start_weight` times its value at the
+    /// window's start plus the predicted samples of `fed` (a zero weight is no entry).
+    Fed {
+        state: usize,
+        start_weight: f64,
+        fed: [(usize, f64); 2],
+    },
+    /// Not something an embedding reads from a track.
+    Absent,
+}
+
+impl Source {
+    /// The source of an entry of `var` at `offset` knots after the window start (a stage
+    /// at `fraction` of its step).
+    fn of(var: Var, lag: usize, offset: f64, fraction: f64) -> Source {
+        match var {
+            Var::Input(input) => {
+                // At the end of a step (fraction 1) the value held over the step.
+                let knot = if fraction >= 1.0 {
+                    rounding::ceil(offset) - 1.0
+                } else {
+                    rounding::floor(offset)
+                };
+                Source::Held {
+                    input,
+                    knot: knot as isize,
+                }
+            }
+            Var::State(_) if lag == 0 => Source::Stage,
+            Var::State(state) => {
+                let below = rounding::floor(offset);
+                let fraction = offset - below;
+                if offset <= 0.0 {
+                    return Source::Data {
+                        state,
+                        below: below as isize,
+                        fraction,
+                    };
+                }
+                // Samples `below` and `below + 1` of the window; sample 0 is its start.
+                let below = below as usize;
+                let (mut start_weight, mut fed) = (0.0, [(0, 0.0); 2]);
+                for (slot, (sample, weight)) in [(below, 1.0 - fraction), (below + 1, fraction)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if sample == 0 {
+                        start_weight += weight;
+                    } else {
+                        fed[slot] = (sample, weight);
+                    }
+                }
+                Source::Fed {
+                    state,
+                    start_weight,
+                    fed,
+                }
+            }
+            _ => Source::Absent,
+        }
+    }
+
+    /// The entry's data share in the window starting at knot `start` of `track` (its
+    /// predicted shares are [`Source::feed`]'s).
+    fn value(self, track: &Track, start: usize) -> f64 {
+        match self {
+            Source::Held { input, knot } => {
+                let values = &track.inputs[input];
+                let last = values.len().saturating_sub(1) as isize;
+                values[(start as isize + knot).clamp(0, last) as usize]
+            }
+            Source::Stage => 0.0,
+            Source::Data {
+                state,
+                below,
+                fraction,
+            } => {
+                let values = &track.states[state];
+                let last = values.len().saturating_sub(1);
+                let at = start as isize + below;
+                if at < 0 {
+                    return values[0];
+                }
+                let at = at as usize;
+                if fraction == 0.0 || at >= last {
+                    return values[at.min(last)];
+                }
+                values[at] * (1.0 - fraction) + values[at + 1] * fraction
+            }
+            Source::Fed {
+                state,
+                start_weight,
+                ..
+            } if start_weight != 0.0 => start_weight * track.states[state][start],
+            Source::Fed { .. } => 0.0,
+            Source::Absent => f64::NAN,
+        }
+    }
+
+    /// Appends the entry's predicted shares to `feedback`, for network input `column` of
+    /// batch rows `rows`.
+    fn feed(self, rows: &std::ops::Range<usize>, column: usize, feedback: &mut Vec<Feedback>) {
+        if let Source::Fed { state, fed, .. } = self {
+            for (sample, weight) in fed {
+                if weight != 0.0 {
+                    feedback.push(Feedback {
+                        rows: rows.clone(),
+                        column,
+                        sample,
+                        state,
+                        weight,
+                    });
+                }
+            }
+        }
+    }
+}
+
+/// The sources of every embedding entry of a window, `[step][closure][fraction][column]`.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct WindowPlan {
+    sources: Vec<Source>,
+}
+
+impl WindowPlan {
+    /// The plan of the `steps`-step window from knot `start` of `track` for closures of
+    /// `layouts` (layout and delay) at stage `fractions`.
+    fn new(
+        layouts: &[(Vec<(Var, usize)>, f64)],
+        track: &Track,
+        start: usize,
+        (steps, fractions): (usize, &[f64]),
+    ) -> WindowPlan {
+        let mut plan = WindowPlan::default();
+        plan.lay(layouts, track, start, (steps, fractions));
+        plan
+    }
+
+    /// Appends the plan's feedback entries, for batch rows `rows`, to
+    /// `feedback[step][closure][fraction]`.
+    fn feed(
+        &self,
+        layouts: &[(Vec<(Var, usize)>, f64)],
+        rows: std::ops::Range<usize>,
+        feedback: &mut [Vec<Vec<Vec<Feedback>>>],
+    ) {
+        let mut sources = self.sources.iter();
+        for per_closure in feedback {
+            for (per_fraction, (layout, _)) in per_closure.iter_mut().zip(layouts) {
+                for list in per_fraction {
+                    for (column, source) in sources.by_ref().take(layout.len()).enumerate() {
+                        source.feed(&rows, column, list);
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`WindowPlan::new`] in place (its buffer kept).
+    fn lay(
+        &mut self,
+        layouts: &[(Vec<(Var, usize)>, f64)],
+        track: &Track,
+        start: usize,
+        (steps, fractions): (usize, &[f64]),
+    ) {
+        let sources = &mut self.sources;
+        sources.clear();
+        for step in 0..steps {
+            for (layout, delay) in layouts {
+                for &fraction in fractions {
+                    sources.extend(layout.iter().map(|&(var, lag)| {
+                        let offset = track.stage_offset(start, (step, fraction), (lag, *delay));
+                        Source::of(var, lag, offset, fraction)
+                    }));
+                }
+            }
+        }
+    }
+}
 
 /// A closure's raw embedding at step `step` (fraction `fraction`) of the window starting at
 /// knot `start` of `track`, batch row `row`, with predicted shares left at zero, and those
@@ -27,60 +234,15 @@ pub fn window_embedding(
     (start, row): (usize, usize),
     (step, fraction): (usize, f64),
 ) -> (Vec<f64>, Vec<Feedback>) {
-    let layout = closure.embedding.layout();
-    let (mut raw, mut feedback) = (Vec::with_capacity(layout.len()), Vec::new());
-    let at = (start, row, step, fraction);
-    let into = (&mut raw, &mut feedback);
-    window_embedding_into((&layout, closure.embedding.delay), track, at, into);
-    (raw, feedback)
-}
-
-/// [`window_embedding`] for an embedding `layout` of delay `delay`, appended to `raw` and
-/// `feedback`.
-fn window_embedding_into(
-    (layout, delay): (&[(Var, usize)], f64),
-    track: &Track,
-    (start, row, step, fraction): (usize, usize, usize, f64),
-    (raw, feedback): (&mut Vec<f64>, &mut Vec<Feedback>),
-) {
-    for (column, &(var, lag)) in layout.iter().enumerate() {
-        let position = track.stage_position(start + step, fraction, (lag, delay));
-        let value = match var {
-            Var::Input(i) => hold(&track.inputs[i], position, fraction >= 1.0),
-            Var::State(_) if lag == 0 => 0.0,
-            Var::State(i) => {
-                let offset = snap(position - start as f64);
-                if offset <= 0.0 {
-                    interpolate(&track.states[i], position)
-                } else {
-                    let below = crate::numeric::rounding::floor(offset);
-                    let weight_above = offset - below;
-                    let below = below as usize;
-                    let mut data_share = 0.0;
-                    for (sample, weight) in [(below, 1.0 - weight_above), (below + 1, weight_above)]
-                    {
-                        if weight == 0.0 {
-                            continue;
-                        }
-                        if sample == 0 {
-                            data_share += weight * track.states[i][start];
-                        } else {
-                            feedback.push(Feedback {
-                                row,
-                                column,
-                                sample,
-                                state: i,
-                                weight,
-                            });
-                        }
-                    }
-                    data_share
-                }
-            }
-            _ => f64::NAN,
-        };
-        raw.push(value);
+    let delay = closure.embedding.delay;
+    let (mut raw, mut feedback) = (Vec::new(), Vec::new());
+    for (column, (var, lag)) in closure.embedding.layout().into_iter().enumerate() {
+        let offset = track.stage_offset(start, (step, fraction), (lag, delay));
+        let source = Source::of(var, lag, offset, fraction);
+        source.feed(&(row..row + 1), column, &mut feedback);
+        raw.push(source.value(track, start));
     }
+    (raw, feedback)
 }
 
 /// What rollouts read: the tracks, the hidden-state estimates per track and knot, the
@@ -93,41 +255,80 @@ pub type RolloutData<'a> = (&'a [Track], &'a [Vec<Vec<f64>>], &'a [f64], &'a [us
 /// 1); `observables` are the measured model outputs (the normalisation's).
 pub fn rollout_batch(
     model: &ir::Model,
-    (tracks, hidden, weights, observables): RolloutData,
+    data: RolloutData,
     starts: &[PairAt],
     steps: usize,
     fractions: &[f64],
 ) -> RolloutBatch {
-    let closures = model.closures.len();
+    let mut batch = RolloutBatch::default();
+    rollout_batch_into(&mut batch, model, data, starts, (steps, fractions));
+    batch
+}
+
+/// [`rollout_batch`] written into `batch`, whose buffers are reused (an epoch builds every
+/// batch into one).
+pub fn rollout_batch_into(
+    batch: &mut RolloutBatch,
+    model: &ir::Model,
+    (tracks, hidden, weights, observables): RolloutData,
+    starts: &[PairAt],
+    (steps, fractions): (usize, &[f64]),
+) {
     let rows = starts.len();
     let layouts: Vec<_> = (model.closures.iter())
         .map(|c| (c.embedding.layout(), c.embedding.delay))
         .collect();
-    // Each embedding block sized once (a clone would drop the capacity).
-    let embeddings = || -> Vec<Vec<Vec<f64>>> {
-        (layouts.iter())
-            .map(|(layout, _)| {
-                (fractions.iter())
-                    .map(|_| Vec::with_capacity(rows * layout.len()))
-                    .collect()
-            })
-            .collect()
-    };
-    let mut batch = RolloutBatch {
-        rows,
-        steps,
-        states: Vec::new(),
-        inputs: vec![Vec::new(); steps],
-        embeddings: (0..steps).map(|_| embeddings()).collect(),
-        feedback: vec![vec![vec![Vec::new(); fractions.len()]; closures]; steps],
-        targets: vec![Vec::new(); steps],
-        step_sizes: vec![Vec::new(); steps],
-        weights: vec![Vec::new(); steps],
-        observed: vec![Vec::new(); steps],
-        observed_weights: vec![Vec::new(); steps],
-    };
+    batch.rows = rows;
+    batch.steps = steps;
+    batch.states.clear();
+    for lists in [
+        &mut batch.inputs,
+        &mut batch.targets,
+        &mut batch.step_sizes,
+        &mut batch.weights,
+        &mut batch.observed,
+        &mut batch.observed_weights,
+    ] {
+        cleared(lists, steps);
+    }
+    batch.embeddings.resize_with(steps, Vec::new);
+    batch.feedback.resize_with(steps, Vec::new);
+    for (embeddings, feedback) in batch.embeddings.iter_mut().zip(&mut batch.feedback) {
+        embeddings.resize_with(layouts.len(), Vec::new);
+        feedback.resize_with(layouts.len(), Vec::new);
+        for ((embedding, feedback), (layout, _)) in
+            embeddings.iter_mut().zip(feedback.iter_mut()).zip(&layouts)
+        {
+            cleared(embedding, fractions.len());
+            cleared(feedback, fractions.len());
+            for block in embedding.iter_mut() {
+                block.reserve(rows * layout.len());
+            }
+        }
+    }
+    // One plan per uniform track (kept for the batch); an irregular track's per window.
+    // A run of consecutive windows with one plan shares its feedback entries.
+    let mut plans: Vec<Option<WindowPlan>> = vec![None; tracks.len()];
+    let mut irregular = WindowPlan::default();
+    let mut shared_until = 0;
     for (window, &(index, start)) in starts.iter().enumerate() {
         let track = &tracks[index];
+        let plan = if track.uniform.is_some() {
+            plans[index]
+                .get_or_insert_with(|| WindowPlan::new(&layouts, track, start, (steps, fractions)))
+        } else {
+            irregular.lay(&layouts, track, start, (steps, fractions));
+            &irregular
+        };
+        if window >= shared_until {
+            let alike = match track.uniform {
+                Some(_) => starts[window..].iter().take_while(|s| s.0 == index).count(),
+                None => 1,
+            };
+            shared_until = window + alike;
+            plan.feed(&layouts, window..shared_until, &mut batch.feedback);
+        }
+        let mut sources = plan.sources.iter();
         batch.states.extend(track.states.iter().map(|s| s[start]));
         let estimates = hidden.get(index).and_then(|h| h.get(start));
         batch.states.extend(estimates.into_iter().flatten());
@@ -148,19 +349,20 @@ pub fn rollout_batch(
                 batch.observed[step].push(cell.unwrap_or(0.0));
                 batch.observed_weights[step].push(f64::from(cell.is_some()));
             }
-            for (closure, (layout, delay)) in layouts.iter().enumerate() {
-                for (offset, &fraction) in fractions.iter().enumerate() {
-                    let at = (start, window, step, fraction);
-                    let into = (
-                        &mut batch.embeddings[step][closure][offset],
-                        &mut batch.feedback[step][closure][offset],
-                    );
-                    window_embedding_into((layout, *delay), track, at, into);
+            for (closure, (layout, _)) in layouts.iter().enumerate() {
+                for raw in &mut batch.embeddings[step][closure] {
+                    let block = sources.by_ref().take(layout.len());
+                    raw.extend(block.map(|source| source.value(track, start)));
                 }
             }
         }
     }
-    batch
+}
+
+/// `lists` as `count` empty lists (their capacity kept).
+fn cleared<T>(lists: &mut Vec<Vec<T>>, count: usize) {
+    lists.resize_with(count, Vec::new);
+    lists.iter_mut().for_each(Vec::clear);
 }
 
 /// Window starts for one pass of multiple shooting over the knots `first..first + pairs`
@@ -296,31 +498,44 @@ mod tests {
         let start = first_pair_row(&model, record.steps[0]);
         let steps = 5;
         let tracks = [record.clone()];
+        // Three windows on one uniform track: they share one plan and its feedback entries.
+        let starts = [start, start + 1, start + 3];
         let batch = rollout_batch(
             &model,
             (&tracks, &[], &[], &[]),
-            &[(0, start)],
+            &starts.map(|s| (0, s)),
             steps,
             &fractions,
         );
+        let entries: Vec<&Feedback> = batch
+            .feedback
+            .iter()
+            .flatten()
+            .flatten()
+            .flatten()
+            .collect();
+        assert!(!entries.is_empty());
+        assert!(entries.iter().all(|f| f.rows == (0..3)));
         let rolled = network.rollout_predict(&batch).unwrap();
-        let run = simulate(
-            &network,
-            &model,
-            &record,
-            &fractions,
-            (start, start + steps - 1),
-            &[],
-            (Feed::Own, None),
-        )
-        .unwrap();
-        for (step, predicted) in rolled.iter().enumerate() {
-            let expected = run.next_states[step][0];
-            assert!(
-                (predicted[0] - expected).abs() < 1e-12,
-                "step {step}: {} vs {expected}",
-                predicted[0]
-            );
+        for (row, &from) in starts.iter().enumerate() {
+            let run = simulate(
+                &network,
+                &model,
+                &record,
+                &fractions,
+                (from, from + steps - 1),
+                &[],
+                (Feed::Own, None),
+            )
+            .unwrap();
+            for (step, predicted) in rolled.iter().enumerate() {
+                let expected = run.next_states[step][0];
+                assert!(
+                    (predicted[row] - expected).abs() < 1e-12,
+                    "window {row}, step {step}: {} vs {expected}",
+                    predicted[row]
+                );
+            }
         }
         // One step: the rollout loss is the one-step loss of the same pair.
         let pairs = [(0, start), (0, start + 2)];
