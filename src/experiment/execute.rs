@@ -1,6 +1,5 @@
 //! Running a study: [`prepare`] loads and checks every model and record once, [`execute`]
-//! trains the pending runs of a grid on a local rayon pool of `jobs` threads, each training
-//! single-threaded, and writes each run's result atomically as it finishes.
+//! trains the pending runs of a grid on `jobs` threads, each training single-threaded, and writes each run's result atomically as it finishes.
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -437,42 +436,52 @@ pub fn execute(
     Ok(slots.into_iter().flatten().collect())
 }
 
-/// Calls `work(0..count)` on a local pool of `jobs` threads, each taking the next item in
-/// order; the first failure stops the queue (items under way finish) and is returned.
+/// Calls `work(0..count)` on `jobs` threads, each taking the next item in order; the first
+/// failure stops the queue (items under way finish) and is returned.
+///
+/// Each job is a plain thread that runs its items on a rayon pool of one thread of its own:
+/// dfdx's matrix products use the current rayon pool, so every training stays
+/// single-threaded. The job threads must not be rayon workers themselves: a rayon worker
+/// waiting for another pool runs queued tasks of its own pool meanwhile, so it would take
+/// up a sibling job's whole loop nested inside its wait and hold its own loop until that
+/// one had drained the queue, leaving one job doing all the work.
 pub(super) fn run_queue(
     jobs: usize,
     count: usize,
     work: &(dyn Fn(usize) -> Result<(), ExperimentFailure> + Sync),
 ) -> Result<(), ExperimentFailure> {
     let jobs = jobs.clamp(1, count.max(1));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs)
-        .build()
-        .map_err(|error| ExperimentFailure::Internal(format!("cannot start threads: {error}")))?;
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
     let failures = Mutex::new(Vec::new());
-    pool.scope(|scope| {
-        for _ in 0..jobs {
-            scope.spawn(|_| {
-                // dfdx's matrix products use rayon's current pool: a pool of one thread
-                // keeps each training single-threaded inside the job pool.
-                let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
-                while !stop.load(Ordering::Relaxed) {
-                    let item = next.fetch_add(1, Ordering::Relaxed);
-                    if item >= count {
-                        break;
-                    }
-                    let outcome = match &single {
-                        Some(single) => single.install(|| work(item)),
-                        None => work(item),
-                    };
-                    if let Err(failure) = outcome {
-                        stop.store(true, Ordering::Relaxed);
-                        lock(&failures).push(failure);
-                    }
-                }
-            });
+    let job = || {
+        let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
+        while !stop.load(Ordering::Relaxed) {
+            let item = next.fetch_add(1, Ordering::Relaxed);
+            if item >= count {
+                break;
+            }
+            let outcome = match &single {
+                Some(single) => single.install(|| work(item)),
+                None => work(item),
+            };
+            if let Err(failure) = outcome {
+                stop.store(true, Ordering::Relaxed);
+                lock(&failures).push(failure);
+            }
+        }
+    };
+    std::thread::scope(|scope| {
+        for index in 0..jobs {
+            let started = std::thread::Builder::new()
+                .name(format!("gbc-job-{index}"))
+                .spawn_scoped(scope, job);
+            if let Err(error) = started {
+                stop.store(true, Ordering::Relaxed);
+                let message = format!("cannot start a job thread: {error}");
+                lock(&failures).push(ExperimentFailure::Internal(message));
+                break;
+            }
         }
     });
     let first = lock(&failures).drain(..).next();

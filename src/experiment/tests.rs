@@ -434,6 +434,34 @@ fn the_job_queue_runs_every_item_once_and_stops_at_the_first_failure() {
     assert_eq!(done.into_inner(), 3, "nothing runs after the failure");
 }
 
+/// With two jobs the items run two at a time: no job is left idle while the other drains
+/// the queue. Eight items of 50 ms each: nearly every one overlaps another (a queue drained
+/// by one job after the first pair overlaps two).
+#[test]
+fn two_jobs_run_their_items_side_by_side() {
+    use std::sync::Mutex;
+    use std::time::{Duration, Instant};
+    let origin = Instant::now();
+    let spans = Mutex::new(Vec::new());
+    let outcome = super::execute::run_queue(2, 8, &|_| {
+        let start = origin.elapsed();
+        std::thread::sleep(Duration::from_millis(50));
+        let span = (start, origin.elapsed());
+        spans.lock().map(|mut s| s.push(span)).unwrap_or_default();
+        Ok(())
+    });
+    assert!(outcome.is_ok());
+    let spans = spans.into_inner().unwrap_or_default();
+    assert_eq!(spans.len(), 8);
+    let overlapping = (spans.iter().enumerate())
+        .filter(|&(i, a)| (spans.iter().enumerate()).any(|(j, b)| i != j && a.0 < b.1 && b.0 < a.1))
+        .count();
+    assert!(
+        overlapping >= 6,
+        "{overlapping} of 8 items ran beside another"
+    );
+}
+
 #[test]
 fn studies_on_data_sets_read_back_and_one_file_stays_a_string() {
     // The paper's studies keep `"data": "path"`, so existing experiment directories keep
