@@ -2,8 +2,8 @@
 //! study's record over time and each input programme, with the row where validation starts
 //! marked, so a reader sees what the models were given before reading how they did.
 
-use super::execute::Prepared;
 use super::figures::{axis_titles, color, Figure, DATA_COLOR, HEIGHT, WIDTH};
+use super::prepare::Prepared;
 use super::study::Validation;
 use crate::plot::{thin, Chart, Series, Style, MAX_POINTS};
 

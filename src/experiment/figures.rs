@@ -12,7 +12,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::execute::{LoadedModel, Prepared};
+use super::prepare::{LoadedModel, Prepared};
 use super::reference::{first_predicted_row, free_run, true_params, truth_along, TruthRun};
 use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::backend::{Network, Setup};

@@ -5,8 +5,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::execute::{claim_directory, prepare, Prepared};
+use super::execute::claim_directory;
 use super::figures::{self, Figure};
+use super::prepare::{prepare, Prepared};
 use super::results::{self, RunResult};
 use super::{report, tables, ExperimentError, ExperimentFailure};
 

@@ -23,6 +23,7 @@ pub mod execute;
 pub mod figures;
 pub mod grid;
 pub mod merge;
+pub mod prepare;
 pub mod reference;
 pub mod report;
 pub mod results;
@@ -35,9 +36,10 @@ mod tests;
 mod tests_run;
 
 pub use error::{ExperimentError, ExperimentFailure};
-pub use execute::{execute, prepare, LoadedModel, Prepared, Progress};
+pub use execute::{execute, Progress};
 pub use grid::{grid, RunSpec, Shard};
 pub use merge::merge;
+pub use prepare::{prepare, LoadedModel, Prepared};
 pub use results::{RunResult, RunStatus, StudyRecord};
 pub use study::{DataFiles, Study, StudyModel, Validation};
 

@@ -3,8 +3,8 @@
 
 use std::fmt::Write;
 
-use super::execute::Prepared;
 use super::figures::{representative, Figure};
+use super::prepare::Prepared;
 use super::results::{runs_of, spread, summarise, RunResult, Spread, SummaryRow};
 use super::{is_black_box, Study, Validation};
 use crate::plot::escape;

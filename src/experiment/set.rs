@@ -5,7 +5,7 @@
 //! `gbc train --train-points`), and every error is on the scale of the held-out
 //! experiments' measured cells.
 
-use super::execute::LoadedModel;
+use super::prepare::LoadedModel;
 use super::{ExperimentError, ExperimentFailure, Study, Validation};
 use crate::data::MinRows;
 use crate::ir;

@@ -1,0 +1,175 @@
+//! The text `gbc train` prints on stdout when a run ends: what trained, the validation
+//! errors per experiment and pooled, where a free run left the physical range, each
+//! experiment's initial state and each param with its standard error.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use crate::ir::Model;
+use crate::train::{self, ErrorSet, Trained};
+
+/// `writeln!` into a `String` (which cannot fail).
+macro_rules! line {
+    ($out:expr, $($arg:tt)*) => {{
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+
+/// The summary of `trained` (`seconds` of training; `run`: where the run was written).
+pub(super) fn summary(
+    model: &Model,
+    trained: &Trained,
+    seconds: f64,
+    run: Option<&Path>,
+) -> String {
+    let mut out = String::new();
+    let report = &trained.report;
+    line!(
+        out,
+        "trained `{}` on {} pairs for {} epochs ({}) in {seconds:.1} s (final loss {})",
+        model.name,
+        report.train_pairs,
+        report.losses.len(),
+        report.recipe.objective.name(),
+        report
+            .losses
+            .last()
+            .map_or("-".into(), |l| format!("{l:.4e}"))
+    );
+    let metrics = &report.metrics;
+    if metrics.validations.is_empty() {
+        line!(
+            out,
+            "nothing validates: pass --val FILE, --holdout NAME, --val-fraction SHARE or a \
+             smaller --train-points"
+        );
+    }
+    for set in &metrics.validations {
+        line!(
+            out,
+            "validation on {} ({} pairs; MSE of z-scored states at measured cells):",
+            set.name,
+            set.pairs
+        );
+        print_errors(&mut out, set.offline.as_ref(), set.online.as_ref());
+    }
+    if metrics.validations.len() > 1 {
+        line!(out, "validation pooled over every experiment:");
+        print_errors(&mut out, metrics.offline.as_ref(), metrics.online.as_ref());
+    }
+    print_initial_states(&mut out, report);
+    print_params(&mut out, trained);
+    if let Some(directory) = run {
+        line!(out, "run written to {}", directory.display());
+    }
+    out
+}
+
+/// One row per measured state; an error that could not be measured shows as `-`.
+fn print_errors(out: &mut String, offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
+    line!(out, "  {:<16} {:>12} {:>12}", "state", "offline", "online");
+    let names: Vec<&String> = (offline.iter().chain(online.iter()))
+        .flat_map(|set| set.per_state.iter().map(|(name, _)| name))
+        .fold(Vec::new(), |mut names, name| {
+            if !names.contains(&name) {
+                names.push(name);
+            }
+            names
+        });
+    let of = |set: Option<&ErrorSet>, name: &str| {
+        set.and_then(|s| s.per_state.iter().find(|(n, _)| n == name))
+            .map_or("-".to_string(), |(_, e)| error(*e))
+    };
+    for name in names {
+        line!(
+            out,
+            "  {name:<16} {:>12} {:>12}",
+            of(offline, name),
+            of(online, name)
+        );
+    }
+    let overall = |set: Option<&ErrorSet>| set.map_or("-".to_string(), |s| error(s.overall));
+    line!(
+        out,
+        "  {:<16} {:>12} {:>12}",
+        "overall",
+        overall(offline),
+        overall(online)
+    );
+    if let Some(divergence) = online.and_then(|s| s.divergence.as_ref()) {
+        line!(out, "  {divergence}");
+    }
+}
+
+/// The initial values that were not measured: declared or fitted per experiment.
+fn print_initial_states(out: &mut String, report: &train::TrainReport) {
+    let unmeasured: Vec<_> = (report.initial_states.iter())
+        .flat_map(|state| {
+            (state.states.iter())
+                .filter(|(_, _, origin)| *origin != train::Origin::Measured)
+                .map(move |(name, value, origin)| (&state.experiment, name, value, origin))
+        })
+        .collect();
+    if unmeasured.is_empty() {
+        return;
+    }
+    line!(
+        out,
+        "initial states not measured at an experiment's first row:"
+    );
+    for (experiment, name, value, origin) in unmeasured {
+        let how = match origin {
+            train::Origin::Declared => "declared",
+            _ => "fitted",
+        };
+        line!(out, "  {experiment:<24} {name} = {value:.6} ({how})");
+    }
+}
+
+fn print_params(out: &mut String, trained: &Trained) {
+    let report = &trained.report;
+    if report.params.is_empty() {
+        return;
+    }
+    match (&report.polish, &report.balance_fit) {
+        (_, Some(fit)) => line!(
+            out,
+            "params (from the balances over {} intervals, held fixed in training; rms scaled \
+             residual {:.3e}; +- standard error):",
+            fit.intervals,
+            fit.rms_residual
+        ),
+        (Some(polish), None) => line!(
+            out,
+            "params (polished in {} steps, one-step loss {:.4e} -> {:.4e}; +- standard error):",
+            polish.steps,
+            polish.loss_before,
+            polish.loss_after
+        ),
+        (None, None) => line!(out, "params (+- standard error):"),
+    }
+    for estimate in &report.estimates {
+        let flag = if estimate.identified {
+            ""
+        } else {
+            "  poorly identified"
+        };
+        line!(
+            out,
+            "  {} = {:.6} +- {:.2e} ({:.1} %){flag}",
+            estimate.name,
+            estimate.value,
+            estimate.std_error,
+            100.0 * estimate.relative_error
+        );
+    }
+}
+
+/// An error value for the summary: scientific notation, or `diverged`.
+pub(super) fn error(value: f64) -> String {
+    if value.is_finite() {
+        format!("{value:.4e}")
+    } else {
+        "diverged".to_string()
+    }
+}
