@@ -545,6 +545,55 @@ mod tests {
         assert!((network.rollout_loss(&single).unwrap() - one_step).abs() < 1e-14);
     }
 
+    /// On an irregular track each window has its own plan and feedback entries of its
+    /// own row; every window is still the evaluator's free run from its start.
+    #[test]
+    fn rollouts_on_an_irregular_track_are_free_runs_of_the_evaluator() {
+        let model = model();
+        // Gaps of 2.7 and 1.3 among gaps of 2; the grid cuts the 2.7 ones in two.
+        let times = (0..14).map(|i| 2.0 * i as f64 + if i % 3 == 1 { 0.7 } else { 0.0 });
+        let record = crate::record::Record::complete(
+            "r",
+            times.collect(),
+            vec![(0..14).map(|i| (i % 3) as f64).collect()],
+            vec![(0..14).map(|i| 1.0 + 0.1 * i as f64).collect()],
+        );
+        let grid = crate::train::prepare::grid_for(&model, 2.0);
+        let track = Track::lay(&record, &grid, &[]);
+        assert!(track.uniform.is_none());
+        let network = network(&model, &track);
+        let fractions = stage_fractions(model.dynamics, 1);
+        let steps = 5;
+        let starts = [4, 5, 8];
+        let tracks = [track.clone()];
+        let at = starts.map(|s| (0, s));
+        let batch = rollout_batch(&model, (&tracks, &[], &[], &[]), &at, steps, &fractions);
+        let entries = || batch.feedback.iter().flatten().flatten().flatten();
+        assert!(entries().next().is_some());
+        assert!(entries().all(|f| f.rows.len() == 1));
+        let rolled = network.rollout_predict(&batch).unwrap();
+        for (row, &from) in starts.iter().enumerate() {
+            let run = simulate(
+                &network,
+                &model,
+                &track,
+                &fractions,
+                (from, from + steps - 1),
+                &[],
+                (Feed::Own, None),
+            )
+            .unwrap();
+            for (step, predicted) in rolled.iter().enumerate() {
+                let expected = run.next_states[step][0];
+                assert!(
+                    (predicted[row] - expected).abs() < 1e-12,
+                    "window {row}, step {step}: {} vs {expected}",
+                    predicted[row]
+                );
+            }
+        }
+    }
+
     #[test]
     fn shooting_windows_tile_the_training_pairs() {
         assert_eq!(shooting_starts(3, 10, 4, 0), vec![3, 7]);
