@@ -106,8 +106,7 @@ impl ClosureLayout {
         let mut columns = (*self.state_columns).clone();
         for entry in feedback {
             let factor = (self.feedback_factor(entry.column, entry.weight))
-                .filter(|_| entry.sample >= 1 && entry.rows.start < entry.rows.end)
-                .filter(|_| entry.rows.end <= rows)
+                .filter(|_| entry.sample >= 1 && entry.fits(rows))
                 .ok_or_else(|| BackendError::internal("feedback outside the embedding"))?;
             columns.entries.push(EmbedEntry {
                 column: entry.column,

@@ -163,6 +163,13 @@ pub struct Feedback {
     pub weight: f64,
 }
 
+impl Feedback {
+    /// Whether the entry names at least one row and no row outside a batch of `rows`.
+    pub fn fits(&self, rows: usize) -> bool {
+        self.rows.start < self.rows.end && self.rows.end <= rows
+    }
+}
+
 /// A batch of free-run windows of `steps` steps, row-major per step: each window starts
 /// at measured (and hidden-state) values and is stepped `steps` times, the network fed its
 /// own predictions through the state and, by [`Feedback`], through the delay embedding.

@@ -48,7 +48,7 @@ pub fn data_figures(prepared: &Prepared) -> Vec<Figure> {
         figures.push(Figure {
             name: format!("data_{}", state.name),
             caption: format!(
-                "The measured {} of `{source}` (paper Fig. 2a/3a): the rows before the mark \
+                "The measured {} of {source} (paper Fig. 2a/3a): the rows before the mark \
                  train (each run takes its training pairs from them), the rows after it \
                  validate.",
                 state.name
@@ -143,5 +143,27 @@ mod tests {
         let whole = split_chart(Chart::new("t", "x", "y"), points.clone(), None);
         assert_eq!((whole.series.len(), whole.marks.len()), (1, 0));
         assert_eq!(whole.series[0].points, points);
+    }
+
+    /// The chemostat preset: one figure per measured state and one of the input, axes
+    /// titled with units, captions in plain text (they are escaped into HTML, so markdown
+    /// backticks would show as written).
+    #[test]
+    fn the_shipped_record_has_a_figure_per_state_and_input() {
+        let prepared = crate::experiment::prepare(&crate::experiment::Study::chemostat())
+            .expect("the chemostat preset loads");
+        let figures = data_figures(&prepared);
+        let names: Vec<&str> = figures.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["data_S", "data_inputs"]);
+        for figure in &figures {
+            assert!(figure.svg.contains("time [s]"), "{}", figure.name);
+            assert!(!figure.caption.contains('`'), "{}", figure.caption);
+            if figure.name == "data_S" {
+                assert!(figure
+                    .caption
+                    .contains("models/mm_chemostat/data/steps.csv"));
+                assert!(figure.svg.contains("[mol/L]"), "{}", figure.name);
+            }
+        }
     }
 }

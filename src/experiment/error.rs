@@ -96,6 +96,30 @@ pub enum ExperimentError {
         /// The file, relative to the current directory.
         path: String,
     },
+    /// A model, record or truth file that the study names cannot be read.
+    #[error("cannot read `{path}`, named by the study: {reason}")]
+    #[diagnostic(
+        code(gbm::E0907),
+        help("check that the file still exists and is readable; paths are relative to the current directory")
+    )]
+    UnreadableFile {
+        /// The file.
+        path: String,
+        /// Why (the system's reason).
+        reason: String,
+    },
+}
+
+impl ExperimentError {
+    /// A study file at `path` that the system cannot read.
+    pub fn unreadable_study(path: &std::path::Path, error: &std::io::Error) -> ExperimentError {
+        ExperimentError::BadStudy {
+            path: path.display().to_string(),
+            reason: crate::io::describe(error),
+            source_code: None,
+            span: None,
+        }
+    }
 }
 
 /// Why an experiment stopped: problems with the user's input (each a diagnostic, with its

@@ -533,7 +533,7 @@ fn generalisation_figures(
         .map(|(state, svg)| Figure {
             name: format!("generalisation_{stem}_{state}"),
             caption: format!(
-                "Free runs of {state} under the inputs of `{}`, a record never used in training, \
+                "Free runs of {state} under the inputs of {}, a record never used in training, \
                  of the median replicate of each model trained on {size} points, against the \
                  data (paper Fig. 2d).",
                 data.path.display()

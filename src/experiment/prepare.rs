@@ -339,11 +339,9 @@ fn study_record(study: &Study) -> Result<StudyRecord, ExperimentFailure> {
     let paths = study.files();
     let files = (paths.into_iter())
         .map(|path| {
-            let bytes = std::fs::read(path).map_err(|error| ExperimentError::BadStudy {
+            let bytes = std::fs::read(path).map_err(|error| ExperimentError::UnreadableFile {
                 path: path.display().to_string(),
                 reason: crate::io::describe(&error),
-                source_code: None,
-                span: None,
             })?;
             let sha256 = Sha256::digest(&bytes)
                 .iter()
@@ -374,5 +372,30 @@ pub(super) fn study_options(study: &Study) -> TrainOptions {
         },
         // The free run covers the whole validation window (the default).
         ..TrainOptions::with(&study.settings)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file the study names that cannot be read when the study is hashed is reported by
+    /// its path, as a file of the study (not as an unreadable study file).
+    #[test]
+    fn an_unreadable_file_of_the_study_is_named() {
+        let study = Study {
+            truth: Some("models/nowhere/truth.gbm".into()),
+            ..Study::chemostat()
+        };
+        match study_record(&study) {
+            Err(ExperimentFailure::User(reports)) => {
+                let text = reports[0].to_string();
+                assert!(
+                    text.contains("`models/nowhere/truth.gbm`, named by the study"),
+                    "{text}"
+                );
+            }
+            other => panic!("expected a user error, found {other:?}"),
+        }
     }
 }

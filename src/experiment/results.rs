@@ -246,14 +246,7 @@ pub fn read_study_record(dir: &Path) -> Result<Option<StudyRecord>, ExperimentEr
     let text = match std::fs::read_to_string(&path) {
         Ok(text) => text,
         Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(error) => {
-            return Err(ExperimentError::BadStudy {
-                path: path.display().to_string(),
-                reason: crate::io::describe(&error),
-                source_code: None,
-                span: None,
-            })
-        }
+        Err(error) => return Err(ExperimentError::unreadable_study(&path, &error)),
     };
     serde_json::from_str(&text)
         .map(Some)

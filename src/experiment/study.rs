@@ -273,12 +273,8 @@ impl Study {
 
     /// Reads a study from a JSON file; errors point into the file.
     pub fn load(path: &Path) -> Result<Study, ExperimentError> {
-        let text = std::fs::read_to_string(path).map_err(|error| ExperimentError::BadStudy {
-            path: path.display().to_string(),
-            reason: crate::io::describe(&error),
-            source_code: None,
-            span: None,
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|error| ExperimentError::unreadable_study(path, &error))?;
         Study::parse(&path.display().to_string(), &text)
     }
 

@@ -251,8 +251,7 @@ impl<E: Lane> Kernel<E> {
                 for entry in entries {
                     let factor = (closure.layout.feedback_factor(entry.column, entry.weight))
                         .filter(|_| (1..=step).contains(&entry.sample))
-                        .filter(|_| entry.rows.start < entry.rows.end && entry.rows.end <= rows)
-                        .filter(|_| entry.state < states)
+                        .filter(|_| entry.fits(rows) && entry.state < states)
                         .ok_or_else(|| unfit("feedback outside the window"))?;
                     if offset < offsets {
                         data.feedback.push(FedBack {

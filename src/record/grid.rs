@@ -315,8 +315,18 @@ pub fn snap(position: f64) -> f64 {
 pub fn interpolate(values: &[f64], position: f64) -> f64 {
     let last = values.len().saturating_sub(1);
     let position = snap(position).clamp(0.0, last as f64);
-    let below = rounding::floor(position) as usize;
-    let fraction = position - below as f64;
+    let below = rounding::floor(position);
+    interpolate_at(values, below as isize, position - below)
+}
+
+/// [`interpolate`] at knot `below` plus `fraction` (in `[0, 1)`), the position already
+/// split: clamped to the first knot before the track and to the last from it on.
+pub fn interpolate_at(values: &[f64], below: isize, fraction: f64) -> f64 {
+    let last = values.len().saturating_sub(1);
+    if below < 0 {
+        return values[0];
+    }
+    let below = below as usize;
     if fraction == 0.0 || below >= last {
         return values[below.min(last)];
     }

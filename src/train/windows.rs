@@ -25,7 +25,7 @@
 use crate::backend::{Feedback, RolloutBatch};
 use crate::ir::{self, Var};
 use crate::numeric::rounding;
-use crate::record::grid::Track;
+use crate::record::grid::{interpolate_at, Track};
 
 use super::pairs::PairAt;
 
@@ -120,19 +120,7 @@ impl Source {
                 state,
                 below,
                 fraction,
-            } => {
-                let values = &track.states[state];
-                let last = values.len().saturating_sub(1);
-                let at = start as isize + below;
-                if at < 0 {
-                    return values[0];
-                }
-                let at = at as usize;
-                if fraction == 0.0 || at >= last {
-                    return values[at.min(last)];
-                }
-                values[at] * (1.0 - fraction) + values[at + 1] * fraction
-            }
+            } => interpolate_at(&track.states[state], start as isize + below, fraction),
             Source::Fed {
                 state,
                 start_weight,
@@ -487,6 +475,40 @@ mod tests {
         network
     }
 
+    /// Each window of `batch`, starting at knot `starts[row]` of `track`, is the
+    /// evaluator's free run from that knot (to 1e-12); the evaluator feeds predictions back
+    /// by rewriting the record.
+    fn assert_free_runs(
+        network: &Network,
+        (model, track): (&ir::Model, &Track),
+        starts: &[usize],
+        batch: &RolloutBatch,
+    ) {
+        let fractions = stage_fractions(model.dynamics, 1);
+        let rolled = network.rollout_predict(batch).unwrap();
+        for (row, &from) in starts.iter().enumerate() {
+            let last = from + batch.steps - 1;
+            let run = simulate(
+                network,
+                model,
+                track,
+                &fractions,
+                (from, last),
+                &[],
+                (Feed::Own, None),
+            )
+            .unwrap();
+            for (step, predicted) in rolled.iter().enumerate() {
+                let expected = run.next_states[step][0];
+                assert!(
+                    (predicted[row] - expected).abs() < 1e-12,
+                    "window {row}, step {step}: {} vs {expected}",
+                    predicted[row]
+                );
+            }
+        }
+    }
+
     /// A rollout batch reproduces the step-by-step free run of the evaluator, which feeds
     /// predictions back by rewriting the record.
     #[test]
@@ -516,27 +538,7 @@ mod tests {
             .collect();
         assert!(!entries.is_empty());
         assert!(entries.iter().all(|f| f.rows == (0..3)));
-        let rolled = network.rollout_predict(&batch).unwrap();
-        for (row, &from) in starts.iter().enumerate() {
-            let run = simulate(
-                &network,
-                &model,
-                &record,
-                &fractions,
-                (from, from + steps - 1),
-                &[],
-                (Feed::Own, None),
-            )
-            .unwrap();
-            for (step, predicted) in rolled.iter().enumerate() {
-                let expected = run.next_states[step][0];
-                assert!(
-                    (predicted[row] - expected).abs() < 1e-12,
-                    "window {row}, step {step}: {} vs {expected}",
-                    predicted[row]
-                );
-            }
-        }
+        assert_free_runs(&network, (&model, &record), &starts, &batch);
         // One step: the rollout loss is the one-step loss of the same pair.
         let pairs = [(0, start), (0, start + 2)];
         let single = rollout_batch(&model, (&tracks, &[], &[], &[]), &pairs, 1, &fractions);
@@ -571,27 +573,7 @@ mod tests {
         let entries = || batch.feedback.iter().flatten().flatten().flatten();
         assert!(entries().next().is_some());
         assert!(entries().all(|f| f.rows.len() == 1));
-        let rolled = network.rollout_predict(&batch).unwrap();
-        for (row, &from) in starts.iter().enumerate() {
-            let run = simulate(
-                &network,
-                &model,
-                &track,
-                &fractions,
-                (from, from + steps - 1),
-                &[],
-                (Feed::Own, None),
-            )
-            .unwrap();
-            for (step, predicted) in rolled.iter().enumerate() {
-                let expected = run.next_states[step][0];
-                assert!(
-                    (predicted[row] - expected).abs() < 1e-12,
-                    "window {row}, step {step}: {} vs {expected}",
-                    predicted[row]
-                );
-            }
-        }
+        assert_free_runs(&network, (&model, &track), &starts, &batch);
     }
 
     #[test]
