@@ -5,19 +5,23 @@
 //! subexpressions) is compiled against that layout into straight-line register code: no
 //! name look-ups, no allocation and no recursion when evaluated. Literal arithmetic and
 //! consts are folded at compile time. [`CompiledRhs`] evaluates all balances of a model
-//! at once. [`interpret`] is a plain tree-walking interpreter kept as an independent
+//! at once. [`JacobianProgram`] adds the exact derivatives of such code with respect to
+//! chosen slots (states, params), for the implicit integrator and forward sensitivities.
+//! [`interpret`] is a plain tree-walking interpreter kept as an independent
 //! reference for tests.
 //!
 //! **Invariant:** const slots are folded into the code, so changing a const's slot value
 //! after compilation has no effect; params, states, hidden states, inputs and closure
 //! outputs are read from the slots at every evaluation.
 
+mod derivative;
 mod interpret;
 mod program;
 mod scalar;
 #[cfg(test)]
 mod tests;
 
+pub use derivative::JacobianProgram;
 pub use interpret::interpret;
 pub use program::{CompileError, CompiledRhs, Program, ProgramSet};
 pub use scalar::{apply_binary, apply_func, sigmoid, softplus};

@@ -24,7 +24,7 @@ pub enum CompileError {
 
 /// Where an instruction reads a value from.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Operand {
+pub(super) enum Operand {
     Slot(usize),
     Register(usize),
     Value(f64),
@@ -32,11 +32,15 @@ enum Operand {
 
 /// One instruction; its result goes to the register with its own index.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Instr {
+pub(super) enum Instr {
     Neg(Operand),
     Square(Operand),
     Binary(BinOp, Operand, Operand),
     Call(Func, Operand, Operand),
+    /// `1` unless the first operand is at most the second (so `1` where either is NaN),
+    /// else `0`: the branch indicator of the derivatives of `abs`, `min` and `max`; never in
+    /// a program compiled from an expression alone.
+    Exceeds(Operand, Operand),
 }
 
 /// The identity of an instruction for sharing: immediates compared by their bits.
@@ -53,6 +57,7 @@ enum InstrKey {
     Square(OperandKey),
     Binary(BinOp, OperandKey, OperandKey),
     Call(Func, OperandKey, OperandKey),
+    Exceeds(OperandKey, OperandKey),
 }
 
 impl Operand {
@@ -65,7 +70,7 @@ impl Operand {
     }
 
     #[inline(always)]
-    fn fetch(self, slots: &[f64], registers: &[f64]) -> f64 {
+    pub(super) fn fetch(self, slots: &[f64], registers: &[f64]) -> f64 {
         match self {
             Operand::Slot(slot) => slots[slot],
             Operand::Register(register) => registers[register],
@@ -81,6 +86,7 @@ impl Instr {
             Instr::Square(a) => InstrKey::Square(a.key()),
             Instr::Binary(op, a, b) => InstrKey::Binary(op, a.key(), b.key()),
             Instr::Call(func, a, b) => InstrKey::Call(func, a.key(), b.key()),
+            Instr::Exceeds(a, b) => InstrKey::Exceeds(a.key(), b.key()),
         }
     }
 
@@ -88,7 +94,9 @@ impl Instr {
         let immediate = |operand: Operand| matches!(operand, Operand::Value(_));
         match self {
             Instr::Neg(a) | Instr::Square(a) => immediate(a),
-            Instr::Binary(_, a, b) | Instr::Call(_, a, b) => immediate(a) && immediate(b),
+            Instr::Binary(_, a, b) | Instr::Call(_, a, b) | Instr::Exceeds(a, b) => {
+                immediate(a) && immediate(b)
+            }
         }
     }
 
@@ -106,19 +114,22 @@ impl Instr {
             Instr::Call(func, a, b) => {
                 apply_func(func, a.fetch(slots, registers), b.fetch(slots, registers))
             }
+            Instr::Exceeds(a, b) => f64::from(u8::from(
+                !(a.fetch(slots, registers) <= b.fetch(slots, registers)),
+            )),
         }
     }
 }
 
 /// Builds register code, folding immediates and sharing repeated instructions.
-struct Builder<'a> {
+pub(super) struct Builder<'a> {
     layout: &'a Layout,
-    code: Vec<Instr>,
+    pub(super) code: Vec<Instr>,
     shared: HashMap<InstrKey, usize>,
 }
 
 impl<'a> Builder<'a> {
-    fn new(layout: &'a Layout) -> Self {
+    pub(super) fn new(layout: &'a Layout) -> Self {
         Builder {
             layout,
             code: Vec::new(),
@@ -126,7 +137,7 @@ impl<'a> Builder<'a> {
         }
     }
 
-    fn lower(&mut self, expr: &Expr) -> Result<Operand, CompileError> {
+    pub(super) fn lower(&mut self, expr: &Expr) -> Result<Operand, CompileError> {
         let instr = match expr {
             Expr::Num(value) => return Ok(Operand::Value(*value)),
             Expr::Var(var) => return self.variable(*var),
@@ -165,7 +176,7 @@ impl<'a> Builder<'a> {
         })
     }
 
-    fn emit(&mut self, instr: Instr) -> Operand {
+    pub(super) fn emit(&mut self, instr: Instr) -> Operand {
         if instr.is_immediate() {
             return Operand::Value(instr.execute(&[], &[]));
         }
@@ -179,7 +190,7 @@ impl<'a> Builder<'a> {
 
 /// Runs `code`, leaving instruction `i`'s result in `registers[i]`.
 #[inline]
-fn run(code: &[Instr], slots: &[f64], registers: &mut Vec<f64>) {
+pub(super) fn run(code: &[Instr], slots: &[f64], registers: &mut Vec<f64>) {
     if registers.len() < code.len() {
         registers.resize(code.len(), 0.0);
     }
@@ -291,25 +302,8 @@ pub struct CompiledRhs {
 impl CompiledRhs {
     /// Compiles the balances of `model` against `layout`.
     pub fn new(model: &Model, layout: &Layout) -> Result<Self, CompileError> {
-        let states = layout.state_range();
-        let mut ordered: Vec<Option<&Expr>> = vec![None; states.len()];
-        for balance in &model.balances {
-            let governed = match balance.state {
-                Var::State(_) | Var::Hidden(_) if layout.contains(balance.state) => {
-                    layout.slot(balance.state) - states.start
-                }
-                _ => return Err(CompileError::Balances),
-            };
-            if ordered[governed].replace(&balance.expr).is_some() {
-                return Err(CompileError::Balances);
-            }
-        }
-        let exprs = ordered
-            .into_iter()
-            .collect::<Option<Vec<_>>>()
-            .ok_or(CompileError::Balances)?;
         Ok(CompiledRhs {
-            set: ProgramSet::compile(exprs, layout)?,
+            set: ProgramSet::compile(balance_order(model, layout)?, layout)?,
         })
     }
 
@@ -327,4 +321,29 @@ impl CompiledRhs {
     pub fn instruction_count(&self) -> usize {
         self.set.instruction_count()
     }
+}
+
+/// The balances' expressions in the state order of [`Layout::state_range`] (measured
+/// states, then hidden); an error unless they govern each state exactly once.
+pub(super) fn balance_order<'m>(
+    model: &'m Model,
+    layout: &Layout,
+) -> Result<Vec<&'m Expr>, CompileError> {
+    let states = layout.state_range();
+    let mut ordered: Vec<Option<&Expr>> = vec![None; states.len()];
+    for balance in &model.balances {
+        let governed = match balance.state {
+            Var::State(_) | Var::Hidden(_) if layout.contains(balance.state) => {
+                layout.slot(balance.state) - states.start
+            }
+            _ => return Err(CompileError::Balances),
+        };
+        if ordered[governed].replace(&balance.expr).is_some() {
+            return Err(CompileError::Balances);
+        }
+    }
+    ordered
+        .into_iter()
+        .collect::<Option<Vec<_>>>()
+        .ok_or(CompileError::Balances)
 }

@@ -296,3 +296,145 @@ fn sigmoid_is_accurate_and_finite_everywhere() {
     assert_eq!(sigmoid(-1e6), 0.0);
     assert!((sigmoid(2.0) + sigmoid(-2.0) - 1.0).abs() <= f64::EPSILON);
 }
+
+/// The central difference of `expr` in slot `slot` with step `h`.
+fn central(expr: &Expr, layout: &Layout, slots: &[f64], slot: usize, h: f64) -> f64 {
+    let mut moved = slots.to_vec();
+    moved[slot] += h;
+    let up = reference(expr, layout, &moved);
+    moved[slot] -= 2.0 * h;
+    let down = reference(expr, layout, &moved);
+    (up - down) / (2.0 * h)
+}
+
+/// A one-sided difference of `expr` in slot `slot` with signed step `h`, extrapolated to
+/// second order (`2 D(h/2) - D(h)`).
+fn one_sided(expr: &Expr, layout: &Layout, slots: &[f64], slot: usize, h: f64) -> f64 {
+    let at = |shift: f64| {
+        let mut moved = slots.to_vec();
+        moved[slot] += shift;
+        reference(expr, layout, &moved)
+    };
+    let base = at(0.0);
+    let coarse = (at(h) - base) / h;
+    let fine = (at(h / 2.0) - base) / (h / 2.0);
+    2.0 * fine - coarse
+}
+
+/// The derivative by Richardson-extrapolated central differences, where two step sizes
+/// and both one-sided differences agree (a smooth neighbourhood); `None` near a kink, a
+/// pole or a non-finite value.
+fn smooth_difference(expr: &Expr, layout: &Layout, slots: &[f64], slot: usize) -> Option<f64> {
+    let h = 1e-4 * slots[slot].abs().max(1.0);
+    let coarse = central(expr, layout, slots, slot, h);
+    let fine = central(expr, layout, slots, slot, h / 2.0);
+    let extrapolated = (4.0 * fine - coarse) / 3.0;
+    let finer = central(expr, layout, slots, slot, h / 4.0);
+    let check = (4.0 * finer - fine) / 3.0;
+    let forward = one_sided(expr, layout, slots, slot, h);
+    let backward = one_sided(expr, layout, slots, slot, -h);
+    let scale = extrapolated.abs().max(1.0);
+    let smooth =
+        (extrapolated - check).abs() < 1e-7 * scale && (forward - backward).abs() < 1e-4 * scale;
+    (extrapolated.is_finite() && smooth).then_some(extrapolated)
+}
+
+/// Whether every subexpression of `expr` is finite at `slots` (where an intermediate is
+/// NaN or infinite, `min`/`max` may still give a finite value, but no derivative exists).
+fn finite_throughout(expr: &Expr, layout: &Layout, slots: &[f64]) -> bool {
+    let children: Vec<&Expr> = match expr {
+        Expr::Num(_) | Expr::Var(_) => Vec::new(),
+        Expr::Neg(inner) => vec![inner],
+        Expr::Bin(_, a, b) => vec![a, b],
+        Expr::Call(_, args) => args.iter().collect(),
+    };
+    reference(expr, layout, slots).is_finite()
+        && children.iter().all(|c| finite_throughout(c, layout, slots))
+}
+
+proptest! {
+    #[test]
+    fn derivatives_match_finite_differences(
+        exprs in prop::collection::vec(arb_expr(), 1..4),
+        values in prop::collection::vec(-4.0..4.0f64, 10),
+    ) {
+        let layout = Layout::new(&small_model());
+        let slots = random_slots(&layout, &values);
+        let wrt: Vec<usize> = [Var::State(0), Var::Hidden(0), Var::Param(0), Var::Input(1)]
+            .iter()
+            .map(|&v| layout.slot(v))
+            .collect();
+        let program = JacobianProgram::compile(&exprs, &layout, &wrt).unwrap();
+        let (mut values_out, mut jacobian) = (vec![0.0; exprs.len()], vec![f64::NAN; exprs.len() * wrt.len()]);
+        program.eval(&slots, &mut Vec::new(), &mut values_out, &mut jacobian);
+        for (row, expr) in exprs.iter().enumerate() {
+            let expected = reference(expr, &layout, &slots);
+            prop_assert!(agrees(values_out[row], expected), "value {expr:?}");
+            if !finite_throughout(expr, &layout, &slots) {
+                continue;
+            }
+            for (column, &slot) in wrt.iter().enumerate() {
+                let exact = jacobian[row * wrt.len() + column];
+                if let Some(numeric) = smooth_difference(expr, &layout, &slots, slot) {
+                    let scale = numeric.abs().max(1.0);
+                    prop_assert!(
+                        (exact - numeric).abs() < 1e-6 * scale,
+                        "d/d{column} of {expr:?}: exact {exact} vs {numeric}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn derivatives_are_sparse_and_exact_on_a_rate_law() {
+    use crate::ir::Var::{Param, State};
+    let layout = Layout::new(&small_model());
+    // mu = k x / (a + x): depends on x and k only.
+    let x = var(State(0));
+    let rate = bin(
+        BinOp::Div,
+        bin(BinOp::Mul, var(Param(0)), x.clone()),
+        bin(BinOp::Add, var(Var::Const(0)), x),
+    );
+    let wrt: Vec<usize> = [State(0), State(1), Param(0)]
+        .iter()
+        .map(|&v| layout.slot(v))
+        .collect();
+    let program = JacobianProgram::compile([&rate], &layout, &wrt).unwrap();
+    assert_eq!(program.nonzeros(), 2, "d/dy is structurally zero");
+    let mut slots = layout.initial_slots();
+    slots[layout.slot(State(0))] = 0.8;
+    let (mut value, mut jacobian) = ([0.0], [f64::NAN; 3]);
+    program.eval(&slots, &mut Vec::new(), &mut value, &mut jacobian);
+    let (k, a, s) = (2.0, 1.5, 0.8);
+    assert!((value[0] - k * s / (a + s)).abs() < 1e-15);
+    assert!((jacobian[0] - k * a / (a + s).powi(2)).abs() < 1e-14);
+    assert_eq!(jacobian[1], 0.0);
+    assert!((jacobian[2] - s / (a + s)).abs() < 1e-15);
+}
+
+#[test]
+fn kinks_take_their_one_sided_derivative() {
+    let layout = Layout::new(&small_model());
+    let x = var(Var::State(0));
+    let exprs = [
+        Expr::Call(Func::Abs, vec![x.clone()]),
+        Expr::Call(Func::Min, vec![x.clone(), Expr::Num(0.0)]),
+        Expr::Call(Func::Max, vec![x, Expr::Num(0.0)]),
+    ];
+    let wrt = [layout.slot(Var::State(0))];
+    let program = JacobianProgram::compile(&exprs, &layout, &wrt).unwrap();
+    let mut slots = layout.initial_slots();
+    let mut jacobian = [f64::NAN; 3];
+    for (x, want) in [
+        (-2.0, [-1.0, 1.0, 0.0]),
+        (0.0, [0.0, 1.0, 1.0]),
+        (3.0, [1.0, 0.0, 1.0]),
+    ] {
+        slots[layout.slot(Var::State(0))] = x;
+        program.eval(&slots, &mut Vec::new(), &mut [0.0; 3], &mut jacobian);
+        assert_eq!(jacobian, want, "at {x}");
+    }
+}

@@ -1,5 +1,6 @@
 //! The numeric helpers every stage shares: statistics ([`stats`]), dense linear algebra
-//! ([`linalg`]: Cholesky, normal equations; [`eigen`]: symmetric eigen-decomposition), one
+//! ([`linalg`]: Cholesky, normal equations; [`lu`]: LU with pivoting, real or complex;
+//! [`eigen`]: symmetric eigen-decomposition), one
 //! Levenberg–Marquardt driver ([`lm`]), the training element types with the one safe
 //! softplus ([`real`]), the one optimiser of training, Adam with clipping ([`adam`]), and
 //! library-call-free exact rounding ([`rounding`]).
@@ -14,6 +15,7 @@ pub mod adam;
 pub mod eigen;
 pub mod linalg;
 pub mod lm;
+pub mod lu;
 pub mod real;
 pub mod rounding;
 pub mod stats;
@@ -27,5 +29,6 @@ pub use adam::{clip, Adam, AdamState, Update};
 pub use eigen::symmetric_eigen;
 pub use linalg::{dot, solve_spd, Cholesky, NormalEquations};
 pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Settings};
+pub use lu::{Complex, Lu};
 pub use real::Real;
 pub use stats::{mean_std, median, order_statistic, root_mean_square};
