@@ -219,9 +219,7 @@ impl Simulator {
                 for row in first..last {
                     self.system.rhs(record.times[row], state, &mut next);
                     if next.iter().any(|v| !v.is_finite()) {
-                        return Err(IntegrationError::NonFinite {
-                            t: record.times[row + 1],
-                        });
+                        return Err(IntegrationError::non_finite(record.times[row + 1]));
                     }
                     state.copy_from_slice(&next);
                     record_row(row + 1, state);

@@ -236,38 +236,57 @@ impl Differentiator<'_, '_> {
     }
 
     fn add(&mut self, a: Operand, b: Operand) -> Operand {
-        match (a, b) {
-            (Operand::Value(z), other) | (other, Operand::Value(z)) if z == 0.0 => other,
-            _ => self.builder.emit(Instr::Binary(BinOp::Add, a, b)),
+        if is(a, 0.0) {
+            b
+        } else if is(b, 0.0) {
+            a
+        } else {
+            self.builder.emit(Instr::Binary(BinOp::Add, a, b))
         }
     }
 
     fn sub(&mut self, a: Operand, b: Operand) -> Operand {
-        match (a, b) {
-            (other, Operand::Value(z)) if z == 0.0 => other,
-            (Operand::Value(z), other) if z == 0.0 => self.neg(other),
-            _ => self.builder.emit(Instr::Binary(BinOp::Sub, a, b)),
+        if is(b, 0.0) {
+            a
+        } else if is(a, 0.0) {
+            self.neg(b)
+        } else {
+            self.builder.emit(Instr::Binary(BinOp::Sub, a, b))
         }
     }
 
     fn mul(&mut self, a: Operand, b: Operand) -> Operand {
-        match (a, b) {
-            (Operand::Value(z), _) | (_, Operand::Value(z)) if z == 0.0 => Operand::Value(0.0),
-            (Operand::Value(u), other) | (other, Operand::Value(u)) if u == 1.0 => other,
-            (Operand::Value(m), other) | (other, Operand::Value(m)) if m == -1.0 => self.neg(other),
-            _ => self.builder.emit(Instr::Binary(BinOp::Mul, a, b)),
+        if is(a, 0.0) || is(b, 0.0) {
+            Operand::Value(0.0)
+        } else if is(a, 1.0) {
+            b
+        } else if is(b, 1.0) {
+            a
+        } else if is(a, -1.0) {
+            self.neg(b)
+        } else if is(b, -1.0) {
+            self.neg(a)
+        } else {
+            self.builder.emit(Instr::Binary(BinOp::Mul, a, b))
         }
     }
 
     fn div(&mut self, a: Operand, b: Operand) -> Operand {
-        match (a, b) {
-            (Operand::Value(z), _) if z == 0.0 => Operand::Value(0.0),
-            (other, Operand::Value(u)) if u == 1.0 => other,
-            _ => self.builder.emit(Instr::Binary(BinOp::Div, a, b)),
+        if is(a, 0.0) {
+            Operand::Value(0.0)
+        } else if is(b, 1.0) {
+            a
+        } else {
+            self.builder.emit(Instr::Binary(BinOp::Div, a, b))
         }
     }
 
     fn neg(&mut self, a: Operand) -> Operand {
         self.builder.emit(Instr::Neg(a))
     }
+}
+
+/// Whether `operand` is the immediate `value`.
+fn is(operand: Operand, value: f64) -> bool {
+    matches!(operand, Operand::Value(v) if v == value)
 }

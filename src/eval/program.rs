@@ -114,9 +114,11 @@ impl Instr {
             Instr::Call(func, a, b) => {
                 apply_func(func, a.fetch(slots, registers), b.fetch(slots, registers))
             }
-            Instr::Exceeds(a, b) => f64::from(u8::from(
-                !(a.fetch(slots, registers) <= b.fetch(slots, registers)),
-            )),
+            Instr::Exceeds(a, b) => {
+                let (a, b) = (a.fetch(slots, registers), b.fetch(slots, registers));
+                // `a > b` or either is NaN: not `a <= b`.
+                f64::from(u8::from(a.partial_cmp(&b).is_none_or(|o| o.is_gt())))
+            }
         }
     }
 }

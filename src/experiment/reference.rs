@@ -6,7 +6,7 @@ use crate::data::Dataset;
 use crate::ir;
 use crate::numeric::mean_std;
 use crate::signal::Signal;
-use crate::sim::{SimOptions, Tolerances};
+use crate::sim::SimOptions;
 use crate::train::predict::{predict_in_range, Mode, PredictionTable};
 use crate::train::TrainError;
 
@@ -128,12 +128,10 @@ pub fn truth_along(
         t_start: first_time,
         t_end: last_time + 0.5 * data.step,
         dt: data.step,
-        warmup: 0.0,
-        tolerances: Tolerances::default(),
-        max_steps: 10_000_000,
         initial: (truth.states.iter())
             .map(|s| data.column(&s.name).and_then(|c| c.first().copied()))
             .collect(),
+        ..SimOptions::new(last_time, data.step)
     };
     let run = crate::sim::simulate(truth, &signals, &options)?;
     let rows = run.len().min(data.len());

@@ -1,90 +1,19 @@
 //! The Dormand–Prince 5(4) integrator with PI step-size control, FSAL and 4th-order dense
 //! output, after Hairer, Nørsett and Wanner, *Solving Ordinary Differential Equations I*,
-//! section II.5 and II.6 (their code DOPRI5).
+//! section II.5 and II.6 (their code DOPRI5), with its stiffness detection (section IV.2,
+//! "automatic stiffness detection"): `h |lambda|` estimated from the last two stages.
 //!
 //! One call of [`Dopri5::integrate`] covers one smooth stretch `[t0, t1]` of the right-hand
 //! side: it starts afresh (new first stage, new initial step), ends exactly at `t1`, and
 //! reports the solution at requested times inside the stretch through the continuous
-//! extension, so sampling never shortens a step.
+//! extension, so sampling never shortens a step. [`super::Integrator`] runs it with the
+//! stiffness monitor on (it then hands the stretch over to Radau IIA) and, for forward
+//! sensitivities, differentiates every stage ([`super::sensitivity::Explicit`]).
 
-/// A system of ordinary differential equations `dy/dt = f(t, y)`.
-pub trait OdeSystem {
-    /// Number of equations.
-    fn dim(&self) -> usize;
-    /// Writes `f(t, y)` into `dydt` (both of length [`OdeSystem::dim`]).
-    fn rhs(&mut self, t: f64, y: &[f64], dydt: &mut [f64]);
-}
-
-/// Error tolerances: the local error of component `i` is kept below
-/// `atol + rtol * |y_i|` in the root-mean-square sense.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Tolerances {
-    /// Relative tolerance.
-    pub rtol: f64,
-    /// Absolute tolerance (in the units of the states).
-    pub atol: f64,
-}
-
-impl Default for Tolerances {
-    /// `rtol = 1e-9`, `atol = 1e-12`: tight enough that simulated data carry no visible
-    /// integration error at the magnitudes of the paper's models.
-    fn default() -> Self {
-        Tolerances {
-            rtol: 1e-9,
-            atol: 1e-12,
-        }
-    }
-}
-
-/// Why an integration stopped early.
-#[derive(Debug, Clone, PartialEq, thiserror::Error, miette::Diagnostic)]
-pub enum IntegrationError {
-    /// The step size fell to the rounding level of the time.
-    #[error("step size underflow at t = {t} (step {step:e})")]
-    #[diagnostic(
-        code(gbm::E0705),
-        help("the model may be stiff or singular near this time; check its equations or loosen --rtol/--atol")
-    )]
-    StepSizeUnderflow {
-        /// Time reached.
-        t: f64,
-        /// The step size that was too small.
-        step: f64,
-    },
-    /// The right-hand side or the state became infinite or NaN.
-    #[error("the state became non-finite at t = {t}")]
-    #[diagnostic(
-        code(gbm::E0706),
-        help("look for a division by zero, the log or square root of a negative value, or a state that runs away")
-    )]
-    NonFinite {
-        /// Time reached.
-        t: f64,
-    },
-    /// More steps than allowed were attempted.
-    #[error("gave up at t = {t} after {steps} steps")]
-    #[diagnostic(
-        code(gbm::E0707),
-        help("the model is probably stiff at these tolerances; loosen --rtol/--atol")
-    )]
-    TooManySteps {
-        /// Time reached.
-        t: f64,
-        /// Steps attempted.
-        steps: usize,
-    },
-}
-
-/// Work counters of an integration.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Stats {
-    /// Accepted steps.
-    pub accepted: usize,
-    /// Rejected steps.
-    pub rejected: usize,
-    /// Evaluations of the right-hand side.
-    pub evaluations: usize,
-}
+use super::error::{IntegrationError, Stuck};
+use super::sensitivity::Explicit;
+use super::stiffness::Monitor;
+use super::system::{all_finite, rms, OdeSystem, Stats, Tolerances};
 
 // Butcher tableau of Dormand and Prince (1980).
 const C2: f64 = 1.0 / 5.0;
@@ -126,6 +55,17 @@ const D5: f64 = 701980252875.0 / 199316789632.0;
 const D6: f64 = -1453857185.0 / 822651844.0;
 const D7: f64 = 69997945.0 / 29380423.0;
 
+/// Stages 2 to 6: their time fraction and their weights on the earlier stages.
+pub(super) const TABLEAU: [(f64, &[(usize, f64)]); 5] = [
+    (C2, &[(0, A21)]),
+    (C3, &[(0, A31), (1, A32)]),
+    (C4, &[(0, A41), (1, A42), (2, A43)]),
+    (C5, &[(0, A51), (1, A52), (2, A53), (3, A54)]),
+    (1.0, &[(0, A61), (1, A62), (2, A63), (3, A64), (4, A65)]),
+];
+/// The 5th-order solution's weights (the 7th stage is evaluated there: FSAL).
+pub(super) const SOLUTION: [(usize, f64); 5] = [(0, A71), (2, A73), (3, A74), (4, A75), (5, A76)];
+
 // PI controller (Hairer's defaults for DOPRI5).
 const SAFETY: f64 = 0.9;
 const BETA: f64 = 0.04;
@@ -134,16 +74,43 @@ const MAX_GROWTH: f64 = 10.0;
 const MAX_SHRINK: f64 = 5.0;
 /// Step reduction after a step that produced non-finite values.
 const NON_FINITE_SHRINK: f64 = 0.1;
+/// What a stretch records: `record(k, y, s)` for sample `k` (sensitivities empty
+/// without).
+pub(super) type Record<'a> = dyn FnMut(usize, &[f64], &[f64]) + 'a;
+
+/// How a stretch ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Reached {
+    /// The end of the stretch.
+    End,
+    /// The stiffness monitor stopped at `t` (the state and sensitivities are there, and
+    /// the first `recorded` samples are recorded).
+    Stiff {
+        /// Time reached.
+        t: f64,
+        /// Samples recorded.
+        recorded: usize,
+    },
+}
+
+/// What to do besides stepping.
+pub(super) struct Options<'s> {
+    /// Stop when the stretch is found stiff.
+    pub monitor_stiffness: bool,
+    /// Forward sensitivities to carry along.
+    pub sensitivity: Option<&'s mut Explicit>,
+}
 
 /// A reusable Dormand–Prince 5(4) integrator (owns its work arrays).
 #[derive(Debug, Clone)]
 pub struct Dopri5 {
     tolerances: Tolerances,
     max_steps: usize,
-    stages: [Vec<f64>; 7],
-    stage_state: Vec<f64>,
-    next: Vec<f64>,
+    pub(super) stages: [Vec<f64>; 7],
+    pub(super) stage_state: Vec<f64>,
+    pub(super) next: Vec<f64>,
     sample: Vec<f64>,
+    pub(super) jacobian: Vec<f64>,
     stats: Stats,
 }
 
@@ -156,6 +123,7 @@ struct Stepper {
     last_rejected: bool,
     last_non_finite: bool,
     attempts: usize,
+    monitor: Monitor,
 }
 
 impl Dopri5 {
@@ -170,6 +138,7 @@ impl Dopri5 {
             stage_state: work(),
             next: work(),
             sample: work(),
+            jacobian: Vec::new(),
             stats: Stats::default(),
         }
     }
@@ -177,6 +146,11 @@ impl Dopri5 {
     /// Work done since the integrator was made.
     pub fn stats(&self) -> Stats {
         self.stats
+    }
+
+    /// Sets the most steps attempted per stretch.
+    pub(super) fn set_max_steps(&mut self, max_steps: usize) {
+        self.max_steps = max_steps;
     }
 
     /// Integrates `system` from `(t0, y)` to `t1 >= t0`, leaving `y(t1)` in `y`.
@@ -187,21 +161,50 @@ impl Dopri5 {
     pub fn integrate<S: OdeSystem>(
         &mut self,
         system: &mut S,
-        (t0, t1): (f64, f64),
+        span: (f64, f64),
         y: &mut [f64],
         samples: &[f64],
         mut record: impl FnMut(usize, &[f64]),
     ) -> Result<(), IntegrationError> {
+        let options = Options {
+            monitor_stiffness: false,
+            sensitivity: None,
+        };
+        self.advance(
+            system,
+            span,
+            y,
+            samples,
+            &mut |k, y, _| record(k, y),
+            options,
+        )
+        .map(|_| ())
+    }
+
+    /// [`Dopri5::integrate`] with sensitivities and the stiffness monitor as `options`
+    /// says; `record(k, y, s)` also gets the sensitivities (empty without).
+    pub(super) fn advance<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        (t0, t1): (f64, f64),
+        y: &mut [f64],
+        samples: &[f64],
+        record: &mut Record,
+        mut options: Options,
+    ) -> Result<Reached, IntegrationError> {
         let mut pending = samples.iter().enumerate().peekable();
         while let Some((k, _)) = pending.next_if(|&(_, &s)| s <= t0) {
-            record(k, y);
+            record(k, y, sensitivities(&options));
         }
         if t1 <= t0 {
-            return Ok(());
+            return Ok(Reached::End);
         }
         self.evaluate(system, t0, y, 0);
         if !all_finite(&self.stages[0]) {
-            return Err(IntegrationError::NonFinite { t: t0 });
+            return Err(IntegrationError::non_finite(t0));
+        }
+        if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
+            sensitivity.first_stage(system, t0, y, &mut self.stats);
         }
         let mut stepper = Stepper {
             t: t0,
@@ -211,41 +214,77 @@ impl Dopri5 {
             last_rejected: false,
             last_non_finite: false,
             attempts: 0,
+            monitor: Monitor::default(),
         };
         while stepper.t < t1 {
-            let last = self.check_step(&mut stepper)?;
-            self.step(system, stepper.t, stepper.h, y);
+            let last = self.check_step(system, &mut stepper, y)?;
+            self.step(
+                system,
+                stepper.t,
+                stepper.h,
+                y,
+                options.sensitivity.as_deref_mut(),
+            );
             let error = self.error_norm(stepper.h, y);
             if error <= 1.0 {
                 let step_end = if last { t1 } else { stepper.t + stepper.h };
+                let step = (step_end, stepper.h);
+                let stiff =
+                    options.monitor_stiffness && self.stiffness(system, &mut stepper.monitor, step);
                 while let Some((k, _)) = pending.next_if(|&(_, &s)| s <= step_end) {
                     let sample = samples[k];
                     self.interpolate(stepper.t, stepper.h, step_end, sample, y);
-                    record(k, &self.sample);
+                    let s = match options.sensitivity.as_deref_mut() {
+                        Some(sensitivity) => {
+                            sensitivity.interpolate(
+                                self.theta(stepper.t, stepper.h, step_end, sample),
+                                stepper.h,
+                            );
+                            sensitivity.sample()
+                        }
+                        None => &[],
+                    };
+                    record(k, &self.sample, s);
                 }
                 y.copy_from_slice(&self.next);
                 self.stages.swap(0, 6);
+                if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
+                    sensitivity.accept();
+                }
                 stepper.accept(error, step_end);
                 self.stats.accepted += 1;
+                if stiff && stepper.t < t1 {
+                    let recorded = pending.peek().map_or(samples.len(), |&(k, _)| k);
+                    return Ok(Reached::Stiff {
+                        t: stepper.t,
+                        recorded,
+                    });
+                }
             } else {
                 stepper.reject(error);
                 self.stats.rejected += 1;
             }
         }
         for (k, _) in pending {
-            record(k, y);
+            record(k, y, sensitivities(&options));
         }
-        Ok(())
+        Ok(Reached::End)
     }
 
     /// Clamps the step to the end of the stretch and checks the step budget; returns
     /// whether this step ends the stretch.
-    fn check_step(&self, stepper: &mut Stepper) -> Result<bool, IntegrationError> {
+    fn check_step<S: OdeSystem>(
+        &self,
+        system: &mut S,
+        stepper: &mut Stepper,
+        y: &[f64],
+    ) -> Result<bool, IntegrationError> {
         stepper.attempts += 1;
         if stepper.attempts > self.max_steps {
             return Err(IntegrationError::TooManySteps {
                 t: stepper.t,
                 steps: self.max_steps,
+                stuck: stuck(system, stepper, y),
             });
         }
         let remaining = stepper.t_end - stepper.t;
@@ -253,14 +292,17 @@ impl Dopri5 {
             stepper.h = remaining;
             return Ok(true);
         }
-        let smallest = 16.0 * f64::EPSILON * (stepper.t.abs() + remaining);
+        // The rounding level of the time itself (not of the stretch's length: a stretch of
+        // 4e10 may start with steps of 1e-9 at t = 0).
+        let smallest = 16.0 * f64::EPSILON * stepper.t.abs().max(f64::MIN_POSITIVE);
         if stepper.h <= smallest {
             return Err(if stepper.last_non_finite {
-                IntegrationError::NonFinite { t: stepper.t }
+                IntegrationError::non_finite(stepper.t)
             } else {
                 IntegrationError::StepSizeUnderflow {
                     t: stepper.t,
                     step: stepper.h,
+                    stuck: stuck(system, stepper, y),
                 }
             });
         }
@@ -273,23 +315,43 @@ impl Dopri5 {
     }
 
     /// One Dormand–Prince step from `(t, y)`: stages 2..7 (stage 1 is already there), the
-    /// 5th-order solution in `next`.
-    fn step<S: OdeSystem>(&mut self, system: &mut S, t: f64, h: f64, y: &[f64]) {
-        let tableau: [(f64, &[(usize, f64)]); 5] = [
-            (C2, &[(0, A21)]),
-            (C3, &[(0, A31), (1, A32)]),
-            (C4, &[(0, A41), (1, A42), (2, A43)]),
-            (C5, &[(0, A51), (1, A52), (2, A53), (3, A54)]),
-            (1.0, &[(0, A61), (1, A62), (2, A63), (3, A64), (4, A65)]),
-        ];
-        for (stage, (c, weights)) in tableau.into_iter().enumerate() {
+    /// 5th-order solution in `next`, and the stages' sensitivities where asked.
+    fn step<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        t: f64,
+        h: f64,
+        y: &[f64],
+        mut sensitivity: Option<&mut Explicit>,
+    ) {
+        for (stage, (c, weights)) in TABLEAU.into_iter().enumerate() {
             combine(&mut self.stage_state, y, h, &self.stages, weights);
             system.rhs(t + c * h, &self.stage_state, &mut self.stages[stage + 1]);
+            if let Some(sensitivity) = sensitivity.as_deref_mut() {
+                let at = (t + c * h, h);
+                sensitivity.stage(
+                    system,
+                    at,
+                    &self.stage_state,
+                    stage + 1,
+                    weights,
+                    &mut self.stats,
+                );
+            }
         }
-        let weights = [(0, A71), (2, A73), (3, A74), (4, A75), (5, A76)];
-        combine(&mut self.next, y, h, &self.stages, &weights);
+        combine(&mut self.next, y, h, &self.stages, &SOLUTION);
         system.rhs(t + h, &self.next, &mut self.stages[6]);
         self.stats.evaluations += 6;
+        if let Some(sensitivity) = sensitivity {
+            sensitivity.stage(
+                system,
+                (t + h, h),
+                &self.next,
+                6,
+                &SOLUTION,
+                &mut self.stats,
+            );
+        }
     }
 
     /// Root-mean-square of the embedded error estimate relative to the tolerance.
@@ -320,6 +382,15 @@ impl Dopri5 {
         }
     }
 
+    /// The fraction of the step `(t, t + h]` at `sample` (1 at or past the step's end).
+    fn theta(&self, t: f64, h: f64, step_end: f64, sample: f64) -> f64 {
+        if sample >= step_end {
+            1.0
+        } else {
+            (sample - t) / h
+        }
+    }
+
     /// Writes the solution at `sample` in `(t, t + h]` into `self.sample`.
     fn interpolate(&mut self, t: f64, h: f64, step_end: f64, sample: f64, y: &[f64]) {
         if sample >= step_end {
@@ -327,24 +398,7 @@ impl Dopri5 {
             return;
         }
         let theta = (sample - t) / h;
-        let theta1 = 1.0 - theta;
-        let k = &self.stages;
-        for i in 0..y.len() {
-            let difference = self.next[i] - y[i];
-            let slope_gap = h * k[0][i] - difference;
-            let curvature = difference - h * k[6][i] - slope_gap;
-            let correction = h
-                * (D1 * k[0][i]
-                    + D3 * k[2][i]
-                    + D4 * k[3][i]
-                    + D5 * k[4][i]
-                    + D6 * k[5][i]
-                    + D7 * k[6][i]);
-            self.sample[i] = y[i]
-                + theta
-                    * (difference
-                        + theta1 * (slope_gap + theta * (curvature + theta1 * correction)));
-        }
+        dense(theta, h, y, &self.next, &self.stages, &mut self.sample);
     }
 
     /// Hairer's starting step heuristic (HINIT), bounded by `max_step`.
@@ -357,16 +411,8 @@ impl Dopri5 {
     ) -> f64 {
         let Tolerances { rtol, atol } = self.tolerances;
         let scale = |i: usize| atol + rtol * y[i].abs();
-        let rms = |values: &mut dyn Iterator<Item = f64>| {
-            let (sum, count) = values.fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
-            if count == 0 {
-                0.0
-            } else {
-                (sum / count as f64).sqrt()
-            }
-        };
-        let slope = rms(&mut (0..y.len()).map(|i| self.stages[0][i] / scale(i)));
-        let size = rms(&mut (0..y.len()).map(|i| y[i] / scale(i)));
+        let slope = rms((0..y.len()).map(|i| self.stages[0][i] / scale(i)));
+        let size = rms((0..y.len()).map(|i| y[i] / scale(i)));
         let mut h = if slope <= 1e-10 || size <= 1e-10 {
             1e-6
         } else {
@@ -379,7 +425,7 @@ impl Dopri5 {
         system.rhs(t + h, &self.stage_state, &mut self.stages[1]);
         self.stats.evaluations += 1;
         let curvature =
-            rms(&mut (0..y.len()).map(|i| (self.stages[1][i] - self.stages[0][i]) / scale(i))) / h;
+            rms((0..y.len()).map(|i| (self.stages[1][i] - self.stages[0][i]) / scale(i))) / h;
         let bound = curvature.abs().max(slope);
         let guess = if !bound.is_finite() {
             h * 1e-3
@@ -389,6 +435,50 @@ impl Dopri5 {
             (0.01 / bound).powf(0.2)
         };
         (100.0 * h).min(guess).min(max_step)
+    }
+}
+
+/// The sensitivities to hand a sample when the step's own are not at hand (empty without).
+fn sensitivities<'a>(options: &'a Options) -> &'a [f64] {
+    options
+        .sensitivity
+        .as_deref()
+        .map_or(&[], Explicit::current)
+}
+
+/// Where an explicit integration was stuck.
+fn stuck<S: OdeSystem>(system: &mut S, stepper: &Stepper, y: &[f64]) -> Stuck {
+    let n = y.len();
+    let mut jacobian = vec![0.0; n * n];
+    system.jacobian(stepper.t, y, &mut jacobian);
+    Stuck::from_jacobian(&jacobian, n, stepper.h, false)
+}
+
+/// The continuous extension at fraction `theta` of a step of size `h` from `y` to `next`
+/// with stages `k`, entry by entry (states or their sensitivities alike).
+pub(super) fn dense(
+    theta: f64,
+    h: f64,
+    y: &[f64],
+    next: &[f64],
+    k: &[Vec<f64>; 7],
+    out: &mut [f64],
+) {
+    let theta1 = 1.0 - theta;
+    for i in 0..y.len() {
+        let difference = next[i] - y[i];
+        let slope_gap = h * k[0][i] - difference;
+        let curvature = difference - h * k[6][i] - slope_gap;
+        let correction = h
+            * (D1 * k[0][i]
+                + D3 * k[2][i]
+                + D4 * k[3][i]
+                + D5 * k[4][i]
+                + D6 * k[5][i]
+                + D7 * k[6][i]);
+        out[i] = y[i]
+            + theta
+                * (difference + theta1 * (slope_gap + theta * (curvature + theta1 * correction)));
     }
 }
 
@@ -420,14 +510,16 @@ impl Stepper {
     }
 }
 
-/// Sets `out = y + h * sum_j weight_j * stages[j]`.
-fn combine(out: &mut [f64], y: &[f64], h: f64, stages: &[Vec<f64>; 7], weights: &[(usize, f64)]) {
+/// Sets `out = y + h * sum_j weight_j * stages[j]`, entry by entry.
+pub(super) fn combine(
+    out: &mut [f64],
+    y: &[f64],
+    h: f64,
+    stages: &[Vec<f64>; 7],
+    weights: &[(usize, f64)],
+) {
     for (i, value) in out.iter_mut().enumerate() {
         let increment: f64 = weights.iter().map(|&(j, w)| w * stages[j][i]).sum();
         *value = y[i] + h * increment;
     }
-}
-
-fn all_finite(values: &[f64]) -> bool {
-    values.iter().all(|v| v.is_finite())
 }

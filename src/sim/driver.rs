@@ -1,7 +1,7 @@
 //! From a model and its input signals to a sampled [`Trajectory`].
 
-use super::{Dopri5, OdeSystem, SimError, SimOptions, Stats, Trajectory};
-use crate::eval::{CompileError, CompiledRhs, Layout, Program, ProgramSet};
+use super::{Integrator, OdeSystem, SimError, SimOptions, Stats, Trajectory};
+use crate::eval::{CompileError, CompiledRhs, JacobianProgram, Layout, Program, ProgramSet};
 use crate::ir::{Dynamics, Model};
 use crate::signal::Signal;
 use std::ops::Range;
@@ -11,28 +11,49 @@ const MAX_SAMPLES: usize = 100_000_000;
 
 /// A model's balances as an [`OdeSystem`] (or, for a `next` model, as its map): the states
 /// are the measured then hidden states, and the other slots (inputs, params) are held at
-/// whatever they were last set to.
+/// whatever they were last set to. Its Jacobian is the exact derivative of the balances
+/// ([`JacobianProgram`]); forward sensitivities are taken with respect to the slots given
+/// to [`ModelSystem::differentiate_by`].
 #[derive(Debug, Clone)]
 pub struct ModelSystem {
     layout: Layout,
     rhs: CompiledRhs,
+    jacobian: JacobianProgram,
+    sensitivity: Option<JacobianProgram>,
     slots: Vec<f64>,
     scratch: Vec<f64>,
+    values: Vec<f64>,
+    combined: Vec<f64>,
     states: Range<usize>,
 }
 
 impl ModelSystem {
-    /// Compiles the balances of `model`; params start at their initial values, inputs at 0.
+    /// Compiles the balances of `model` and their Jacobian; params start at their initial
+    /// values, inputs at 0.
     pub fn new(model: &Model) -> Result<Self, CompileError> {
         let layout = Layout::new(model);
         let rhs = CompiledRhs::new(model, &layout)?;
+        let states: Vec<usize> = layout.state_range().collect();
+        let jacobian = JacobianProgram::balances(model, &layout, &states)?;
         Ok(ModelSystem {
             slots: layout.initial_slots(),
             states: layout.state_range(),
+            values: vec![0.0; states.len()],
             layout,
             rhs,
+            jacobian,
+            sensitivity: None,
             scratch: Vec::new(),
+            combined: Vec::new(),
         })
+    }
+
+    /// Takes forward sensitivities with respect to the quantities in `slots` (params,
+    /// closure outputs held as corrections, ...) from now on.
+    pub fn differentiate_by(&mut self, model: &Model, slots: &[usize]) -> Result<(), CompileError> {
+        let wrt: Vec<usize> = self.states.clone().chain(slots.iter().copied()).collect();
+        self.sensitivity = Some(JacobianProgram::balances(model, &self.layout, &wrt)?);
+        Ok(())
     }
 
     /// The slot layout of the model.
@@ -64,6 +85,39 @@ impl OdeSystem for ModelSystem {
     fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) {
         self.slots[self.states.clone()].copy_from_slice(y);
         self.rhs.eval(&self.slots, &mut self.scratch, dydt);
+    }
+
+    fn jacobian(&mut self, _t: f64, y: &[f64], jacobian: &mut [f64]) {
+        self.slots[self.states.clone()].copy_from_slice(y);
+        let (slots, scratch, values) = (&self.slots, &mut self.scratch, &mut self.values);
+        self.jacobian.eval(slots, scratch, values, jacobian);
+    }
+
+    fn sensitivity_params(&self) -> usize {
+        self.sensitivity
+            .as_ref()
+            .map_or(0, |program| program.columns() - self.states.len())
+    }
+
+    fn sensitivity_jacobians(&mut self, t: f64, y: &[f64], states: &mut [f64], params: &mut [f64]) {
+        let Some(program) = &self.sensitivity else {
+            return self.jacobian(t, y, states);
+        };
+        self.slots[self.states.clone()].copy_from_slice(y);
+        let (n, columns) = (self.states.len(), program.columns());
+        self.combined.resize(n * columns, 0.0);
+        program.eval(
+            &self.slots,
+            &mut self.scratch,
+            &mut self.values,
+            &mut self.combined,
+        );
+        let p = columns - n;
+        for i in 0..n {
+            let row = &self.combined[i * columns..(i + 1) * columns];
+            states[i * n..(i + 1) * n].copy_from_slice(&row[..n]);
+            params[i * p..(i + 1) * p].copy_from_slice(&row[n..]);
+        }
     }
 }
 
@@ -134,7 +188,12 @@ impl Run<'_> {
         record: &mut dyn FnMut(usize, &[f64]),
     ) -> Result<Stats, SimError> {
         let options = self.options;
-        let mut integrator = Dopri5::new(system.dim(), options.tolerances, options.max_steps);
+        let mut integrator = Integrator::new(
+            system.dim(),
+            options.tolerances,
+            options.max_steps,
+            options.method,
+        );
         let (first, last) = (self.times[0], self.times[self.times.len() - 1]);
         if options.warmup > 0.0 {
             system.hold_inputs(self.inputs, first);
@@ -199,7 +258,7 @@ fn map_once(
 ) -> Result<(), SimError> {
     system.rhs(t, state, next);
     if next.iter().any(|v| !v.is_finite()) {
-        return Err(super::IntegrationError::NonFinite { t: t + dt }.into());
+        return Err(super::IntegrationError::non_finite(t + dt).into());
     }
     state.copy_from_slice(next);
     Ok(())

@@ -2,20 +2,37 @@
 //! with only consts is a simulator").
 //!
 //! Continuous models (`der`) are integrated by the adaptive, error-controlled
-//! [`Dopri5`] integrator, restarted at every input switch (inputs are piecewise constant),
-//! with samples taken from its dense output. Discrete models (`next`) iterate their map
-//! once per sampling step. [`simulate`] is the entry point; [`OdeSystem`] and [`Dopri5`]
-//! are reusable on their own.
+//! [`Integrator`]: explicit Dormand–Prince ([`Dopri5`]) while the balances are not stiff,
+//! Radau IIA ([`Radau`]) where they are, switched automatically; restarted at every input
+//! switch (inputs are piecewise constant), with samples taken from the dense output; with
+//! forward sensitivities on request ([`sensitivity`]) and a step budget whose error names
+//! the fastest balance ([`IntegrationError`], [`Stuck`]). Discrete models (`next`) iterate
+//! their map once per sampling step. [`simulate`] is the entry point; [`OdeSystem`],
+//! [`Integrator`], [`Dopri5`] and [`Radau`] are reusable on their own.
 
 mod dopri;
 mod driver;
+mod error;
+mod integrator;
+mod radau;
+pub mod sensitivity;
+mod stiffness;
+mod system;
 #[cfg(test)]
 mod tests;
 
-pub use dopri::{Dopri5, IntegrationError, OdeSystem, Stats, Tolerances};
+pub use dopri::Dopri5;
 pub use driver::{simulate, simulate_with_progress, ModelSystem};
+pub use error::{IntegrationError, Stuck};
+pub use integrator::{Integrator, Method};
+pub use radau::Radau;
+pub use system::{OdeSystem, Stats, Tolerances};
 
 use crate::eval::CompileError;
+
+/// The default step budget of a simulation: a million steps, about a second of work on a
+/// small model, far more than any model needs once stiff stretches run implicit.
+pub const DEFAULT_MAX_STEPS: usize = 1_000_000;
 
 /// What to simulate and how accurately.
 #[derive(Debug, Clone, PartialEq)]
@@ -31,8 +48,10 @@ pub struct SimOptions {
     pub warmup: f64,
     /// Integration tolerances.
     pub tolerances: Tolerances,
-    /// Most steps attempted between two input switches before giving up.
+    /// Most integration steps attempted in the whole simulation before giving up.
     pub max_steps: usize,
+    /// Which integration method runs ([`Method::Auto`]: explicit unless stiff).
+    pub method: Method,
     /// Explicit initial values, measured states first then hidden (the balance order):
     /// `Some(v)` replaces the declared initial value of that state; entries past the end
     /// of the vector, and `None`s, keep the declared values.
@@ -40,8 +59,8 @@ pub struct SimOptions {
 }
 
 impl SimOptions {
-    /// Samples `0, dt, 2 dt, ...` up to `t_end`, default tolerances, no warm-up, declared
-    /// initial values.
+    /// Samples `0, dt, 2 dt, ...` up to `t_end`, default tolerances and step budget,
+    /// automatic method choice, no warm-up, declared initial values.
     pub fn new(t_end: f64, dt: f64) -> Self {
         SimOptions {
             t_start: 0.0,
@@ -49,7 +68,8 @@ impl SimOptions {
             dt,
             warmup: 0.0,
             tolerances: Tolerances::default(),
-            max_steps: 10_000_000,
+            max_steps: DEFAULT_MAX_STEPS,
+            method: Method::Auto,
             initial: Vec::new(),
         }
     }

@@ -1,0 +1,342 @@
+//! The one integrator every simulation, fit and free run uses: explicit Dormand–Prince
+//! while the system is not stiff, Radau IIA where it is, chosen automatically as LSODA
+//! does — the explicit method's stiffness monitor hands a stretch to the implicit method,
+//! and the implicit method hands it back once the explicit method would be stable at the
+//! step it takes. A step budget per run turns a runaway integration into an error that
+//! names the fastest balance; forward sensitivities go through whichever method steps.
+
+use super::dopri::{Dopri5, Options, Reached, Record};
+use super::error::IntegrationError;
+use super::radau::Radau;
+use super::sensitivity::{Explicit, Implicit};
+use super::system::{OdeSystem, Stats, Tolerances};
+
+/// Which method integrates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Dormand–Prince while the system is not stiff, Radau IIA where it is (the default).
+    #[default]
+    Auto,
+    /// Dormand–Prince only.
+    Explicit,
+    /// Radau IIA only.
+    Implicit,
+}
+
+/// Implicit steps between checks whether the explicit method would do.
+const CALM_CHECK: usize = 10;
+/// The explicit method takes over where `h * |J|` is below this (well inside its
+/// stability region, whose real extent is about 3.3).
+const CALM_PRODUCT: f64 = 1.0;
+
+/// A reusable integrator with automatic method choice (owns its work arrays).
+#[derive(Debug, Clone)]
+pub struct Integrator {
+    method: Method,
+    budget: usize,
+    attempts: usize,
+    stiff: bool,
+    implicit_step: Option<f64>,
+    explicit: Dopri5,
+    implicit: Radau,
+    explicit_sensitivity: Option<Explicit>,
+    implicit_sensitivity: Option<Implicit>,
+    sample: Vec<f64>,
+    scratch: Vec<f64>,
+    switches: usize,
+}
+
+impl Integrator {
+    /// An integrator for systems of `dim` equations that attempts at most `budget` steps
+    /// per run (from one [`Integrator::restart`] to the next).
+    pub fn new(dim: usize, tolerances: Tolerances, budget: usize, method: Method) -> Self {
+        Integrator {
+            method,
+            budget,
+            attempts: 0,
+            stiff: method == Method::Implicit,
+            implicit_step: None,
+            explicit: Dopri5::new(dim, tolerances, budget),
+            implicit: Radau::new(dim, tolerances),
+            explicit_sensitivity: None,
+            implicit_sensitivity: None,
+            sample: vec![0.0; dim],
+            scratch: vec![0.0; dim * dim],
+            switches: 0,
+        }
+    }
+
+    /// Starts a new run: the step budget is whole again and the method choice starts over
+    /// (explicit, unless only the implicit method runs).
+    pub fn restart(&mut self) {
+        self.attempts = 0;
+        self.stiff = self.method == Method::Implicit;
+        self.implicit_step = None;
+    }
+
+    /// Work done since the integrator was made, both methods together.
+    pub fn stats(&self) -> Stats {
+        let mut stats = self.explicit.stats();
+        stats.add(&self.implicit.stats());
+        stats.switches = self.switches;
+        stats
+    }
+
+    /// Integrates `system` from `(t0, y)` to `t1 >= t0`, leaving `y(t1)` in `y`;
+    /// `record(k, y)` is called once for each of the increasing `samples` in `[t0, t1]`.
+    pub fn integrate<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        span: (f64, f64),
+        y: &mut [f64],
+        samples: &[f64],
+        mut record: impl FnMut(usize, &[f64]),
+    ) -> Result<(), IntegrationError> {
+        self.run(system, span, y, None, samples, &mut |k, y, _| record(k, y))
+    }
+
+    /// [`Integrator::integrate`] carrying the sensitivities `s = dy/dp` (`dim x p`,
+    /// row-major, `p` = [`OdeSystem::sensitivity_params`]) along: `record(k, y, s)`.
+    pub fn integrate_with_sensitivities<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        span: (f64, f64),
+        y: &mut [f64],
+        s: &mut [f64],
+        samples: &[f64],
+        mut record: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Result<(), IntegrationError> {
+        let (n, p) = (y.len(), system.sensitivity_params());
+        if self
+            .explicit_sensitivity
+            .as_ref()
+            .map(|e| e.current().len())
+            != Some(n * p)
+        {
+            self.explicit_sensitivity = Some(Explicit::new(n, p));
+            self.implicit_sensitivity = Some(Implicit::new(n, p));
+        }
+        self.run(system, span, y, Some(s), samples, &mut record)
+    }
+
+    fn run<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        (t0, t1): (f64, f64),
+        y: &mut [f64],
+        mut s: Option<&mut [f64]>,
+        samples: &[f64],
+        record: &mut Record,
+    ) -> Result<(), IntegrationError> {
+        let (mut t, mut done) = (t0, 0);
+        loop {
+            let stretch = (t, t1);
+            let result = if self.stiff {
+                self.implicit_stretch(
+                    system,
+                    stretch,
+                    y,
+                    s.as_deref_mut(),
+                    &samples[done..],
+                    done,
+                    record,
+                )
+            } else {
+                self.explicit_stretch(
+                    system,
+                    stretch,
+                    y,
+                    s.as_deref_mut(),
+                    &samples[done..],
+                    done,
+                    record,
+                )
+            };
+            match result? {
+                Reached::End => return Ok(()),
+                Reached::Stiff { t: at, recorded } => {
+                    (t, done) = (at, done + recorded);
+                    self.stiff = !self.stiff;
+                    self.switches += 1;
+                }
+            }
+        }
+    }
+
+    /// A stretch (or its start, up to where it turns stiff) with the explicit method.
+    #[allow(clippy::too_many_arguments)]
+    fn explicit_stretch<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        span: (f64, f64),
+        y: &mut [f64],
+        s: Option<&mut [f64]>,
+        samples: &[f64],
+        offset: usize,
+        record: &mut Record,
+    ) -> Result<Reached, IntegrationError> {
+        let remaining = self.budget.saturating_sub(self.attempts);
+        self.explicit.set_max_steps(remaining);
+        let before = self.explicit.stats();
+        let sensitivity = match (&s, self.explicit_sensitivity.as_mut()) {
+            (Some(s), Some(sensitivity)) => {
+                sensitivity.set(s);
+                Some(sensitivity)
+            }
+            _ => None,
+        };
+        let options = Options {
+            monitor_stiffness: self.method == Method::Auto,
+            sensitivity,
+        };
+        let mut shifted = |k: usize, y: &[f64], s: &[f64]| record(offset + k, y, s);
+        let reached = self
+            .explicit
+            .advance(system, span, y, samples, &mut shifted, options);
+        let after = self.explicit.stats();
+        self.attempts += (after.accepted + after.rejected) - (before.accepted + before.rejected);
+        let reached = reached.map_err(|error| self.whole_budget(error))?;
+        if let (Some(s), Some(sensitivity)) = (s, &self.explicit_sensitivity) {
+            s.copy_from_slice(sensitivity.current());
+        }
+        Ok(reached)
+    }
+
+    /// A stretch (or its start, up to where it turns calm) with the implicit method.
+    #[allow(clippy::too_many_arguments)]
+    fn implicit_stretch<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        (t0, t1): (f64, f64),
+        y: &mut [f64],
+        s: Option<&mut [f64]>,
+        samples: &[f64],
+        offset: usize,
+        record: &mut Record,
+    ) -> Result<Reached, IntegrationError> {
+        if let (Some(s), Some(sensitivity)) = (&s, self.implicit_sensitivity.as_mut()) {
+            sensitivity.set(s);
+        }
+        let with = s.is_some();
+        let mut next = samples.partition_point(|&sample| sample <= t0);
+        let start = self.implicit_current(with);
+        for k in 0..next {
+            record(offset + k, y, &start);
+        }
+        let mut reached = Reached::End;
+        if t1 > t0 {
+            self.implicit
+                .start(system, (t0, t1), y, self.implicit_step)?;
+            let mut steps = 0;
+            while self.implicit.time() < t1 {
+                self.implicit_step(system, with)?;
+                next += self.record_implicit(samples, next, offset, with, record);
+                steps += 1;
+                let check = self.method == Method::Auto && steps % CALM_CHECK == 0;
+                if check && self.implicit.time() < t1 && self.calm(system) {
+                    let t = self.implicit.time();
+                    reached = Reached::Stiff { t, recorded: next };
+                    break;
+                }
+            }
+            self.implicit_step = Some(self.implicit.step_size());
+            y.copy_from_slice(self.implicit.state());
+        }
+        if let (Some(s), Some(sensitivity)) = (s, &self.implicit_sensitivity) {
+            s.copy_from_slice(sensitivity.current());
+        }
+        if reached == Reached::End {
+            let end = self.implicit_current(with);
+            for k in next..samples.len() {
+                record(offset + k, y, &end);
+            }
+        }
+        Ok(reached)
+    }
+
+    /// The implicit method's current sensitivities (empty without them).
+    fn implicit_current(&self, with: bool) -> Vec<f64> {
+        match (with, &self.implicit_sensitivity) {
+            (true, Some(sensitivity)) => sensitivity.current().to_vec(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// One implicit step (and the sensitivities over it).
+    fn implicit_step<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        sensitivities: bool,
+    ) -> Result<(), IntegrationError> {
+        self.implicit
+            .step(system, &mut self.attempts, self.budget)?;
+        if sensitivities {
+            if let Some(sensitivity) = self.implicit_sensitivity.as_mut() {
+                self.implicit.step_sensitivities(system, sensitivity);
+            }
+        }
+        Ok(())
+    }
+
+    /// Records the samples from `next` on that the last implicit step passed; returns how
+    /// many.
+    fn record_implicit(
+        &mut self,
+        samples: &[f64],
+        next: usize,
+        offset: usize,
+        sensitivities: bool,
+        record: &mut Record,
+    ) -> usize {
+        let now = self.implicit.time();
+        let mut count = 0;
+        for (k, &sample) in samples.iter().enumerate().skip(next) {
+            if sample > now {
+                break;
+            }
+            self.implicit.interpolate(sample, &mut self.sample);
+            let s: &[f64] = match (sensitivities, self.implicit_sensitivity.as_mut()) {
+                (true, Some(sensitivity)) => {
+                    sensitivity.interpolate(sample);
+                    sensitivity.sample()
+                }
+                _ => &[],
+            };
+            record(offset + k, &self.sample, s);
+            count += 1;
+        }
+        count
+    }
+
+    /// Whether the explicit method would be stable at the implicit method's step: `h` times
+    /// the largest absolute row sum of a fresh Jacobian below [`CALM_PRODUCT`].
+    fn calm<S: OdeSystem>(&mut self, system: &mut S) -> bool {
+        let n = self.sample.len();
+        system.jacobian(
+            self.implicit.time(),
+            self.implicit.state(),
+            &mut self.scratch,
+        );
+        let largest = (0..n)
+            .map(|i| {
+                self.scratch[i * n..(i + 1) * n]
+                    .iter()
+                    .map(|v| v.abs())
+                    .sum::<f64>()
+            })
+            .fold(0.0, f64::max);
+        self.implicit.step_size() * largest < CALM_PRODUCT
+    }
+
+    /// An explicit method's budget error, counted against the whole run's budget.
+    fn whole_budget(&self, error: IntegrationError) -> IntegrationError {
+        match error {
+            IntegrationError::TooManySteps { t, stuck, .. } => IntegrationError::TooManySteps {
+                t,
+                steps: self.budget,
+                stuck,
+            },
+            other => other,
+        }
+    }
+}

@@ -1,0 +1,127 @@
+//! The explicit method's stiffness monitor: whether a stretch has turned stiff, so that
+//! [`super::Integrator`] hands it to the implicit method. Two tests, either suffices once
+//! the stretch has cost [`STIFF_WORK`] steps: Hairer's (Hairer and Wanner II, section
+//! IV.2), `h |lambda|` estimated from the last two stages at the edge of the stability
+//! region; and the spectral radius of the exact Jacobian times the step.
+
+use super::dopri::Dopri5;
+use super::system::OdeSystem;
+
+/// `h |lambda|` above this is at the edge of the stability region (about 3.3 on the
+/// negative real axis; Hairer tests 3.25, the controller keeps our estimates just below).
+const STIFF_PRODUCT: f64 = 3.0;
+/// Accepted steps at the edge of stability that declare the stretch stiff ...
+const STIFF_STEPS: usize = 15;
+/// ... unless this many steps inside the region come first.
+const NON_STIFF_STEPS: usize = 6;
+/// Accepted steps between two estimates of the spectral radius from the exact Jacobian.
+const RADIUS_CHECK: usize = 10;
+/// `h rho(J)` above this at [`RADIUS_CHECKS`] estimates in a row declares the stretch stiff:
+/// a step that large cannot resolve the fastest mode, so only stability limits it.
+const RADIUS_PRODUCT: f64 = 1.0;
+/// Consecutive spectral-radius estimates above [`RADIUS_PRODUCT`] that declare stiffness.
+const RADIUS_CHECKS: usize = 3;
+/// Power iterations per spectral-radius estimate.
+const POWER_ITERATIONS: usize = 8;
+/// Accepted steps in a stretch before it may be declared stiff: a short stretch costs
+/// little explicit, and the explicit method's results are the reference for a system that
+/// is only mildly stiff here and there.
+const STIFF_WORK: usize = 100;
+
+/// The monitor's counters over one stretch.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Monitor {
+    accepted: usize,
+    stiff_steps: usize,
+    non_stiff_steps: usize,
+    radius_checks: usize,
+}
+
+impl Dopri5 {
+    /// Whether the stretch has turned stiff, tested after each accepted step of size
+    /// `h` (before the step's end is taken): Hairer's test, `h |lambda|` estimated
+    /// as `h |k7 - k6| / |y7 - y6|` at the edge of the stability region for [`STIFF_STEPS`]
+    /// steps (not interrupted by [`NON_STIFF_STEPS`] inside it), or every [`RADIUS_CHECK`]
+    /// steps the spectral radius of the exact Jacobian times the step above
+    /// [`RADIUS_PRODUCT`] [`RADIUS_CHECKS`] times in a row; never before [`STIFF_WORK`]
+    /// steps.
+    pub(super) fn stiffness<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        monitor: &mut Monitor,
+        (t_next, h): (f64, f64),
+    ) -> bool {
+        monitor.accepted += 1;
+        let hairer = self.hairer_test(monitor, h);
+        if monitor.accepted < STIFF_WORK {
+            return false;
+        }
+        if hairer {
+            return true;
+        }
+        if monitor.accepted.is_multiple_of(RADIUS_CHECK) {
+            let radius = self.spectral_radius(system, t_next);
+            if h * radius > RADIUS_PRODUCT {
+                monitor.radius_checks += 1;
+                if monitor.radius_checks >= RADIUS_CHECKS {
+                    return true;
+                }
+            } else {
+                monitor.radius_checks = 0;
+            }
+        }
+        false
+    }
+
+    /// Hairer's test: whether [`STIFF_STEPS`] steps have been at the edge of stability.
+    fn hairer_test(&self, monitor: &mut Monitor, h: f64) -> bool {
+        let (numerator, denominator) = (0..self.next.len()).fold((0.0, 0.0), |(n, d), i| {
+            let slope = self.stages[6][i] - self.stages[5][i];
+            let gap = self.next[i] - self.stage_state[i];
+            (n + slope * slope, d + gap * gap)
+        });
+        if denominator <= 0.0 {
+            return false;
+        }
+        let product = h * (numerator / denominator).sqrt();
+        if product > STIFF_PRODUCT {
+            monitor.non_stiff_steps = 0;
+            monitor.stiff_steps += 1;
+            monitor.stiff_steps >= STIFF_STEPS
+        } else {
+            monitor.non_stiff_steps += 1;
+            if monitor.non_stiff_steps >= NON_STIFF_STEPS {
+                monitor.stiff_steps = 0;
+            }
+            false
+        }
+    }
+
+    /// The spectral radius of the Jacobian at the end of the step just taken (`next`), by
+    /// [`POWER_ITERATIONS`] power iterations from a vector of ones (its growth rate: exact
+    /// for a dominant real eigenvalue, the right size for a dominant complex pair).
+    fn spectral_radius<S: OdeSystem>(&mut self, system: &mut S, t: f64) -> f64 {
+        let n = self.next.len();
+        if self.jacobian.len() != n * n {
+            self.jacobian = vec![0.0; n * n];
+        }
+        system.jacobian(t, &self.next, &mut self.jacobian);
+        let mut vector = vec![1.0 / (n.max(1) as f64).sqrt(); n];
+        let mut image = vec![0.0; n];
+        let mut radius = 0.0;
+        for _ in 0..POWER_ITERATIONS {
+            for (i, value) in image.iter_mut().enumerate() {
+                *value = (0..n).map(|j| self.jacobian[i * n + j] * vector[j]).sum();
+            }
+            let length = image.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !(length > 0.0 && length.is_finite()) {
+                return if length.is_nan() { 0.0 } else { length };
+            }
+            radius = length;
+            for (v, w) in vector.iter_mut().zip(&image) {
+                *v = w / length;
+            }
+        }
+        radius
+    }
+}
