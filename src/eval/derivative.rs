@@ -174,7 +174,9 @@ impl Differentiator<'_, '_> {
             let lowered = self.builder.emit(Instr::Binary(BinOp::Pow, a, exponent));
             terms.push((a, self.mul(b, lowered)));
         }
-        if !self.partials_of(b).is_empty() {
+        // A literal zero base gives `0^b`, constant where it is defined (`ln 0` would
+        // make the term NaN).
+        if !self.partials_of(b).is_empty() && !is(a, 0.0) {
             let log = self
                 .builder
                 .emit(Instr::Call(Func::Log, a, Operand::Value(0.0)));
