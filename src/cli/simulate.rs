@@ -267,6 +267,8 @@ fn input_signals(
 ) -> Result<Vec<Signal>, CommandError> {
     let mut programs = vec![None; model.inputs.len()];
     let mut reports = Vec::new();
+    // Inputs whose program was given but is defective: reported once, not also as missing.
+    let mut defective: Vec<&str> = Vec::new();
     for text in &args.inputs {
         let parsed = crate::signal::parse_input_argument(text).and_then(|argument| {
             let input = argument.resolve(&model.inputs)?;
@@ -279,12 +281,18 @@ fn input_signals(
                     reports.push(report(SimulateError::DuplicateInput { name }));
                 }
             }
-            Err(error) => reports.push(report(error)),
+            Err(error) => {
+                defective.extend(text.split_once('=').map(|(name, _)| name.trim()));
+                reports.push(report(error));
+            }
         }
     }
     let mut signals = Vec::with_capacity(model.inputs.len());
     for (input, program) in model.inputs.iter().zip(&programs) {
         let Some(program) = program else {
+            if defective.contains(&input.name.as_str()) {
+                continue;
+            }
             reports.push(report(SimulateError::MissingInput {
                 name: input.name.clone(),
             }));

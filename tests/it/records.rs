@@ -313,4 +313,10 @@ fn simulate_reads_a_lab_record_input_like_any_record() {
     let error = integrate(&dir, &format!("u=csv({lab})"), "none.csv").expect_err("fails");
     assert!(error.contains("gbm::E0319"), "{error}");
     assert!(error.contains("experiment=day1"), "{error}");
+    let error = integrate(&dir, "u=schedule(0:20, 3:70, 2:0)", "order.csv").expect_err("fails");
+    assert!(error.contains("gbm::E0317"), "{error}");
+    assert!(
+        !error.contains("E0709"),
+        "a defective programme is no missing one: {error}"
+    );
 }
