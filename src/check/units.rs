@@ -190,16 +190,22 @@ impl Checker<'_> {
         let alias = ALIASES
             .iter()
             .find(|(word, _)| word.eq_ignore_ascii_case(symbol));
-        let help = match alias
+        let refused = Symbol::refused_prefix(symbol).map(|base| {
+            format!(
+                "`{}` takes no SI prefix: only `g mol L m K s` do (`mg`, `mmol`, `mL`, `ms`)",
+                base.symbol()
+            )
+        });
+        let suggestion = alias
             .map(|(_, unit)| *unit)
             .or(super::closest(symbol, SYMBOL_NAMES))
-        {
-            Some(best) => format!("did you mean `{best}`?"),
-            None => format!(
+            .map(|best| format!("did you mean `{best}`?"));
+        let help = refused.or(suggestion).unwrap_or_else(|| {
+            format!(
                 "units are products of {} with SI prefixes (`mg`, `mmol`, `mL`, `ms`), or `-`",
                 SYMBOL_NAMES.map(|s| format!("`{s}`")).join(" ")
-            ),
-        };
+            )
+        });
         self.errors.push(CheckError::UnknownUnit {
             symbol: symbol.to_string(),
             span: span.into(),
@@ -362,7 +368,7 @@ impl Checker<'_> {
 }
 
 /// Words people write for units, and the symbol gbc reads.
-const ALIASES: [(&str, &str); 16] = [
+const ALIASES: [(&str, &str); 18] = [
     ("gram", "g"),
     ("grams", "g"),
     ("hr", "h"),
@@ -379,6 +385,8 @@ const ALIASES: [(&str, &str); 16] = [
     ("day", "d"),
     ("kelvin", "K"),
     ("M", "mol/L"),
+    ("percent", "%"),
+    ("pct", "%"),
 ];
 
 /// Puts `note` in front of the help line of a unit mismatch.

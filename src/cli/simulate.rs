@@ -66,14 +66,17 @@ pub struct SimulateArgs {
     /// An input programme, `NAME=PROGRAM`, e.g. `u=steps(hold=5..40, seed=1)` (one per
     /// input).
     ///
-    /// Programmes, sampled on the grid t_start + k dt and held between samples:
+    /// Programmes, each held between its switches:
     /// `steps(lo=, hi=, hold=MIN..MAX, seed=)` random levels in [lo, hi] (default: the
     /// input's declared bounds), each held for a random multiple of the step between MIN and
     /// MAX (model time; default 5 to 40 steps; `hold=H` exactly H); `const(V)` the value V;
     /// `chirp(lo=, hi=, f0=, f1=, period=)` a sine between lo and hi whose frequency rises
-    /// linearly from f0 to f1 over each period; `csv(FILE)` or `csv(FILE, COLUMN)` a data
-    /// column (default: the input's name), held between rows. Arguments are KEY=VALUE or
-    /// positional in the order shown (docs/language.md).
+    /// linearly from f0 to f1 over each period, sampled on the grid t_start + k dt;
+    /// `schedule(T:V, T:V, ...)` the level V from time T on; `csv(FILE)`,
+    /// `csv(FILE, COLUMN)` or `csv(FILE, COLUMN, experiment=NAME)` a data column (default:
+    /// the input's name) read as a record's input: any time spacing, empty cells hold the
+    /// last value, `experiment=` picks one experiment of a file that has several.
+    /// Arguments are KEY=VALUE or positional in the order shown (docs/language.md).
     #[arg(long = "input", value_name = "NAME=PROGRAM")]
     pub inputs: Vec<String>,
     /// Settle this long at the first input values before recording.
@@ -264,6 +267,8 @@ fn input_signals(
 ) -> Result<Vec<Signal>, CommandError> {
     let mut programs = vec![None; model.inputs.len()];
     let mut reports = Vec::new();
+    // Inputs whose program was given but is defective: reported once, not also as missing.
+    let mut defective: Vec<&str> = Vec::new();
     for text in &args.inputs {
         let parsed = crate::signal::parse_input_argument(text).and_then(|argument| {
             let input = argument.resolve(&model.inputs)?;
@@ -276,12 +281,18 @@ fn input_signals(
                     reports.push(report(SimulateError::DuplicateInput { name }));
                 }
             }
-            Err(error) => reports.push(report(error)),
+            Err(error) => {
+                defective.extend(text.split_once('=').map(|(name, _)| name.trim()));
+                reports.push(report(error));
+            }
         }
     }
     let mut signals = Vec::with_capacity(model.inputs.len());
     for (input, program) in model.inputs.iter().zip(&programs) {
         let Some(program) = program else {
+            if defective.contains(&input.name.as_str()) {
+                continue;
+            }
             reports.push(report(SimulateError::MissingInput {
                 name: input.name.clone(),
             }));

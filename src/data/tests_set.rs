@@ -175,6 +175,32 @@ fn units_in_headers_are_kept() {
 }
 
 #[test]
+fn percent_and_ppm_headers_name_their_column() {
+    let text = "t [h],u [%],X [ppm],OD [%]\n0,20.9,3,\n1,21,4,95\n";
+    let set = read_ok(&[("d.csv", text)], &request());
+    let experiment = &set.experiments[0];
+    let describe = |name: &str| {
+        experiment
+            .series(name)
+            .map(|s| (s.unit.clone(), s.values.clone()))
+    };
+    assert_eq!(
+        describe("u"),
+        Some((Some("%".into()), vec![Some(20.9), Some(21.0)]))
+    );
+    assert_eq!(
+        describe("X"),
+        Some((Some("ppm".into()), vec![Some(3.0), Some(4.0)]))
+    );
+    assert_eq!(
+        describe("OD"),
+        Some((Some("%".into()), vec![None, Some(95.0)]))
+    );
+    let mapped = read_ok(&[("d.csv", text)], &mapped(&["u=u [%]"]));
+    assert_eq!(mapped.experiments[0].series("u").map(|s| s.index), Some(2));
+}
+
+#[test]
 fn split_unit_cases() {
     let cases = [
         ("X [g/L]", ("X", Some("g/L"))),

@@ -28,6 +28,14 @@ fn units_move_to_their_canonical_place() {
 }
 
 #[test]
+fn percent_and_ppm_units_are_kept() {
+    check(
+        "model m\nstate DO=30 [ % ]\nconst y [%]=20.9\nconst c = 1[ppm /h]\nconst r = 1 [%*g/L]\n",
+        "model m\nstate DO [%] = 30\nconst y = 20.9 [%]\nconst c = 1 [ppm/h]\nconst r = 1 [% g/L]\n",
+    );
+}
+
+#[test]
 fn runs_of_one_kind_align_on_the_equals_sign() {
     check(
         "model m\nconst a = 1\nconst bbb = 2 [g]\n\nconst c = 3\nder X = 1\nder Long = 2\n",

@@ -51,6 +51,16 @@ fn definition_and_hover_of_names() {
 }
 
 #[test]
+fn hover_shows_percent_units_declared_and_inferred() {
+    let source = "model m\ntime h\nstate DO [%] = 30\nconst k = 0.1 [1/h]\nlet loss = k * DO\n\
+                  der DO = -loss\n";
+    let declared = hover(source, offset_of(source, "DO", 0)).expect("hover");
+    assert!(declared.contains("unit: `%`"), "{declared}");
+    let inferred = hover(source, offset_of(source, "loss", 0)).expect("hover");
+    assert!(inferred.contains("unit: `%/h` (inferred)"), "{inferred}");
+}
+
+#[test]
 fn line_index_counts_utf16_columns() {
     let text = "ab\nµg x\n";
     let index = LineIndex::new(text);

@@ -253,7 +253,7 @@ pub enum SignalError {
     #[error("expected `{file}` to cover t = {t_start} to {t_end}, found t = {first} to {last}")]
     #[diagnostic(
         code(gbm::E0314),
-        help("the file's first row must be at or before the start, and its last row held for one step must reach the end")
+        help("the file's first row must be at or before the start, and its last row, held for one more interval (its last time step or the sampling step, the longer), must reach the end")
     )]
     CsvCoverage {
         /// The argument.
@@ -284,6 +284,83 @@ pub enum SignalError {
         expected: String,
         /// What was given.
         found: String,
+    },
+    /// The switches of a schedule out of time order.
+    #[error("expected switch times in increasing order, found {time} after {previous}")]
+    #[diagnostic(
+        code(gbm::E0317),
+        help("write the switches of `schedule(T:V, ...)` in time order, each time once")
+    )]
+    ScheduleOrder {
+        /// The argument.
+        #[source_code]
+        src: ArgumentSource,
+        /// The switch out of order.
+        #[label("at t = {time}")]
+        span: SourceSpan,
+        /// The switch before it.
+        #[label("after t = {previous}")]
+        previous_span: SourceSpan,
+        /// Its time.
+        time: f64,
+        /// The time of the switch before it.
+        previous: f64,
+    },
+    /// A schedule whose first switch comes after the start of the simulation.
+    #[error("expected the first switch at or before the start t = {t_start}, found t = {first}")]
+    #[diagnostic(
+        code(gbm::E0318),
+        help("a schedule gives the level from its first switch on: begin with `{t_start}:V`")
+    )]
+    ScheduleStart {
+        /// The argument.
+        #[source_code]
+        src: ArgumentSource,
+        /// The first switch.
+        #[label("the first switch")]
+        span: SourceSpan,
+        /// The simulation's start.
+        t_start: f64,
+        /// The time of the first switch.
+        first: f64,
+    },
+    /// A `csv(...)` file of several experiments, none of them chosen.
+    #[error("expected one experiment in `{file}`, found {count}: {names}")]
+    #[diagnostic(code(gbm::E0319))]
+    CsvSeveralExperiments {
+        /// The argument.
+        #[source_code]
+        src: ArgumentSource,
+        /// The file name.
+        #[label("{count} experiments")]
+        span: SourceSpan,
+        /// The file.
+        file: String,
+        /// How many experiments it holds.
+        count: usize,
+        /// Their names, listed.
+        names: String,
+        /// How to choose one.
+        #[help]
+        help: String,
+    },
+    /// `experiment=NAME` names no experiment of the file.
+    #[error("expected an experiment of `{file}`, found `{name}`")]
+    #[diagnostic(code(gbm::E0320))]
+    CsvUnknownExperiment {
+        /// The argument.
+        #[source_code]
+        src: ArgumentSource,
+        /// The name given.
+        #[label("not an experiment of this file")]
+        span: SourceSpan,
+        /// The file.
+        file: String,
+        /// The name given.
+        name: String,
+        /// The file's experiments, with a suggestion.
+        #[help]
+        help: String,
     },
     /// Break times and values that do not make a piecewise-constant signal.
     #[error(transparent)]

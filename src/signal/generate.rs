@@ -1,15 +1,13 @@
 //! Sampling a typed program into a [`Signal`] on a simulation's time grid.
 
 use super::error::{ArgumentSource, SignalError};
-use super::parse::Piece;
-use super::program::{Hold, Levels, Number};
+use super::program::{Hold, Levels, Number, Switch};
 use super::Signal;
 use crate::ir::Input;
 use miette::SourceSpan;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
-use std::path::Path;
 
 /// The most sampling intervals a program may generate.
 pub const MAX_SAMPLES: usize = 10_000_000;
@@ -133,36 +131,27 @@ impl Context<'_> {
         Signal::new(breaks, values)
     }
 
-    /// Column `column` (default: the input's name) of another data file, held between its
-    /// rows; the file must cover the grid.
-    pub fn csv(&self, file: &Piece, column: Option<&Piece>) -> Result<Signal, SignalError> {
-        let name = column.map_or(self.input.name.as_str(), |piece| piece.text.as_str());
-        let dataset = crate::data::read(Path::new(&file.text), &[name], 2)?;
-        let values = dataset.column(name).unwrap_or_default();
-        let (Some(&first), Some(&last)) = (dataset.times.first(), dataset.times.last()) else {
+    /// The levels of a schedule from their times on; the first switch at or before the
+    /// start (before its time, the first level holds).
+    pub fn schedule(&self, switches: &[Switch]) -> Result<Signal, SignalError> {
+        let Some(first) = switches.first() else {
             return Signal::new(Vec::new(), Vec::new());
         };
-        let slack = 1e-6 * self.grid.dt;
-        if first > self.grid.t_start + slack || last + dataset.step < self.grid.t_end - slack {
-            return Err(SignalError::CsvCoverage {
+        let slack = 1e-9 * self.grid.dt;
+        if first.time > self.grid.t_start + slack {
+            return Err(SignalError::ScheduleStart {
                 src: self.source.clone(),
-                span: file.span,
-                file: file.text.clone(),
+                span: first.span,
                 t_start: self.grid.t_start,
-                t_end: self.grid.t_end,
-                first,
-                last,
+                first: first.time,
             });
         }
-        let outside = self
-            .input
-            .bounds
-            .and_then(|(lo, hi)| values.iter().position(|value| !(lo..=hi).contains(value)));
-        if let Some(index) = outside {
-            let origin = format!(" in `{}` row {}, column `{name}`", file.text, index + 2);
-            self.within(values[index], file.span, origin)?;
+        for switch in switches {
+            self.within(switch.level, switch.span, String::new())?;
         }
-        Signal::new(dataset.times.clone(), values.to_vec())
+        let times: Vec<f64> = switches.iter().map(|switch| switch.time).collect();
+        let levels: Vec<f64> = switches.iter().map(|switch| switch.level).collect();
+        Signal::at_changes(&times, &levels)
     }
 
     /// The levels: given, or the input's bounds; ordered and within the bounds.
@@ -216,7 +205,12 @@ impl Context<'_> {
     }
 
     /// Checks a value against the input's declared bounds, if any.
-    fn within(&self, value: f64, span: SourceSpan, origin: String) -> Result<(), SignalError> {
+    pub(super) fn within(
+        &self,
+        value: f64,
+        span: SourceSpan,
+        origin: String,
+    ) -> Result<(), SignalError> {
         match self.input.bounds {
             Some((lo, hi)) if value < lo || value > hi => Err(SignalError::OutsideBounds {
                 src: self.source.clone(),

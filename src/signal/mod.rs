@@ -5,8 +5,8 @@
 //!
 //! A program is `KIND(ARGUMENTS)`; arguments are `KEY=VALUE` or, in the order listed,
 //! positional; values may be double-quoted (for file names with commas or parentheses).
-//! Every program is sampled on the simulation's grid `t_start + k dt` and held between
-//! samples (zero-order hold), so the result is always a [`Signal`].
+//! `steps` and `chirp` are sampled on the simulation's grid `t_start + k dt` and held
+//! between samples (zero-order hold), so the result is always a [`Signal`].
 //!
 //! - `steps(lo=, hi=, hold=MIN..MAX, seed=)`: random levels drawn uniformly from
 //!   `[lo, hi]`, each held for a duration drawn uniformly among the multiples of the
@@ -20,13 +20,24 @@
 //!   restarts). Defaults: the input's bounds, `period` the whole simulated span,
 //!   `f0 = 1/period`, `f1 = 1/(10 dt)`. Frequencies (cycles per time unit) must lie in
 //!   `[0, 1/(2 dt)]`, the Nyquist range of the grid.
-//! - `csv(FILE)` or `csv(FILE, COLUMN)`: column `COLUMN` (default: the input's name) of a
-//!   data file read by the rules of [`crate::data`], held between its rows. The file must
-//!   start at or before the simulation and, its last row held for one step, reach its end.
-//!   Relative paths are relative to the working directory.
+//! - `schedule(T:V, T:V, ...)`: the level `V` from time `T` on, until the next switch;
+//!   times strictly increasing, the first at or before the start. Switches fall where they
+//!   are written, on the grid or not.
+//! - `csv(FILE)`, `csv(FILE, COLUMN)` or `csv(FILE, COLUMN, EXPERIMENT)`: column `COLUMN`
+//!   (default: the input's name) of a data file read by the rules of [`crate::data`], as
+//!   an input of a record: times at any spacing, a value at the experiment's first row,
+//!   then each given value held until the next (empty and `NA` cells hold the last one).
+//!   A file with an experiment column and several experiments needs `experiment=NAME`
+//!   (the third argument); a file of one experiment needs none. The file must start at or
+//!   before the simulation and, its last row held for one more interval (its last time
+//!   step or the sampling step, the longer), reach its end. Relative paths are relative to
+//!   the working directory.
 //!
-//! Every level (given, defaulted or read) must lie within the input's declared bounds.
+//! `schedule` and `csv` switch at their own times; the others on the grid. A signal breaks
+//! only where its value changes. Every level (given, defaulted or read) must lie within
+//! the input's declared bounds.
 
+mod csv;
 mod error;
 mod generate;
 mod parse;
@@ -89,6 +100,24 @@ impl Signal {
         Ok(Signal { breaks, values })
     }
 
+    /// A signal holding `values[i]` from `times[i]`, with a break only where the value
+    /// changes (the simulator restarts its integrator at every break), checking the
+    /// invariant.
+    pub fn at_changes(times: &[f64], values: &[f64]) -> Result<Self, SignalError> {
+        if times.len() != values.len() {
+            return Signal::new(times.to_vec(), values.to_vec());
+        }
+        let mut breaks = Vec::with_capacity(times.len());
+        let mut held: Vec<f64> = Vec::with_capacity(values.len());
+        for (&time, &value) in times.iter().zip(values) {
+            if held.last() != Some(&value) {
+                breaks.push(time);
+                held.push(value);
+            }
+        }
+        Signal::new(breaks, held)
+    }
+
     /// The value held at time `t`; NaN for an empty signal (which [`Signal::new`] refuses).
     pub fn value_at(&self, t: f64) -> f64 {
         let index = self.breaks.partition_point(|&b| b <= t).saturating_sub(1);
@@ -145,7 +174,16 @@ impl Program {
                 f1,
                 period,
             } => context.chirp(levels, *f0, *f1, *period),
-            Kind::Csv { file, column } => context.csv(file, column.as_ref()),
+            Kind::Csv {
+                file,
+                column,
+                experiment,
+            } => context.csv(&csv::CsvSource {
+                file,
+                column: column.as_ref(),
+                experiment: experiment.as_ref(),
+            }),
+            Kind::Schedule(switches) => context.schedule(switches),
         }
     }
 }
@@ -237,3 +275,5 @@ fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalEr
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_csv;

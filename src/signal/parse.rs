@@ -6,12 +6,16 @@ use crate::suggest::did_you_mean;
 use miette::SourceSpan;
 
 /// The kinds of program and the keys each accepts, in positional order.
-pub(super) const KINDS: [(&str, &[&str]); 4] = [
+pub(super) const KINDS: [(&str, &[&str]); 5] = [
     ("steps", &["lo", "hi", "hold", "seed"]),
     ("const", &["value"]),
     ("chirp", &["lo", "hi", "f0", "f1", "period"]),
-    ("csv", &["file", "column"]),
+    ("csv", &["file", "column", "experiment"]),
+    (SCHEDULE, &[]),
 ];
+
+/// The one kind whose arguments are a list: `schedule(T:V, T:V, ...)`, switches without keys.
+pub(super) const SCHEDULE: &str = "schedule";
 
 /// A piece of the argument text with its byte range in the whole argument.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,7 +40,8 @@ pub(super) struct Bound {
     pub name: &'static str,
     /// Where the name is written.
     pub span: SourceSpan,
-    /// One slot per key of the kind, in [`KINDS`] order: the value given, if any.
+    /// One slot per key of the kind, in [`KINDS`] order: the value given, if any; for
+    /// [`SCHEDULE`], one filled slot per argument.
     pub values: Vec<Option<Piece>>,
 }
 
@@ -58,7 +63,44 @@ pub(super) fn parse_bound(source: &ArgumentSource, start: usize) -> Result<Bound
             help: did_you_mean(&kind.text, &names, "input programs"),
         });
     };
+    if name == SCHEDULE {
+        return bind_list(source, (name, kind.span), arguments);
+    }
     bind(source, (name, kind.span), keys, arguments)
+}
+
+/// Binds the arguments of a list program: every one positional, at least one.
+fn bind_list(
+    source: &ArgumentSource,
+    (name, span): (&'static str, SourceSpan),
+    arguments: Vec<RawArgument>,
+) -> Result<Bound, SignalError> {
+    let example = "write the levels with the times they start at, e.g. \
+                   `schedule(0:0.2, 10:0.5, 24:0)`";
+    if arguments.is_empty() {
+        return Err(SignalError::MissingArgument {
+            src: source.clone(),
+            span,
+            program: name,
+            key: "T:V",
+            reason: String::new(),
+            help: example.to_string(),
+        });
+    }
+    let mut values = Vec::with_capacity(arguments.len());
+    for argument in arguments {
+        if let Some(key) = argument.key {
+            return Err(SignalError::UnknownKey {
+                src: source.clone(),
+                span: key.span,
+                program: name,
+                key: key.text,
+                help: format!("`{name}` takes no keys: {example}"),
+            });
+        }
+        values.push(Some(argument.value));
+    }
+    Ok(Bound { name, span, values })
 }
 
 /// Binds positional arguments to keys in order, then keyword arguments by name.
@@ -174,7 +216,8 @@ impl<'a> Scanner<'a> {
         let length = identifier_length(self.rest());
         if length == 0 {
             return Err(self.syntax(
-                "a program such as `steps(...)`, `const(...)`, `chirp(...)` or `csv(...)`",
+                "a program such as `steps(...)`, `const(...)`, `chirp(...)`, `schedule(...)` or \
+                 `csv(...)`",
                 "write e.g. `u=const(0.5)` or `u=steps(hold=5..40, seed=1)`",
             ));
         }

@@ -44,8 +44,23 @@ pub(super) enum Kind {
         f1: Option<Number>,
         period: Option<Number>,
     },
-    /// `csv(file, column)`.
-    Csv { file: Piece, column: Option<Piece> },
+    /// `csv(file, column, experiment)`.
+    Csv {
+        file: Piece,
+        column: Option<Piece>,
+        experiment: Option<Piece>,
+    },
+    /// `schedule(T:V, ...)`: levels from given times on, times strictly increasing.
+    Schedule(Vec<Switch>),
+}
+
+/// One switch of a schedule: `level` from `time` on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Switch {
+    pub time: f64,
+    pub level: f64,
+    /// Where `T:V` is written.
+    pub span: SourceSpan,
 }
 
 /// Seed of `steps` when none is given.
@@ -82,11 +97,50 @@ pub(super) fn typed(source: &ArgumentSource, bound: Bound) -> Result<Kind, Signa
             f1: optional_number(source, next(), "f1")?,
             period: optional_number(source, next(), "period")?,
         },
-        _ => Kind::Csv {
+        "csv" => Kind::Csv {
             file: next().ok_or_else(|| missing("file", "csv(inputs.csv)"))?,
             column: next(),
+            experiment: next(),
         },
+        _ => Kind::Schedule(schedule(source, values.flatten())?),
     })
+}
+
+/// The switches of a schedule, their times strictly increasing.
+fn schedule(
+    source: &ArgumentSource,
+    pieces: impl Iterator<Item = Piece>,
+) -> Result<Vec<Switch>, SignalError> {
+    let mut switches: Vec<Switch> = Vec::new();
+    for piece in pieces {
+        let parsed = piece.text.split_once(':').and_then(|(time, level)| {
+            Some((parse_finite(time.trim())?, parse_finite(level.trim())?))
+        });
+        let Some((time, level)) = parsed else {
+            return Err(bad_number(
+                source,
+                &piece,
+                "schedule",
+                "a switch `T:V` (a time and a level)",
+                "write each switch as the time it starts at and its level, e.g. `10:0.5`",
+            ));
+        };
+        if let Some(previous) = switches.last().filter(|previous| previous.time >= time) {
+            return Err(SignalError::ScheduleOrder {
+                src: source.clone(),
+                span: piece.span,
+                previous_span: previous.span,
+                time,
+                previous: previous.time,
+            });
+        }
+        switches.push(Switch {
+            time,
+            level,
+            span: piece.span,
+        });
+    }
+    Ok(switches)
 }
 
 fn levels(
@@ -124,7 +178,12 @@ fn number(
             piece,
             key,
             "a finite number",
-            "numbers are written like `0.5`, `-2` or `1e-3`",
+            if piece.text.contains(':') {
+                "levels from given times on are a schedule: write e.g. \
+                 `schedule(0:0.2, 10:0.5, 24:0)`"
+            } else {
+                "numbers are written like `0.5`, `-2` or `1e-3`"
+            },
         )),
     }
 }

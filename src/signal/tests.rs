@@ -1,10 +1,9 @@
 use super::*;
-use crate::io::ScratchDir;
 use miette::Diagnostic;
 
-type TestResult = Result<(), Box<dyn std::error::Error>>;
+pub(super) type TestResult = Result<(), Box<dyn std::error::Error>>;
 
-fn input(name: &str, bounds: Option<(f64, f64)>) -> Input {
+pub(super) fn input(name: &str, bounds: Option<(f64, f64)>) -> Input {
     Input {
         name: name.to_string(),
         bounds,
@@ -12,19 +11,24 @@ fn input(name: &str, bounds: Option<(f64, f64)>) -> Input {
 }
 
 /// The unit-bounded input `u in [0, 1]`.
-fn unit() -> Input {
+pub(super) fn unit() -> Input {
     input("u", Some((0.0, 1.0)))
 }
 
 /// Parses `u=PROGRAM` and samples it for `input` on `[0, t_end]` with step `dt`.
-fn generate(argument: &str, input: &Input, t_end: f64, dt: f64) -> Result<Signal, SignalError> {
+pub(super) fn generate(
+    argument: &str,
+    input: &Input,
+    t_end: f64,
+    dt: f64,
+) -> Result<Signal, SignalError> {
     let parsed = parse_input_argument(argument)?;
     parsed.program.generate(input, 0.0, t_end, dt)
 }
 
 /// Asserts that generating `argument` fails with `code`, its first label covering exactly
 /// `labelled` in the argument text.
-fn check_error(argument: &str, input: &Input, code: &str, labelled: &str) {
+pub(super) fn check_error(argument: &str, input: &Input, code: &str, labelled: &str) {
     let error = match generate(argument, input, 100.0, 1.0) {
         Ok(signal) => panic!("expected {code} for `{argument}`, got {signal:?}"),
         Err(error) => error,
@@ -45,7 +49,7 @@ fn check_error(argument: &str, input: &Input, code: &str, labelled: &str) {
     assert_eq!(text, labelled, "`{argument}`: {error}");
 }
 
-fn code_of(error: &dyn Diagnostic) -> String {
+pub(super) fn code_of(error: &dyn Diagnostic) -> String {
     error
         .code()
         .map(|code| code.to_string())
@@ -207,60 +211,21 @@ fn chirp_restarts_each_period() -> TestResult {
 }
 
 #[test]
-fn csv_program_holds_the_named_column() -> TestResult {
-    let scratch = ScratchDir::new("signal-csv")?;
-    let path = scratch.join("inputs.csv");
-    std::fs::write(&path, "t,u,light\n0,0.1,1\n2,0.4,0\n4,0.9,1\n6,0.3,0\n")?;
-    let name = path.display();
-    let signal = generate(&format!("u=csv({name})"), &unit(), 7.0, 1.0)?;
-    assert_eq!(signal.breaks, vec![0.0, 2.0, 4.0, 6.0]);
+fn schedule_switches_at_its_own_times() -> TestResult {
+    let signal = generate("u=schedule(0:0.2, 2.5:0.7, 4:0.7, 6:0)", &unit(), 10.0, 1.0)?;
     assert_eq!(
-        signal.sample(&[0.0, 1.9, 2.0, 5.0, 7.5]),
-        vec![0.1, 0.1, 0.4, 0.9, 0.3]
+        signal.breaks,
+        vec![0.0, 2.5, 6.0],
+        "a break only at each change"
     );
-    let light = generate(&format!("u=csv(\"{name}\", light)"), &unit(), 7.0, 1.0)?;
-    assert_eq!(light.values, vec![1.0, 0.0, 1.0, 0.0]);
-    let error = generate(&format!("u=csv({name})"), &unit(), 9.0, 1.0).err();
-    assert_eq!(
-        error.as_ref().map(|e| code_of(e)).as_deref(),
-        Some("gbm::E0314")
-    );
-    let error = generate(
-        &format!("w=csv(file={name}, column=w)"),
-        &input("w", None),
-        6.0,
-        1.0,
-    )
-    .err();
-    let message = error.as_ref().map(|e| e.to_string()).unwrap_or_default();
-    assert!(message.contains("expected a column `w`"), "{message}");
-    assert_eq!(
-        error.as_ref().map(|e| code_of(e)).as_deref(),
-        Some("gbm::E0208")
-    );
-    let error = generate(
-        &format!("u=csv({})", scratch.join("none.csv").display()),
-        &unit(),
-        6.0,
-        1.0,
-    )
-    .err();
-    assert_eq!(
-        error.as_ref().map(|e| code_of(e)).as_deref(),
-        Some("gbm::E0201")
-    );
-    Ok(())
-}
-
-#[test]
-fn csv_values_outside_bounds_name_the_row() -> TestResult {
-    let scratch = ScratchDir::new("signal-csv-bounds")?;
-    let path = scratch.join("u.csv");
-    std::fs::write(&path, "t,u\n0,0.1\n1,1.5\n2,0.3\n")?;
-    let error = generate(&format!("u=csv({})", path.display()), &unit(), 2.0, 1.0).err();
-    let message = error.as_ref().map(|e| e.to_string()).unwrap_or_default();
-    assert!(message.contains("found 1.5 in"), "{message}");
-    assert!(message.contains("row 3"), "{message}");
+    assert_eq!(signal.values, vec![0.2, 0.7, 0.0]);
+    let early = generate("u=schedule(-3:0.5, 12:1)", &unit(), 10.0, 1.0)?;
+    assert_eq!(early.sample(&[0.0, 11.9, 12.0]), vec![0.5, 0.5, 1.0]);
+    let help = generate("u=steps(0:0.2)", &unit(), 10.0, 1.0)
+        .err()
+        .and_then(|e| e.help().map(|h| h.to_string()))
+        .unwrap_or_default();
+    assert!(help.contains("schedule(0:0.2"), "{help}");
     Ok(())
 }
 
@@ -298,6 +263,25 @@ fn program_errors_carry_a_code_and_a_label() {
         ("u=chirp(f1=0.6)", &unit(), "gbm::E0313", "0.6"),
         ("u=chirp(f0=-1)", &unit(), "gbm::E0313", "-1"),
         ("u=chirp(period=0)", &unit(), "gbm::E0313", "0"),
+        ("u=schedule()", &unit(), "gbm::E0309", "schedule"),
+        ("u=schedule(t=0)", &unit(), "gbm::E0305", "t"),
+        ("u=schedule(0-0.2)", &unit(), "gbm::E0308", "0-0.2"),
+        ("u=schedule(0:0.2, 5:x)", &unit(), "gbm::E0308", "5:x"),
+        ("u=steps(0:0.2)", &unit(), "gbm::E0308", "0:0.2"),
+        ("u=schedule(0:2)", &unit(), "gbm::E0312", "0:2"),
+        (
+            "u=schedule(0:0.2, 5:0.3, 5:0.1)",
+            &unit(),
+            "gbm::E0317",
+            "5:0.1",
+        ),
+        (
+            "u=schedule(0:0.2, 5:0.3, 2:0.1)",
+            &unit(),
+            "gbm::E0317",
+            "2:0.1",
+        ),
+        ("u=schedule(1:0.2)", &unit(), "gbm::E0318", "1:0.2"),
     ];
     for &(argument, input, code, labelled) in cases {
         check_error(argument, input, code, labelled);
@@ -402,7 +386,7 @@ proptest::proptest! {
     }
 
     #[test]
-    fn program_like_arguments_never_panic(argument in "u=(steps|const|chirp)\\([a-z0-9=.,\\- ]{0,30}\\)") {
+    fn program_like_arguments_never_panic(argument in "u=(steps|const|chirp|schedule)\\([a-z0-9=.,:\\- ]{0,30}\\)") {
         if let Ok(parsed) = parse_input_argument(&argument) {
             if let Ok(signal) = parsed.program.generate(&unit(), 0.0, 50.0, 1.0) {
                 proptest::prop_assert!(signal.values.iter().all(|v| (0.0..=1.0).contains(v)));

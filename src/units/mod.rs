@@ -7,10 +7,12 @@
 //! to the checks rather than wrong.
 //!
 //! Symbols are the SI base units gbc models need and a few domain units: `g`, `mol`, `L`,
-//! `m`, `K`, `s` (all of which take the prefixes `p n u µ m c d k M`), and `min`, `h`, `d`
-//! (no prefixes). `-` is dimensionless. Two units are equal when they have the same
-//! dimension and scale (`g/L` is `mg/mL`); units of one dimension and different scales
-//! (`g/L` and `mg/L`, `1/h` and `1/min`) differ by a factor that [`Comparison::Scale`] names.
+//! `m`, `K`, `s` (all of which take the prefixes `p n u µ m c d k M`), `min`, `h`, `d`
+//! (no prefixes), and the pure numbers `%` (10^-2) and `ppm` (10^-6), dimensionless
+//! with a scale (no prefixes either). `-` is dimensionless. Two units are equal when they
+//! have the same dimension and scale (`g/L` is `mg/mL`, `%/%` is `-`); units of one
+//! dimension and different scales (`g/L` and `mg/L`, `1/h` and `1/min`, `%` and `-`)
+//! differ by a factor that [`Comparison::Scale`] names.
 
 mod symbols;
 
@@ -245,7 +247,7 @@ fn power_text(power: i32) -> String {
 }
 
 /// `1 a = F b` with `F >= 1` (swapping the two if needed), and `F` in words: the sentence a
-/// scale-mismatch help line uses.
+/// scale-mismatch help line uses. The pure number `-` is written bare: `1 = 100 %`.
 pub fn conversion(a: &Unit, b: &Unit) -> (String, String) {
     let ratio = a.scale() / b.scale();
     let (big, small, factor) = if ratio >= 1.0 {
@@ -254,7 +256,15 @@ pub fn conversion(a: &Unit, b: &Unit) -> (String, String) {
         (b, a, 1.0 / ratio)
     };
     let factor_text = format_factor(factor);
-    (format!("1 {big} = {factor_text} {small}"), factor_text)
+    let quantity = |number: &str, unit: &Unit| {
+        if unit.is_one() {
+            number.to_string()
+        } else {
+            format!("{number} {unit}")
+        }
+    };
+    let sentence = format!("{} = {}", quantity("1", big), quantity(&factor_text, small));
+    (sentence, factor_text)
 }
 
 /// A conversion factor in short text: whole numbers exactly, others to six significant digits.

@@ -23,11 +23,15 @@ pub enum Base {
     Hour,
     /// `d`: day, 86400 s.
     Day,
+    /// `%`: percent, the pure number 10^-2.
+    Percent,
+    /// `ppm`: parts per million, the pure number 10^-6.
+    PartsPerMillion,
 }
 
 impl Base {
     /// Every base, in canonical display order.
-    pub const ALL: [Base; 9] = [
+    pub const ALL: [Base; 11] = [
         Base::Gram,
         Base::Mole,
         Base::Litre,
@@ -37,6 +41,8 @@ impl Base {
         Base::Minute,
         Base::Hour,
         Base::Day,
+        Base::Percent,
+        Base::PartsPerMillion,
     ];
 
     /// The symbol written in a model.
@@ -51,6 +57,8 @@ impl Base {
             Base::Minute => "min",
             Base::Hour => "h",
             Base::Day => "d",
+            Base::Percent => "%",
+            Base::PartsPerMillion => "ppm",
         }
     }
 
@@ -63,23 +71,29 @@ impl Base {
             Base::Metre => [0, 0, 1, 0, 0],
             Base::Kelvin => [0, 0, 0, 0, 1],
             Base::Second | Base::Minute | Base::Hour | Base::Day => [0, 0, 0, 1, 0],
+            Base::Percent | Base::PartsPerMillion => [0; super::DIMENSIONS],
         }
     }
 
-    /// Size in base units (g, mol, m^3 or m, s, K).
+    /// Size in base units (g, mol, m^3 or m, s, K; 1 for a pure number).
     pub fn scale(self) -> f64 {
         match self {
             Base::Litre => 1e-3,
             Base::Minute => 60.0,
             Base::Hour => 3600.0,
             Base::Day => 86400.0,
+            Base::Percent => 1e-2,
+            Base::PartsPerMillion => 1e-6,
             _ => 1.0,
         }
     }
 
-    /// Whether SI prefixes apply (not to `min`, `h`, `d`).
+    /// Whether SI prefixes apply (not to `min`, `h`, `d`, `%`, `ppm`).
     pub fn takes_prefix(self) -> bool {
-        !matches!(self, Base::Minute | Base::Hour | Base::Day)
+        !matches!(
+            self,
+            Base::Minute | Base::Hour | Base::Day | Base::Percent | Base::PartsPerMillion
+        )
     }
 }
 
@@ -156,7 +170,7 @@ pub struct Symbol {
 }
 
 /// Every unprefixed symbol, for suggestions and documentation.
-pub const SYMBOL_NAMES: [&str; 9] = ["g", "mol", "L", "m", "K", "s", "min", "h", "d"];
+pub const SYMBOL_NAMES: [&str; 11] = ["g", "mol", "L", "m", "K", "s", "min", "h", "d", "%", "ppm"];
 
 impl Symbol {
     /// Reads a symbol: an exact base first (`min` is minutes, `d` is days), then a prefix
@@ -180,6 +194,23 @@ impl Symbol {
             prefix: Some(prefix),
             base,
         })
+    }
+
+    /// The base that `text` would be with a prefix it does not take (`mh`, `k%`, `uppm`),
+    /// for a help line; `None` for a valid symbol or anything else.
+    pub fn refused_prefix(text: &str) -> Option<Base> {
+        if Symbol::parse(text).is_some() {
+            return None;
+        }
+        let rest = text.strip_prefix('µ').or_else(|| {
+            let prefix = Prefix::ALL
+                .into_iter()
+                .find(|p| text.starts_with(p.symbol()))?;
+            Some(&text[prefix.symbol().len()..])
+        })?;
+        Base::ALL
+            .into_iter()
+            .find(|base| base.symbol() == rest && !base.takes_prefix())
     }
 
     /// Size in base units.

@@ -149,3 +149,71 @@ fn unknown_symbols_are_reported_with_their_spans() {
         .collect();
     assert_eq!(texts, ["gram", "Lx"]);
 }
+
+#[test]
+fn percent_and_ppm_are_pure_numbers_with_a_scale() {
+    for (a, b) in [("%/%", "-"), ("ppm/ppm", "g/g"), ("%/h", "h^-1 %")] {
+        assert_eq!(unit(a).compare(&unit(b)), Comparison::Equal, "{a} vs {b}");
+    }
+    let cases = [
+        ("%", "-", 1e-2),
+        ("-", "%", 100.0),
+        ("%", "ppm", 1e4),
+        ("ppm/h", "%/h", 1e-4),
+        ("%/min", "%/h", 60.0),
+    ];
+    for (a, b, factor) in cases {
+        match unit(a).compare(&unit(b)) {
+            Comparison::Scale(ratio) => {
+                assert!((ratio / factor - 1.0).abs() < 1e-12, "{a} vs {b}: {ratio}")
+            }
+            other => panic!("{a} vs {b}: {other:?}"),
+        }
+    }
+    for (a, b) in [("%", "g/L"), ("%/h", "%"), ("ppm", "1/h")] {
+        assert_eq!(
+            unit(a).compare(&unit(b)),
+            Comparison::Incompatible,
+            "{a} vs {b}"
+        );
+    }
+    assert!(unit("%").is_dimensionless() && !unit("%").is_one());
+    assert_eq!(unit("ppm").dimension_words(), "dimensionless");
+    for (written, canonical) in [("h^-1 %", "%/h"), ("ppm^-1", "1/ppm"), ("% g/L", "g %/L")] {
+        let text = unit(written).to_string();
+        assert_eq!(text, canonical, "{written}");
+        assert_eq!(unit(&text), unit(written), "{text} parses back");
+    }
+}
+
+#[test]
+fn percent_and_ppm_take_no_prefix() {
+    let read = |text: &str| Symbol::parse(text).map(|s| (s.prefix, s.base));
+    assert_eq!(read("%"), Some((None, Base::Percent)));
+    assert_eq!(read("ppm"), Some((None, Base::PartsPerMillion)));
+    for refused in ["m%", "k%", "µ%", "mppm", "uppm"] {
+        assert_eq!(read(refused), None, "{refused}");
+    }
+    let refused = |text: &str| Symbol::refused_prefix(text);
+    assert_eq!(refused("m%"), Some(Base::Percent));
+    assert_eq!(refused("µ%"), Some(Base::Percent));
+    assert_eq!(refused("kppm"), Some(Base::PartsPerMillion));
+    assert_eq!(refused("mh"), Some(Base::Hour));
+    for not_refused in ["mg", "%", "ppm", "gram", "x"] {
+        assert_eq!(refused(not_refused), None, "{not_refused}");
+    }
+    assert_eq!(Unit::parse("m%"), None);
+}
+
+#[test]
+fn conversions_with_pure_numbers_read_as_numbers() {
+    let (sentence, factor) = conversion(&unit("%"), &unit("-"));
+    assert_eq!((sentence.as_str(), factor.as_str()), ("1 = 100 %", "100"));
+    let (sentence, factor) = conversion(&unit("ppm"), &unit("%"));
+    assert_eq!(
+        (sentence.as_str(), factor.as_str()),
+        ("1 % = 10000 ppm", "10000")
+    );
+    let (sentence, _) = conversion(&unit("-"), &unit("ppm"));
+    assert_eq!(sentence, "1 = 1000000 ppm");
+}

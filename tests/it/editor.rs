@@ -166,6 +166,8 @@ fn grammar_gives_the_expected_scopes() {
         ("state X [g/L] = 0.1 # note", "state", "keyword.other.gbm"),
         ("state X [g/L] = 0.1 # note", "0.1", "constant.numeric.gbm"),
         ("input u [-] in [0, 1]", "[-]", "constant.other.unit.gbm"),
+        ("state DO [%] = 30", "[%]", "constant.other.unit.gbm"),
+        ("const c = 2 [ppm/h]", "[ppm/h]", "constant.other.unit.gbm"),
         ("input u [-] in [0, 1]", "[", "punctuation.separator.gbm"),
         (
             "param Y = 0.5 [g/g] positive",

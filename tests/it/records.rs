@@ -1,5 +1,6 @@
 //! `gbc train` and `gbc predict` on data sets: several experiments, irregular times, missing
-//! cells, and every bad data set a clear coded error with exit code 1.
+//! cells, and every bad data set a clear coded error with exit code 1; `gbc simulate
+//! --input u=csv(...)` reading a lab record's input the same way.
 
 use crate::cli::{gbc, scratch};
 use std::path::Path;
@@ -267,4 +268,55 @@ fn experiment_on_a_data_set_holds_out_whole_experiments() {
         "training pairs of `gb`",
     );
     bad(&["--val-from", "50", "--sizes", "40"], "--holdout NAME");
+}
+
+/// `gbc simulate` of `der X = u` (so `X` is the integral of the input) from 0 to 4 h at
+/// 0.5 h, under the input programme `programme`; the output's text, or the failure.
+fn integrate(dir: &Path, programme: &str, output: &str) -> Result<String, String> {
+    let model = write(
+        dir,
+        "tank.gbm",
+        "model tank\ntime h\ninput u [%] in [0, 100]\nstate X [% h] = 0\nder X = u\n",
+    );
+    let output = dir.join(output).display().to_string();
+    let out = gbc(&[
+        "simulate", &model, "--t-end", "4", "--dt", "0.5", "--input", programme, "-o", &output,
+    ]);
+    match out.status.code() {
+        Some(0) => Ok(std::fs::read_to_string(&output).expect("written")),
+        _ => Err(text(&out.stderr)),
+    }
+}
+
+#[test]
+fn simulate_reads_a_lab_record_input_like_any_record() {
+    let dir = scratch("simulate-csv-input");
+    let schedule = integrate(&dir, "u=schedule(0:20, 2.5:70)", "schedule.csv").expect("runs");
+    let last = schedule.lines().last().unwrap_or_default().to_string();
+    let x_end: f64 = last
+        .split(',')
+        .nth(2)
+        .and_then(|x| x.parse().ok())
+        .unwrap_or(f64::NAN);
+    assert!((x_end - (20.0 * 2.5 + 70.0 * 1.5)).abs() < 1e-6, "{last}");
+    let lab = write(
+        &dir,
+        "lab.csv",
+        "experiment,t [h],DO [%],u [%]\nday1,0,95,10\nday2,0,96,20\nday2,0.7,,\n\
+         day2,2.5,90,70\nday2,3.5,88,NA\n",
+    );
+    let record = integrate(&dir, &format!("u=csv({lab}, u, day2)"), "record.csv").expect("runs");
+    assert_eq!(
+        record, schedule,
+        "held cells and an irregular grid give the schedule's run"
+    );
+    let error = integrate(&dir, &format!("u=csv({lab})"), "none.csv").expect_err("fails");
+    assert!(error.contains("gbm::E0319"), "{error}");
+    assert!(error.contains("experiment=day1"), "{error}");
+    let error = integrate(&dir, "u=schedule(0:20, 3:70, 2:0)", "order.csv").expect_err("fails");
+    assert!(error.contains("gbm::E0317"), "{error}");
+    assert!(
+        !error.contains("E0709"),
+        "a defective programme is no missing one: {error}"
+    );
 }

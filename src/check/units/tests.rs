@@ -92,3 +92,59 @@ fn next_updates_keep_the_unit_of_their_state() {
     let fixed = source.replace("[mg/L]", "[g/L]");
     checked(&fixed);
 }
+
+#[test]
+fn percent_and_ppm_are_units_of_pure_numbers() {
+    let source = "model aerated\ntime h\ninput kLa [1/h] in [0, 200]\n\
+                  state DO [%] = 100, C [ppm] = 5\nconst DO_sat = 100 [%], y_O2 = 20.9 [%]\n\
+                  const OUR = 30 [%/h], q = 0.1 [ppm/h]\nlet air [%] = y_O2 / 20.9 * DO_sat\n\
+                  der DO = kLa * (air - DO) - OUR\nder C = -q * DO / DO_sat\n";
+    checked(source);
+    let (text, inferred) = unit_text(source, "air");
+    assert_eq!((text.as_str(), inferred), ("%", false));
+    let compiled = crate::driver::compile("t.gbm", source, &[]).expect("compiles");
+    let ir = crate::ir::print(&compiled.model);
+    assert!(ir.contains("DO [%] = 100") && ir.contains("[%/h]"), "{ir}");
+}
+
+#[test]
+fn a_percentage_where_a_fraction_is_needed_is_a_factor_of_100() {
+    let source = "model m\ntime h\nstate X [g/L] = 1\nconst mu = 0.2 [1/h], f = 30 [%]\n\
+                  let kept [-] = f\nder X = mu * exp(-f) * X\n";
+    let found = errors(source);
+    let factors: Vec<(&str, &str)> = found
+        .iter()
+        .filter_map(|error| match error {
+            CheckError::UnitScale { factor, help, .. } => Some((factor.as_str(), help.as_str())),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(factors.len(), 2, "{found:#?}");
+    for (factor, help) in factors {
+        assert_eq!(factor, "100");
+        assert!(help.contains("(1 = 100 %)"), "{help}");
+    }
+    let fixed = source
+        .replace("f = 30 [%]", "f = 30 [%], percent = 100 [%]")
+        .replace("[-] = f\n", "[-] = f / percent\n")
+        .replace("exp(-f)", "exp(-kept)");
+    checked(&fixed);
+}
+
+#[test]
+fn a_prefix_on_percent_is_an_unknown_unit_saying_why() {
+    let found = errors("model m\nstate X [m%] = 1\nder X = -X\n");
+    let helps: Vec<&str> = found
+        .iter()
+        .filter_map(|error| match error {
+            CheckError::UnknownUnit { symbol, help, .. } if symbol == "m%" => Some(help.as_str()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(helps.len(), 1, "{found:#?}");
+    assert!(
+        helps[0].starts_with("`%` takes no SI prefix"),
+        "{}",
+        helps[0]
+    );
+}
