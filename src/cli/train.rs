@@ -261,6 +261,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         early_stop: args.early_stop,
         resume: checkpoint,
         command,
+        keep_last_finite: true,
     };
     let outcome = train::train_run(&model, &data, (&options, &recipe), &control, &mut |event| {
         progress.observe(event, options.epochs)
@@ -308,6 +309,9 @@ pub fn run(args: &TrainArgs) -> CommandResult {
             .map_err(|error| CommandError::Internal(format!("cannot encode metrics: {error}")))?;
         crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
+    if let Some(diverged) = &trained.report.diverged {
+        return Err(diverged_run(diverged, &directory));
+    }
     let seconds = started.elapsed().as_secs_f64();
     let text = summary(&model, &trained, seconds, Some(&directory));
     if json_to_stdout {
@@ -316,6 +320,24 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         print!("{text}");
     }
     Ok(())
+}
+
+/// A run that went non-finite and was saved with its last finite weights: says which
+/// epoch those are on stderr, and fails with E0415 naming the epoch that diverged.
+fn diverged_run(diverged: &train::EpochDivergence, directory: &Path) -> CommandError {
+    let kept = match diverged.kept_epoch {
+        0 => "the initial weights (no epoch ended finite)".to_string(),
+        epoch => format!("the weights of epoch {epoch}, the last finite one"),
+    };
+    eprintln!(
+        "{} keeps {kept}: `gbc predict --weights {}` reads them",
+        directory.display(),
+        directory.display()
+    );
+    train_error(TrainError::Diverged {
+        epoch: diverged.epoch,
+        what: diverged.what.clone(),
+    })
 }
 
 /// The training log of a run directory.
