@@ -3,8 +3,8 @@
 //!
 //! The study comes from `--preset`, `--config FILE` or the flags (`--model`, `--data`, ...);
 //! flags override a preset or config. `--shard K/N` runs one slice of the grid (a job array);
-//! `gbc experiment merge DIR...` joins slices. One progress bar on stderr; the summary on
-//! stdout. See docs/reproduction.md.
+//! `gbc experiment merge DIR...` joins slices. Progress on stderr (a bar on a terminal,
+//! else a line every few seconds, [`crate::cli::progress`]); the summary on stdout. See docs/reproduction.md.
 
 use std::collections::HashMap;
 use std::path::PathBuf;

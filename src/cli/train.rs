@@ -5,11 +5,12 @@
 //!
 //! The default recipe is multi-step (free-run rollouts with a curriculum, then a polish of
 //! the params); `--objective one-step` is the paper's (see `docs/training.md`). Stiffness
-//! warnings and a progress bar (epoch, rollout length, loss, ETA) go to stderr; the summary
-//! goes to stdout: errors per validation set, where a free run left the physical range,
-//! and each param with its standard error. `-o DIR` writes `weights.safetensors` and
-//! `run.json`; `--json FILE` writes the same metadata (metrics, params, warnings,
-//! normalisation, ...) to FILE.
+//! warnings and the progress (epoch, rollout length, loss, ETA: a bar on a terminal, else a
+//! line every few seconds) go to stderr; the summary goes to stdout: errors per validation
+//! set, where a free run left the physical range, and each param with its standard error.
+//! `-o DIR` writes `weights.safetensors` and `run.json`; `--json FILE` writes the same
+//! metadata (metrics, params, warnings, normalisation, ...) to FILE. A run that goes
+//! non-finite is saved with its last finite epoch's weights and fails with E0415.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
