@@ -51,6 +51,18 @@ pub enum IoError {
         /// The input path as given.
         input: String,
     },
+    /// A value to be written that is not finite: gbc writes no NaN or infinite number as a
+    /// weight, a param or a predicted value ([`crate::finite`]).
+    #[error("expected finite values to write to `{path}`, found {what}")]
+    #[diagnostic(code(gbm::E0253), help("nothing was written: {help}"))]
+    NotFinite {
+        /// The output file.
+        path: String,
+        /// Which value and where, e.g. "`S` = NaN at t = 3.5 (row 12)".
+        what: String,
+        /// What to do about it.
+        help: String,
+    },
     /// A table whose columns do not match its header or each other.
     #[error(transparent)]
     #[diagnostic(transparent)]

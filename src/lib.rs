@@ -22,6 +22,7 @@ pub mod eval;
 pub mod experiment;
 pub mod explain;
 pub mod export;
+pub mod finite;
 pub mod format;
 pub mod fused;
 pub mod ide;

@@ -5,12 +5,10 @@
 //! `--json` and `--html` reports and `--figures` SVG files.
 
 use super::data::{hold_out, load_records, ColumnArgs};
+use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
 use crate::diagnose::{self, DiagnoseError, Options, Problem, Progress};
-use indicatif::{ProgressBar, ProgressStyle};
-use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::Mutex;
 
 /// Arguments of `gbc diagnose`.
 #[derive(Debug, clap::Args)]
@@ -137,11 +135,12 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         .num_threads(args.jobs.unwrap_or(0))
         .build()
         .map_err(|e| CommandError::Internal(format!("cannot start worker threads: {e}")))?;
-    let bar = ProgressReporter::new();
+    let reporter = Reporter::new();
     let outcome =
-        pool.install(|| diagnose::diagnose(&problem, &options, &|event| bar.update(event)));
-    bar.finish();
+        pool.install(|| diagnose::diagnose(&problem, &options, &|event| report(&reporter, event)));
+    reporter.finish();
     let report = outcome.map_err(CommandError::user)?;
+    check_finite(args, &report)?;
     print!("{}", diagnose::render::text(&report));
     write_outputs(args, &report)
 }
@@ -167,6 +166,25 @@ fn check_holdout_names(records: &[crate::record::Record], holdout: &[String]) ->
     Ok(())
 }
 
+/// Refuses a report whose fitted params or initial states are not finite: they are its
+/// result (a diverged effect's gap is infinite by design and written as such).
+fn check_finite(args: &DiagnoseArgs, report: &diagnose::Report) -> CommandResult {
+    let params = (report.fitted_params.iter()).map(|(name, value)| (name.as_str(), *value));
+    let starts = (report.initial_states.iter()).map(|s| (s.state.as_str(), s.value));
+    let found = crate::finite::in_named(params)
+        .map(|what| format!("the fitted param {what}"))
+        .or_else(|| {
+            crate::finite::in_named(starts).map(|what| format!("the initial state {what}"))
+        });
+    let path = args
+        .json
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("the report"));
+    let help = "the fit of the model went non-finite: check the params' initial values and \
+                constraints";
+    crate::finite::refuse(&path, found, help).map_err(CommandError::user)
+}
+
 fn write_outputs(args: &DiagnoseArgs, report: &diagnose::Report) -> CommandResult {
     if let Some(path) = &args.json {
         let json = serde_json::to_string_pretty(report)
@@ -187,55 +205,15 @@ fn write_outputs(args: &DiagnoseArgs, report: &diagnose::Report) -> CommandResul
     Ok(())
 }
 
-/// A progress bar on stderr, shown only on a terminal.
-struct ProgressReporter {
-    bar: Mutex<Option<ProgressBar>>,
-    visible: bool,
-}
-
-impl ProgressReporter {
-    fn new() -> Self {
-        ProgressReporter {
-            bar: Mutex::new(None),
-            visible: std::io::stderr().is_terminal(),
+/// Reports the stages of a diagnosis ([`Reporter`]: a bar on a terminal, else a line per
+/// stage and one every few seconds).
+fn report(reporter: &Reporter, event: Progress) {
+    match event {
+        Progress::Stage { name, total } => {
+            reporter.stage(name, total as u64, Count::Items("fits"), Announce::Now)
         }
-    }
-
-    fn update(&self, event: Progress) {
-        if !self.visible {
-            return;
-        }
-        let Ok(mut slot) = self.bar.lock() else {
-            return;
-        };
-        match event {
-            Progress::Stage { name, total } => {
-                if let Some(bar) = slot.take() {
-                    bar.finish_and_clear();
-                }
-                let bar = ProgressBar::new(total as u64);
-                if let Ok(style) = ProgressStyle::with_template(
-                    "{prefix:>20} [{bar:30}] {pos}/{len} {elapsed} {msg}",
-                ) {
-                    bar.set_style(style.progress_chars("=> "));
-                }
-                bar.set_prefix(name);
-                *slot = Some(bar);
-            }
-            Progress::Done { item, seconds } => {
-                if let Some(bar) = slot.as_ref() {
-                    bar.set_message(format!("{item} done in {seconds:.1} s"));
-                    bar.inc(1);
-                }
-            }
-        }
-    }
-
-    fn finish(&self) {
-        if let Ok(mut slot) = self.bar.lock() {
-            if let Some(bar) = slot.take() {
-                bar.finish_and_clear();
-            }
+        Progress::Done { item, seconds } => {
+            reporter.advance(1, format!("`{item}` done in {seconds:.1} s"))
         }
     }
 }

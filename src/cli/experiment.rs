@@ -3,8 +3,8 @@
 //!
 //! The study comes from `--preset`, `--config FILE` or the flags (`--model`, `--data`, ...);
 //! flags override a preset or config. `--shard K/N` runs one slice of the grid (a job array);
-//! `gbc experiment merge DIR...` joins slices. One progress bar on stderr; the summary on
-//! stdout. See docs/reproduction.md.
+//! `gbc experiment merge DIR...` joins slices. Progress on stderr (a bar on a terminal,
+//! else a line every few seconds, [`crate::cli::progress`]); the summary on stdout. See docs/reproduction.md.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -13,6 +13,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use crate::cli::options::TrainingFlags;
+use crate::cli::progress::{Announce, Count, Reporter};
 use crate::cli::{CommandError, CommandResult};
 use crate::experiment::merge::{publish, weights_in, Published};
 use crate::experiment::report::{compare, number};
@@ -418,9 +419,10 @@ pub fn print_summary(
     }
 }
 
-/// One progress bar over every pending run of one or more studies, advanced per epoch.
+/// One progress report over every pending run of one or more studies, advanced per epoch
+/// (the shared [`Reporter`]: a bar on a terminal, else a line every few seconds).
 pub struct ProgressBar {
-    bar: indicatif::ProgressBar,
+    reporter: Reporter,
     finished: AtomicUsize,
     skipped: AtomicUsize,
     total: usize,
@@ -429,7 +431,7 @@ pub struct ProgressBar {
 }
 
 impl ProgressBar {
-    /// A bar over the runs of `studies` not yet finished in their directories.
+    /// A report over the runs of `studies` not yet finished in their directories.
     pub fn new(studies: &[(&Prepared, &[&RunSpec], &PathBuf)]) -> Self {
         let mut work = 0;
         let mut total = 0;
@@ -441,17 +443,14 @@ impl ProgressBar {
                 }
             }
         }
-        let bar = indicatif::ProgressBar::new(work);
-        let template = "{elapsed_precise} [{bar:30}] {percent:>3}% {msg} ETA {eta}";
-        if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar.set_message(format!("0/{total} runs"));
-        if total == 0 {
-            bar.finish_and_clear();
+        let reporter = Reporter::new();
+        if total > 0 {
+            let name = format!("running {total} trainings");
+            reporter.stage(&name, work, Count::Percent, Announce::Now);
+            reporter.update(0, format!("0/{total} runs"));
         }
         ProgressBar {
-            bar,
+            reporter,
             finished: AtomicUsize::new(0),
             skipped: AtomicUsize::new(0),
             total,
@@ -465,18 +464,17 @@ impl ProgressBar {
         match progress {
             Progress::Epoch(spec, _) => {
                 *counted.entry(spec.id.clone()).or_insert(0) += spec.size as u64;
-                self.bar.inc(spec.size as u64);
+                let finished = self.finished.load(Ordering::Relaxed);
+                let runs = format!("{finished}/{} runs", self.total);
+                self.reporter.advance(spec.size as u64, runs);
             }
             Progress::Finished(spec, _) => {
                 // A run that failed stopped early: count the epochs it did not train.
                 let done = counted.remove(&spec.id).unwrap_or(0);
-                self.bar.inc(
-                    spec.cost(prepared.study.settings.epochs)
-                        .saturating_sub(done),
-                );
+                let rest = (spec.cost(prepared.study.settings.epochs)).saturating_sub(done);
                 let finished = self.finished.fetch_add(1, Ordering::Relaxed) + 1;
-                self.bar
-                    .set_message(format!("{finished}/{} runs", self.total));
+                let runs = format!("{finished}/{} runs", self.total);
+                self.reporter.advance(rest, runs);
             }
             Progress::Skipped(_) => _ = self.skipped.fetch_add(1, Ordering::Relaxed),
             Progress::Started(_) => {}
@@ -490,6 +488,6 @@ impl ProgressBar {
 
     /// Clears the bar.
     pub fn finish(&self) {
-        self.bar.finish_and_clear();
+        self.reporter.finish();
     }
 }

@@ -51,7 +51,10 @@ pub fn run(args: &ExportArgs) -> CommandResult {
             crate::export::onnx(&model, &restored.network, &restored.setup, args.precision)
         }
     }
-    .map_err(|error| CommandError::Internal(error.to_string()))?;
+    .map_err(|error| match error {
+        crate::export::ExportError::Internal(message) => CommandError::Internal(message),
+        not_finite => CommandError::user(not_finite),
+    })?;
     crate::io::write_atomic(&args.output, &exported.bytes).map_err(CommandError::user)?;
     let layout = &exported.layout;
     let columns = |names: &[String]| names.join(", ");

@@ -19,6 +19,7 @@ mod init;
 mod lsp;
 mod options;
 mod predict;
+mod progress;
 mod simulate;
 mod train;
 

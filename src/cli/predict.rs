@@ -6,11 +6,13 @@
 //! hidden), the closure outputs, the model's outputs; one row per data row. Offline rows are one-step predictions from the true history; online rows come
 //! from one free run driven by the data's inputs (see `gbc::train::predict`). A free run
 //! that leaves the physical range of the training data (the run's `--range-factor`) stops:
-//! the file ends at the offending row and a warning on stderr says where and why.
+//! the file ends before the offending row and a warning on stderr says where and why. No
+//! value that is not finite is ever written: a table holding one is refused (E0253).
 
 use std::path::PathBuf;
 
 use super::data::{load_records, ColumnArgs, HistoryArg};
+use super::progress::{Announce, Count, Reporter};
 use super::train::{read_source, train_error};
 use super::{CommandError, CommandResult};
 use crate::train::recipe::DEFAULT_RANGE_FACTOR;
@@ -71,19 +73,20 @@ pub fn run(args: &PredictArgs) -> CommandResult {
     let mut header = Vec::new();
     let mut columns: Vec<Vec<f64>> = Vec::new();
     let mut labels = Vec::new();
+    let reporter = Reporter::new();
+    let count = Count::Items("experiments");
+    reporter.stage("predicting", records.len() as u64, count, Announce::IfSlow);
     for record in &records {
         let how = (mode, args.history.into(), range.as_ref());
         let mut table = predict::predict_in_range(&model, &network, &setup, record, how)
             .map_err(train_error)?;
         if let Some(divergence) = &table.divergence {
-            eprintln!("warning: {divergence}; the predictions stop there");
-            let rows = (table.columns.first()).map_or(0, |times| {
-                times.iter().take_while(|t| **t <= divergence.time).count()
-            });
-            for column in &mut table.columns {
-                column.truncate(rows);
-            }
+            reporter.println(&format!(
+                "warning: {divergence}; the predictions stop before it"
+            ));
         }
+        table.cut_at_divergence();
+        reporter.advance(1, record.name.clone());
         let rows = table.columns.first().map_or(0, Vec::len);
         labels.extend(std::iter::repeat_n(record.name.clone(), rows));
         if columns.is_empty() {
@@ -95,6 +98,7 @@ pub fn run(args: &PredictArgs) -> CommandResult {
             }
         }
     }
+    reporter.finish();
     let labels = (records.len() > 1).then_some(("experiment", labels.as_slice()));
     crate::data::write_table(&args.output, labels, &header, &columns)
         .map_err(CommandError::user)?;

@@ -12,6 +12,7 @@
 mod params;
 mod whatif;
 
+use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
 use crate::ir::Model;
 use crate::signal::Signal;
@@ -22,9 +23,6 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
-
-/// Runs with more samples than this show a progress bar (on a terminal).
-const PROGRESS_THRESHOLD: usize = 20_000;
 
 /// Arguments of `gbc simulate`.
 #[derive(Debug, clap::Args)]
@@ -233,17 +231,19 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
         initial: initial_values(&model, &args.init)?,
         ..SimOptions::new(args.t_end, dt)
     };
-    let mut bar: Option<indicatif::ProgressBar> = None;
+    // The stage starts before the warm-up; its total is known from the first sample on.
+    let reporter = Reporter::new();
+    reporter.stage("simulating", 0, Count::Items("samples"), Announce::IfSlow);
     let mut progress = |done: usize, total: usize| {
-        if total > PROGRESS_THRESHOLD {
-            bar.get_or_insert_with(|| progress_bar(total))
-                .set_position(done as u64);
+        if done == 1 {
+            reporter.set_total(total as u64);
+        }
+        if done.is_multiple_of(1024) || done == total {
+            reporter.update(done as u64, String::new());
         }
     };
     let simulated = crate::sim::simulate_with_progress(&model, &signals, &options, &mut progress);
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
-    }
+    reporter.finish();
     let mut trajectory = simulated.map_err(CommandError::user)?;
     add_noise(&mut trajectory, args.noise, args.seed);
     let table = csv_table(&model, &trajectory, args.hidden, &args.output)?;
@@ -314,20 +314,6 @@ fn report(diagnostic: impl Diagnostic + Send + Sync + 'static) -> miette::Report
     miette::Report::new(diagnostic)
 }
 
-/// A progress bar over `total` samples on stderr (drawn only on a terminal).
-fn progress_bar(total: usize) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::with_draw_target(
-        Some(total as u64),
-        indicatif::ProgressDrawTarget::stderr(),
-    );
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "simulating {bar:40} {pos}/{len} samples ({eta} left)",
-    ) {
-        bar.set_style(style);
-    }
-    bar
-}
-
 /// Multiplies every measured state by `1 + sigma * N(0, 1)`, row by row.
 fn add_noise(trajectory: &mut Trajectory, sigma: f64, seed: u64) {
     if sigma == 0.0 {
@@ -371,6 +357,14 @@ fn csv_table<'a>(
         model.outputs.iter().map(|o| &o.name).collect(),
         &trajectory.outputs,
     ));
+    let mut named: Vec<(&str, &[f64])> = vec![("t", &trajectory.times)];
+    named.extend(
+        columns
+            .iter()
+            .map(|(name, values)| (name.as_str(), *values)),
+    );
+    let found = crate::finite::in_table(&named);
+    crate::finite::refuse(path, found, crate::data::NOT_FINITE_HELP).map_err(CommandError::user)?;
     let header = std::iter::once("t").chain(columns.iter().map(|(name, _)| name.as_str()));
     let failed = |error: csv::Error| {
         CommandError::Internal(format!("cannot format `{}`: {error}", path.display()))
@@ -541,6 +535,31 @@ mod tests {
             ["gbm::E0711"]
         );
         assert!(!output.exists());
+    }
+
+    #[test]
+    fn an_output_that_goes_non_finite_is_refused_naming_where() {
+        let scratch = ScratchDir::new("simulate-nan").unwrap();
+        let model = scratch.join("decay.gbm");
+        let source = "model decay\nstate x = 1\noutput y = sqrt(x - 0.5)\nder x = -x\n";
+        std::fs::write(&model, source).unwrap();
+        let output = scratch.join("decay.csv");
+        let (model, out) = (model.display().to_string(), output.display().to_string());
+        let words = [
+            "simulate", &model, "--t-end", "2", "--dt", "0.25", "-o", &out,
+        ];
+        let error = run(&Command::try_parse_from(words).unwrap().args).unwrap_err();
+        let CommandError::User(reports) = &error else {
+            panic!("expected a user error, found {error:?}");
+        };
+        let message = reports[0].to_string();
+        assert_eq!(codes(error), ["gbm::E0253"]);
+        // x = e^-t falls below 0.5 after t = ln 2 = 0.69: the first sample past it.
+        assert!(
+            message.contains("`y` = NaN at t = 0.75 (row 4)"),
+            "{message}"
+        );
+        assert!(!output.exists(), "nothing is written");
     }
 
     #[test]

@@ -5,11 +5,12 @@
 //!
 //! The default recipe is multi-step (free-run rollouts with a curriculum, then a polish of
 //! the params); `--objective one-step` is the paper's (see `docs/training.md`). Stiffness
-//! warnings and a progress bar (epoch, rollout length, loss, ETA) go to stderr; the summary
-//! goes to stdout: errors per validation set, where a free run left the physical range,
-//! and each param with its standard error. `-o DIR` writes `weights.safetensors` and
-//! `run.json`; `--json FILE` writes the same metadata (metrics, params, warnings,
-//! normalisation, ...) to FILE.
+//! warnings and the progress (epoch, rollout length, loss, ETA: a bar on a terminal, else a
+//! line every few seconds) go to stderr; the summary goes to stdout: errors per validation
+//! set, where a free run left the physical range, and each param with its standard error.
+//! `-o DIR` writes `weights.safetensors` and `run.json`; `--json FILE` writes the same
+//! metadata (metrics, params, warnings, normalisation, ...) to FILE. A run that goes
+//! non-finite is saved with its last finite epoch's weights and fails with E0415.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -261,6 +262,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         early_stop: args.early_stop,
         resume: checkpoint,
         command,
+        keep_last_finite: true,
     };
     let outcome = train::train_run(&model, &data, (&options, &recipe), &control, &mut |event| {
         progress.observe(event, options.epochs)
@@ -308,6 +310,9 @@ pub fn run(args: &TrainArgs) -> CommandResult {
             .map_err(|error| CommandError::Internal(format!("cannot encode metrics: {error}")))?;
         crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
+    if let Some(diverged) = &trained.report.diverged {
+        return Err(diverged_run(diverged, &directory));
+    }
     let seconds = started.elapsed().as_secs_f64();
     let text = summary(&model, &trained, seconds, Some(&directory));
     if json_to_stdout {
@@ -316,6 +321,24 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         print!("{text}");
     }
     Ok(())
+}
+
+/// A run that went non-finite and was saved with its last finite weights: says which
+/// epoch those are on stderr, and fails with E0415 naming the epoch that diverged.
+fn diverged_run(diverged: &train::EpochDivergence, directory: &Path) -> CommandError {
+    let kept = match diverged.kept_epoch {
+        0 => "the initial weights (no epoch ended finite)".to_string(),
+        epoch => format!("the weights of epoch {epoch}, the last finite one"),
+    };
+    eprintln!(
+        "{} keeps {kept}: `gbc predict --weights {}` reads them",
+        directory.display(),
+        directory.display()
+    );
+    train_error(TrainError::Diverged {
+        epoch: diverged.epoch,
+        what: diverged.what.clone(),
+    })
 }
 
 /// The training log of a run directory.

@@ -234,8 +234,9 @@ impl From<usize> for MinRows {
 
 /// Writes a table as CSV, atomically: a header line, then one line per row. Numbers are
 /// written in their shortest form that reads back to the same `f64` (plain decimals, or
-/// scientific notation such as `1e-7` for very small or large magnitudes). A non-finite
-/// value is written as `NaN`, `inf` or `-inf` (which [`read`] rejects).
+/// scientific notation such as `1e-7` for very small or large magnitudes). A table holding
+/// a value that is not finite is not written: [`IoError::NotFinite`] names the earliest
+/// (see [`crate::finite`]).
 pub fn write_csv(path: &Path, header: &[String], columns: &[Vec<f64>]) -> Result<(), IoError> {
     write_table(path, None, header, columns)
 }
@@ -276,6 +277,10 @@ pub fn write_table(
             names.len()
         )));
     }
+    let named: Vec<(&str, &[f64])> = (header.iter().zip(columns))
+        .map(|(name, values)| (name.as_str(), values.as_slice()))
+        .collect();
+    crate::finite::refuse(path, crate::finite::in_table(&named), NOT_FINITE_HELP)?;
     let quote = |text: &str| {
         if text.contains([',', '"', '\n', '\r']) {
             format!("\"{}\"", text.replace('"', "\"\""))
@@ -311,6 +316,11 @@ pub fn write_table(
     }
     write_atomic(path, text.as_bytes())
 }
+
+/// What to do about a table that went non-finite.
+pub const NOT_FINITE_HELP: &str = "the run that computed it went non-finite there; check the \
+     model's expressions at that time (a division by zero, a log or square root of a negative \
+     value) or shorten the run";
 
 /// The shortest text that parses back to exactly `value`: Rust's `Display` (which never
 /// uses an exponent) for ordinary magnitudes, `LowerExp` outside `[1e-5, 1e16)`.

@@ -373,6 +373,26 @@ fn write_csv_refuses_mismatched_columns() -> TestResult {
 }
 
 #[test]
+fn write_csv_refuses_a_value_that_is_not_finite_naming_where() -> TestResult {
+    let scratch = ScratchDir::new("data-write-nan")?;
+    let path = scratch.join("pred.csv");
+    let header = vec!["t".to_string(), "S".to_string(), "P".to_string()];
+    let columns = [
+        vec![0.0, 0.5, 1.0],
+        vec![1.0, 2.0, 3.0],
+        vec![1.0, 2.0, f64::NAN],
+    ];
+    let error = write_csv(&path, &header, &columns)
+        .err()
+        .ok_or("expected an error")?;
+    assert!(matches!(error, IoError::NotFinite { .. }), "{error:?}");
+    let message = error.to_string();
+    assert!(message.contains("`P` = NaN at t = 1 (row 3)"), "{message}");
+    assert!(!path.exists(), "nothing is written");
+    Ok(())
+}
+
+#[test]
 fn errors_stay_small_enough_to_return_by_value() {
     // clippy's `result_large_err` flags error types of 128 bytes or more in every caller.
     assert!(std::mem::size_of::<DataError>() < 128);

@@ -65,6 +65,21 @@ pub enum ExportError {
     #[error("internal error in the export: {0}")]
     #[diagnostic(code(gbm::E1100), help("this is a bug in gbc; please report it"))]
     Internal(String),
+    /// A trained weight that is not finite in the element type of the export.
+    #[error("expected finite weights in {precision}, found {what}")]
+    #[diagnostic(
+        code(gbm::E1101),
+        help(
+            "a weight beyond f32's range (3.4e38) exports with --precision f64; a NaN or \
+             infinite one comes from a run that went non-finite: train again"
+        )
+    )]
+    NotFinite {
+        /// The weight and its value.
+        what: String,
+        /// The element type.
+        precision: &'static str,
+    },
 }
 
 /// The one-step map of a trained `network` of `model` as an ONNX model in `precision`.
@@ -85,6 +100,7 @@ pub fn onnx(
             weights.len()
         )));
     }
+    check_finite(model, &weights, precision)?;
     let window = window::window_map(model, setup);
     let layout = layout_of(model, setup, &window, precision);
     let mut graph = graph::Builder::new(precision);
@@ -125,6 +141,33 @@ pub fn onnx(
         bytes: model_proto.encode_to_vec(),
         layout,
     })
+}
+
+/// Refuses weights that are not finite once cast to `precision`.
+fn check_finite(
+    model: &ir::Model,
+    weights: &[crate::backend::NamedTensor],
+    precision: Precision,
+) -> Result<(), ExportError> {
+    let cast: Vec<crate::backend::NamedTensor> = (weights.iter())
+        .map(|tensor| crate::backend::NamedTensor {
+            values: (tensor.values.iter())
+                .map(|&v| match precision {
+                    Precision::F32 => f64::from(v as f32),
+                    Precision::F64 => v,
+                })
+                .collect(),
+            ..tensor.clone()
+        })
+        .collect();
+    let params: Vec<String> = model.params.iter().map(|p| p.name.clone()).collect();
+    match crate::finite::in_tensors(&cast, &params) {
+        Some(what) => Err(ExportError::NotFinite {
+            what,
+            precision: precision.name(),
+        }),
+        None => Ok(()),
+    }
 }
 
 fn layout_of(

@@ -248,3 +248,40 @@ fn the_layout_names_the_window_and_every_column() {
         .unwrap();
     assert_eq!(window.value, "46");
 }
+
+/// Weights are checked in the export's element type: one beyond f32's range exports in f64
+/// only, a NaN in neither; each refusal names the weight.
+#[test]
+fn weights_that_are_not_finite_in_the_element_type_are_refused() {
+    let (model, _) = shipped(
+        "models/bioreactor/gb1.gbm",
+        "models/bioreactor/data/steps.csv",
+        120,
+    );
+    let setup = crate::train::fixtures::setup(&model, Precision::F64, 1);
+    let mut network = crate::backend::Network::build(&model, &setup).unwrap();
+    let mut weights = network.weights();
+    weights[0].values[3] = 1e39;
+    network.set_weights(&weights).unwrap();
+    let refused = super::onnx(&model, &network, &setup, Precision::F32).unwrap_err();
+    let message = refused.to_string();
+    assert!(
+        message.contains(&format!("`{}`[3] = inf", weights[0].name)),
+        "{message}"
+    );
+    assert!(message.contains("in f32"), "{message}");
+    assert!(super::onnx(&model, &network, &setup, Precision::F64).is_ok());
+    let last = weights.len() - 1;
+    weights[last].values[1] = f64::NAN;
+    network.set_weights(&weights).unwrap();
+    let refused = super::onnx(&model, &network, &setup, Precision::F64).unwrap_err();
+    assert!(
+        refused.to_string().contains("param `Y_A` = NaN"),
+        "{refused}"
+    );
+    use miette::Diagnostic;
+    assert_eq!(
+        refused.code().map(|c| c.to_string()).as_deref(),
+        Some("gbm::E1101")
+    );
+}

@@ -80,6 +80,10 @@ pub struct RunInfo {
     pub warnings: Vec<StiffnessWarning>,
     /// The weights file, relative to the run directory.
     pub weights: String,
+    /// Where training went non-finite, when it did: the weights are then the kept epoch's
+    /// (`gbc train` exits with E0415).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diverged: Option<super::EpochDivergence>,
 }
 
 /// The model a run belongs to.
@@ -245,12 +249,24 @@ pub fn run_info(
         metrics: report.metrics.clone(),
         warnings: report.warnings.clone(),
         weights: WEIGHTS_FILE.to_string(),
+        diverged: report.diverged.clone(),
     }
 }
 
-/// Writes `run.json` and the weights into `directory` (created if missing).
+/// What to do about weights or params that are not finite.
+pub const NOT_FINITE_HELP: &str = "training went non-finite; lower the learning rate (--lr) \
+     or clip the gradient (--clip 1), add --substeps K, or train in --precision f64";
+
+/// Writes `run.json` and the weights into `directory` (created if missing). Weights or
+/// params that are not finite are refused ([`crate::io::IoError::NotFinite`]) before
+/// anything is written.
 pub fn save(directory: &Path, info: &RunInfo, network: &Network) -> Result<(), TrainError> {
-    write_tensors(&directory.join(WEIGHTS_FILE), &network.weights())?;
+    let weights = network.weights();
+    let params = (info.params.iter()).map(|p| (p.name.as_str(), p.value));
+    let found =
+        crate::finite::in_tensors(&weights, &[]).or_else(|| crate::finite::in_named(params));
+    crate::finite::refuse(&directory.join(WEIGHTS_FILE), found, NOT_FINITE_HELP)?;
+    write_tensors(&directory.join(WEIGHTS_FILE), &weights)?;
     // A loaded run's metadata carries no source text: its copy stays as it is.
     if let Some(file) = info
         .model
@@ -307,6 +323,14 @@ pub fn restore_with_notes(
     directory: &Path,
 ) -> Result<Restored, TrainError> {
     let (info, mut weights) = load(directory)?;
+    let params: Vec<String> = model.params.iter().map(|p| p.name.clone()).collect();
+    if let Some(found) = crate::finite::in_tensors(&weights, &params) {
+        let reason = format!(
+            "expected finite weights, found {found} (the run went non-finite; gbc now keeps \
+             the last finite epoch of such a run): train again"
+        );
+        return Err(bad_run(&directory.join(&info.weights), reason));
+    }
     let notes = check_structure(model, source, &info, directory)?;
     check_fits(model, &info, directory)?;
     let setup = Setup {

@@ -52,6 +52,10 @@ pub struct RunControl {
     pub resume: Option<Checkpoint>,
     /// What the caller keeps with each checkpoint (the CLI: its command line).
     pub command: serde_json::Value,
+    /// When the loss, a weight or a param goes NaN or infinite, end training with the last
+    /// finite epoch's weights and report where ([`super::TrainReport::diverged`]) instead of
+    /// failing with [`TrainError::Diverged`].
+    pub keep_last_finite: bool,
 }
 
 /// One epoch in the training log.
@@ -119,8 +123,14 @@ pub struct Checkpoint {
 
 impl Checkpoint {
     /// Writes the checkpoint into `directory`: the tensors first, then the metadata, each
-    /// atomically (a checkpoint whose metadata is there is whole).
+    /// atomically (a checkpoint whose metadata is there is whole). Weights that are not all
+    /// finite are refused ([`crate::io::IoError::NotFinite`]): a checkpoint is always a
+    /// state training can go on from.
     pub fn save(&self, directory: &Path) -> Result<(), TrainError> {
+        let found = crate::finite::in_tensors(&self.weights, &[])
+            .or_else(|| crate::finite::in_tensors(&self.best_weights, &[]));
+        let path = directory.join(CHECKPOINT_TENSORS);
+        crate::finite::refuse(&path, found, super::artifacts::NOT_FINITE_HELP)?;
         let mut tensors = Vec::new();
         fn prefixed<'t>(
             prefix: &'t str,
@@ -420,12 +430,23 @@ impl<'a> Safety<'a> {
     }
 
     /// After the last epoch: with early stopping, the network takes the best epoch's
-    /// weights.
-    pub fn finish(&self, network: &mut Network) -> Result<(), TrainError> {
+    /// weights; returns that epoch (none: the network keeps its own).
+    pub fn finish(&self, network: &mut Network) -> Result<Option<usize>, TrainError> {
         if self.early.is_some() && !self.best_weights.is_empty() {
             network.set_weights(&self.best_weights)?;
+            return Ok(self
+                .early
+                .as_ref()
+                .and_then(|e| e.best)
+                .map(|(epoch, _)| epoch));
         }
-        Ok(())
+        Ok(None)
+    }
+
+    /// Whether a divergence ends training with the last finite weights
+    /// ([`RunControl::keep_last_finite`]) rather than an error.
+    pub fn keeps_last_finite(&self) -> bool {
+        self.control.keep_last_finite
     }
 
     fn checkpoint(&self, end: &mut EpochEnd) -> Checkpoint {

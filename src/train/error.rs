@@ -76,20 +76,21 @@ pub enum TrainError {
         /// Hidden state name.
         name: String,
     },
-    /// The loss became NaN or infinite.
-    #[error("training diverged in epoch {epoch}: the loss became {loss}")]
+    /// The loss, a weight or a param became NaN or infinite.
+    #[error("training diverged in epoch {epoch}: {what}")]
     #[diagnostic(
         code(gbm::E0415),
         help(
-            "lower the learning rate (--lr), check the stiffness warnings and add --substeps K, \
-             or train in --precision f64"
+            "lower the learning rate (--lr) or clip the gradient (--clip 1), check the \
+             stiffness warnings and add --substeps K, or train in --precision f64"
         )
     )]
     Diverged {
         /// 1-based epoch.
         epoch: usize,
-        /// The offending loss value.
-        loss: f64,
+        /// What went non-finite: "the loss became NaN", "weight `...`[3] = inf after the
+        /// epoch".
+        what: String,
     },
     /// Weights reused with a model whose structure changed since training.
     #[error(

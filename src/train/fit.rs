@@ -24,7 +24,7 @@ use super::split::Training;
 use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
 use super::windows::{rollout_batch_into, shooting_starts};
-use super::{Engine, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
+use super::{Engine, EpochDivergence, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
 use crate::backend::RolloutBatch;
 
 /// What the epochs need besides the network.
@@ -54,16 +54,19 @@ impl Fit<'_> {
     }
 
     /// Runs every epoch (from a checkpoint's, and until `safety` stops it); returns the
-    /// mean training loss of each and the engine that ran them ([`Engine::Graph`] or
-    /// [`Engine::Fused`]). `network` ends with the trained weights and Adam state whichever
-    /// engine ran the epochs.
+    /// mean training loss of each, the engine that ran them ([`Engine::Graph`] or
+    /// [`Engine::Fused`]) and, under [`super::RunControl::keep_last_finite`], where training
+    /// went non-finite. `network` ends with the trained weights and Adam state whichever
+    /// engine ran the epochs: after a divergence, those of the last epoch whose weights
+    /// were all finite (without `keep_last_finite` a divergence is
+    /// [`TrainError::Diverged`]).
     pub fn run(
         &self,
         network: &mut Network,
         training: &mut Course,
         on_event: &mut dyn FnMut(Event),
         safety: &mut Safety,
-    ) -> Result<(Vec<f64>, Engine), TrainError> {
+    ) -> Result<Fitted, TrainError> {
         let options = self.options;
         let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
@@ -77,26 +80,21 @@ impl Fit<'_> {
             network,
             windows: RolloutBatch::default(),
         };
-        let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
-        // A state an experiment never measures is all fill: its estimate is the model's own
-        // run, refreshed every epoch.
-        let unmeasured =
-            (training.tracks.iter()).any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
-        let every = if unmeasured { 1 } else { FILL_REFRESH };
+        // The last state whose weights were all finite, and its epoch.
+        let mut kept = (first - 1, engines.optimiser.clone());
+        let mut diverged = None;
+        let fill = fill_schedule(training);
         for epoch in first..=options.epochs {
             let horizon = self.recipe.horizon_at(epoch, options.epochs);
-            let fill_due = needs_fill && (epoch - 1) % every == 0;
-            if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
-                let current = engines.graph_with_weights()?;
-                let how = (fractions.as_slice(), fill_due);
-                refresh(current, self.model, training, how, self.hidden_init)?;
-            }
-            let loss = self
-                .epoch(&mut engines, training, (horizon, &fractions), &mut rng)
-                .map_err(|found| match found {
-                    EpochFailure::Backend(error) => TrainError::Backend(error),
-                    EpochFailure::NotFinite(loss) => TrainError::Diverged { epoch, loss },
-                })?;
+            self.refresh_before(epoch, &mut engines, training, (&fractions, fill))?;
+            let how = ((epoch, horizon), fractions.as_slice());
+            let loss = match self.checked_epoch(&mut engines, training, how, &mut rng, on_event)? {
+                Ok(loss) => loss,
+                Err(what) => {
+                    diverged = Some((epoch, what));
+                    break;
+                }
+            };
             losses.push(loss);
             on_event(Event::Epoch {
                 epoch,
@@ -112,7 +110,9 @@ impl Fit<'_> {
                 course: training,
                 engines,
             };
-            if safety.after_epoch(end, on_event)? {
+            let stop = safety.after_epoch(end, on_event)?;
+            kept = (epoch, engines.optimiser.clone());
+            if stop {
                 break;
             }
         }
@@ -120,23 +120,90 @@ impl Fit<'_> {
             Some(_) => Engine::Fused,
             None => Engine::Graph,
         };
+        let diverged = settle(diverged, kept, &mut engines, safety)?;
         engines.graph_with_state()?;
-        safety.finish(network)?;
-        Ok((losses, engine))
+        let best = safety.finish(network)?;
+        Ok(Fitted {
+            losses,
+            engine,
+            diverged: diverged.map(|d| EpochDivergence {
+                kept_epoch: best.unwrap_or(d.kept_epoch),
+                ..d
+            }),
+        })
     }
 
-    /// One epoch of `horizon`-step windows (1: one-step pairs) on the engine that runs it.
+    /// Before an epoch after the first: the hidden states refreshed with the current
+    /// weights, and the model's fill of unknown stretches when it is due (`fill`: whether
+    /// any is needed, and every how many epochs).
+    fn refresh_before(
+        &self,
+        epoch: usize,
+        engines: &mut Engines,
+        training: &mut Course,
+        (fractions, (needs_fill, every)): (&[f64], (bool, usize)),
+    ) -> Result<(), TrainError> {
+        let fill_due = needs_fill && (epoch - 1).is_multiple_of(every);
+        if epoch > 1 && (!self.model.hidden.is_empty() || fill_due) {
+            let current = engines.graph_with_weights()?;
+            refresh(
+                current,
+                self.model,
+                training,
+                (fractions, fill_due),
+                self.hidden_init,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// One epoch with its batches told to `on_event`: its loss, or what went non-finite
+    /// (the loss, or after the epoch a weight: a finite loss is the loss *before* the
+    /// epoch's last step).
+    fn checked_epoch(
+        &self,
+        engines: &mut Engines,
+        training: &Course,
+        ((epoch, horizon), fractions): ((usize, usize), &[f64]),
+        rng: &mut ChaCha8Rng,
+        on_event: &mut dyn FnMut(Event),
+    ) -> Result<Result<f64, String>, TrainError> {
+        let mut on_batch = |done, batches| {
+            on_event(Event::Batch {
+                epoch,
+                done,
+                batches,
+            })
+        };
+        let how = (horizon, fractions);
+        match self.epoch(engines, training, how, rng, &mut on_batch) {
+            Err(EpochFailure::Backend(error)) => Err(TrainError::Backend(error)),
+            Err(EpochFailure::NotFinite(loss)) => Ok(Err(format!("the loss became {loss}"))),
+            Ok(loss) => {
+                let params: Vec<String> =
+                    self.model.params.iter().map(|p| p.name.clone()).collect();
+                Ok(match engines.non_finite(&params) {
+                    Some(found) => Err(format!("{found} after the epoch")),
+                    None => Ok(loss),
+                })
+            }
+        }
+    }
+
+    /// One epoch of `horizon`-step windows (1: one-step pairs) on the engine that runs it;
+    /// `on_batch` hears of each step (batches done, batches in the epoch).
     fn epoch(
         &self,
         engines: &mut Engines,
         training: &Course,
         (horizon, fractions): (usize, &[f64]),
         rng: &mut ChaCha8Rng,
+        on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         if horizon > 1 {
-            return self.rollout_epoch(engines, training, (horizon, fractions), rng);
+            return self.rollout_epoch(engines, training, (horizon, fractions), rng, on_batch);
         }
-        self.one_step_epoch(engines, training, rng)
+        self.one_step_epoch(engines, training, rng, on_batch)
     }
 
     fn one_step_epoch(
@@ -144,16 +211,19 @@ impl Fit<'_> {
         engines: &mut Engines,
         training: &Course,
         rng: &mut ChaCha8Rng,
+        on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
         let mut order: Vec<usize> = (0..training.table.len()).collect();
         order.shuffle(rng);
         let mut total = 0.0;
-        for chunk in order.chunks(self.options.batch_size) {
+        let batches = order.len().div_ceil(self.options.batch_size.max(1));
+        for (done, chunk) in order.chunks(self.options.batch_size).enumerate() {
             let batch = training.table.batch(chunk);
             let loss = engines.step(StepBatch::Pairs(&batch), &settings)?;
             finite(loss)?;
             total += loss * chunk.len() as f64;
+            on_batch(done + 1, batches);
         }
         Ok(total / order.len().max(1) as f64)
     }
@@ -164,6 +234,7 @@ impl Fit<'_> {
         training: &Course,
         (horizon, fractions): (usize, &[f64]),
         rng: &mut ChaCha8Rng,
+        on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
         let longest = (self.trainings.iter())
@@ -179,7 +250,7 @@ impl Fit<'_> {
             starts.extend(tiles.into_iter().map(|knot| (index, knot)));
         }
         if starts.is_empty() {
-            return self.one_step_epoch(engines, training, rng);
+            return self.one_step_epoch(engines, training, rng, on_batch);
         }
         starts.shuffle(rng);
         let per_batch = (self.recipe.windows_per_batch)
@@ -189,7 +260,8 @@ impl Fit<'_> {
         // The buffers of the last epoch's batches (a failed step loses them with the run).
         let mut batch = std::mem::take(&mut engines.windows);
         let mut ordered = Vec::with_capacity(per_batch);
-        for chunk in starts.chunks(per_batch) {
+        let batches = starts.len().div_ceil(per_batch);
+        for (done, chunk) in starts.chunks(per_batch).enumerate() {
             // In track order, so that windows of one uniform track share their feedback.
             ordered.clear();
             ordered.extend_from_slice(chunk);
@@ -204,10 +276,54 @@ impl Fit<'_> {
             let loss = engines.step(StepBatch::Windows(&batch), &settings)?;
             finite(loss)?;
             total += loss * chunk.len() as f64;
+            on_batch(done + 1, batches);
         }
         engines.windows = batch;
         Ok(total / starts.len() as f64)
     }
+}
+
+/// Whether any training track needs the model's fill, and every how many epochs it is
+/// refreshed: every epoch where an experiment never measures a state (that state is all
+/// fill, the model's own run), else every [`FILL_REFRESH`].
+fn fill_schedule(training: &Course) -> (bool, usize) {
+    let needs_fill = training.tracks.iter().any(|t| !t.fully_known());
+    let unmeasured =
+        (training.tracks.iter()).any(|t| t.measured.iter().any(|m| !m.iter().any(|&x| x)));
+    (needs_fill, if unmeasured { 1 } else { FILL_REFRESH })
+}
+
+/// After the epochs: a divergence is [`TrainError::Diverged`], or under
+/// [`super::RunControl::keep_last_finite`] the optimiser goes back to `kept` (the last
+/// finite epoch and its state) and the divergence is reported.
+fn settle(
+    diverged: Option<(usize, String)>,
+    (kept_epoch, kept): (usize, Optimiser),
+    engines: &mut Engines,
+    safety: &Safety,
+) -> Result<Option<EpochDivergence>, TrainError> {
+    let Some((epoch, what)) = diverged else {
+        return Ok(None);
+    };
+    if !safety.keeps_last_finite() {
+        return Err(TrainError::Diverged { epoch, what });
+    }
+    engines.optimiser = kept;
+    Ok(Some(EpochDivergence {
+        epoch,
+        what,
+        kept_epoch,
+    }))
+}
+
+/// What the epochs leave besides the network.
+pub(super) struct Fitted {
+    /// The mean training loss of each epoch that stayed finite.
+    pub losses: Vec<f64>,
+    /// The engine that ran them.
+    pub engine: Engine,
+    /// Where training went non-finite (under [`super::RunControl::keep_last_finite`]).
+    pub diverged: Option<EpochDivergence>,
 }
 
 /// The state after an epoch, for the run's safety hooks ([`Safety`]).
@@ -234,15 +350,7 @@ impl EpochEnd<'_, '_> {
     /// The current weights and Adam state, from the optimiser (looking changes nothing).
     pub fn state(&self) -> (Vec<NamedTensor>, AdamState) {
         let engines = &self.engines;
-        let mut tensors = engines.network.weights();
-        let flat = engines.optimiser.weights();
-        let mut at = 0;
-        for tensor in &mut tensors {
-            let size = tensor.values.len();
-            tensor.values.copy_from_slice(&flat[at..at + size]);
-            at += size;
-        }
-        (tensors, engines.optimiser.adam_state())
+        (engines.tensors(), engines.optimiser.adam_state())
     }
 }
 
@@ -265,6 +373,25 @@ impl Engines<'_> {
             None => self.network,
         };
         self.optimiser.step(engine, batch, settings)
+    }
+
+    /// The optimiser's current weights as the network's named tensors.
+    fn tensors(&self) -> Vec<NamedTensor> {
+        let mut tensors = self.network.weights();
+        let flat = self.optimiser.weights();
+        let mut at = 0;
+        for tensor in &mut tensors {
+            let size = tensor.values.len();
+            tensor.values.copy_from_slice(&flat[at..at + size]);
+            at += size;
+        }
+        tensors
+    }
+
+    /// The first of the optimiser's weights (params by name) that is not finite, in words.
+    fn non_finite(&self, params: &[String]) -> Option<String> {
+        crate::finite::first_non_finite(&self.optimiser.weights())?;
+        crate::finite::in_tensors(&self.tensors(), params)
     }
 
     /// The graph network with the optimiser's current weights.

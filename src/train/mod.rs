@@ -65,7 +65,7 @@ pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 pub use initial::{InitialState, Origin};
 pub use polish::{ParamEstimate, PolishSummary};
 pub use recipe::{Engine, Objective, ParamSource, Recipe};
-pub use run::{train_run, train_with};
+pub use run::{train_run, train_with, EVALUATING, TRAINING, VALIDATING};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
 
@@ -154,6 +154,18 @@ pub enum Event<'a> {
         /// Validation pairs.
         validation_pairs: usize,
     },
+    /// A phase of the run starts: "validating the untrained network", "training" (the
+    /// epochs), "evaluating the trained network" (initial states, polish, validation).
+    Phase(&'static str),
+    /// Within an epoch, after each Adam step (a slow epoch still shows life).
+    Batch {
+        /// 1-based epoch.
+        epoch: usize,
+        /// Batches done in this epoch.
+        done: usize,
+        /// Batches in this epoch.
+        batches: usize,
+    },
     /// After each epoch.
     Epoch {
         /// 1-based epoch.
@@ -214,6 +226,20 @@ pub struct ValidationErrors {
     pub online: Option<ErrorSet>,
 }
 
+/// Where training went non-finite, and which weights it kept (a run under
+/// [`RunControl::keep_last_finite`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EpochDivergence {
+    /// The 1-based epoch that went non-finite.
+    pub epoch: usize,
+    /// What went non-finite, in words: "the loss became NaN", "param `Y_X` = inf after
+    /// the epoch".
+    pub what: String,
+    /// The epoch whose weights were kept: the last one whose weights were all finite (the
+    /// best one with early stopping; 0: the initial weights).
+    pub kept_epoch: usize,
+}
+
 /// What a training run reports.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrainReport {
@@ -250,6 +276,10 @@ pub struct TrainReport {
     /// The engine that ran the training steps ([`Engine::Auto`] resolved: graph or
     /// fused).
     pub engine: Engine,
+    /// Where training went non-finite, when it did (under
+    /// [`RunControl::keep_last_finite`]; the network then holds the kept epoch's weights,
+    /// unpolished).
+    pub diverged: Option<EpochDivergence>,
 }
 
 /// A trained network with everything needed to reuse it.

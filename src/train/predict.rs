@@ -47,6 +47,24 @@ pub struct PredictionTable {
     pub divergence: Option<Divergence>,
 }
 
+impl PredictionTable {
+    /// Drops the rows from the divergence on: the offending row holds the value that left
+    /// the range and no closure outputs, the rows after it `NaN`. What is left is the
+    /// prediction up to where the run stopped, every value finite (the divergence says
+    /// where and why). Without a divergence nothing changes.
+    pub fn cut_at_divergence(&mut self) {
+        let Some(divergence) = &self.divergence else {
+            return;
+        };
+        let rows = (self.columns.first()).map_or(0, |times| {
+            times.iter().take_while(|t| **t < divergence.time).count()
+        });
+        for column in &mut self.columns {
+            column.truncate(rows);
+        }
+    }
+}
+
 /// Predicts along `record` with a trained network; online runs stop outside the default
 /// physical range of the training data.
 pub fn predict(

@@ -11,15 +11,15 @@ use crate::ir;
 
 use super::balances::{self, BalanceFit};
 use super::checkpoint::{RunControl, Safety};
+use super::fit::Fitted;
 use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
-    polish, with_initial_params, Engine, Event, InitialState, Metrics, ParamSource, Part,
-    PhysicalRange, Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained,
-    TrainingData,
+    polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part, PhysicalRange,
+    Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
 };
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
@@ -46,11 +46,31 @@ pub fn train_run(
 ) -> Result<Trained, TrainError> {
     let started = std::time::Instant::now();
     let mut run = prepare(model, data, options, recipe, on_event)?;
+    if !run.layout.scorings.is_empty() {
+        on_event(Event::Phase(VALIDATING));
+    }
     let initial = run.validate(options, recipe)?;
+    on_event(Event::Phase(TRAINING));
     let fitted = run.fit((options, recipe), (control, started), on_event)?;
-    let evaluation = run.evaluate(options, recipe)?;
+    on_event(Event::Phase(EVALUATING));
+    let polishes = fitted.diverged.is_none() && recipe.polishes(&run.model);
+    let evaluation = run.evaluate(options, recipe, polishes)?;
+    let params: Vec<String> = run.model.params.iter().map(|p| p.name.clone()).collect();
+    if let Some(found) = crate::finite::in_tensors(&run.network.weights(), &params) {
+        return Err(TrainError::Diverged {
+            epoch: fitted.losses.len(),
+            what: format!("{found} after the polish"),
+        });
+    }
     Ok(run.report(options, recipe, (initial, evaluation), fitted))
 }
+
+/// The phase before the epochs ([`Event::Phase`]).
+pub const VALIDATING: &str = "validating the untrained network";
+/// The phase of the epochs.
+pub const TRAINING: &str = "training";
+/// The phase after the epochs.
+pub const EVALUATING: &str = "evaluating the trained network";
 
 /// A run between its steps.
 struct Run<'m> {
@@ -193,13 +213,14 @@ impl Run<'_> {
         Ok(metrics)
     }
 
-    /// Runs the epochs; the mean training loss of each and the engine that ran them.
+    /// Runs the epochs: the mean training loss of each, the engine that ran them and where
+    /// training went non-finite.
     fn fit(
         &mut self,
         (options, recipe): (&TrainOptions, &Recipe),
         (control, started): (&RunControl, std::time::Instant),
         on_event: &mut dyn FnMut(Event),
-    ) -> Result<(Vec<f64>, Engine), TrainError> {
+    ) -> Result<Fitted, TrainError> {
         let fit = fit::Fit {
             model: &self.model,
             setup: &self.setup,
@@ -228,12 +249,13 @@ impl Run<'_> {
     }
 
     /// After the epochs: initial states re-fitted on the training and validation data,
-    /// hidden states refreshed, params polished (unless they came from the balances), and
-    /// the validation errors of the trained network.
+    /// hidden states refreshed, params polished (with `polishes`, unless they came from the
+    /// balances), and the validation errors of the trained network.
     fn evaluate(
         &mut self,
         options: &TrainOptions,
         recipe: &Recipe,
+        polishes: bool,
     ) -> Result<Evaluation, TrainError> {
         let mut initial_states = self.layout.initial.clone();
         let refit = (&mut initial_states[..], self.hidden_init.as_slice());
@@ -266,7 +288,7 @@ impl Run<'_> {
                 &self.model,
                 &self.training.table,
                 &self.setup,
-                recipe.polishes(&self.model),
+                polishes,
             )?,
         };
         let metrics = self.validate(options, recipe)?;
@@ -284,7 +306,7 @@ impl Run<'_> {
         options: &TrainOptions,
         recipe: &Recipe,
         (initial, evaluation): (Metrics, Evaluation),
-        (losses, engine): (Vec<f64>, Engine),
+        fitted: Fitted,
     ) -> Trained {
         let metrics = Metrics {
             initial_offline: initial.offline,
@@ -298,7 +320,7 @@ impl Run<'_> {
             metrics,
             params,
             warnings: self.warnings,
-            losses,
+            losses: fitted.losses,
             train_pairs: self.layout.pairs.len(),
             validation_pairs: self.validation_pairs,
             recipe: recipe.clone(),
@@ -309,7 +331,8 @@ impl Run<'_> {
             dt: self.layout.grid.max_step,
             learning_rate: options.learning_rate,
             validated_from: super::validated_from(&self.layout),
-            engine,
+            engine: fitted.engine,
+            diverged: fitted.diverged,
         };
         Trained {
             network: self.network,

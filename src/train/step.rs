@@ -61,6 +61,7 @@ impl Step for FusedNetwork {
 
 /// The weights and Adam's state of a run, in its precision; the one optimiser loop of
 /// training.
+#[derive(Clone)]
 pub struct Optimiser {
     state: State,
     /// The weights as `f64` and the gradient, kept from step to step.
@@ -71,6 +72,7 @@ pub struct Optimiser {
     lengths: Vec<usize>,
 }
 
+#[derive(Clone)]
 enum State {
     Single(Vec<f32>, Adam<f32>),
     Double(Vec<f64>, Adam<f64>),

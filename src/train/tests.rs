@@ -90,8 +90,11 @@ fn divergence_stops_training_naming_the_epoch() {
         }
     });
     match result {
-        Err(TrainError::Diverged { epoch, loss }) => {
-            assert!(!loss.is_finite());
+        Err(TrainError::Diverged { epoch, what }) => {
+            assert!(
+                what.contains("loss became") || what.contains("after the epoch"),
+                "{what}"
+            );
             assert_eq!(epoch, epochs_done + 1);
         }
         Err(other) => panic!("expected divergence, found {other}"),
@@ -305,4 +308,127 @@ fn offline_predictions_are_one_step_and_online_ones_a_free_run() {
     assert_eq!(offline.columns[2][5], step.closure_outputs[0]);
     // The free run drifts away from the one-step predictions.
     assert_ne!(online.columns[1][40], offline.columns[1][40]);
+}
+
+/// The data and split of the divergence tests: 100 one-step pairs of the chemostat.
+fn diverging_data() -> (ir::Model, crate::record::Record) {
+    let (data, _) = chemostat::data(200, (0.002, 0.02), 2);
+    let model = chemostat::grey_box();
+    let record = record(&model, &data);
+    (model, record)
+}
+
+/// The user's case: in f32 an Adam step overflows every weight (a learning rate beyond
+/// f32's range) while the loss, computed before the step, stays finite. One batch per
+/// epoch, so no later loss sees the weights: they are checked themselves.
+#[test]
+fn weights_that_overflow_with_a_finite_loss_are_a_divergence() {
+    let (model, record) = diverging_data();
+    let records = [record];
+    let training = TrainingData {
+        train: &records,
+        validation: &[],
+        part: Part::FirstPairs(Some(100)),
+    };
+    let options = TrainOptions {
+        learning_rate: 1e39,
+        precision: Precision::F32,
+        batch_size: 128,
+        ..options(1, 100)
+    };
+    let result = train_with(&model, &training, &options, &Recipe::paper(), &mut |_| {});
+    match result {
+        Err(TrainError::Diverged { epoch, what }) => {
+            assert_eq!(epoch, 1);
+            assert!(what.contains("after the epoch"), "{what}");
+        }
+        Err(other) => panic!("expected divergence, found {other}"),
+        Ok(_) => panic!("expected divergence, found a trained network"),
+    }
+    let control = RunControl {
+        keep_last_finite: true,
+        ..RunControl::default()
+    };
+    let kept = train_run(
+        &model,
+        &training,
+        (&options, &Recipe::paper()),
+        &control,
+        &mut |_| {},
+    )
+    .unwrap();
+    let diverged = kept.report.diverged.unwrap();
+    assert_eq!((diverged.epoch, diverged.kept_epoch), (1, 0));
+    assert!(kept.report.losses.is_empty());
+    let initial = Network::build(&model, &kept.setup).unwrap().weights();
+    assert_eq!(
+        kept.network.weights(),
+        initial,
+        "the initial weights are kept"
+    );
+    let params = kept.report.params.iter().map(|(_, value)| *value);
+    assert!(params
+        .chain(initial.iter().flat_map(|t| t.values.clone()))
+        .all(f64::is_finite));
+}
+
+/// A run that diverges after finite epochs keeps the last of them, bit for bit: two epochs
+/// at a sane learning rate (stopped with a checkpoint), then the third with an absurd one.
+#[test]
+fn a_run_that_diverges_keeps_its_last_finite_epoch() {
+    let (model, record) = diverging_data();
+    let records = [record];
+    let training = TrainingData {
+        train: &records,
+        validation: &[],
+        part: Part::FirstPairs(Some(100)),
+    };
+    let scratch = crate::io::ScratchDir::new("train-diverged").unwrap();
+    let sane = TrainOptions {
+        learning_rate: 0.01,
+        ..options(5, 100)
+    };
+    let stopping = RunControl {
+        directory: Some(scratch.path.clone()),
+        stop_after: Some(2),
+        ..RunControl::default()
+    };
+    let stopped = train_run(
+        &model,
+        &training,
+        (&sane, &Recipe::paper()),
+        &stopping,
+        &mut |_| {},
+    );
+    assert!(matches!(
+        stopped,
+        Err(TrainError::Interrupted { epoch: 2, .. })
+    ));
+    let checkpoint = Checkpoint::load(&scratch.path).unwrap();
+    let absurd = TrainOptions {
+        learning_rate: 1e12,
+        ..sane
+    };
+    let resumed = RunControl {
+        resume: Some(checkpoint.clone()),
+        keep_last_finite: true,
+        ..RunControl::default()
+    };
+    let kept = train_run(
+        &model,
+        &training,
+        (&absurd, &Recipe::paper()),
+        &resumed,
+        &mut |_| {},
+    )
+    .unwrap();
+    let diverged = kept.report.diverged.clone().unwrap();
+    assert_eq!(
+        (diverged.epoch, diverged.kept_epoch),
+        (3, 2),
+        "{diverged:?}"
+    );
+    assert!(diverged.what.contains("became"), "{diverged:?}");
+    assert_eq!(kept.network.weights(), checkpoint.weights);
+    assert_eq!(kept.report.losses.len(), 2);
 }

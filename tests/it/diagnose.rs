@@ -90,6 +90,16 @@ fn diagnose_reads_a_data_set_and_writes_its_reports() {
     let out = gbc(&args);
     let stdout = text(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{}{stdout}", text(&out.stderr));
+    // Stderr is a pipe here, not a terminal: the progress comes as lines, one per stage.
+    let stderr = text(&out.stderr);
+    for stage in [
+        "fitting the model: 1 fits",
+        "fitting effects: ",
+        "selecting effects: ",
+    ] {
+        let found = stderr.lines().any(|line| line.starts_with(stage));
+        assert!(found, "no line `{stage}...` on stderr: {stderr}");
+    }
     assert!(stdout.contains("credited: product_decay"), "{stdout}");
     assert!(stdout.contains("(e1, e2, e3)"), "{stdout}");
     let report: serde_json::Value =

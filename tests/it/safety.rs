@@ -269,3 +269,100 @@ fn renamed_flags_keep_their_old_spelling_with_a_warning() {
         );
     }
 }
+
+/// Every value of a CSV file after its header, parsed (`None` for a cell that is no number).
+fn cells(path: &Path) -> Vec<Option<f64>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    (text.lines().skip(1))
+        .flat_map(|line| {
+            line.split(',')
+                .map(|cell| cell.parse().ok())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// Issue 22's case: an f32 run whose Adam step overflows every weight while the epoch's
+/// loss (computed before the step) stays finite. The run fails with E0415 naming the epoch,
+/// and its directory keeps finite weights (here the initial ones) that `gbc predict` reads;
+/// a run directory holding NaN weights is refused by name.
+#[test]
+fn a_run_that_goes_non_finite_exits_1_keeping_finite_weights_that_predict() {
+    let dir = scratch("diverged");
+    let run = dir.join("run");
+    let run_text = run.display().to_string();
+    let output = gbc(&[
+        "train",
+        GB1,
+        STEPS,
+        "-o",
+        &run_text,
+        "--epochs",
+        "1",
+        "--objective",
+        "one-step",
+        "--train-points",
+        "100",
+        "--batch",
+        "128",
+        "--lr",
+        "1e39",
+        "--precision",
+        "f32",
+    ]);
+    let message = stderr(&output);
+    assert_eq!(output.status.code(), Some(1), "{message}");
+    assert!(message.contains("E0415"), "{message}");
+    assert!(
+        message.contains("training diverged in epoch 1"),
+        "{message}"
+    );
+    assert!(message.contains("after the epoch"), "{message}");
+    assert!(message.contains("keeps the initial weights"), "{message}");
+    assert!(
+        message.contains("--lr"),
+        "the help says what to try: {message}"
+    );
+    let weights = gbc::train::artifacts::read_tensors(&run.join("weights.safetensors")).unwrap();
+    assert!(!weights.is_empty());
+    for tensor in &weights {
+        assert!(
+            tensor.values.iter().all(|v| v.is_finite()),
+            "{}",
+            tensor.name
+        );
+    }
+    let info = std::fs::read_to_string(run.join("run.json")).unwrap();
+    let info: serde_json::Value = serde_json::from_str(&info).unwrap();
+    assert_eq!(info["diverged"]["epoch"], 1);
+    assert_eq!(info["diverged"]["kept_epoch"], 0);
+    let predicted = dir.join("predicted.csv");
+    let predicted_text = predicted.display().to_string();
+    let args = [
+        "predict",
+        GB1,
+        STEPS,
+        "--weights",
+        &run_text,
+        "-o",
+        &predicted_text,
+    ];
+    let output = gbc(&args);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let values = cells(&predicted);
+    assert!(values.len() > 100);
+    assert!(values.iter().all(|v| v.is_some_and(f64::is_finite)));
+    // A run directory with a NaN weight (as gbc wrote before this check) is refused.
+    let mut broken = weights.clone();
+    broken[0].values[2] = f64::NAN;
+    gbc::train::artifacts::write_tensors(&run.join("weights.safetensors"), &broken).unwrap();
+    std::fs::remove_file(&predicted).unwrap();
+    let output = gbc(&args);
+    let message = stderr(&output);
+    assert_eq!(output.status.code(), Some(1), "{message}");
+    assert!(
+        message.contains("E0417") && message.contains("= NaN"),
+        "{message}"
+    );
+    assert!(!predicted.exists());
+}

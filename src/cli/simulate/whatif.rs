@@ -5,7 +5,8 @@
 //! The model is matched to the weights by its structure: a model whose comments, consts or
 //! balances changed runs with notes on stderr saying what changed; one whose structure
 //! changed is refused (E0416). A run that leaves the physical range of the training data
-//! stops there with a warning, as `gbc predict --mode online` does.
+//! stops before it with a warning, as `gbc predict --mode online` does; a value that is not
+//! finite is never written (E0253).
 
 use std::path::Path;
 
@@ -56,14 +57,9 @@ pub fn run(model: &Model, weights: &Path, args: &SimulateArgs) -> CommandResult 
         other => CommandError::user(other),
     })?;
     if let Some(divergence) = &table.divergence {
-        eprintln!("warning: {divergence}; the run stops there");
-        let rows = (table.columns.first()).map_or(0, |times| {
-            times.iter().take_while(|t| **t <= divergence.time).count()
-        });
-        for column in &mut table.columns {
-            column.truncate(rows);
-        }
+        eprintln!("warning: {divergence}; the run stops before it");
     }
+    table.cut_at_divergence();
     crate::data::write_csv(&args.output, &table.header, &table.columns).map_err(CommandError::user)
 }
 

@@ -1,16 +1,17 @@
-//! `gbc train`'s progress on stderr (a bar on a terminal, lines otherwise) and the
-//! training log (`log.csv`) built from the epochs it hears of.
+//! `gbc train`'s progress on stderr (through the shared [`Reporter`]: a bar on a terminal,
+//! else a line when training starts and one every few seconds, within slow epochs too) and
+//! the training log (`log.csv`) built from the epochs it hears of.
 
-use std::io::IsTerminal;
 use std::time::Instant;
 
+use crate::cli::progress::{Announce, Count, Reporter};
 use crate::train::checkpoint::EpochRow;
 use crate::train::{self, ErrorSet, Event};
 
-/// The progress bar and warnings on stderr, and the training log.
+/// The progress and warnings on stderr, and the training log.
 #[derive(Default)]
 pub(super) struct Progress {
-    bar: Option<indicatif::ProgressBar>,
+    reporter: Reporter,
     started: Option<Instant>,
     /// Seconds of the run before this process (resumed).
     before: f64,
@@ -18,6 +19,8 @@ pub(super) struct Progress {
     resumed: Vec<EpochRow>,
     /// Every epoch so far.
     rows: Vec<EpochRow>,
+    /// The last epoch's loss in words.
+    last_loss: String,
 }
 
 impl Progress {
@@ -29,7 +32,7 @@ impl Progress {
 
     pub(super) fn observe(&mut self, event: Event, epochs: usize) {
         match event {
-            Event::Warning(warning) => eprintln!("warning: {warning}"),
+            Event::Warning(warning) => self.reporter.println(&format!("warning: {warning}")),
             Event::Started {
                 train_pairs,
                 validation_pairs,
@@ -37,20 +40,28 @@ impl Progress {
             } => {
                 self.started = Some(Instant::now());
                 self.rows.clone_from(&self.resumed);
-                let message =
-                    format!("training on {train_pairs} pairs, validating on {validation_pairs}");
-                if !std::io::stderr().is_terminal() {
-                    eprintln!("{message}");
-                    return;
-                }
-                let bar = indicatif::ProgressBar::new(epochs as u64);
-                let template = "epoch {pos}/{len} [{bar:30}] {msg} ETA {eta}";
-                if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
-                    bar.set_style(style.progress_chars("=> "));
-                }
-                bar.set_position(self.rows.len() as u64);
-                bar.println(message);
-                self.bar = Some(bar);
+                self.reporter.println(&format!(
+                    "training on {train_pairs} pairs, validating on {validation_pairs}"
+                ));
+            }
+            Event::Phase(train::TRAINING) => {
+                let count = Count::Items("epochs");
+                self.reporter
+                    .stage(train::TRAINING, epochs as u64, count, Announce::Now);
+                self.reporter.update(self.rows.len() as u64, String::new());
+            }
+            Event::Phase(name) => self.reporter.stage(name, 0, Count::Time, Announce::IfSlow),
+            Event::Batch {
+                epoch,
+                done,
+                batches,
+            } => {
+                let within = format!("epoch {epoch} at batch {done}/{batches}");
+                let message = match self.last_loss.as_str() {
+                    "" => within,
+                    loss => format!("{loss}; {within}"),
+                };
+                self.reporter.update(epoch as u64 - 1, message);
             }
             Event::Epoch {
                 epoch,
@@ -58,27 +69,18 @@ impl Progress {
                 horizon,
             } => {
                 let elapsed = self.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
-                let seconds = self.before + elapsed;
                 self.rows.push(EpochRow {
                     epoch,
                     horizon,
                     loss,
-                    seconds,
+                    seconds: self.before + elapsed,
                     offline: None,
                     online: None,
                 });
-                match &self.bar {
-                    Some(bar) => {
-                        bar.set_message(format!("{horizon} step loss {loss:.3e}"));
-                        bar.set_position(epoch as u64);
-                    }
-                    // Without a terminal, a line every twentieth of the run (and the last).
-                    None if epoch % epochs.div_ceil(20).max(1) == 0 || epoch == epochs => {
-                        eprintln!(
-                            "epoch {epoch}/{epochs}: {horizon}-step loss {loss:.4e} ({seconds:.1} s)"
-                        );
-                    }
-                    None => {}
+                self.last_loss = format!("{horizon}-step loss {loss:.4e}");
+                self.reporter.update(epoch as u64, self.last_loss.clone());
+                if epoch == epochs {
+                    self.reporter.report_now();
                 }
             }
             Event::Validation {
@@ -95,15 +97,11 @@ impl Progress {
                 best_epoch,
                 best_loss,
             } => {
-                let message = format!(
+                self.reporter.println(&format!(
                     "early stop after epoch {epoch}: no better validation loss for {} epochs; \
                      keeping the weights of epoch {best_epoch} (validation loss {best_loss:.4e})",
                     epoch - best_epoch
-                );
-                match &self.bar {
-                    Some(bar) => bar.println(message),
-                    None => eprintln!("{message}"),
-                }
+                ));
             }
         }
     }
@@ -157,8 +155,6 @@ impl Progress {
     }
 
     pub(super) fn finish(&mut self) {
-        if let Some(bar) = self.bar.take() {
-            bar.finish_and_clear();
-        }
+        self.reporter.finish();
     }
 }
