@@ -1,8 +1,9 @@
 //! Fitting a mechanistic model's params (and the starts of measured states that no cell or
 //! declaration gives, [`super::split::Start::Fitted`]) to the training parts of every
 //! experiment: Levenberg–Marquardt on the z-scored free-run residuals at the measured
-//! training cells, with a forward-difference Jacobian through the simulator (the shared
-//! driver, [`crate::numeric::lm`]), in transformed coordinates so that constraints always
+//! training cells, with the exact Jacobian from the free runs' forward sensitivities
+//! ([`super::sensitivity`]; the experiments in parallel) through the shared driver
+//! ([`crate::numeric::lm`]), in transformed coordinates so that constraints always
 //! hold (`positive`: `p = exp(theta)`; `in [lo, hi]`: `p = lo + (hi - lo) sigmoid(theta)`;
 //! fitted starts are free).
 //!
@@ -55,6 +56,9 @@ const RESTART_SPREAD: f64 = 0.7;
 /// Two starts agree when their training gaps differ by at most this fraction.
 pub const AGREE: f64 = 1e-3;
 
+/// A training experiment: its index in the split, the record and its training rows.
+type Training<'a> = (usize, &'a crate::record::Record, std::ops::Range<usize>);
+
 /// The free-run error of a model at the training cells of a split.
 #[derive(Debug, Clone, Copy)]
 pub struct Objective<'a> {
@@ -67,29 +71,116 @@ pub struct Objective<'a> {
 impl Objective<'_> {
     /// Z-scored residuals `(sim - data) / std` at every measured training cell, divided by
     /// the square root of their number so that their squares sum to the training gap;
-    /// `None` if a free run fails. `x` holds the params, then the fitted starts.
+    /// `None` if a free run fails. `x` holds the params, then the fitted starts. The
+    /// experiments run in parallel; the residuals are in training order whatever the
+    /// threads do.
     pub fn residuals(&self, x: &[f64]) -> Option<Vec<f64>> {
-        let mut simulator = self.simulator.clone();
-        simulator.set_params(x);
-        let fitted = &x[simulator.params().min(x.len())..];
+        let per_record = self.per_record(x, |simulator, (_, record, rows), overrides| {
+            let run = simulator.free_run(record, overrides, rows.end).ok()?;
+            let deviation =
+                |row: usize, k: usize| run.row(row)[k] - record.states[k][row].unwrap_or(f64::NAN);
+            Some(self.record_residuals(record, rows, deviation))
+        })?;
+        let residuals: Vec<f64> = per_record.into_iter().flatten().collect();
+        residuals.iter().all(|r| r.is_finite()).then_some(residuals)
+    }
+
+    /// The Jacobian of [`Objective::residuals`] at `x`, one column per unknown, from the
+    /// forward sensitivities of every free run (exact to the integration tolerance);
+    /// `None` if a run fails.
+    pub fn jacobian(&self, x: &[f64]) -> Option<Vec<Vec<f64>>> {
+        let params = self.simulator.params().min(x.len());
+        let hidden = self.simulator.hidden_count();
+        let per_record = self.per_record(x, |simulator, (index, record, rows), overrides| {
+            let (_, sensitivities) = simulator.sensitive_run(record, overrides, rows.end).ok()?;
+            // The sensitivity column of each unknown: a param's own, or the initial value
+            // of the state a fitted start belongs to (none: this experiment has no such).
+            let fitted = self.split.fitted_indices(index, hidden);
+            let column = |unknown: usize| match unknown.checked_sub(params) {
+                None => Some(unknown),
+                Some(start) => {
+                    (fitted.iter().position(|f| *f == Some(start))).map(|state| params + state)
+                }
+            };
+            let columns: Vec<Vec<f64>> = (0..x.len())
+                .map(|unknown| {
+                    let column = column(unknown);
+                    self.record_residuals(record, rows.clone(), |row, k| {
+                        column.map_or(0.0, |c| sensitivities.at(row, k)[c])
+                    })
+                })
+                .collect();
+            Some(columns)
+        })?;
+        let mut columns = vec![Vec::new(); x.len()];
+        for record in per_record {
+            for (column, part) in columns.iter_mut().zip(record) {
+                column.extend(part);
+            }
+        }
+        let finite = columns.iter().flatten().all(|v| v.is_finite());
+        finite.then_some(columns)
+    }
+
+    /// `value(row, k) / std_k / sqrt(cells)` at every measured training cell of `record`
+    /// in `rows` (the residuals' order: row by row, state by state); with `value` the
+    /// simulation's deviation that gives the residuals, and its derivative their Jacobian.
+    fn record_residuals(
+        &self,
+        record: &crate::record::Record,
+        rows: std::ops::Range<usize>,
+        value: impl Fn(usize, usize) -> f64,
+    ) -> Vec<f64> {
         let norm = &self.split.normalisation;
         let scale = (self.split.training_cells().max(1) as f64).sqrt();
-        let mut residuals = Vec::new();
-        for (index, record, rows) in self.split.training() {
-            let overrides = self
-                .split
-                .overrides(index, fitted, simulator.hidden_count());
-            let run = simulator.free_run(record, &overrides, rows.end).ok()?;
-            for row in rows {
-                let state = run.row(row);
-                for (k, cells) in record.states.iter().enumerate() {
-                    if let Some(value) = cells[row] {
-                        residuals.push((state[k] - value) / norm.state_std[k] / scale);
-                    }
+        let mut out = Vec::new();
+        for row in rows {
+            for (k, cells) in record.states.iter().enumerate() {
+                if cells[row].is_some() {
+                    out.push(value(row, k) / norm.state_std[k] / scale);
                 }
             }
         }
-        residuals.iter().all(|r| r.is_finite()).then_some(residuals)
+        out
+    }
+
+    /// `work` on every training experiment in parallel (each with its own copy of the
+    /// simulator, params set from `x`), in training order; `None` if any fails.
+    fn per_record<T: Send>(
+        &self,
+        x: &[f64],
+        work: impl Fn(&mut Simulator, Training, &[Option<f64>]) -> Option<T> + Sync,
+    ) -> Option<Vec<T>> {
+        use rayon::prelude::*;
+        let mut base = self.simulator.clone();
+        base.set_params(x);
+        let fitted = &x[base.params().min(x.len())..];
+        let hidden = base.hidden_count();
+        let training: Vec<_> = self.split.training().collect();
+        (training.into_par_iter())
+            .map(|(index, record, rows)| {
+                let mut simulator = base.clone();
+                let overrides = self.split.overrides(index, fitted, hidden);
+                work(&mut simulator, (index, record, rows), &overrides)
+            })
+            .collect()
+    }
+
+    /// The Jacobian of the residuals in the transformed coordinates `theta` of unknowns
+    /// under `constraints`: [`Objective::jacobian`] times each transform's slope; forward
+    /// differences where a sensitivity run fails.
+    pub fn theta_jacobian(&self, constraints: &[Constraint], theta: &[f64]) -> Vec<Vec<f64>> {
+        let x = values(constraints, theta);
+        if let Some(mut columns) = self.jacobian(&x) {
+            for ((column, &constraint), &t) in columns.iter_mut().zip(constraints).zip(theta) {
+                let slope = slope(constraint, t);
+                column.iter_mut().for_each(|v| *v *= slope);
+            }
+            return columns;
+        }
+        let residuals = |theta: &[f64]| self.residuals(&values(constraints, theta));
+        let r = residuals(theta).unwrap_or_default();
+        crate::numeric::lm::forward_differences(&residuals, theta, &r, JACOBIAN_STEP)
     }
 
     /// The training gap at `x`, infinite if a run fails.
@@ -129,6 +220,7 @@ pub fn fit(
         };
     }
     let residuals = |theta: &[f64]| objective.residuals(&values(constraints, theta));
+    let jacobian = |theta: &[f64]| objective.theta_jacobian(constraints, theta);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut results: Vec<(Vec<f64>, f64)> = Vec::new();
     for attempt in 0..=restarts {
@@ -142,7 +234,7 @@ pub fn fit(
                 })
                 .collect()
         };
-        results.push(levenberg_marquardt(&residuals, theta));
+        results.push(levenberg_marquardt(&residuals, &jacobian, theta));
         if agreeing(&results) {
             break;
         }
@@ -224,34 +316,40 @@ pub fn slope(constraint: Constraint, theta: f64) -> f64 {
     }
 }
 
-/// Minimises `|r(theta)|^2` from `theta` with the diagnosis's settings (forward-difference
-/// Jacobian, columns in parallel); returns the minimiser and the minimum (infinite when `r`
-/// fails at the start).
+/// A residual function of transformed coordinates (`None` where a run fails).
+pub type Residuals<'a> = dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync + 'a;
+/// Its Jacobian columns, one per coordinate.
+pub type Columns<'a> = dyn Fn(&[f64]) -> Vec<Vec<f64>> + Sync + 'a;
+
+/// Minimises `|r(theta)|^2` from `theta` with the diagnosis's settings and the Jacobian
+/// `jacobian` (exact, from sensitivities); returns the minimiser and the minimum (infinite
+/// when `r` fails at the start).
 pub fn levenberg_marquardt(
-    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    residuals: &Residuals,
+    jacobian: &Columns,
     theta: Vec<f64>,
 ) -> (Vec<f64>, f64) {
-    minimise(residuals, theta, &SETTINGS)
+    minimise(residuals, Jacobian::Analytic(jacobian), theta, &SETTINGS)
 }
 
-/// [`levenberg_marquardt`] with the looser settings of a refinement (a polish).
-pub fn polish(
-    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
-    theta: Vec<f64>,
-) -> (Vec<f64>, f64) {
-    minimise(residuals, theta, &POLISH)
+/// [`levenberg_marquardt`] with the looser settings of a refinement (a polish), by
+/// forward differences.
+pub fn polish(residuals: &Residuals, theta: Vec<f64>) -> (Vec<f64>, f64) {
+    let jacobian = Jacobian::ForwardDifferences {
+        step: JACOBIAN_STEP,
+    };
+    minimise(residuals, jacobian, theta, &POLISH)
 }
 
 fn minimise(
-    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    residuals: &Residuals,
+    jacobian: Jacobian,
     theta: Vec<f64>,
     settings: &Settings,
 ) -> (Vec<f64>, f64) {
     let function = Function {
         residuals,
-        jacobian: Jacobian::ForwardDifferences {
-            step: JACOBIAN_STEP,
-        },
+        jacobian,
         damping: DAMPING,
     };
     let outcome = function.minimise(theta, settings);

@@ -36,6 +36,7 @@ mod refine;
 pub mod render;
 mod report;
 mod selection;
+mod sensitivity;
 mod simulate;
 mod split;
 mod symbolic;
@@ -488,6 +489,8 @@ fn origin(start: Start) -> &'static str {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_jacobian;
 #[cfg(test)]
 mod tests_json;
 #[cfg(test)]

@@ -4,20 +4,23 @@
 //! driven by the data's inputs alone) and *one-step* predictions from the measured history.
 //!
 //! Rows may be irregularly spaced and cells missing. Inputs are held from each row to the
-//! next (zero-order hold, as the record holds them). Continuous models are integrated by the
-//! adaptive Dormand–Prince method of [`crate::sim`], which reports the state at every row's
-//! time whatever the spacing, restarted wherever an input changes; discrete models apply
-//! their map once per row. Optional *correction* slots (outputs of a synthesised closure,
-//! see [`super::locus`]) are held constant over each interval.
+//! next (zero-order hold, as the record holds them). Continuous models are integrated by
+//! [`crate::sim::Integrator`] (Dormand–Prince, Radau IIA where the balances are stiff),
+//! which reports the state at every row's time whatever the spacing, restarted wherever an
+//! input changes; discrete models apply their map once per row. Optional *correction* slots
+//! (outputs of a synthesised closure, see [`super::locus`]) are held constant over each
+//! interval. [`Simulator::sensitive_run`] carries the forward sensitivities to the params
+//! and the initial values along a free run ([`super::sensitivity`]).
 
 use super::DiagnoseError;
-use crate::eval::Program;
+use crate::eval::{JacobianProgram, Program};
 use crate::ir::{Dynamics, Model, Var};
 use crate::record::Record;
-use crate::sim::{Dopri5, IntegrationError, ModelSystem, OdeSystem, Tolerances};
+use crate::sim::{IntegrationError, Integrator, Method, ModelSystem, OdeSystem, Tolerances};
 
-/// Most integration steps per interval before a run is declared failed (wild params).
-const MAX_STEPS: usize = 20_000;
+/// Most integration steps per free run (or one-step interval) before it is declared failed
+/// (wild params).
+const MAX_STEPS: usize = 200_000;
 
 /// States along a record, row-major: `values[row * dim + k]` is state `k` (measured, then
 /// hidden) at that row.
@@ -44,15 +47,19 @@ impl Run {
 /// A compiled model ready to run along records with chosen param values.
 #[derive(Debug, Clone)]
 pub struct Simulator {
-    system: ModelSystem,
-    dynamics: Dynamics,
+    pub(super) system: ModelSystem,
+    pub(super) dynamics: Dynamics,
     measured_init: Vec<Option<Program>>,
     hidden_init: Vec<Program>,
+    /// The declared initial values and their derivatives by the params (measured states
+    /// without a declaration give zero rows).
+    pub(super) init_derivatives: JacobianProgram,
     measured: usize,
     params: usize,
     correction_slots: Vec<usize>,
-    integrator: Dopri5,
-    scratch: Vec<f64>,
+    pub(super) integrator: Integrator,
+    pub(super) scratch: Vec<f64>,
+    names: Vec<String>,
 }
 
 impl Simulator {
@@ -64,7 +71,17 @@ impl Simulator {
         tolerances: Tolerances,
     ) -> Result<Self, DiagnoseError> {
         let internal = |e: crate::eval::CompileError| DiagnoseError::internal(e.to_string());
-        let system = ModelSystem::new(model).map_err(internal)?;
+        let mut system = ModelSystem::new(model).map_err(internal)?;
+        let params: Vec<usize> = system.layout().param_range().collect();
+        let dim = system.dim();
+        system
+            .differentiate_by(model, &params, dim)
+            .map_err(internal)?;
+        let zero = crate::ir::Expr::Num(0.0);
+        let inits = (model.states.iter().chain(&model.hidden))
+            .map(|state| state.init.as_ref().unwrap_or(&zero));
+        let init_derivatives =
+            JacobianProgram::compile(inits, system.layout(), &params).map_err(internal)?;
         let hidden_init = (model.hidden.iter())
             .map(|state| match &state.init {
                 Some(init) => Program::compile(init, system.layout()).map_err(internal),
@@ -83,8 +100,13 @@ impl Simulator {
         let correction_slots = (corrections.iter())
             .map(|&var| system.layout().slot(var))
             .collect();
+        let names = (model.states.iter().chain(&model.hidden))
+            .map(|state| state.name.clone())
+            .collect();
         Ok(Simulator {
-            integrator: Dopri5::new(system.dim(), tolerances, MAX_STEPS),
+            integrator: Integrator::new(dim, tolerances, MAX_STEPS, Method::Auto),
+            init_derivatives,
+            names,
             dynamics: model.dynamics,
             measured: model.states.len(),
             params: model.params.len(),
@@ -175,7 +197,8 @@ impl Simulator {
         program.eval(self.system.slots_mut(), &mut self.scratch)
     }
 
-    fn load(&mut self, record: &Record, row: usize, state: &[f64]) {
+    /// Loads the inputs of `row` and `state` into the slots.
+    pub(super) fn load(&mut self, record: &Record, row: usize, state: &[f64]) {
         let layout = self.system.layout();
         let (inputs, states) = (layout.input_range(), layout.state_range());
         let slots = self.system.slots_mut();
@@ -185,13 +208,15 @@ impl Simulator {
         slots[states].copy_from_slice(state);
     }
 
-    /// Advances `state` over the interval from `row` to `row + 1`.
+    /// Advances `state` over the interval from `row` to `row + 1` (with a whole step
+    /// budget of its own).
     pub fn step(
         &mut self,
         record: &Record,
         row: usize,
         state: &mut [f64],
     ) -> Result<(), IntegrationError> {
+        self.integrator.renew_budget();
         self.advance(record, (row, row + 1), state, &mut |_, _| {})
     }
 
@@ -213,6 +238,7 @@ impl Simulator {
                     .integrate(&mut self.system, span, state, times, |k, y| {
                         record_row(first + 1 + k, y)
                     })
+                    .map_err(|error| error.named(&self.names))
             }
             Dynamics::Discrete => {
                 let mut next = vec![0.0; state.len()];
@@ -237,6 +263,7 @@ impl Simulator {
         overrides: &[Option<f64>],
         end: usize,
     ) -> Result<Run, IntegrationError> {
+        self.integrator.restart();
         let mut state = self.start_state(record, overrides);
         let dim = state.len();
         let mut values = Vec::with_capacity(end * dim);
@@ -264,6 +291,7 @@ impl Simulator {
         overrides: &[Option<f64>],
         end: usize,
     ) -> Result<(Run, Run), IntegrationError> {
+        self.integrator.restart();
         let mut state = self.start_state(record, overrides);
         let dim = state.len();
         let (mut starts, mut predictions) = (Vec::new(), Vec::new());
@@ -287,7 +315,8 @@ pub fn inputs_at(record: &Record, row: usize) -> impl Iterator<Item = f64> + '_ 
     record.inputs.iter().map(move |column| column[row])
 }
 
-fn same_inputs(record: &Record, a: usize, b: usize) -> bool {
+/// Whether the inputs of rows `a` and `b` are the same.
+pub(super) fn same_inputs(record: &Record, a: usize, b: usize) -> bool {
     record.inputs.iter().all(|column| column[a] == column[b])
 }
 

@@ -175,6 +175,25 @@ impl Split {
         overrides
     }
 
+    /// Per state (measured, then the `hidden` hidden ones) of `record`: the index into the
+    /// fitted starts of the value it starts from, where that is one (as
+    /// [`Split::overrides`] reads them).
+    pub fn fitted_indices(&self, record: usize, hidden: usize) -> Vec<Option<usize>> {
+        let mut indices: Vec<Option<usize>> = (self.starts[record].iter())
+            .map(|start| match *start {
+                Start::Fitted(index) => Some(index),
+                _ => None,
+            })
+            .collect();
+        let slot = self
+            .fit_hidden
+            .then(|| self.training_slot(record))
+            .flatten();
+        let first = self.fitted_starts.len() + slot.unwrap_or(0) * hidden;
+        indices.extend((0..hidden).map(|h| slot.map(|_| first + h)));
+        indices
+    }
+
     /// The position of `record` among the records with a training part.
     pub fn training_slot(&self, record: usize) -> Option<usize> {
         self.training().position(|(index, _, _)| index == record)

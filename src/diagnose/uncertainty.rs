@@ -1,8 +1,8 @@
 //! What the data cannot decide about a fit: a standard error for every fitted unknown, an
 //! identifiability flag, and the direction in which the fit is free.
 //!
-//! At the fit's minimum, with `J` the forward-difference Jacobian of the training residuals
-//! in transformed coordinates (`theta`), the linearised covariance is `s^2 (J'J)^-1`,
+//! At the fit's minimum, with `J` the Jacobian of the training residuals in transformed
+//! coordinates (`theta`, from the free runs' forward sensitivities), the linearised covariance is `s^2 (J'J)^-1`,
 //! `s^2 = |r|^2 / (n - q)` ([`crate::numeric::lm::standard_errors`]); an unknown's standard
 //! error is its marginal one times the slope of its transform. It is *identified* when the
 //! error is below [`IDENTIFIABILITY_LIMIT`] of its value (the rule `gbc train` applies to
@@ -12,11 +12,11 @@
 //! units) gives the same trajectory. Free-run residuals are correlated in time, so the
 //! errors measure how sharply the data pin the fit, not confidence intervals.
 
-use super::fit::{slope, thetas, values, Objective, JACOBIAN_STEP};
+use super::fit::{slope, thetas, values, Objective};
 use super::report::{FitSummary, ParamEstimate};
 use crate::ir::Constraint;
 use crate::numeric::linalg::gauss_newton_system;
-use crate::numeric::lm::{forward_differences, standard_errors};
+use crate::numeric::lm::standard_errors;
 use crate::numeric::symmetric_eigen;
 pub use crate::train::polish::IDENTIFIABILITY_LIMIT;
 
@@ -45,7 +45,7 @@ pub fn summarise(
     };
     let gap: f64 = r.iter().map(|v| v * v).sum();
     let (aic, bic) = criteria(gap, cells, x.len());
-    let columns = forward_differences(&residuals, &theta, &r, JACOBIAN_STEP);
+    let columns = objective.theta_jacobian(constraints, &theta);
     let errors = standard_errors(&columns, &r, x.len());
     let estimates: Vec<ParamEstimate> = (0..x.len())
         .map(|i| {

@@ -20,6 +20,7 @@ pub struct ModelSystem {
     rhs: CompiledRhs,
     jacobian: JacobianProgram,
     sensitivity: Option<JacobianProgram>,
+    extra: usize,
     slots: Vec<f64>,
     scratch: Vec<f64>,
     values: Vec<f64>,
@@ -43,16 +44,25 @@ impl ModelSystem {
             rhs,
             jacobian,
             sensitivity: None,
+            extra: 0,
             scratch: Vec::new(),
             combined: Vec::new(),
         })
     }
 
     /// Takes forward sensitivities with respect to the quantities in `slots` (params,
-    /// closure outputs held as corrections, ...) from now on.
-    pub fn differentiate_by(&mut self, model: &Model, slots: &[usize]) -> Result<(), CompileError> {
+    /// closure outputs held as corrections, ...) from now on, followed by `extra` columns
+    /// that the balances do not depend on (initial values: their sensitivities only start
+    /// non-zero).
+    pub fn differentiate_by(
+        &mut self,
+        model: &Model,
+        slots: &[usize],
+        extra: usize,
+    ) -> Result<(), CompileError> {
         let wrt: Vec<usize> = self.states.clone().chain(slots.iter().copied()).collect();
         self.sensitivity = Some(JacobianProgram::balances(model, &self.layout, &wrt)?);
+        self.extra = extra;
         Ok(())
     }
 
@@ -94,9 +104,9 @@ impl OdeSystem for ModelSystem {
     }
 
     fn sensitivity_params(&self) -> usize {
-        self.sensitivity
-            .as_ref()
-            .map_or(0, |program| program.columns() - self.states.len())
+        (self.sensitivity.as_ref()).map_or(0, |program| {
+            program.columns() - self.states.len() + self.extra
+        })
     }
 
     fn sensitivity_jacobians(&mut self, t: f64, y: &[f64], states: &mut [f64], params: &mut [f64]) {
@@ -112,11 +122,12 @@ impl OdeSystem for ModelSystem {
             &mut self.values,
             &mut self.combined,
         );
-        let p = columns - n;
+        let (slots, p) = (columns - n, columns - n + self.extra);
         for i in 0..n {
             let row = &self.combined[i * columns..(i + 1) * columns];
             states[i * n..(i + 1) * n].copy_from_slice(&row[..n]);
-            params[i * p..(i + 1) * p].copy_from_slice(&row[n..]);
+            params[i * p..i * p + slots].copy_from_slice(&row[n..]);
+            params[i * p + slots..(i + 1) * p].fill(0.0);
         }
     }
 }

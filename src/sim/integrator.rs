@@ -74,6 +74,12 @@ impl Integrator {
         self.implicit_step = None;
     }
 
+    /// Makes the step budget whole again, keeping the method choice (a new stretch of the
+    /// same run, e.g. the next one-step prediction along a record).
+    pub fn renew_budget(&mut self) {
+        self.attempts = 0;
+    }
+
     /// Work done since the integrator was made, both methods together.
     pub fn stats(&self) -> Stats {
         let mut stats = self.explicit.stats();

@@ -20,7 +20,7 @@ use super::system::{OdeSystem, Stats};
 use crate::numeric::Lu;
 
 /// `out = a b + c` for `a` (`n x n`), `b` and `c` (`n x p`), row-major.
-pub(super) fn multiply_add(a: &[f64], b: &[f64], c: &[f64], n: usize, p: usize, out: &mut [f64]) {
+pub fn multiply_add(a: &[f64], b: &[f64], c: &[f64], n: usize, p: usize, out: &mut [f64]) {
     for i in 0..n {
         let row = &mut out[i * p..(i + 1) * p];
         row.copy_from_slice(&c[i * p..(i + 1) * p]);

@@ -16,7 +16,7 @@ fn system(model: &Model, params: &[f64]) -> ModelSystem {
     let range = system.layout().param_range();
     system.slots_mut()[range.clone()].copy_from_slice(params);
     let slots: Vec<usize> = range.collect();
-    system.differentiate_by(model, &slots).unwrap();
+    system.differentiate_by(model, &slots, 0).unwrap();
     system
 }
 
