@@ -95,6 +95,27 @@ pub struct SimulateArgs {
     /// Absolute tolerance of the integrator.
     #[arg(long, default_value = "1e-12", allow_negative_numbers = true)]
     pub atol: f64,
+    /// Most integration steps in the whole run before it stops with an error that names the
+    /// fastest balance.
+    #[arg(long, value_name = "N", default_value_t = crate::sim::DEFAULT_MAX_STEPS)]
+    pub max_steps: usize,
+    /// Integration method: `auto` (explicit Dormand–Prince, Radau IIA where the balances
+    /// turn stiff), `explicit` or `implicit`.
+    #[arg(long, value_name = "METHOD", default_value = "auto", value_parser = parse_method)]
+    pub integrator: crate::sim::Method,
+}
+
+/// `--integrator auto|explicit|implicit`.
+fn parse_method(text: &str) -> Result<crate::sim::Method, String> {
+    use crate::sim::Method;
+    match text {
+        "auto" => Ok(Method::Auto),
+        "explicit" => Ok(Method::Explicit),
+        "implicit" => Ok(Method::Implicit),
+        other => Err(format!(
+            "expected `auto`, `explicit` or `implicit`, found `{other}`"
+        )),
+    }
 }
 
 /// A problem with the arguments of `gbc simulate` itself.
@@ -229,6 +250,8 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
             atol: args.atol,
         },
         initial: initial_values(&model, &args.init)?,
+        max_steps: args.max_steps,
+        method: args.integrator,
         ..SimOptions::new(args.t_end, dt)
     };
     // The stage starts before the warm-up; its total is known from the first sample on.

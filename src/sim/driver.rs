@@ -167,9 +167,18 @@ pub fn simulate_with_progress(
         times: &times,
     };
     let stats = match model.dynamics {
-        Dynamics::Continuous => run.continuous(&mut system, &mut state, &mut record)?,
-        Dynamics::Discrete => run.discrete(&mut system, &mut state, &mut record)?,
-    };
+        Dynamics::Continuous => run.continuous(&mut system, &mut state, &mut record),
+        Dynamics::Discrete => run.discrete(&mut system, &mut state, &mut record),
+    }
+    .map_err(|error| match error {
+        SimError::Integration(error) => {
+            let names: Vec<String> = (model.states.iter().chain(&model.hidden))
+                .map(|state| state.name.clone())
+                .collect();
+            SimError::Integration(error.named(&names))
+        }
+        other => other,
+    })?;
     let hidden = columns.split_off(model.states.len());
     let algebraic = evaluate_algebraic(model, system.layout(), inputs, &times, &columns, &hidden)?;
     Ok(Trajectory {

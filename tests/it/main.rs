@@ -11,4 +11,5 @@ mod lsp;
 mod parser;
 mod records;
 mod safety;
+mod stiff;
 mod whatif;
