@@ -83,13 +83,16 @@ pub(super) type Record<'a> = dyn FnMut(usize, &[f64], &[f64]) + 'a;
 pub enum Reached {
     /// The end of the stretch.
     End,
-    /// The stiffness monitor stopped at `t` (the state and sensitivities are there, and
-    /// the first `recorded` samples are recorded).
+    /// The method hands over at `t` (the state and sensitivities are there, and the first
+    /// `recorded` samples are recorded): the explicit method found the stretch stiff, or
+    /// the implicit method found it calm or not worth its cost.
     Stiff {
         /// Time reached.
         t: f64,
         /// Samples recorded.
         recorded: usize,
+        /// The step size the method was taking.
+        step: f64,
     },
 }
 
@@ -258,6 +261,7 @@ impl Dopri5 {
                     return Ok(Reached::Stiff {
                         t: stepper.t,
                         recorded,
+                        step: stepper.h,
                     });
                 }
             } else {

@@ -28,6 +28,10 @@ const CALM_CHECK: usize = 10;
 /// The explicit method takes over where `h * |J|` is below this (well inside its
 /// stability region, whose real extent is about 3.3).
 const CALM_PRODUCT: f64 = 1.0;
+/// An implicit step costs a few explicit ones (three stages, Newton iterations, two LU
+/// factorisations): the implicit method keeps a stretch only where its steps are at least
+/// this many times the explicit method's.
+const WORTH: f64 = 4.0;
 
 /// A reusable integrator with automatic method choice (owns its work arrays).
 #[derive(Debug, Clone)]
@@ -36,6 +40,11 @@ pub struct Integrator {
     budget: usize,
     attempts: usize,
     stiff: bool,
+    /// Whether the explicit method watches for stiffness (off for the rest of a run once
+    /// the implicit method was not worth its cost).
+    monitor: bool,
+    /// The explicit method's step where it last handed over.
+    explicit_step: f64,
     implicit_step: Option<f64>,
     explicit: Dopri5,
     implicit: Radau,
@@ -55,6 +64,8 @@ impl Integrator {
             budget,
             attempts: 0,
             stiff: method == Method::Implicit,
+            monitor: method == Method::Auto,
+            explicit_step: 0.0,
             implicit_step: None,
             explicit: Dopri5::new(dim, tolerances, budget),
             implicit: Radau::new(dim, tolerances),
@@ -71,6 +82,7 @@ impl Integrator {
     pub fn restart(&mut self) {
         self.attempts = 0;
         self.stiff = self.method == Method::Implicit;
+        self.monitor = self.method == Method::Auto;
         self.implicit_step = None;
     }
 
@@ -160,8 +172,16 @@ impl Integrator {
             };
             match result? {
                 Reached::End => return Ok(()),
-                Reached::Stiff { t: at, recorded } => {
+                Reached::Stiff {
+                    t: at,
+                    recorded,
+                    step,
+                } => {
                     (t, done) = (at, done + recorded);
+                    if !self.stiff {
+                        self.explicit_step = step;
+                        self.implicit_step = Some(step);
+                    }
                     self.stiff = !self.stiff;
                     self.switches += 1;
                 }
@@ -192,7 +212,7 @@ impl Integrator {
             _ => None,
         };
         let options = Options {
-            monitor_stiffness: self.method == Method::Auto,
+            monitor_stiffness: self.monitor,
             sensitivity,
         };
         let mut shifted = |k: usize, y: &[f64], s: &[f64]| record(offset + k, y, s);
@@ -239,9 +259,13 @@ impl Integrator {
                 next += self.record_implicit(samples, next, offset, with, record);
                 steps += 1;
                 let check = self.method == Method::Auto && steps % CALM_CHECK == 0;
-                if check && self.implicit.time() < t1 && self.calm(system) {
-                    let t = self.implicit.time();
-                    reached = Reached::Stiff { t, recorded: next };
+                if check && self.implicit.time() < t1 && self.hand_back(system) {
+                    let (t, step) = (self.implicit.time(), self.implicit.step_size());
+                    reached = Reached::Stiff {
+                        t,
+                        recorded: next,
+                        step,
+                    };
                     break;
                 }
             }
@@ -312,6 +336,17 @@ impl Integrator {
             count += 1;
         }
         count
+    }
+
+    /// Whether the explicit method should take the stretch back: the implicit steps are not
+    /// [`WORTH`] times the explicit ones (then the monitor stays off for the rest of the
+    /// run), or the stretch has calmed down.
+    fn hand_back<S: OdeSystem>(&mut self, system: &mut S) -> bool {
+        if self.implicit.step_size() < WORTH * self.explicit_step {
+            self.monitor = false;
+            return true;
+        }
+        self.calm(system)
     }
 
     /// Whether the explicit method would be stable at the implicit method's step: `h` times

@@ -223,3 +223,68 @@ fn the_budget_counts_the_whole_run_across_stretches() {
         .integrate(&mut Robertson, (0.0, 1e-3), &mut y, &[], |_, _| {})
         .unwrap();
 }
+
+/// An oscillator `x'' = -w^2 x` that a fast lag `z' = -k (z - x)` follows: stiff for the
+/// explicit method's stability, yet the oscillation keeps every method's steps short.
+struct FollowedOscillator {
+    frequency: f64,
+    rate: f64,
+}
+
+impl FollowedOscillator {
+    /// `(x, v, z)` at `t` from `(1, 0, 1)`.
+    fn exact(&self, t: f64) -> [f64; 3] {
+        let (w, k) = (self.frequency, self.rate);
+        let (sin, cos) = (w * t).sin_cos();
+        let (a, b) = (k * k / (k * k + w * w), k * w / (k * k + w * w));
+        [
+            cos,
+            -w * sin,
+            a * cos + b * sin + (1.0 - a) * (-k * t).exp(),
+        ]
+    }
+}
+
+impl OdeSystem for FollowedOscillator {
+    fn dim(&self) -> usize {
+        3
+    }
+    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) {
+        dydt[0] = y[1];
+        dydt[1] = -self.frequency.powi(2) * y[0];
+        dydt[2] = -self.rate * (y[2] - y[0]);
+    }
+    fn jacobian(&mut self, _t: f64, _y: &[f64], jacobian: &mut [f64]) {
+        let (w2, k) = (self.frequency.powi(2), self.rate);
+        jacobian.copy_from_slice(&[0.0, 1.0, 0.0, -w2, 0.0, 0.0, k, 0.0, -k]);
+    }
+}
+
+#[test]
+fn the_implicit_method_hands_back_a_stretch_it_is_not_worth() {
+    // The explicit steps are held at the lag's stability limit (3.3 / 5000), the implicit
+    // ones at the oscillation's accuracy limit, not much longer: after one trial of ten
+    // steps the explicit method keeps the run.
+    let mut system = FollowedOscillator {
+        frequency: 10.0,
+        rate: 5000.0,
+    };
+    let tolerances = Tolerances {
+        rtol: 1e-10,
+        atol: 1e-12,
+    };
+    let mut integrator = Integrator::new(3, tolerances, 1_000_000, Method::Auto);
+    let mut y = [1.0, 0.0, 1.0];
+    let mut last = Vec::new();
+    integrator
+        .integrate(&mut system, (0.0, 5.0), &mut y, &[5.0], |_, y| {
+            last = y.to_vec()
+        })
+        .unwrap();
+    let stats = integrator.stats();
+    assert!(stats.switches == 2 && stats.implicit == 10, "{stats:?}");
+    let exact = system.exact(5.0);
+    for k in 0..3 {
+        assert!((last[k] - exact[k]).abs() < 1e-8, "{last:?} vs {exact:?}");
+    }
+}
