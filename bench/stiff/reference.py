@@ -300,11 +300,6 @@ def main():
         entry = {"file": f"bench/stiff/{name}", "params": params_with(ks), "rtol": 1e-10,
                  "atol": 1e-14, "nfev": nfev, "wall_s": wall,
                  "stiffness_fed_phase": stiffness(experiments, runs, params_with(ks))}
-        st = entry["stiffness_fed_phase"]
-        print(f"    fed phase: |lambda|max median {st['lambda_median_per_h']:.3g} /h, max "
-              f"{st['lambda_max_per_h']:.3g} /h (time constants {st['time_constant_median_s']:.3g} s, "
-              f"{st['time_constant_min_s']:.3g} s); max * run = {st['lambda_max_times_run']:.3g}",
-              file=sys.stderr)
         if args.check:
             fine, _ = run_all(experiments, params_with(ks), rtol=1e-12, atol=1e-16)
             entry["error_vs_rtol_1e-12"] = max_rel_error(runs, fine)
@@ -313,6 +308,11 @@ def main():
               f"{len(experiments)} batches, nfev {nfev}, {wall:.1f} s"
               + ("; estimated error " + " ".join(f"{k} {v:.1e}" for k, v in entry["error_vs_rtol_1e-12"].items())
                  if args.check else ""), file=sys.stderr)
+        st = entry["stiffness_fed_phase"]
+        print(f"    fed phase: |lambda|max median {st['lambda_median_per_h']:.3g} /h, max "
+              f"{st['lambda_max_per_h']:.3g} /h (time constants {st['time_constant_median_s']:.3g} s, "
+              f"{st['time_constant_min_s']:.3g} s); max * run = {st['lambda_max_times_run']:.3g}",
+              file=sys.stderr)
     feeds = write_feeds(experiments)
     write_params_file(HERE / "params_ks2.7e-6.json", params_with(SMALL_KS))
     print("gbc, declared params (one run per batch):")
