@@ -144,11 +144,35 @@ def segments(breaks, levels, t0, t1):
     return [(a, b, feed_at(breaks, levels, a)) for a, b in zip(edges[:-1], edges[1:])]
 
 
+class BudgetExceeded(RuntimeError):
+    """A run took more right-hand-side evaluations than its budget (see Budget)."""
+
+
+class Budget:
+    """Counts right-hand-side evaluations across the runs it is passed to and raises
+    BudgetExceeded past `limit` (None: no limit). The fit uses it as gbc diagnose uses its
+    20000-step limit per interval: a run at wild params that would take far longer than
+    usual is declared failed, so that the optimiser steps back."""
+
+    def __init__(self, limit=None):
+        self.limit, self.count = limit, 0
+
+    def wrap(self, f):
+        def counted(t, y):
+            self.count += 1
+            if self.limit is not None and self.count > self.limit:
+                raise BudgetExceeded(f"more than {self.limit} right-hand-side evaluations")
+            return f(t, y)
+
+        return counted
+
+
 def simulate(model, y0, breaks, levels, times, method="Radau", rtol=1e-10, atol=1e-14,
-             use_jac=True):
+             use_jac=True, budget=None):
     """States at `times` (sorted, times[0] the start) from y0, restarting the integrator at
     every feed change. Returns (array len(times) x 4, number of rhs evaluations). `atol`
-    may be a scalar or one value per state."""
+    may be a scalar or one value per state; `budget` an optional Budget."""
+    budget = budget or Budget()
     times = np.asarray(times, dtype=float)
     out = np.empty((len(times), 4))
     out[0] = y0
@@ -160,7 +184,7 @@ def simulate(model, y0, breaks, levels, times, method="Radau", rtol=1e-10, atol=
         if use_jac and method in ("Radau", "BDF", "LSODA"):
             kwargs["jac"] = lambda t, y, F=F: model.jac(t, y, F)
         sol = solve_ivp(
-            lambda t, y, F=F: model.rhs(t, y, F),
+            budget.wrap(lambda t, y, F=F: model.rhs(t, y, F)),
             (a, b),
             y,
             method=method,
@@ -178,10 +202,12 @@ def simulate(model, y0, breaks, levels, times, method="Radau", rtol=1e-10, atol=
     return out, nfev
 
 
-def simulate_sens(model, y0, breaks, levels, times, method="Radau", rtol=1e-8, atol=1e-10):
+def simulate_sens(model, y0, breaks, levels, times, method="Radau", rtol=1e-8, atol=1e-10,
+                  budget=None):
     """States and their forward sensitivities to log(params) at `times`: returns
     (states len(times) x 4, sens len(times) x 4 x 6, rhs evaluations). The initial state
-    does not depend on the params (cells or declared numbers)."""
+    does not depend on the params (cells or declared numbers). `budget`: see simulate."""
+    budget = budget or Budget()
     npar = len(PARAMS)
     pvals = np.array(model.p)
     times = np.asarray(times, dtype=float)
@@ -206,7 +232,7 @@ def simulate_sens(model, y0, breaks, levels, times, method="Radau", rtol=1e-8, a
         inside = times[(times > a) & (times <= b)]
         t_eval = np.append(inside, b) if (len(inside) == 0 or inside[-1] != b) else inside
         sol = solve_ivp(
-            lambda t, z, F=F: f(t, z, F),
+            budget.wrap(lambda t, z, F=F: f(t, z, F)),
             (a, b),
             z,
             method=method,

@@ -19,7 +19,12 @@ gbc diagnose's default split at SHARE = 0.3 (the free run still starts at row 0)
 Integration: scipy LSODA (default; --method Radau) at rtol 1e-8, atol 1e-10, analytic
 Jacobian. Jacobian of the residuals: forward sensitivities to log(params) integrated with
 the states (default), or --jacobian 2-point (scipy's finite differences, relative step
---diff-step). Starts: the declared values, then --starts - 1 log-normal perturbations
+--diff-step). A run that takes more than --budget right-hand-side evaluations (default
+1e6 per objective or Jacobian evaluation, about 40 times a usual one) counts as failed:
+its residuals are all 1e3, so least_squares rejects the step and shrinks its trust region,
+as gbc diagnose's runs fail past 20000 steps per interval. Without it, LSODA's method
+switching can stall for minutes at the wild params a first step may try (K_S ~ 5e-6 g/L,
+Y_XS ~ 0.04, K_I ~ 250 g/L). Starts: the declared values, then --starts - 1 log-normal perturbations
 theta0 + --spread * N(0, 1) drawn with --seed.
 
 Prints a summary and writes bench/stiff/fit_scipy.json (--json): best gap, params, the
@@ -70,11 +75,13 @@ def train_end(experiment, share):
 
 
 class Problem:
-    def __init__(self, experiments, share, method, rtol, atol):
+    def __init__(self, experiments, share, method, rtol, atol, budget=None):
         decl = fm.declared()
         self.consts = decl["consts"]
         self.init = decl["init"]
         self.method, self.rtol, self.atol = method, rtol, atol
+        self.budget = budget
+        self.failed = 0
         self.parts = []  # (experiment, times up to train end, mask rows x states, data)
         pooled = {s: [] for s in fm.STATES}
         for e in experiments:
@@ -95,17 +102,25 @@ class Problem:
         return dict(zip(fm.PARAMS, np.exp(theta)))
 
     def _runs(self, theta, sens):
+        budget = fm.Budget(self.budget)
+        try:
+            return self._run_all(theta, sens, budget)
+        finally:
+            self.rhs_evals += budget.count
+
+    def _run_all(self, theta, sens, budget):
         model = fm.FedBatch(self.params(theta), self.consts)
         res, jac = [], []
         for e, times, mask, cells in self.parts:
             y0 = fm.start_state(e, self.init)
             if sens:
-                states, s, n = fm.simulate_sens(model, y0, e["breaks"], e["levels"], times,
-                                                method=self.method, rtol=self.rtol, atol=self.atol)
+                states, s, _ = fm.simulate_sens(model, y0, e["breaks"], e["levels"], times,
+                                                method=self.method, rtol=self.rtol, atol=self.atol,
+                                                budget=budget)
             else:
-                states, n = fm.simulate(model, y0, e["breaks"], e["levels"], times,
-                                        method=self.method, rtol=self.rtol, atol=self.atol)
-            self.rhs_evals += n
+                states, _ = fm.simulate(model, y0, e["breaks"], e["levels"], times,
+                                        method=self.method, rtol=self.rtol, atol=self.atol,
+                                        budget=budget)
             for k in range(4):
                 rows = mask[:, k]
                 res.append((states[rows, k] - cells[rows, k]) / self.std[k] / self.scale)
@@ -119,6 +134,7 @@ class Problem:
         try:
             r, _ = self._runs(theta, False)
         except (RuntimeError, FloatingPointError, ValueError):
+            self.failed += 1
             return np.full(self.cells, FAILED)
         return r if np.all(np.isfinite(r)) else np.full(self.cells, FAILED)
 
@@ -127,6 +143,7 @@ class Problem:
         try:
             _, J = self._runs(theta, True)
         except (RuntimeError, FloatingPointError, ValueError):
+            self.failed += 1
             return np.zeros((self.cells, len(theta)))
         return J if np.all(np.isfinite(J)) else np.zeros((self.cells, len(theta)))
 
@@ -149,12 +166,16 @@ def main():
     ap.add_argument("--jacobian", default="sens", choices=["sens", "2-point"])
     ap.add_argument("--diff-step", type=float, default=1e-6)
     ap.add_argument("--max-nfev", type=int, default=200)
+    ap.add_argument("--budget", type=float, default=1e6,
+                    help="right-hand-side evaluations per objective or Jacobian evaluation before "
+                         "the run counts as failed (0: no limit)")
     ap.add_argument("--tol", type=float, default=1e-10, help="ftol, xtol and gtol of least_squares")
     ap.add_argument("--json", default=str(HERE / "fit_scipy.json"))
     args = ap.parse_args()
 
     experiments = fm.read_record(args.record)
-    problem = Problem(experiments, args.val_fraction, args.method, args.rtol, args.atol)
+    problem = Problem(experiments, args.val_fraction, args.method, args.rtol, args.atol,
+                      int(args.budget) if args.budget > 0 else None)
     declared = fm.declared()["params"]
     theta0 = np.log([declared[p] for p in fm.PARAMS])
     truth = json.loads(fm.TRUTH.read_text())["params"] if fm.TRUTH.exists() else None
@@ -171,7 +192,7 @@ def main():
     results = []
     total = time.perf_counter()
     for i, start in enumerate(starts):
-        problem.nfev = problem.njev = problem.rhs_evals = 0
+        problem.nfev = problem.njev = problem.rhs_evals = problem.failed = 0
         t0 = time.perf_counter()
         sol = least_squares(
             problem.residuals, start,
@@ -187,11 +208,11 @@ def main():
             "message": sol.message, "nfev": int(sol.nfev),
             "njev": int(sol.njev) if sol.njev is not None else None,
             "residual_evals": problem.nfev, "jacobian_evals": problem.njev,
-            "ode_rhs_evals": problem.rhs_evals, "wall_s": wall,
+            "ode_rhs_evals": problem.rhs_evals, "failed_runs": problem.failed, "wall_s": wall,
         }
         results.append(row)
         print(f"start {i}: gap {row['gap_start']:.5g} -> {gap:.6g}, {sol.nfev} residuals, "
-              f"{row['njev']} Jacobians, {wall:.1f} s, status {sol.status}; "
+              f"{row['njev']} Jacobians, {problem.failed} failed, {wall:.1f} s, status {sol.status}; "
               + " ".join(f"{k} {v:.4g}" for k, v in row["params"].items()), file=sys.stderr, flush=True)
     total = time.perf_counter() - total
     best = min(results, key=lambda r: r["gap"])
