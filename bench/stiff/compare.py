@@ -164,7 +164,7 @@ def main():
         err = r["max_rel_error"]
         err_text = " ".join(f"{k} {v:.1e}" for k, v in err.items()) if err else "-"
         sc = scipy.get(r["case"], {})
-        sc_text = ", ".join(f"{k}: {v:.2f}" for k, v in sc.items()) if sc else "-"
+        sc_text = ", ".join(f"{k}: {v:.3g}" for k, v in sc.items()) if sc else "-"
         print(f"| {r['case']} | {r['status']} | {r['runs']}/{r['runs_expected']} | "
               f"{r['gbc_wall_s']:.2f} | {err_text} | {sc_text} |")
         r["scipy_median_s"] = sc
