@@ -4,9 +4,11 @@
 //! pairs, the chemostat grey-box model at 500; batch 50), each precision and each step
 //! implementation (`graph`, what `gbc train` runs, and `fused`, the hand-fused step of
 //! `src/fused/`) it prints the median time of one Adam step and of one epoch. It also times
-//! a 3000 h simulation of the bioreactor truth model and, with `--full`, one paper-scale
-//! training end to end. `--json FILE` writes every measurement. Run it from the repository
+//! a 3000 h simulation of the bioreactor truth model, the stiff integrations of
+//! `models/stiff/` ([`stiff`]) and, with `--full`, one paper-scale training end to end. `--json FILE` writes every measurement. Run it from the repository
 //! root (or pass `--root`); docs/performance.md has the numbers and the peer comparison.
+
+mod stiff;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -82,7 +84,7 @@ pub struct BenchArgs {
     /// left out: both precisions, both engines, 20 epochs), shared with `gbc train`.
     #[command(flatten)]
     pub settings: TrainingFlags,
-    /// Do not time the simulation of the bioreactor truth model.
+    /// Do not time the simulations (the bioreactor truth model, the stiff models).
     #[arg(long)]
     pub no_simulation: bool,
     /// Also time one paper-scale training end to end (GB2, 1000 pairs, the paper's recipe,
@@ -129,6 +131,7 @@ struct Measurements {
     cores: usize,
     training: Vec<TrainingRow>,
     simulation: Option<SimulationRow>,
+    stiff: Vec<stiff::StiffRow>,
     full: Option<FullRow>,
 }
 
@@ -143,6 +146,7 @@ pub fn run(args: &BenchArgs) -> CommandResult {
         cores: std::thread::available_parallelism().map_or(1, usize::from),
         training: Vec::new(),
         simulation: None,
+        stiff: Vec::new(),
         full: None,
     };
     println!(
@@ -165,6 +169,17 @@ pub fn run(args: &BenchArgs) -> CommandResult {
             simulation.median_seconds * 1e3
         );
         measurements.simulation = Some(simulation);
+        for row in stiff::time_stiff(&args.root)? {
+            println!(
+                "{}: {:.2} ms ({} runs, {} steps, {} implicit)",
+                row.case,
+                row.median_seconds * 1e3,
+                row.runs,
+                row.accepted,
+                row.implicit
+            );
+            measurements.stiff.push(row);
+        }
     }
     if args.full {
         let full = time_full_training(&args.root, args.full_epochs)?;

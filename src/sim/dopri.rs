@@ -98,8 +98,9 @@ pub enum Reached {
 
 /// What to do besides stepping.
 pub(super) struct Options<'s> {
-    /// Stop when the stretch is found stiff.
-    pub monitor_stiffness: bool,
+    /// Stop when the stretch is found stiff, after at least this many accepted steps
+    /// (`None`: never).
+    pub monitor_stiffness: Option<usize>,
     /// Forward sensitivities to carry along.
     pub sensitivity: Option<&'s mut Explicit>,
 }
@@ -170,7 +171,7 @@ impl Dopri5 {
         mut record: impl FnMut(usize, &[f64]),
     ) -> Result<(), IntegrationError> {
         let options = Options {
-            monitor_stiffness: false,
+            monitor_stiffness: None,
             sensitivity: None,
         };
         self.advance(
@@ -217,7 +218,7 @@ impl Dopri5 {
             last_rejected: false,
             last_non_finite: false,
             attempts: 0,
-            monitor: Monitor::default(),
+            monitor: Monitor::new(options.monitor_stiffness.unwrap_or(usize::MAX)),
         };
         while stepper.t < t1 {
             let last = self.check_step(system, &mut stepper, y)?;
@@ -232,8 +233,8 @@ impl Dopri5 {
             if error <= 1.0 {
                 let step_end = if last { t1 } else { stepper.t + stepper.h };
                 let step = (step_end, stepper.h);
-                let stiff =
-                    options.monitor_stiffness && self.stiffness(system, &mut stepper.monitor, step);
+                let stiff = options.monitor_stiffness.is_some()
+                    && self.stiffness(system, &mut stepper.monitor, step);
                 while let Some((k, _)) = pending.next_if(|&(_, &s)| s <= step_end) {
                     let sample = samples[k];
                     self.interpolate(stepper.t, stepper.h, step_end, sample, y);

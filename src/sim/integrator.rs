@@ -9,6 +9,7 @@ use super::dopri::{Dopri5, Options, Reached, Record};
 use super::error::IntegrationError;
 use super::radau::Radau;
 use super::sensitivity::{Explicit, Implicit};
+use super::stiffness::STIFF_WORK;
 use super::system::{OdeSystem, Stats, Tolerances};
 
 /// Which method integrates.
@@ -29,9 +30,13 @@ const CALM_CHECK: usize = 10;
 /// stability region, whose real extent is about 3.3).
 const CALM_PRODUCT: f64 = 1.0;
 /// An implicit step costs a few explicit ones (three stages, Newton iterations, two LU
-/// factorisations): the implicit method keeps a stretch only where its steps are at least
-/// this many times the explicit method's.
+/// factorisations): the implicit method keeps a stretch only where its steps reach this
+/// many times the explicit method's, or still grow (by [`GROWING`] between checks).
 const WORTH: f64 = 4.0;
+/// Growth of the implicit step between two checks that counts as still growing.
+const GROWING: f64 = 2.0;
+/// After a lost trial, the explicit method waits this many times longer before the next.
+const BACKOFF: usize = 4;
 
 /// A reusable integrator with automatic method choice (owns its work arrays).
 #[derive(Debug, Clone)]
@@ -40,9 +45,11 @@ pub struct Integrator {
     budget: usize,
     attempts: usize,
     stiff: bool,
-    /// Whether the explicit method watches for stiffness (off for the rest of a run once
-    /// the implicit method was not worth its cost).
-    monitor: bool,
+    /// Accepted explicit steps in a stretch before it may be declared stiff (`None`: never):
+    /// [`STIFF_WORK`], four times more after each trial the implicit method lost.
+    monitor: Option<usize>,
+    /// The implicit step at the last check of the current implicit stretch.
+    checked_step: f64,
     /// The explicit method's step where it last handed over.
     explicit_step: f64,
     implicit_step: Option<f64>,
@@ -64,7 +71,8 @@ impl Integrator {
             budget,
             attempts: 0,
             stiff: method == Method::Implicit,
-            monitor: method == Method::Auto,
+            monitor: (method == Method::Auto).then_some(STIFF_WORK),
+            checked_step: 0.0,
             explicit_step: 0.0,
             implicit_step: None,
             explicit: Dopri5::new(dim, tolerances, budget),
@@ -82,7 +90,7 @@ impl Integrator {
     pub fn restart(&mut self) {
         self.attempts = 0;
         self.stiff = self.method == Method::Implicit;
-        self.monitor = self.method == Method::Auto;
+        self.monitor = (self.method == Method::Auto).then_some(STIFF_WORK);
         self.implicit_step = None;
     }
 
@@ -253,6 +261,9 @@ impl Integrator {
         if t1 > t0 {
             self.implicit
                 .start(system, (t0, t1), y, self.implicit_step)?;
+            // A restart (an input switch) may begin with a transient of short steps: the
+            // first check of a stretch only sees the steps grow.
+            self.checked_step = 0.0;
             let mut steps = 0;
             while self.implicit.time() < t1 {
                 self.implicit_step(system, with)?;
@@ -338,12 +349,16 @@ impl Integrator {
         count
     }
 
-    /// Whether the explicit method should take the stretch back: the implicit steps are not
-    /// [`WORTH`] times the explicit ones (then the monitor stays off for the rest of the
-    /// run), or the stretch has calmed down.
+    /// Whether the explicit method should take the stretch back: the implicit steps neither
+    /// reach [`WORTH`] times the explicit ones nor still grow (a lost trial: the explicit
+    /// method then waits [`BACKOFF`] times longer before the next), or the stretch has
+    /// calmed down.
     fn hand_back<S: OdeSystem>(&mut self, system: &mut S) -> bool {
-        if self.implicit.step_size() < WORTH * self.explicit_step {
-            self.monitor = false;
+        let step = self.implicit.step_size();
+        let growing = step > GROWING * self.checked_step;
+        self.checked_step = step;
+        if step < WORTH * self.explicit_step && !growing {
+            self.monitor = self.monitor.map(|work| work.saturating_mul(BACKOFF));
             return true;
         }
         self.calm(system)

@@ -1,6 +1,6 @@
 //! The explicit method's stiffness monitor: whether a stretch has turned stiff, so that
 //! [`super::Integrator`] hands it to the implicit method. Two tests, either suffices once
-//! the stretch has cost [`STIFF_WORK`] steps: Hairer's (Hairer and Wanner II, section
+//! the stretch has cost [`STIFF_WORK`] steps (more after an unprofitable trial): Hairer's (Hairer and Wanner II, section
 //! IV.2), `h |lambda|` estimated from the last two stages at the edge of the stability
 //! region; and the spectral radius of the exact Jacobian times the step.
 
@@ -26,15 +26,30 @@ const POWER_ITERATIONS: usize = 8;
 /// Accepted steps in a stretch before it may be declared stiff: a short stretch costs
 /// little explicit, and the explicit method's results are the reference for a system that
 /// is only mildly stiff here and there.
-const STIFF_WORK: usize = 100;
+pub(super) const STIFF_WORK: usize = 100;
 
 /// The monitor's counters over one stretch.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 pub(super) struct Monitor {
+    /// Accepted steps before the stretch may be declared stiff.
+    pub work: usize,
     accepted: usize,
     stiff_steps: usize,
     non_stiff_steps: usize,
     radius_checks: usize,
+}
+
+impl Monitor {
+    /// A monitor that waits `work` accepted steps before any verdict.
+    pub fn new(work: usize) -> Self {
+        Monitor {
+            work,
+            accepted: 0,
+            stiff_steps: 0,
+            non_stiff_steps: 0,
+            radius_checks: 0,
+        }
+    }
 }
 
 impl Dopri5 {
@@ -43,8 +58,8 @@ impl Dopri5 {
     /// as `h |k7 - k6| / |y7 - y6|` at the edge of the stability region for [`STIFF_STEPS`]
     /// steps (not interrupted by [`NON_STIFF_STEPS`] inside it), or every [`RADIUS_CHECK`]
     /// steps the spectral radius of the exact Jacobian times the step above
-    /// [`RADIUS_PRODUCT`] [`RADIUS_CHECKS`] times in a row; never before [`STIFF_WORK`]
-    /// steps.
+    /// [`RADIUS_PRODUCT`] [`RADIUS_CHECKS`] times in a row; never before `monitor.work`
+    /// steps (at least [`STIFF_WORK`]).
     pub(super) fn stiffness<S: OdeSystem>(
         &mut self,
         system: &mut S,
@@ -53,7 +68,7 @@ impl Dopri5 {
     ) -> bool {
         monitor.accepted += 1;
         let hairer = self.hairer_test(monitor, h);
-        if monitor.accepted < STIFF_WORK {
+        if monitor.accepted < monitor.work {
             return false;
         }
         if hairer {
