@@ -76,7 +76,7 @@ pub enum Command {
     Check(check::CheckArgs),
     /// Compile a model and print a stage of it (AST or IR).
     Compile(compile::CompileArgs),
-    /// Simulate a model without closures (adaptive Dormand–Prince), or a trained one
+    /// Simulate a model without closures (adaptive Dormand–Prince, Radau IIA where stiff), or a trained one
     /// (`--weights`: a what-if run), writing a CSV record.
     Simulate(simulate::SimulateArgs),
     /// Train a grey-box (or black-box) model on a data record.
