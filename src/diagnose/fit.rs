@@ -92,15 +92,16 @@ impl Objective<'_> {
         let params = self.simulator.params().min(x.len());
         let hidden = self.simulator.hidden_count();
         let per_record = self.per_record(x, |simulator, (index, record, rows), overrides| {
-            let (_, sensitivities) = simulator.sensitive_run(record, overrides, rows.end).ok()?;
             // The sensitivity column of each unknown: a param's own, or the initial value
             // of the state a fitted start belongs to (none: this experiment has no such).
             let fitted = self.split.fitted_indices(index, hidden);
+            let initial: Vec<usize> = (0..fitted.len()).filter(|&k| fitted[k].is_some()).collect();
+            let run = simulator.sensitive_run(record, overrides, rows.end, &initial);
+            let (_, sensitivities) = run.ok()?;
             let column = |unknown: usize| match unknown.checked_sub(params) {
                 None => Some(unknown),
-                Some(start) => {
-                    (fitted.iter().position(|f| *f == Some(start))).map(|state| params + state)
-                }
+                Some(start) => (initial.iter().position(|&k| fitted[k] == Some(start)))
+                    .map(|position| params + position),
             };
             let columns: Vec<Vec<f64>> = (0..x.len())
                 .map(|unknown| {

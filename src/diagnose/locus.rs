@@ -339,7 +339,8 @@ pub(super) fn synthesise(
     let vars: Vec<Var> = (0..outputs.len())
         .map(|output| Var::ClosureOutput { closure, output })
         .collect();
-    let simulator = Simulator::new(&model, &vars, tolerances())?;
+    let mut simulator = Simulator::new(&model, &vars, tolerances())?;
+    simulator.set_method(context.corrections);
     let mut loci = Vec::new();
     for member in &target.members {
         loci.push(match target.kind {

@@ -49,6 +49,7 @@ pub use split::MIN_ROWS;
 use crate::check::Checked;
 use crate::ir::{Constraint, Dynamics, Model};
 use crate::record::Record;
+use crate::sim::Method;
 use ranking::Blocks;
 use simulate::{tolerances, Simulator};
 use split::{Holdout, Split, Start};
@@ -148,6 +149,11 @@ pub struct Context<'a> {
     checked: &'a Checked,
     split: Split,
     blocks: Blocks,
+    /// How the corrected models of the loci integrate: explicitly where the model's own
+    /// free runs never turned stiff (a correction's wild trial values then fail fast, as
+    /// they should, instead of being integrated implicitly at great cost), automatically
+    /// where they did.
+    corrections: Method,
 }
 
 impl Context<'_> {
@@ -239,9 +245,14 @@ pub fn diagnose(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Report, DiagnoseError> {
     let started = Instant::now();
-    let context = context(problem, options)?;
+    let mut context = context(problem, options)?;
     let base = Simulator::new(context.model, &[], tolerances())?;
-    check_runs(&context, &base)?;
+    let stiff = check_runs(&context, &base)?;
+    context.corrections = if stiff {
+        Method::Auto
+    } else {
+        Method::Explicit
+    };
     progress(Progress::Stage {
         name: "fitting the model",
         total: 1,
@@ -417,6 +428,7 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
         checked: problem.checked,
         blocks: Blocks::new(&split),
         split,
+        corrections: Method::Auto,
     })
 }
 
@@ -459,7 +471,9 @@ fn check_options(options: &Options) -> Result<(), DiagnoseError> {
 }
 
 /// The model must run on every experiment with its declared params.
-fn check_runs(context: &Context, base: &Simulator) -> Result<(), DiagnoseError> {
+/// Whether the model's free runs at its declared values succeed (an error if not), and
+/// whether any of them turned stiff.
+fn check_runs(context: &Context, base: &Simulator) -> Result<bool, DiagnoseError> {
     let mut simulator = base.clone();
     let declared = context.unknowns(context.model, base).defaults;
     simulator.set_params(&declared);
@@ -474,7 +488,7 @@ fn check_runs(context: &Context, base: &Simulator) -> Result<(), DiagnoseError> 
                 reason: format!("experiment `{}`: {error}", record.name),
             })?;
     }
-    Ok(())
+    Ok(simulator.implicit_steps() > 0)
 }
 
 /// Where a measured state's run starts, in words.

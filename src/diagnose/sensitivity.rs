@@ -4,10 +4,10 @@
 //! integration per experiment instead of one per unknown, and derivatives of the very
 //! solution the residuals come from (the integrator's own steps, `crate::sim::sensitivity`).
 //!
-//! Columns: the model's params (declaration order), then the initial value of each state
-//! (measured, then hidden). A state that starts from its declared initial value starts
-//! with that expression's derivatives by the params; every state starts with a unit entry
-//! in its own initial-value column.
+//! Columns: the model's params (declaration order), then the initial values of the states
+//! asked for (those whose start is an unknown of the fit). A state that starts from its
+//! declared initial value starts with that expression's derivatives by the params; a state
+//! asked for starts with a unit entry in its own initial-value column.
 
 use super::simulate::{same_inputs, Run, Simulator};
 use crate::ir::Dynamics;
@@ -34,16 +34,19 @@ impl RunSensitivities {
 }
 
 impl Simulator {
-    /// The free run of [`Simulator::free_run`] and its sensitivities at every row.
+    /// The free run of [`Simulator::free_run`] and its sensitivities at every row, by the
+    /// params and by the initial values of the states in `initial` (in that order).
     pub fn sensitive_run(
         &mut self,
         record: &Record,
         overrides: &[Option<f64>],
         end: usize,
+        initial: &[usize],
     ) -> Result<(Run, RunSensitivities), IntegrationError> {
         self.integrator.restart();
+        self.system.set_extra_columns(initial.len());
         let mut state = self.start_state(record, overrides);
-        let mut s = self.initial_sensitivities(record, overrides);
+        let mut s = self.initial_sensitivities(record, overrides, initial);
         let (dim, columns) = (state.len(), s.len() / state.len().max(1));
         let mut run = Run {
             dim,
@@ -66,6 +69,7 @@ impl Simulator {
                 runs.extend_from_slice(y);
                 sens.extend_from_slice(s);
             };
+            self.integrator.renew_budget();
             self.advance_sensitive(record, rows, (&mut state, &mut s), &mut push)?;
             first = last;
         }
@@ -125,10 +129,15 @@ impl Simulator {
     }
 
     /// The sensitivities a free run of `record` starts with (see the module documentation).
-    fn initial_sensitivities(&mut self, record: &Record, overrides: &[Option<f64>]) -> Vec<f64> {
+    fn initial_sensitivities(
+        &mut self,
+        record: &Record,
+        overrides: &[Option<f64>],
+        initial: &[usize],
+    ) -> Vec<f64> {
         let dim = self.system.dim();
         let params = self.params();
-        let columns = params + dim;
+        let columns = params + initial.len();
         let mut derivatives = vec![0.0; dim * params];
         let mut values = vec![0.0; dim];
         let program = &self.init_derivatives;
@@ -147,7 +156,9 @@ impl Simulator {
                 let row = &derivatives[k * params..(k + 1) * params];
                 s[k * columns..k * columns + params].copy_from_slice(row);
             }
-            s[k * columns + params + k] = 1.0;
+        }
+        for (column, &k) in initial.iter().enumerate() {
+            s[k * columns + params + column] = 1.0;
         }
         s
     }

@@ -18,9 +18,9 @@ use crate::ir::{Dynamics, Model, Var};
 use crate::record::Record;
 use crate::sim::{IntegrationError, Integrator, Method, ModelSystem, OdeSystem, Tolerances};
 
-/// Most integration steps per free run (or one-step interval) before it is declared failed
-/// (wild params).
-const MAX_STEPS: usize = 200_000;
+/// Most integration steps between two input switches (or over one interval of a one-step
+/// prediction) before a run is declared failed (wild params): a failing run costs no more.
+const MAX_STEPS: usize = 20_000;
 
 /// States along a record, row-major: `values[row * dim + k]` is state `k` (measured, then
 /// hidden) at that row.
@@ -58,6 +58,7 @@ pub struct Simulator {
     params: usize,
     correction_slots: Vec<usize>,
     pub(super) integrator: Integrator,
+    tolerances: Tolerances,
     pub(super) scratch: Vec<f64>,
     names: Vec<String>,
 }
@@ -105,6 +106,7 @@ impl Simulator {
             .collect();
         Ok(Simulator {
             integrator: Integrator::new(dim, tolerances, MAX_STEPS, Method::Auto),
+            tolerances,
             init_derivatives,
             names,
             dynamics: model.dynamics,
@@ -116,6 +118,17 @@ impl Simulator {
             system,
             scratch: Vec::new(),
         })
+    }
+
+    /// Integrates with `method` from now on.
+    pub fn set_method(&mut self, method: Method) {
+        let dim = self.system.dim();
+        self.integrator = Integrator::new(dim, self.tolerances, MAX_STEPS, method);
+    }
+
+    /// Implicit steps taken since the simulator was made (or its method set).
+    pub fn implicit_steps(&self) -> usize {
+        self.integrator.stats().implicit
     }
 
     /// Compiles an expression of this model (e.g. a let's value) against its slots.
@@ -208,15 +221,16 @@ impl Simulator {
         slots[states].copy_from_slice(state);
     }
 
-    /// Advances `state` over the interval from `row` to `row + 1` (with a whole step
-    /// budget of its own).
+    /// Advances `state` over the interval from `row` to `row + 1`, as a run of its own
+    /// (a whole step budget, the method choice from the start: a one-interval run is
+    /// rarely long enough to repay the implicit method).
     pub fn step(
         &mut self,
         record: &Record,
         row: usize,
         state: &mut [f64],
     ) -> Result<(), IntegrationError> {
-        self.integrator.renew_budget();
+        self.integrator.restart();
         self.advance(record, (row, row + 1), state, &mut |_, _| {})
     }
 
@@ -275,6 +289,7 @@ impl Simulator {
                 last += 1;
             }
             let mut push = |_: usize, y: &[f64]| values.extend_from_slice(y);
+            self.integrator.renew_budget();
             self.advance(record, (first, last), &mut state, &mut push)?;
             first = last;
         }

@@ -78,9 +78,46 @@ impl JacobianProgram {
         self.columns
     }
 
+    /// Number of instructions executed per evaluation.
+    pub fn instruction_count(&self) -> usize {
+        self.code.len()
+    }
+
     /// Number of entries that are not structurally zero.
     pub fn nonzeros(&self) -> usize {
         self.entries.len()
+    }
+
+    /// Evaluates on `slots` the product of the Jacobian with a matrix: `out = J[:, ..k] m +
+    /// J[:, k..]` padded with zero columns to `width`, where `k` = the rows of `m` (`k x
+    /// width`, row-major) and `out` is `rows x width`: the derivative of forward
+    /// sensitivities `m` by the first `k` slots (the states), the rest (params) added as
+    /// they are. Only the entries that are not structurally zero are visited.
+    pub fn eval_product(
+        &self,
+        slots: &[f64],
+        scratch: &mut Vec<f64>,
+        m: &[f64],
+        width: usize,
+        out: &mut [f64],
+    ) {
+        run(&self.code, slots, scratch);
+        let k = m.len() / width.max(1);
+        out[..self.values.len() * width].fill(0.0);
+        for &(row, column, operand) in &self.entries {
+            let value = operand.fetch(slots, scratch);
+            let target = &mut out[row * width..(row + 1) * width];
+            if column < k {
+                for (o, &x) in target
+                    .iter_mut()
+                    .zip(&m[column * width..(column + 1) * width])
+                {
+                    *o += value * x;
+                }
+            } else {
+                target[column - k] += value;
+            }
+        }
     }
 
     /// Evaluates on `slots`: the values into `values` (length [`JacobianProgram::rows`]) and

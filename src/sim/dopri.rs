@@ -232,7 +232,7 @@ impl Dopri5 {
             let error = self.error_norm(stepper.h, y);
             if error <= 1.0 {
                 let step_end = if last { t1 } else { stepper.t + stepper.h };
-                let step = (step_end, stepper.h);
+                let step = (step_end, stepper.h, t1);
                 let stiff = options.monitor_stiffness.is_some()
                     && self.stiffness(system, &mut stepper.monitor, step);
                 while let Some((k, _)) = pending.next_if(|&(_, &s)| s <= step_end) {
@@ -516,6 +516,7 @@ impl Stepper {
 }
 
 /// Sets `out = y + h * sum_j weight_j * stages[j]`, entry by entry.
+#[inline]
 pub(super) fn combine(
     out: &mut [f64],
     y: &[f64],

@@ -71,6 +71,12 @@ impl ModelSystem {
         &self.layout
     }
 
+    /// Sets the number of columns after the differentiated slots that the balances do not
+    /// depend on (see [`ModelSystem::differentiate_by`]).
+    pub fn set_extra_columns(&mut self, extra: usize) {
+        self.extra = extra;
+    }
+
     /// All slots, e.g. to set params before integrating.
     pub fn slots_mut(&mut self) -> &mut [f64] {
         &mut self.slots
@@ -107,6 +113,17 @@ impl OdeSystem for ModelSystem {
         (self.sensitivity.as_ref()).map_or(0, |program| {
             program.columns() - self.states.len() + self.extra
         })
+    }
+
+    fn sensitivity_derivative(&mut self, _t: f64, y: &[f64], s: &[f64], out: &mut [f64]) {
+        let width = self.sensitivity_params();
+        match &self.sensitivity {
+            Some(program) => {
+                self.slots[self.states.clone()].copy_from_slice(y);
+                program.eval_product(&self.slots, &mut self.scratch, s, width, out);
+            }
+            None => out.fill(0.0),
+        }
     }
 
     fn sensitivity_jacobians(&mut self, t: f64, y: &[f64], states: &mut [f64], params: &mut [f64]) {

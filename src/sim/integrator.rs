@@ -29,14 +29,34 @@ const CALM_CHECK: usize = 10;
 /// The explicit method takes over where `h * |J|` is below this (well inside its
 /// stability region, whose real extent is about 3.3).
 const CALM_PRODUCT: f64 = 1.0;
-/// An implicit step costs a few explicit ones (three stages, Newton iterations, two LU
-/// factorisations): the implicit method keeps a stretch only where its steps reach this
-/// many times the explicit method's, or still grow (by [`GROWING`] between checks).
-const WORTH: f64 = 4.0;
-/// Growth of the implicit step between two checks that counts as still growing.
+/// The implicit method keeps a stretch only where its work per unit of time (right-hand
+/// sides, Jacobians and factorisations, [`cost`]) is below the explicit method's at the
+/// hand-over divided by this, or still falls (by [`GROWING`] between checks).
+const WORTH: f64 = 1.5;
+/// A fall of the implicit method's cost per unit of time between two checks that counts as
+/// still improving.
 const GROWING: f64 = 2.0;
 /// After a lost trial, the explicit method waits this many times longer before the next.
 const BACKOFF: usize = 4;
+
+/// The implicit method's steps since it last took over, judged every [`CALM_CHECK`] steps
+/// (across stretches) by their cost per unit of time against the explicit method's.
+#[derive(Debug, Clone, Copy, Default)]
+struct Trial {
+    steps: usize,
+    /// Time advanced in the current window of [`CALM_CHECK`] steps.
+    time: f64,
+    /// The implicit method's work counters at the window's start.
+    start: Stats,
+    /// The cost per unit of time of the window before (infinite: none yet).
+    previous: f64,
+}
+
+/// The cost of work, in evaluations of the right-hand side: a Jacobian (the balances and
+/// their derivatives) about three, a factorisation (small dense systems) about two.
+fn cost(stats: &Stats) -> f64 {
+    stats.evaluations as f64 + 3.0 * stats.jacobians as f64 + 2.0 * stats.factorisations as f64
+}
 
 /// A reusable integrator with automatic method choice (owns its work arrays).
 #[derive(Debug, Clone)]
@@ -48,8 +68,8 @@ pub struct Integrator {
     /// Accepted explicit steps in a stretch before it may be declared stiff (`None`: never):
     /// [`STIFF_WORK`], four times more after each trial the implicit method lost.
     monitor: Option<usize>,
-    /// The implicit step at the last check of the current implicit stretch.
-    checked_step: f64,
+    /// The implicit method's steps since it took over.
+    trial: Trial,
     /// The explicit method's step where it last handed over.
     explicit_step: f64,
     implicit_step: Option<f64>,
@@ -72,7 +92,7 @@ impl Integrator {
             attempts: 0,
             stiff: method == Method::Implicit,
             monitor: (method == Method::Auto).then_some(STIFF_WORK),
-            checked_step: 0.0,
+            trial: Trial::default(),
             explicit_step: 0.0,
             implicit_step: None,
             explicit: Dopri5::new(dim, tolerances, budget),
@@ -189,6 +209,11 @@ impl Integrator {
                     if !self.stiff {
                         self.explicit_step = step;
                         self.implicit_step = Some(step);
+                        self.trial = Trial {
+                            start: self.implicit.stats(),
+                            previous: f64::INFINITY,
+                            ..Trial::default()
+                        };
                     }
                     self.stiff = !self.stiff;
                     self.switches += 1;
@@ -261,15 +286,13 @@ impl Integrator {
         if t1 > t0 {
             self.implicit
                 .start(system, (t0, t1), y, self.implicit_step)?;
-            // A restart (an input switch) may begin with a transient of short steps: the
-            // first check of a stretch only sees the steps grow.
-            self.checked_step = 0.0;
-            let mut steps = 0;
             while self.implicit.time() < t1 {
                 self.implicit_step(system, with)?;
                 next += self.record_implicit(samples, next, offset, with, record);
-                steps += 1;
-                let check = self.method == Method::Auto && steps % CALM_CHECK == 0;
+                self.trial.steps += 1;
+                self.trial.time += self.implicit.last_step();
+                let check =
+                    self.method == Method::Auto && self.trial.steps.is_multiple_of(CALM_CHECK);
                 if check && self.implicit.time() < t1 && self.hand_back(system) {
                     let (t, step) = (self.implicit.time(), self.implicit.step_size());
                     reached = Reached::Stiff {
@@ -349,15 +372,22 @@ impl Integrator {
         count
     }
 
-    /// Whether the explicit method should take the stretch back: the implicit steps neither
-    /// reach [`WORTH`] times the explicit ones nor still grow (a lost trial: the explicit
-    /// method then waits [`BACKOFF`] times longer before the next), or the stretch has
-    /// calmed down.
+    /// Whether the explicit method should take the stretch back: the implicit method's
+    /// work per unit of time over the last [`CALM_CHECK`] steps is not [`WORTH`] times below
+    /// the explicit method's (six right-hand sides per explicit step) and no longer falls (a
+    /// lost trial: the explicit method then waits [`BACKOFF`] times longer before the
+    /// next), or the stretch has calmed down.
     fn hand_back<S: OdeSystem>(&mut self, system: &mut S) -> bool {
-        let step = self.implicit.step_size();
-        let growing = step > GROWING * self.checked_step;
-        self.checked_step = step;
-        if step < WORTH * self.explicit_step && !growing {
+        let now = self.implicit.stats();
+        let mut work = now;
+        work.evaluations -= self.trial.start.evaluations;
+        work.jacobians -= self.trial.start.jacobians;
+        work.factorisations -= self.trial.start.factorisations;
+        let implicit = cost(&work) / self.trial.time.max(f64::MIN_POSITIVE);
+        let explicit = 6.0 / self.explicit_step.max(f64::MIN_POSITIVE);
+        let improving = implicit * GROWING < self.trial.previous;
+        (self.trial.previous, self.trial.start, self.trial.time) = (implicit, now, 0.0);
+        if implicit * WORTH > explicit && !improving {
             self.monitor = self.monitor.map(|work| work.saturating_mul(BACKOFF));
             return true;
         }

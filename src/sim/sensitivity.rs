@@ -37,14 +37,10 @@ pub fn multiply_add(a: &[f64], b: &[f64], c: &[f64], n: usize, p: usize, out: &m
 /// Sensitivities through explicit Dormand–Prince steps.
 #[derive(Debug, Clone)]
 pub struct Explicit {
-    n: usize,
-    params: usize,
     current: Vec<f64>,
     stages: [Vec<f64>; 7],
     stage: Vec<f64>,
     next: Vec<f64>,
-    states_jacobian: Vec<f64>,
-    params_jacobian: Vec<f64>,
     sample: Vec<f64>,
 }
 
@@ -53,14 +49,10 @@ impl Explicit {
     pub fn new(n: usize, params: usize) -> Self {
         let work = || vec![0.0; n * params];
         Explicit {
-            n,
-            params,
             current: work(),
             stages: std::array::from_fn(|_| work()),
             stage: work(),
             next: work(),
-            states_jacobian: vec![0.0; n * n],
-            params_jacobian: work(),
             sample: work(),
         }
     }
@@ -120,21 +112,13 @@ impl Explicit {
         stats: &mut Stats,
         from_stage: bool,
     ) {
-        system.sensitivity_jacobians(t, y, &mut self.states_jacobian, &mut self.params_jacobian);
         stats.jacobians += 1;
         let source = if from_stage {
             &self.stage
         } else {
             &self.current
         };
-        multiply_add(
-            &self.states_jacobian,
-            source,
-            &self.params_jacobian,
-            self.n,
-            self.params,
-            &mut self.stages[index],
-        );
+        system.sensitivity_derivative(t, y, source, &mut self.stages[index]);
     }
 
     /// Moves to the end of an accepted step (first stage of the next one: FSAL).

@@ -27,6 +27,10 @@ const POWER_ITERATIONS: usize = 8;
 /// little explicit, and the explicit method's results are the reference for a system that
 /// is only mildly stiff here and there.
 pub(super) const STIFF_WORK: usize = 100;
+/// Explicit steps of the stretch still to go, at the current step, below which it is not
+/// handed over: the implicit method's start (Jacobian, factorisations, a first step that
+/// must grow) costs tens of explicit steps.
+const REMAINING_STEPS: f64 = 100.0;
 
 /// The monitor's counters over one stretch.
 #[derive(Debug, Clone, Copy)]
@@ -59,16 +63,18 @@ impl Dopri5 {
     /// steps (not interrupted by [`NON_STIFF_STEPS`] inside it), or every [`RADIUS_CHECK`]
     /// steps the spectral radius of the exact Jacobian times the step above
     /// [`RADIUS_PRODUCT`] [`RADIUS_CHECKS`] times in a row; never before `monitor.work`
-    /// steps (at least [`STIFF_WORK`]).
+    /// steps (at least [`STIFF_WORK`]), nor with fewer than [`REMAINING_STEPS`] explicit
+    /// steps of the stretch left (finishing it costs less than a hand-over).
     pub(super) fn stiffness<S: OdeSystem>(
         &mut self,
         system: &mut S,
         monitor: &mut Monitor,
-        (t_next, h): (f64, f64),
+        (t_next, h, t_end): (f64, f64, f64),
     ) -> bool {
         monitor.accepted += 1;
         let hairer = self.hairer_test(monitor, h);
-        if monitor.accepted < monitor.work {
+        let remaining = (t_end - t_next) / h;
+        if monitor.accepted < monitor.work || remaining < REMAINING_STEPS {
             return false;
         }
         if hairer {

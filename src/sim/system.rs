@@ -37,6 +37,17 @@ pub trait OdeSystem {
     ) {
         self.jacobian(t, y, states);
     }
+
+    /// Writes the derivative of the sensitivities, `(df/dy) s + df/dp` (`dim x p`,
+    /// row-major, `p` = [`OdeSystem::sensitivity_params`]), at `(t, y)` with sensitivities
+    /// `s`. The default multiplies out [`OdeSystem::sensitivity_jacobians`]; a system with
+    /// a sparse Jacobian does better.
+    fn sensitivity_derivative(&mut self, t: f64, y: &[f64], s: &[f64], out: &mut [f64]) {
+        let (n, p) = (y.len(), self.sensitivity_params());
+        let (mut states, mut params) = (vec![0.0; n * n], vec![0.0; n * p]);
+        self.sensitivity_jacobians(t, y, &mut states, &mut params);
+        super::sensitivity::multiply_add(&states, s, &params, n, p, out);
+    }
 }
 
 /// `df/dy` by forward differences with steps `sqrt(eps) max(|y_j|, 1e-8)`.

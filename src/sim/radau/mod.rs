@@ -187,6 +187,11 @@ impl Radau {
         self.h_abs
     }
 
+    /// The size of the last accepted step (0 before one).
+    pub fn last_step(&self) -> f64 {
+        self.taken.as_ref().map_or(0.0, |taken| taken.h)
+    }
+
     /// The Jacobian the Newton iterations use (`n x n`, row-major).
     pub fn jacobian(&self) -> &[f64] {
         &self.jacobian
