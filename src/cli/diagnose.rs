@@ -40,9 +40,10 @@ pub struct DiagnoseArgs {
     /// Seed of the random restarts (results are deterministic for a given seed).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Most random restarts of each fit besides the declared or warm start; a fit stops
-    /// earlier once two starts agree.
-    #[arg(long, default_value_t = 4)]
+    /// Most random starts of each fit besides the declared or warm start; a fit runs at
+    /// least four starts and stops at the first round that finds no better basin and has
+    /// its best reached twice.
+    #[arg(long, default_value_t = crate::diagnose::Options::default().restarts)]
     pub restarts: usize,
     /// The longest time constant of the history features of the free corrections (model
     /// time units); by default chosen from the residuals of the fitted model.

@@ -3,7 +3,7 @@
 //! forward selection of several effects ([`super::selection`]).
 
 use super::evaluate::{scored_errors, Errors};
-use super::fit::{fit, Fitted, Objective};
+use super::fit::{fit, Fitted, Objective, Starts};
 use super::ranking::{compare, Comparison, RESAMPLES};
 use super::report::{Confidence, EffectScore, FitSummary};
 use super::simulate::{tolerances, Run, Simulator};
@@ -48,7 +48,8 @@ pub fn fit_and_score(
         simulator: &simulator,
         split: &context.split,
     };
-    let fitted = fit(&objective, constraints, &x, context.options.restarts, seed);
+    let starts = Starts::new(context.options.restarts);
+    let fitted = fit(&objective, constraints, &x, (starts, &[]), seed);
     let mut summary = summarise(&objective, constraints, &fitted.x, &unknowns.names);
     let (errors, runs) = held_out(context, &simulator, &fitted.x);
     summary.starts = fitted.starts;

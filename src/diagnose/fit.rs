@@ -7,10 +7,13 @@
 //! hold (`positive`: `p = exp(theta)`; `in [lo, hi]`: `p = lo + (hi - lo) sigmoid(theta)`;
 //! fitted starts are free).
 //!
-//! **Restarts where the landscape needs them.** The first start is the given one (declared
-//! values, or a warm start); random restarts follow one at a time, up to the budget, and the
-//! fit stops as soon as two starts agree on the best training gap (within [`AGREE`]): a
-//! landscape with one basin costs two fits, a rugged one gets the whole budget.
+//! **Starts until no new ground.** The first start is the given one (declared values, or a
+//! warm start); random starts around it follow in rounds run side by side, and the search
+//! stops, after [`MIN_STARTS`], at the first round that neither lowers the best training
+//! gap nor leaves it reached by fewer than two starts (within [`AGREE`]); the budget caps
+//! it. Two starts agreeing is not enough on its own: two can agree on a poor basin. A
+//! landscape with one basin costs [`MIN_STARTS`] fits, a rugged one gets the whole budget.
+//! Unknowns can be held fixed (a direction the data leave free, pinned).
 
 use super::simulate::Simulator;
 use super::split::Split;
@@ -198,70 +201,162 @@ pub struct Fitted {
     pub x: Vec<f64>,
     /// The training gap there.
     pub gap: f64,
-    /// Starts run (1 + the random restarts spent).
+    /// Starts run (the given one and the random ones).
     pub starts: usize,
+    /// Starts that reached the best gap (within [`AGREE`]).
+    pub agreeing: usize,
+    /// The distinct training gaps the starts ended at (within [`AGREE`]), best first: the
+    /// basins found.
+    pub basins: Vec<f64>,
 }
 
-/// Fits `x` from `start` (constrained values) and then random restarts drawn from a
-/// generator seeded with `seed`, at most `restarts` of them, stopping when two starts agree;
-/// returns the best.
+/// How many starts a fit spends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Starts {
+    /// Starts always run.
+    pub min: usize,
+    /// Starts at most.
+    pub max: usize,
+    /// Starts run side by side in one round.
+    pub round: usize,
+}
+
+impl Starts {
+    /// At least four starts, at most `1 + restarts`, rounds of one start per thread (two at
+    /// least).
+    pub fn new(restarts: usize) -> Self {
+        let max = restarts + 1;
+        Starts {
+            min: MIN_STARTS.min(max),
+            max,
+            round: rayon::current_num_threads().max(2),
+        }
+    }
+}
+
+/// Starts every fit runs (when its budget allows).
+pub const MIN_STARTS: usize = 4;
+
+/// Fits `x` from `start` (constrained values) and random starts around it drawn from a
+/// generator seeded with `seed`, in rounds of `starts.round` run side by side, with the
+/// unknowns where `fixed` is set held at their start. The search goes on while it finds
+/// new ground: it stops, after `starts.min` starts, at the first round that neither
+/// lowers the best training gap nor leaves it reached by fewer than two starts; or after
+/// `starts.max`. Returns the best.
 pub fn fit(
     objective: &Objective,
     constraints: &[Constraint],
     start: &[f64],
-    restarts: usize,
+    (starts, fixed): (Starts, &[bool]),
     seed: u64,
 ) -> Fitted {
     let theta0 = thetas(constraints, start);
-    if theta0.is_empty() {
+    let free: Vec<usize> = (0..theta0.len())
+        .filter(|&i| !fixed.get(i).copied().unwrap_or(false))
+        .collect();
+    if free.is_empty() {
+        let gap = objective.gap(start);
         return Fitted {
-            x: Vec::new(),
-            gap: objective.gap(&[]),
+            x: start.to_vec(),
+            gap,
             starts: 1,
+            agreeing: 1,
+            basins: vec![gap],
         };
     }
-    let residuals = |theta: &[f64]| objective.residuals(&values(constraints, theta));
-    let jacobian = |theta: &[f64]| objective.theta_jacobian(constraints, theta);
+    let full = |sub: &[f64]| -> Vec<f64> {
+        let mut theta = theta0.clone();
+        for (&i, &value) in free.iter().zip(sub) {
+            theta[i] = value;
+        }
+        theta
+    };
+    let residuals = |sub: &[f64]| objective.residuals(&values(constraints, &full(sub)));
+    let jacobian = |sub: &[f64]| {
+        let columns = objective.theta_jacobian(constraints, &full(sub));
+        free.iter().map(|&i| columns[i].clone()).collect::<Vec<_>>()
+    };
+    let sub0: Vec<f64> = free.iter().map(|&i| theta0[i]).collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut draw = |first: bool| -> Vec<f64> {
+        if first {
+            return sub0.clone();
+        }
+        (sub0.iter())
+            .map(|&t| {
+                let noise: f64 = StandardNormal.sample(&mut rng);
+                t + RESTART_SPREAD * noise * t.abs().clamp(1.0, 3.0)
+            })
+            .collect()
+    };
     let mut results: Vec<(Vec<f64>, f64)> = Vec::new();
-    for attempt in 0..=restarts {
-        let theta = if attempt == 0 {
-            theta0.clone()
-        } else {
-            (theta0.iter())
-                .map(|&t| {
-                    let noise: f64 = StandardNormal.sample(&mut rng);
-                    t + RESTART_SPREAD * noise * t.abs().clamp(1.0, 3.0)
-                })
+    while results.len() < starts.max {
+        let count = starts.round.min(starts.max - results.len());
+        let thetas: Vec<Vec<f64>> = (0..count)
+            .map(|k| draw(results.is_empty() && k == 0))
+            .collect();
+        let before = best_gap(&results);
+        let round: Vec<(Vec<f64>, f64)> = {
+            use rayon::prelude::*;
+            (thetas.into_par_iter())
+                .map(|theta| levenberg_marquardt(&residuals, &jacobian, theta))
                 .collect()
         };
-        results.push(levenberg_marquardt(&residuals, &jacobian, theta));
-        if agreeing(&results) {
+        results.extend(round);
+        let best = best_gap(&results);
+        let improved = best < before - AGREE * before.abs();
+        if results.len() >= starts.min && !improved && agreeing(&results) >= 2 {
             break;
         }
     }
-    let starts = results.len();
-    let (theta, gap) = results
-        .into_iter()
+    let best = results
+        .iter()
         .min_by(|a, b| a.1.total_cmp(&b.1))
-        .unwrap_or((theta0, f64::INFINITY));
+        .cloned()
+        .unwrap_or((sub0, f64::INFINITY));
     Fitted {
-        x: values(constraints, &theta),
-        gap,
-        starts,
+        x: values(constraints, &full(&best.0)),
+        gap: best.1,
+        starts: results.len(),
+        agreeing: agreeing(&results),
+        basins: basins(&results),
     }
 }
 
-/// Whether at least two of the fits reached the best gap (within [`AGREE`]).
-fn agreeing(results: &[(Vec<f64>, f64)]) -> bool {
-    let best = results.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+/// The best gap of `results` (infinite for none).
+fn best_gap(results: &[(Vec<f64>, f64)]) -> f64 {
+    results.iter().map(|r| r.1).fold(f64::INFINITY, f64::min)
+}
+
+/// How many of the fits reached the best gap (within [`AGREE`]); 0 when none is finite.
+fn agreeing(results: &[(Vec<f64>, f64)]) -> usize {
+    let best = best_gap(results);
     if !best.is_finite() {
-        return false;
+        return 0;
     }
-    let close = (results.iter())
+    (results.iter())
         .filter(|r| r.1 <= best + AGREE * best.abs() + 1e-15)
-        .count();
-    close >= 2
+        .count()
+}
+
+/// The distinct finite gaps of `results` (within [`AGREE`] of each other), best first.
+fn basins(results: &[(Vec<f64>, f64)]) -> Vec<f64> {
+    let mut gaps: Vec<f64> = results
+        .iter()
+        .map(|r| r.1)
+        .filter(|g| g.is_finite())
+        .collect();
+    gaps.sort_by(f64::total_cmp);
+    let mut distinct: Vec<f64> = Vec::new();
+    for gap in gaps {
+        if distinct
+            .last()
+            .is_none_or(|&last| gap > last + AGREE * last.abs() + 1e-15)
+        {
+            distinct.push(gap);
+        }
+    }
+    distinct
 }
 
 /// The transformed coordinates of constrained values.
@@ -394,13 +489,17 @@ mod tests {
     }
 
     #[test]
-    fn restarts_stop_when_two_starts_agree() {
-        assert!(!agreeing(&[(vec![0.0], 1.0)]));
-        assert!(agreeing(&[
+    fn starts_agree_within_the_tolerance_and_basins_are_distinct_gaps() {
+        assert_eq!(agreeing(&[(vec![0.0], 1.0)]), 1);
+        let results = [
             (vec![0.0], 1.0),
             (vec![1.0], 2.0),
-            (vec![2.0], 1.0000001)
-        ]));
-        assert!(!agreeing(&[(vec![0.0], 1.0), (vec![1.0], 1.1)]));
+            (vec![2.0], 1.0000001),
+            (vec![3.0], f64::INFINITY),
+        ];
+        assert_eq!(agreeing(&results), 2);
+        assert_eq!(basins(&results), vec![1.0, 2.0]);
+        assert_eq!(agreeing(&[(vec![0.0], 1.0), (vec![1.0], 1.1)]), 1);
+        assert_eq!(agreeing(&[(vec![0.0], f64::NAN)]), 0);
     }
 }

@@ -111,7 +111,7 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             val_fraction: None,
-            restarts: 4,
+            restarts: 15,
             seed: 0,
             windows: 20,
             span: None,
