@@ -127,7 +127,8 @@ pub fn rank_effects(
         .collect();
     let comparison = compare(&sums, context.seed(1000));
     let mut order: Vec<usize> = (0..fits.len()).collect();
-    order.sort_by(|&a, &b| fits[a].1.gap.total_cmp(&fits[b].1.gap));
+    // Ranked by the training fit's criterion: the held-out gap scores, it does not choose.
+    order.sort_by(|&a, &b| fits[a].1.summary.bic.total_cmp(&fits[b].1.summary.bic));
     let mut scores = Vec::with_capacity(fits.len());
     let mut ordered = Vec::with_capacity(fits.len());
     let mut fits: Vec<Option<(Model, Scored)>> = fits.into_iter().map(Some).collect();

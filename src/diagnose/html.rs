@@ -2,7 +2,7 @@
 //! separate SVG files ([`figures`]): data against the free runs before and after the
 //! credited effects (per scored experiment and measured state), the error over time on the
 //! held-out part, the gap before and after (logarithmic bars), the held-out gap each free
-//! correction leaves with and without history, and the forward selection. This file says
+//! correction leaves with and without history, and the sets of effects. This file says
 //! which figures, which series and what text; [`crate::plot`] draws them.
 
 use super::render::{num, percent};
@@ -45,8 +45,8 @@ pub fn page(report: &Report) -> String {
     if !report.selection.steps.is_empty() {
         gap.push_str(&figure(
             &selection_chart(report),
-            "The forward selection: the held-out gap after each step, credited or not, with \
-             the step's BIC.",
+            "The sets of effects fitted on the training data, best training BIC first (the \
+             first twelve): the held-out gap of each scores the choice, it does not make it.",
         ));
     }
     let mut sections = vec![gap];
@@ -281,11 +281,11 @@ fn loci_chart(report: &Report) -> String {
     gap_bars("free corrections: held-out gap left at each place", rows)
 }
 
-/// The held-out gap after each step of the forward selection.
+/// The held-out gap of each fitted set of effects (the first twelve by training BIC).
 fn selection_chart(report: &Report) -> String {
     let before = report.gap_before;
     let mut rows = vec![("no effect".to_string(), before, BEFORE, String::new())];
-    for step in &report.selection.steps {
+    for step in report.selection.steps.iter().take(12) {
         let (verdict, colour) = if step.accepted {
             ("credited", AFTER)
         } else {
@@ -296,5 +296,5 @@ fn selection_chart(report: &Report) -> String {
     }
     let floor = report.noise_floor;
     rows.push(("noise floor".into(), floor, DATA, String::new()));
-    gap_bars("forward selection", rows)
+    gap_bars("effect sets: held-out gap, chosen by training BIC", rows)
 }

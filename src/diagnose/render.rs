@@ -264,8 +264,12 @@ fn which_section(out: &mut String, report: &Report) {
     }
     let _ = writeln!(
         out,
-        "   {:<4} {:<24} {:>10} {:>9} {:>7} {:>7}  params",
-        "rank", "effect", "gap after", "shrink", "P(best)", "s"
+        "   ranked by BIC of the training fit; the held-out gap scores each choice"
+    );
+    let _ = writeln!(
+        out,
+        "   {:<4} {:<24} {:>11} {:>10} {:>9} {:>7} {:>6} {:>7}  params",
+        "rank", "effect", "BIC", "gap after", "shrink", "P(best)", "starts", "s"
     );
     for (rank, effect) in report.effects.iter().enumerate() {
         let params: Vec<String> = (effect.params.iter())
@@ -273,12 +277,14 @@ fn which_section(out: &mut String, report: &Report) {
             .collect();
         let _ = writeln!(
             out,
-            "   {:<4} {:<24} {:>10} {:>9} {:>7} {:>7.1}  {}",
+            "   {:<4} {:<24} {:>11} {:>10} {:>9} {:>7} {:>6} {:>7.1}  {}",
             rank + 1,
             effect.name,
+            num(effect.fit.bic),
             num(effect.gap_after),
             percent(effect.shrink),
             percent(effect.probability_best),
+            effect.fit.starts,
             effect.fit.seconds,
             params.join(", ")
         );
@@ -307,32 +313,42 @@ fn which_section(out: &mut String, report: &Report) {
     if let Some(best) = report.effects.first() {
         fit_lines(out, &format!("{} params", best.name), &best.fit);
     }
+    let selection = &report.selection;
     let _ = writeln!(
         out,
-        "   forward selection (held-out gap, with AIC and BIC of the training fit):"
+        "   sets of effects, chosen by {}:",
+        if selection.criterion.is_empty() {
+            "BIC"
+        } else {
+            &selection.criterion
+        }
     );
     let _ = writeln!(
         out,
-        "     {:<4} {:<30} {:>10} {:>9} {:>11} {:>11}  verdict",
-        "step", "effects", "gap after", "shrink", "AIC", "BIC"
+        "     {:<34} {:>10} {:>9} {:>10} {:>9}  verdict",
+        "effects", "train gap", "dBIC", "gap after", "shrink"
     );
-    for (index, step) in report.selection.steps.iter().enumerate() {
-        let verdict = if step.accepted { "credited" } else { "stop" };
+    for step in &selection.steps {
+        let verdict = if step.accepted { "credited" } else { "-" };
         let _ = writeln!(
             out,
-            "     {:<4} {:<30} {:>10} {:>9} {:>11} {:>11}  {verdict}: {}",
-            index + 1,
+            "     {:<34} {:>10} {:>9} {:>10} {:>9}  {verdict}: {}",
             step.effects.join(" + "),
+            num(step.gap_train),
+            num(step.delta_bic),
             num(step.gap_after),
             percent(step.shrink),
-            num(step.aic),
-            num(step.bic),
             step.reason
         );
     }
-    if !report.selection.credited.is_empty() {
-        let _ = writeln!(out, "   selection stops: {}", report.selection.stop);
+    if !selection.combinations.is_empty() {
+        let _ = writeln!(
+            out,
+            "   combinations tried: {}",
+            selection.combinations.join(", ")
+        );
     }
+    let _ = writeln!(out, "   verdict: {}", selection.stop);
     let _ = writeln!(out);
 }
 
@@ -378,13 +394,18 @@ fn how_far_section(out: &mut String, report: &Report) {
         [] if !report.significant => {
             let _ = writeln!(out, "   credited: none (no significant gap)");
         }
+        [] if !report.selection.undecided.is_empty() => {
+            let _ = writeln!(
+                out,
+                "   credited: undecided between {}",
+                report.selection.undecided.join(" and ")
+            );
+        }
         [] => {
-            let reason = (report.selection.steps.first())
-                .map_or("no effect declared".to_string(), |s| s.reason.clone());
-            let _ = writeln!(out, "   credited: none ({reason})");
+            let _ = writeln!(out, "   credited: none ({})", report.selection.stop);
         }
         names => {
-            let _ = writeln!(out, "   credited: {}", names.join(", then "));
+            let _ = writeln!(out, "   credited: {} (together)", names.join(" + "));
         }
     }
     let timing = &report.timing;

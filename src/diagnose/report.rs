@@ -246,12 +246,18 @@ pub struct SelectionStep {
     pub added: String,
     /// The effects applied together after it.
     pub effects: Vec<String>,
+    /// Training gap of the set's fit.
+    #[serde(with = "crate::json", default)]
+    pub gap_train: f64,
     /// Held-out gap of the set.
     #[serde(with = "crate::json")]
     pub gap_after: f64,
     /// `1 - gap_after / gap_before`.
     #[serde(with = "crate::json")]
     pub shrink: f64,
+    /// BIC of the set's fit minus the model's (negative: better).
+    #[serde(with = "crate::json", default)]
+    pub delta_bic: f64,
     /// Akaike's criterion of the set's fit.
     #[serde(with = "crate::json")]
     pub aic: f64,
@@ -275,15 +281,24 @@ pub struct SelectionStep {
 /// Forward selection over the effects.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Selection {
-    /// The steps, in order.
+    /// Every set of effects fitted (alone, pairs, triples), best criterion first.
     pub steps: Vec<SelectionStep>,
-    /// The effects credited, in order.
+    /// The effects credited together.
     pub credited: Vec<String>,
     /// Held-out gap of the credited set (the gap before when none).
     #[serde(with = "crate::json")]
     pub gap_after: f64,
-    /// Why the selection stopped, in words.
+    /// The verdict and its reason, in words.
     pub stop: String,
+    /// The criterion the choice was made by (computed without the held-out data).
+    #[serde(default)]
+    pub criterion: String,
+    /// The combinations of effects tried (pairs, triples), `a + b`.
+    #[serde(default)]
+    pub combinations: Vec<String>,
+    /// When the training data cannot decide: the sets between which (the best first).
+    #[serde(default)]
+    pub undecided: Vec<String>,
 }
 
 /// How sure the ranking of the single effects is.

@@ -1,30 +1,52 @@
-//! Several causes at once: forward selection over the effects, with a stopping rule that
-//! penalises params on held-out data.
+//! Which effects explain the gap: chosen on the training side, scored on the held-out side.
 //!
-//! The first step is the ranking of the single effects ([`super::effects::rank_effects`]).
-//! Each later step fits every remaining effect *added* to the credited set (warm-started
-//! from the set's params and the effect's own single fit) and takes the best addition. A
-//! step is credited only when all of these hold, otherwise the selection stops and says
-//! which failed:
+//! The candidates are sets of effects: every effect alone (the ranking,
+//! [`super::effects::rank_effects`]), and, unless one effect alone already leaves no
+//! significant gap, every pair (and, for at most [`TRIPLES_UP_TO`] candidates, every
+//! triple), each fitted with all its params, warm-started from its members' single fits.
+//! Effects that only act together (a source of a species and its sink) are found this way;
+//! greedy forward selection stops at the first step, where neither alone helps.
 //!
-//! 1. the gap before the step is significant (above [`super::SIGNIFICANCE`] times the noise
-//!    floor), and the step removes at least [`super::CREDIT`] of it above the floor;
-//! 2. the step's held-out gap is told apart from the gap before it *and* from every other
-//!    candidate of the step (block bootstrap, [`super::ranking`]: lower in at least 95 % of
-//!    the draws): its lead exceeds the ranking's uncertainty, so the held-out data pay for
-//!    the params it adds;
-//! 3. Schwarz's criterion (BIC) on the training cells falls: the fit gained more than
-//!    `ln n` per added unknown.
+//! The choice uses the training fits only: Schwarz's criterion (BIC) on the training cells,
+//! and how much of the training gap above the noise floor a set removes. Free-run errors
+//! are correlated in time, so BIC alone overstates the evidence of thousands of cells: a
+//! set is preferred to one of its subsets only when BIC falls by [`EVIDENCE`] *and* it
+//! removes at least [`MARGINAL`] of what the subset leaves above the floor (each effect
+//! of a set must earn its place). The set with the lowest BIC, trimmed that way, is
+//! credited when:
 //!
-//! AIC and BIC are reported beside the held-out gap for every step, as PEtab-Select does.
+//! 1. the model's training gap is significant (above [`super::SIGNIFICANCE`] times the
+//!    noise floor);
+//! 2. the set removes at least [`super::CREDIT`] of the training gap above the floor;
+//! 3. BIC falls by at least [`EVIDENCE`] ("strong" evidence on Kass and Raftery's scale);
+//! 4. no other set that is not its subset or superset (and earns each of its effects)
+//!    comes within [`TIE`] of its BIC: else the verdict is "undecided between" them, with
+//!    the evidence for each.
+//!
+//! The held-out data only score the choice: the credited set's held-out gap, its shrink
+//! and the block-bootstrap spread of its decrease ([`super::ranking`]) are reported, and a
+//! credited set that does worse on the held-out data than the model is flagged.
 
 use super::effects::{block_sums, fit_and_score, lower, Ranking, Scored};
-use super::ranking::{compare, CONFIDENCE};
+use super::ranking::compare;
 use super::render::num;
 use super::report::{Selection, SelectionStep};
 use super::{Context, DiagnoseError, Progress, CREDIT, SIGNIFICANCE};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
+
+/// BIC must fall by this much for an effect (or set) to be credited, and a set must beat
+/// each of its subsets by this much to be preferred to it.
+pub const EVIDENCE: f64 = 6.0;
+/// Two sets within this BIC of each other cannot be told apart.
+pub const TIE: f64 = 2.0;
+/// A set beats its subset only when it removes at least this share of what the subset
+/// leaves above the noise floor.
+pub const MARGINAL: f64 = 0.25;
+/// Triples are tried when the model has at most this many candidate effects.
+pub const TRIPLES_UP_TO: usize = 5;
+/// Pairs are tried among at most this many candidates (the best by BIC alone).
+pub const PAIRS_AMONG: usize = 8;
 
 /// The gap and noise level a selection works against.
 #[derive(Debug, Clone, Copy)]
@@ -35,8 +57,14 @@ pub struct Levels {
     pub noise_floor: f64,
 }
 
-/// Runs forward selection from the single-effect ranking; returns the selection and the
-/// fit of the credited set (`None` when nothing is credited).
+/// One fitted set of effects.
+struct Candidate {
+    effects: Vec<String>,
+    fit: Scored,
+}
+
+/// Chooses the credited effects (see the module documentation); returns the selection and
+/// the fit of the credited set (`None` when nothing is credited).
 pub fn select(
     context: &Context,
     base: &Scored,
@@ -44,205 +72,300 @@ pub fn select(
     levels: Levels,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(Selection, Option<Scored>), DiagnoseError> {
-    let mut selection = Selection {
-        gap_after: levels.gap_before,
-        ..Selection::default()
-    };
-    let (Some(first), Some(first_fit)) = (ranking.scores.first(), ranking.fits.first()) else {
-        return Ok((selection, None));
-    };
-    let alternatives: Vec<(String, f64)> = (ranking.scores[1..].iter())
-        .map(|s| (s.name.clone(), s.gap_after))
-        .collect();
-    let others_tied: Vec<String> = (ranking.scores[1..].iter())
-        .filter(|s| s.tied)
-        .map(|s| s.name.clone())
-        .collect();
-    let step = judge(
-        context,
-        (base, first_fit),
-        &first.name,
-        &others_tied,
-        levels,
-    );
-    let accepted = step.accepted;
-    selection.stop = step.reason.clone();
-    selection.steps.push(SelectionStep {
-        effects: vec![first.name.clone()],
-        alternatives,
-        ..step
-    });
-    if !accepted {
-        return Ok((selection, None));
-    }
-    let mut credited = vec![first.name.clone()];
-    let mut current = first_fit.clone();
-    let singles: BTreeMap<String, BTreeMap<String, f64>> = (ranking.scores.iter())
+    let mut candidates: Vec<Candidate> = (ranking.scores.iter())
         .zip(&ranking.fits)
-        .map(|(s, fit)| (s.name.clone(), fit.named.clone()))
-        .collect();
-    selection.stop = "every effect is credited".into();
-    while credited.len() < ranking.scores.len() {
-        let significant = current.gap > SIGNIFICANCE * levels.noise_floor;
-        if !significant {
-            selection.stop = format!(
-                "the gap left ({}) is within {SIGNIFICANCE}x the noise floor ({})",
-                num(current.gap),
-                num(levels.noise_floor)
-            );
-            break;
-        }
-        let (step, fit) = next_step(context, &credited, &current, &singles, levels, progress)?;
-        let accepted = step.accepted;
-        let added = step.added.clone();
-        if !accepted {
-            selection.stop = format!("adding {added}: {}", step.reason);
-        }
-        selection.steps.push(step);
-        if !accepted {
-            break;
-        }
-        credited.push(added);
-        current = fit;
-    }
-    selection.gap_after = current.gap;
-    selection.credited = credited;
-    Ok((selection, Some(current)))
-}
-
-/// Tries every remaining effect added to `credited`; the step of the best addition.
-fn next_step(
-    context: &Context,
-    credited: &[String],
-    current: &Scored,
-    singles: &BTreeMap<String, BTreeMap<String, f64>>,
-    levels: Levels,
-    progress: &(dyn Fn(Progress) + Sync),
-) -> Result<(SelectionStep, Scored), DiagnoseError> {
-    let remaining: Vec<&String> = singles.keys().filter(|n| !credited.contains(n)).collect();
-    let tried = remaining
-        .par_iter()
-        .enumerate()
-        .map(|(index, name)| {
-            let mut set = names(credited);
-            set.push(name.as_str());
-            let model = lower(context, &set)?;
-            let mut start = singles[*name].clone();
-            start.extend(current.named.clone());
-            let seed = context.seed(2000 + 100 * credited.len() as u64 + index as u64);
-            let scored = fit_and_score(context, &model, &start, seed)?;
-            progress(Progress::Done {
-                item: format!("{} + {name}", credited.join(" + ")),
-                seconds: scored.summary.seconds,
-            });
-            Ok(((*name).clone(), scored))
+        .map(|(score, fit)| Candidate {
+            effects: vec![score.name.clone()],
+            fit: fit.clone(),
         })
-        .collect::<Result<Vec<_>, DiagnoseError>>()?;
-    let mut order: Vec<usize> = (0..tried.len()).collect();
-    order.sort_by(|&a, &b| tried[a].1.gap.total_cmp(&tried[b].1.gap));
-    let best = order[0];
-    let sums: Vec<_> = tried.iter().map(|(_, s)| block_sums(context, s)).collect();
-    let comparison = compare(&sums, context.seed(3000 + credited.len() as u64));
-    let others_tied: Vec<String> = (order[1..].iter())
-        .filter(|&&i| comparison.tied_with_best(i))
-        .map(|&i| tried[i].0.clone())
         .collect();
-    let (name, fit) = &tried[best];
-    let step = judge(context, (current, fit), name, &others_tied, levels);
-    let mut effects = credited.to_vec();
-    effects.push(name.clone());
-    let alternatives = (order[1..].iter())
-        .map(|&i| (tried[i].0.clone(), tried[i].1.gap))
-        .collect();
-    Ok((
-        SelectionStep {
-            effects,
-            alternatives,
-            ..step
-        },
-        fit.clone(),
-    ))
+    let settled = best(&candidates).is_some_and(|single| {
+        credible(base, &single.fit, levels) && !significant(single.fit.summary.gap_train, levels)
+    });
+    if !settled {
+        candidates.extend(combinations(context, ranking, progress)?);
+    }
+    candidates.sort_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic));
+    Ok(decide(context, base, &candidates, levels))
 }
 
-/// Whether adding `name` (fit `after`) to the set fitted as `before` is credited, with the
-/// step's numbers and the reason (see the module documentation).
-fn judge(
-    context: &Context,
-    (before, after): (&Scored, &Scored),
-    name: &str,
-    others_tied: &[String],
-    levels: Levels,
-) -> SelectionStep {
-    let pair = compare(
-        &[block_sums(context, before), block_sums(context, after)],
-        context.seed(4000),
-    );
-    let spread = pair.spread[0].max(pair.spread[1]);
-    let excess = before.gap - levels.noise_floor;
-    let removed = before.gap - after.gap;
-    // Each test is false for a NaN, which is then refused.
-    let significant = before.gap > SIGNIFICANCE * levels.noise_floor;
-    let removes_enough = removed >= CREDIT * excess;
-    let bic_falls = after.summary.bic < before.summary.bic;
-    let reason = if !significant {
-        format!(
-            "the gap before it ({}) is within {SIGNIFICANCE}x the noise floor ({})",
-            num(before.gap),
+/// The candidate with the lowest BIC.
+fn best(candidates: &[Candidate]) -> Option<&Candidate> {
+    candidates
+        .iter()
+        .min_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic))
+}
+
+/// Whether a training gap is significant against the noise floor.
+fn significant(gap_train: f64, levels: Levels) -> bool {
+    gap_train > SIGNIFICANCE * levels.noise_floor
+}
+
+/// Whether `fit` passes rules 1-3 against `base`.
+fn credible(base: &Scored, fit: &Scored, levels: Levels) -> bool {
+    reason_refused(base, fit, levels).is_none()
+}
+
+/// Why `fit` is not credited over `base` by rules 1-3 (`None`: it is). Every test is false
+/// for a NaN, which is then refused.
+fn reason_refused(base: &Scored, fit: &Scored, levels: Levels) -> Option<String> {
+    let (before, after) = (base.summary.gap_train, fit.summary.gap_train);
+    let excess = before - levels.noise_floor;
+    let removed = before - after;
+    let falls = base.summary.bic - fit.summary.bic;
+    if !significant(before, levels) {
+        Some(format!(
+            "the training gap ({}) is within {SIGNIFICANCE}x the noise floor ({})",
+            num(before),
             num(levels.noise_floor)
-        )
-    } else if !removes_enough {
-        format!(
-            "it removes {} of the gap above the noise floor, less than {}",
+        ))
+    } else if removed
+        .partial_cmp(&(CREDIT * excess))
+        .is_none_or(|o| o.is_lt())
+    {
+        Some(format!(
+            "it removes {} of the training gap above the noise floor, less than {}",
             percent(removed / excess),
             percent(CREDIT)
-        )
-    } else if pair.best != Some(1) || pair.tied_with_best(0) {
-        format!(
-            "its decrease of the held-out gap ({} +- {}) does not hold in {} of the bootstrap draws",
-            num(removed),
-            num(spread),
-            percent(CONFIDENCE)
-        )
-    } else if !others_tied.is_empty() {
-        format!(
-            "the held-out data cannot tell it from {}",
-            others_tied.join(", ")
-        )
-    } else if !bic_falls {
-        format!(
-            "BIC does not fall ({} to {})",
-            num(before.summary.bic),
-            num(after.summary.bic)
-        )
+        ))
+    } else if falls.partial_cmp(&EVIDENCE).is_none_or(|o| o.is_lt()) {
+        Some(format!("BIC falls by {}, less than {EVIDENCE}", num(falls)))
     } else {
-        String::new()
-    };
-    let accepted = reason.is_empty();
-    SelectionStep {
-        added: name.to_string(),
-        effects: Vec::new(),
-        gap_after: after.gap,
-        shrink: 1.0 - after.gap / levels.gap_before,
-        aic: after.summary.aic,
-        bic: after.summary.bic,
-        unknowns: after.summary.unknowns,
-        spread,
-        alternatives: Vec::new(),
-        accepted,
-        reason: if accepted {
-            format!(
-                "removes {} of the gap above the noise floor, beyond its uncertainty; BIC falls by {}",
-                percent(removed / excess),
-                num(before.summary.bic - after.summary.bic)
-            )
-        } else {
-            reason
-        },
+        None
     }
 }
 
-fn names(set: &[String]) -> Vec<&str> {
-    set.iter().map(String::as_str).collect()
+/// Every pair of the best [`PAIRS_AMONG`] single effects (by BIC), and every triple when
+/// the model has at most [`TRIPLES_UP_TO`] effects, fitted side by side.
+fn combinations(
+    context: &Context,
+    ranking: &Ranking,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Vec<Candidate>, DiagnoseError> {
+    let mut singles: Vec<usize> = (0..ranking.scores.len()).collect();
+    singles.sort_by(|&a, &b| {
+        ranking.fits[a]
+            .summary
+            .bic
+            .total_cmp(&ranking.fits[b].summary.bic)
+    });
+    singles.truncate(PAIRS_AMONG);
+    let mut sets: Vec<Vec<usize>> = Vec::new();
+    for (i, &a) in singles.iter().enumerate() {
+        for (j, &b) in singles.iter().enumerate().skip(i + 1) {
+            sets.push(vec![a, b]);
+            if ranking.scores.len() <= TRIPLES_UP_TO {
+                sets.extend(singles[j + 1..].iter().map(|&c| vec![a, b, c]));
+            }
+        }
+    }
+    progress(Progress::Stage {
+        name: "fitting combinations",
+        total: sets.len(),
+    });
+    sets.par_iter()
+        .enumerate()
+        .map(|(index, set)| {
+            let names: Vec<&str> = set
+                .iter()
+                .map(|&i| ranking.scores[i].name.as_str())
+                .collect();
+            let model = lower(context, &names)?;
+            let mut start: BTreeMap<String, f64> = BTreeMap::new();
+            for &i in set.iter().rev() {
+                start.extend(ranking.fits[i].named.clone());
+            }
+            let fit = fit_and_score(context, &model, &start, context.seed(2000 + index as u64))?;
+            progress(Progress::Done {
+                item: names.join(" + "),
+                seconds: fit.summary.seconds,
+            });
+            Ok(Candidate {
+                effects: names.iter().map(|n| n.to_string()).collect(),
+                fit,
+            })
+        })
+        .collect()
+}
+
+/// The verdict over the fitted candidates (sorted by BIC).
+fn decide(
+    context: &Context,
+    base: &Scored,
+    candidates: &[Candidate],
+    levels: Levels,
+) -> (Selection, Option<Scored>) {
+    let mut selection = Selection {
+        gap_after: levels.gap_before,
+        criterion: format!(
+            "BIC of the training fit (credited when it falls by {EVIDENCE} or more)"
+        ),
+        ..Selection::default()
+    };
+    let Some(winner) = parsimonious(candidates, levels) else {
+        selection.stop = "no candidate effects".into();
+        return (selection, None);
+    };
+    let refused = reason_refused(base, &winner.fit, levels);
+    let rivals: Vec<&Candidate> = (candidates.iter())
+        .filter(|c| !nested(&c.effects, &winner.effects))
+        .filter(|c| earns_every_effect(c, candidates, levels))
+        .filter(|c| c.fit.summary.bic - winner.fit.summary.bic < TIE)
+        .collect();
+    let unconfirmed = winner.fit.fitted.agreeing < 2;
+    selection.steps = candidates
+        .iter()
+        .map(|c| {
+            step(
+                context,
+                base,
+                c,
+                levels,
+                std::ptr::eq(c, winner) && refused.is_none() && rivals.is_empty(),
+            )
+        })
+        .collect();
+    selection.combinations = (candidates.iter())
+        .filter(|c| c.effects.len() > 1)
+        .map(|c| c.effects.join(" + "))
+        .collect();
+    let name = winner.effects.join(" + ");
+    if let Some(reason) = refused {
+        selection.stop = format!("{name} is the best by BIC, but {reason}");
+        return (selection, None);
+    }
+    if !rivals.is_empty() {
+        let mut names = vec![name];
+        names.extend(rivals.iter().map(|c| c.effects.join(" + ")));
+        selection.undecided = names.clone();
+        selection.stop = format!(
+            "undecided between {}: BIC within {TIE} of each other ({})",
+            names.join(" and "),
+            evidence(std::iter::once(winner).chain(rivals.iter().copied()))
+        );
+        return (selection, None);
+    }
+    selection.credited = winner.effects.clone();
+    selection.gap_after = winner.fit.gap;
+    selection.stop = held_out_note(base, &winner.fit, levels);
+    if unconfirmed {
+        selection
+            .stop
+            .push_str("; its best fit was reached by one start only");
+    }
+    (selection, Some(winner.fit.clone()))
+}
+
+/// The lowest-BIC candidate, trimmed: replaced by the best of its proper subsets it does
+/// not [`beat`], until it beats them all.
+fn parsimonious(candidates: &[Candidate], levels: Levels) -> Option<&Candidate> {
+    let mut winner = candidates.first()?;
+    while let Some(subset) = (candidates.iter())
+        .filter(|c| c.effects.len() < winner.effects.len())
+        .filter(|c| c.effects.iter().all(|e| winner.effects.contains(e)))
+        .filter(|c| !beats(&winner.fit, &c.fit, levels))
+        .min_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic))
+    {
+        winner = subset;
+    }
+    Some(winner)
+}
+
+/// Whether `set` beats every subset of it that was fitted (no effect in it is dead weight).
+fn earns_every_effect(set: &Candidate, candidates: &[Candidate], levels: Levels) -> bool {
+    (candidates.iter())
+        .filter(|c| c.effects.len() < set.effects.len())
+        .filter(|c| c.effects.iter().all(|e| set.effects.contains(e)))
+        .all(|c| beats(&set.fit, &c.fit, levels))
+}
+
+/// Whether the set fitted as `larger` earns its place over its subset fitted as `smaller`:
+/// BIC falls by [`EVIDENCE`] and it removes [`MARGINAL`] of what `smaller` leaves above the
+/// noise floor.
+fn beats(larger: &Scored, smaller: &Scored, levels: Levels) -> bool {
+    let left = smaller.summary.gap_train - levels.noise_floor;
+    let removed = smaller.summary.gap_train - larger.summary.gap_train;
+    smaller.summary.bic - larger.summary.bic >= EVIDENCE && removed >= MARGINAL * left
+}
+
+/// Whether one of two sets contains the other.
+fn nested(a: &[String], b: &[String]) -> bool {
+    a.iter().all(|e| b.contains(e)) || b.iter().all(|e| a.contains(e))
+}
+
+/// Each candidate's BIC and held-out gap, in words.
+fn evidence<'a>(candidates: impl Iterator<Item = &'a Candidate>) -> String {
+    candidates
+        .map(|c| {
+            format!(
+                "{}: BIC {}, held-out gap {}",
+                c.effects.join(" + "),
+                num(c.fit.summary.bic),
+                num(c.fit.gap)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// The held-out score of the credited fit, in words.
+fn held_out_note(base: &Scored, fit: &Scored, levels: Levels) -> String {
+    let shrink = 1.0 - fit.gap / levels.gap_before;
+    if fit.gap > base.gap {
+        format!(
+            "credited on the training data, but the held-out gap grows from {} to {}: the \
+             held-out data do not confirm it",
+            num(base.gap),
+            num(fit.gap)
+        )
+    } else {
+        format!(
+            "the held-out gap shrinks by {} ({} to {})",
+            percent(shrink),
+            num(base.gap),
+            num(fit.gap)
+        )
+    }
+}
+
+/// The report's line for one candidate set.
+fn step(
+    context: &Context,
+    base: &Scored,
+    candidate: &Candidate,
+    levels: Levels,
+    accepted: bool,
+) -> SelectionStep {
+    let fit = &candidate.fit;
+    let pair = compare(
+        &[block_sums(context, base), block_sums(context, fit)],
+        context.seed(4000),
+    );
+    let reason = reason_refused(base, fit, levels).unwrap_or_else(|| {
+        format!(
+            "removes {} of the training gap above the noise floor; BIC falls by {}",
+            percent(
+                (base.summary.gap_train - fit.summary.gap_train)
+                    / (base.summary.gap_train - levels.noise_floor)
+            ),
+            num(base.summary.bic - fit.summary.bic)
+        )
+    });
+    SelectionStep {
+        added: candidate.effects.join(" + "),
+        effects: candidate.effects.clone(),
+        gap_train: fit.summary.gap_train,
+        gap_after: fit.gap,
+        shrink: 1.0 - fit.gap / levels.gap_before,
+        aic: fit.summary.aic,
+        bic: fit.summary.bic,
+        delta_bic: fit.summary.bic - base.summary.bic,
+        unknowns: fit.summary.unknowns,
+        spread: pair.spread[0].max(pair.spread[1]),
+        alternatives: Vec::new(),
+        accepted,
+        reason,
+    }
 }
 
 fn percent(value: f64) -> String {

@@ -110,8 +110,10 @@ fn every_number_non_finite() -> Report {
             steps: vec![SelectionStep {
                 added: "product_decay".into(),
                 effects: vec!["product_decay".into()],
+                gap_train: NAN,
                 gap_after: INF,
                 shrink: NAN,
+                delta_bic: NEG,
                 aic: NEG,
                 bic: INF,
                 unknowns: 2,
@@ -127,6 +129,9 @@ fn every_number_non_finite() -> Report {
             credited: vec!["product_decay".into()],
             gap_after: INF,
             stop: "no effect left".into(),
+            criterion: "BIC".into(),
+            combinations: vec!["a + b".into()],
+            undecided: vec!["a".into(), "b".into()],
         },
         confidence: Confidence {
             separated: false,
