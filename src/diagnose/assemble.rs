@@ -21,7 +21,14 @@ pub fn state_gaps(context: &Context, base: &Simulator, before: &Scored) -> Vec<S
     simulator.set_params(&before.fitted.x);
     let fitted = &before.fitted.x[model.params.len()..];
     let offline = offline_errors(&mut simulator, split, fitted);
-    let noise = noise::noise_floors(split);
+    let mut noise = noise::noise_floors(split);
+    let objective = super::fit::Objective {
+        simulator: &simulator,
+        split,
+    };
+    if let Some(residuals) = objective.residuals(&before.fitted.x) {
+        noise::cap_by_fit(&mut noise, split, &residuals, before.fitted.x.len());
+    }
     let cells: Vec<usize> = (0..model.states.len())
         .map(|k| {
             (split.scored())
@@ -43,7 +50,8 @@ pub fn state_gaps(context: &Context, base: &Simulator, before: &Scored) -> Vec<S
             },
             online: online[k],
             offline: offline[k],
-            noise: noise[k],
+            noise: noise[k].variance,
+            noise_estimate: noise[k].describe(),
             cells: cells[k],
         })
         .collect()

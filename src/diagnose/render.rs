@@ -106,18 +106,19 @@ fn where_section(out: &mut String, report: &Report) {
     }
     let _ = writeln!(
         out,
-        "   {:<12} {:>8} {:>10} {:>10} {:>10}",
+        "   {:<12} {:>8} {:>10} {:>10} {:>10}  noise from",
         "state", "share", "online", "offline", "noise"
     );
     for state in &report.states {
         let _ = writeln!(
             out,
-            "   {:<12} {:>8} {:>10} {:>10} {:>10}",
+            "   {:<12} {:>8} {:>10} {:>10} {:>10}  {}",
             state.name,
             percent(state.share),
             maybe(state.online),
             maybe(state.offline),
-            num(state.noise)
+            num(state.noise),
+            state.noise_estimate
         );
     }
     if !report.significant {

@@ -77,6 +77,9 @@ pub struct StateGap {
     /// Its measurement noise variance, normalised.
     #[serde(with = "crate::json")]
     pub noise: f64,
+    /// Where that noise comes from (declared, or how it was estimated and how uncertain).
+    #[serde(default)]
+    pub noise_estimate: String,
     /// Held-out cells of this state.
     pub cells: usize,
 }

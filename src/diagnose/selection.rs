@@ -79,11 +79,16 @@ pub fn select(
             fit: fit.clone(),
         })
         .collect();
-    let settled = best(&candidates).is_some_and(|single| {
-        credible(base, &single.fit, levels) && !significant(single.fit.summary.gap_train, levels)
-    });
-    if !settled {
-        candidates.extend(combinations(context, ranking, progress)?);
+    let settled = |candidates: &[Candidate]| {
+        best(candidates).is_some_and(|set| {
+            credible(base, &set.fit, levels) && !significant(set.fit.summary.gap_train, levels)
+        })
+    };
+    for size in [2, 3] {
+        if settled(&candidates) || (size == 3 && ranking.scores.len() > TRIPLES_UP_TO) {
+            break;
+        }
+        candidates.extend(combinations(context, ranking, size, progress)?);
     }
     candidates.sort_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic));
     Ok(decide(context, base, &candidates, levels))
@@ -135,11 +140,12 @@ fn reason_refused(base: &Scored, fit: &Scored, levels: Levels) -> Option<String>
     }
 }
 
-/// Every pair of the best [`PAIRS_AMONG`] single effects (by BIC), and every triple when
-/// the model has at most [`TRIPLES_UP_TO`] effects, fitted side by side.
+/// Every set of `size` effects among the best [`PAIRS_AMONG`] single effects (by BIC),
+/// fitted side by side.
 fn combinations(
     context: &Context,
     ranking: &Ranking,
+    size: usize,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Vec<Candidate>, DiagnoseError> {
     let mut singles: Vec<usize> = (0..ranking.scores.len()).collect();
@@ -150,17 +156,13 @@ fn combinations(
             .total_cmp(&ranking.fits[b].summary.bic)
     });
     singles.truncate(PAIRS_AMONG);
-    let mut sets: Vec<Vec<usize>> = Vec::new();
-    for (i, &a) in singles.iter().enumerate() {
-        for (j, &b) in singles.iter().enumerate().skip(i + 1) {
-            sets.push(vec![a, b]);
-            if ranking.scores.len() <= TRIPLES_UP_TO {
-                sets.extend(singles[j + 1..].iter().map(|&c| vec![a, b, c]));
-            }
-        }
-    }
+    let sets = subsets(&singles, size);
     progress(Progress::Stage {
-        name: "fitting combinations",
+        name: if size == 2 {
+            "fitting pairs"
+        } else {
+            "fitting triples"
+        },
         total: sets.len(),
     });
     sets.par_iter()
@@ -175,7 +177,8 @@ fn combinations(
             for &i in set.iter().rev() {
                 start.extend(ranking.fits[i].named.clone());
             }
-            let fit = fit_and_score(context, &model, &start, context.seed(2000 + index as u64))?;
+            let seed = context.seed(1000 * size as u64 + index as u64);
+            let fit = fit_and_score(context, &model, &start, seed)?;
             progress(Progress::Done {
                 item: names.join(" + "),
                 seconds: fit.summary.seconds,
@@ -269,6 +272,21 @@ fn parsimonious(candidates: &[Candidate], levels: Levels) -> Option<&Candidate> 
         winner = subset;
     }
     Some(winner)
+}
+
+/// Every subset of `items` with `size` members, in lexicographic order of positions.
+fn subsets(items: &[usize], size: usize) -> Vec<Vec<usize>> {
+    if size == 0 {
+        return vec![Vec::new()];
+    }
+    let mut out = Vec::new();
+    for (i, &first) in items.iter().enumerate() {
+        for mut rest in subsets(&items[i + 1..], size - 1) {
+            rest.insert(0, first);
+            out.push(rest);
+        }
+    }
+    out
 }
 
 /// Whether `set` beats every subset of it that was fitted (no effect in it is dead weight).

@@ -256,9 +256,9 @@ fn two_withheld_effects_are_credited_in_order() {
         &["product_decay", "product_inhibition"],
         0.5,
     );
-    // Chosen among sets on the training BIC: the pair is the one accepted step, it beats
-    // each of its members alone by the evidence needed, and the triples that add a third
-    // effect to it (tried: three candidates) do not earn their place.
+    // Chosen among sets on the training BIC: the pair is the one accepted step and it beats
+    // each of its members alone by the evidence needed; it leaves no significant training
+    // gap, so no triple is tried.
     let steps = &report.selection.steps;
     let accepted: Vec<_> = steps.iter().filter(|s| s.accepted).collect();
     assert_eq!(accepted.len(), 1, "{steps:?}");
@@ -271,9 +271,8 @@ fn two_withheld_effects_are_credited_in_order() {
             );
         }
     }
-    let triples: Vec<_> = steps.iter().filter(|s| s.effects.len() == 3).collect();
-    assert!(!triples.is_empty(), "{:?}", report.selection.combinations);
-    assert!(triples.iter().all(|t| !t.accepted));
+    assert!(pair.gap_train <= super::SIGNIFICANCE * report.noise_floor);
+    assert!(steps.iter().all(|s| s.effects.len() <= 2));
     assert!(report
         .selection
         .combinations

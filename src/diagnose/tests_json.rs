@@ -56,6 +56,7 @@ fn every_number_non_finite() -> Report {
             online: Some(INF),
             offline: Some(NEG),
             noise: NAN,
+            noise_estimate: "declared".into(),
             cells: 40,
         }],
         locus: vec![Locus {
