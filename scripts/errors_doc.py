@@ -10,7 +10,7 @@ DESCRIPTIONS = {
     "E0002": ("syntax", "Brackets nested more than 200 levels deep. Split the expression with `let`s."),
     "E0003": ("syntax", "One declaration holds more than 2000 operators, or a chain of more than 200 operators in a row (e.g. `- - - ... x`)."),
     "E0004": ("syntax", "A number that is not a finite 64-bit float (`1e400`), or a whole number too large for `dim` or a layer width."),
-    "E0005": ("syntax", "A declaration in a place it is not allowed: `der X += ...` outside an effect, an effect inside an effect."),
+    "E0005": ("syntax", "A declaration in a place it is not allowed: `der X += ...` outside an effect, an effect inside an effect, a `noise` declaration inside an effect."),
     "E0006": ("file", "The model file is not UTF-8 text (binary data). Tested in tests/it/cli.rs."),
     "E0008": ("file", "The model file cannot be read (missing, permissions). Tested in tests/it/cli.rs."),
     "E0101": ("check", "A name that is not declared. The help line suggests the nearest declared name."),
@@ -36,6 +36,11 @@ DESCRIPTIONS = {
     "E0121": ("check", "A prior uses a closure output directly."),
     "E0122": ("check", "A hidden state of a trainable model (one with closures or params) has no initial value."),
     "E0124": ("check", "A model that declares no measured state."),
+    "E0140": ("noise", "A `noise` declaration for something that is not measured: a hidden state, an input, a const, a param or a `let` (only measured `state`s and `output`s have measurement noise). The help says why and what to do (make a `let` an `output` if a sensor reads it)."),
+    "E0141": ("noise", "Two `noise` declarations for one quantity (`noise X` twice, or `X` in two lists); both are labelled."),
+    "E0142": ("noise", "A negative noise term (`-4 %`, `-0.01`), or an absolute term that is no longer a finite number once converted to the quantity's unit."),
+    "E0143": ("noise", "Two relative (`%`) or two absolute terms in one `noise` declaration; a declaration has at most one of each. `noise X = 0.04 + 0.01` is two absolute terms: a relative term is written `4 %`."),
+    "E0144": ("noise", "A `noise` declaration whose terms are all zero: give the assay's precision, or leave the declaration out."),
     "E0150": ("units", "A unit symbol gbc does not know, in a `[...]` annotation or after `time` (in a model that declares units). Units are products of powers of `g mol L m K s min h d % ppm` with the SI prefixes `p n u µ m c d k M` (not on `min h d % ppm`), and `-` for dimensionless; the help suggests the symbol meant (`hr` is `h`, `percent` is `%`) or says that a symbol takes no prefix (`m%`)."),
     "E0151": ("units", "Two units of different dimensions where one unit is needed: the operands of `+ - min max`, a balance `der X` (the unit of `X` per time unit) or `next X`, a prior or `~` magnitude and its output, a definition and its declared unit, an initial value, a bound, a patch, an embedding delay (the time unit). Both units are labelled and named with their dimensions."),
     "E0152": ("units", "Two units of one dimension but different scales (`g/L` and `mg/L`, `1/h` and `1/min`, `h` and `min`, `%` and `-`) where one unit is needed; the message and the help name the factor between them (`1 g/L = 1000 mg/L`)."),
@@ -44,6 +49,8 @@ DESCRIPTIONS = {
     "E0131": ("lowering", "`let`s nested more than 256 levels deep."),
     "E0132": ("lowering", "Inlining `let`s produced an expression of more than two million nodes."),
     "E0133": ("lowering", "A prior depends on a closure output through `let`s."),
+    "E0134": ("command line", "A `--noise NAME=LEVEL` spec (`gbc simulate`, `gbc diagnose`) names something that is not a measured state or an output of the model; the message says what the name is, the help lists the measured quantities with a \"did you mean\". Tested in tests/it/noise.rs."),
+    "E0135": ("command line", "Two `--noise` specs for one quantity, or two bare levels (`--noise 1% --noise 2%`). Tested in tests/it/noise.rs."),
 }
 
 def main():

@@ -268,6 +268,38 @@ pub enum ItemKind {
     Effect(EffectDecl),
     /// `NAME *= expr` and friends (only inside an effect).
     Patch(Patch),
+    /// `noise X, S = 4 % + 0.01 [g/L]`: measurement noise (top level only).
+    Noise(NoiseDecl),
+}
+
+/// `noise X, S = 4 % + 0.01 [g/L]`: the standard deviation of a measurement of each named
+/// quantity, `sigma(y) = sqrt(absolute^2 + (relative * y)^2)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseDecl {
+    /// The measured quantities it is declared for.
+    pub targets: Vec<Ident>,
+    /// Its terms as written, in order (the checks allow one of each kind).
+    pub terms: Vec<NoiseTerm>,
+}
+
+/// One term of a noise declaration: `4 %` or `0.01 [g/L]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseTerm {
+    /// The number with its sign (its span covers the literal, sign included).
+    pub value: Spanned<f64>,
+    /// Relative or absolute.
+    pub kind: NoiseKind,
+    /// The whole term.
+    pub span: Span,
+}
+
+/// The kind of a noise term.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NoiseKind {
+    /// `4 %`: a percentage of the measured value.
+    Relative,
+    /// `0.01 [g/L]` or `0.01`: in the unit written, or without one in the quantity's unit.
+    Absolute(Option<SUnit>),
 }
 
 /// `NAME op expr` inside an effect.
@@ -350,6 +382,21 @@ pub struct EffectDecl {
     pub description: Option<String>,
     /// Its declarations (params, hidden states, lets, ders) and patches.
     pub items: Vec<Item>,
+}
+
+impl NoiseDecl {
+    /// The terms in canonical text: `4 % + 0.01 [g/L]` (numbers in their shortest form).
+    pub fn terms_text(&self) -> String {
+        let text = |term: &NoiseTerm| {
+            let number = format_number(term.value.node);
+            match &term.kind {
+                NoiseKind::Relative => format!("{number} %"),
+                NoiseKind::Absolute(Some(unit)) => format!("{number} [{}]", unit.node),
+                NoiseKind::Absolute(None) => number,
+            }
+        };
+        self.terms.iter().map(text).collect::<Vec<_>>().join(" + ")
+    }
 }
 
 impl fmt::Display for Expr {

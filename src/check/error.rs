@@ -344,6 +344,84 @@ pub enum CheckError {
         #[label("this model")]
         span: SourceSpan,
     },
+    /// Noise declared for something that is not measured.
+    #[error("noise for `{name}`, which is {kind}")]
+    #[diagnostic(code(gbm::E0140))]
+    NoiseTarget {
+        /// The name.
+        name: String,
+        /// What it is.
+        kind: String,
+        /// Where.
+        #[label("not measured")]
+        span: SourceSpan,
+        /// Why only measured quantities have noise.
+        #[help]
+        help: String,
+    },
+    /// Two noise declarations for one quantity.
+    #[error("`{name}` has two noise declarations")]
+    #[diagnostic(
+        code(gbm::E0141),
+        help("keep one: a quantity has one error model, `noise {name} = REL % + ABS`")
+    )]
+    DuplicateNoise {
+        /// The quantity.
+        name: String,
+        /// The second declaration.
+        #[label("declared again here")]
+        span: SourceSpan,
+        /// The first declaration.
+        #[label("first declared here")]
+        first: SourceSpan,
+    },
+    /// A negative or non-finite noise term.
+    #[error("expected {expected}, found {found}")]
+    #[diagnostic(code(gbm::E0142))]
+    BadNoiseValue {
+        /// What a term must be.
+        expected: String,
+        /// The value found.
+        found: String,
+        /// Where.
+        #[label("this term")]
+        span: SourceSpan,
+        /// How to fix.
+        #[help]
+        help: String,
+    },
+    /// Two relative or two absolute terms in one noise declaration.
+    #[error("expected at most one {kind} term in a noise declaration, found two")]
+    #[diagnostic(code(gbm::E0143))]
+    NoiseTerms {
+        /// `relative` or `absolute`.
+        kind: String,
+        /// The second term.
+        #[label("second {kind} term")]
+        span: SourceSpan,
+        /// The first term.
+        #[label("first {kind} term")]
+        first: SourceSpan,
+        /// The form of a declaration.
+        #[help]
+        help: String,
+    },
+    /// A noise declaration whose terms are all zero.
+    #[error("expected a noise level above zero, found {found}")]
+    #[diagnostic(
+        code(gbm::E0144),
+        help(
+            "a measurement without error cannot weight a fit or bound a gap: give the assay's \
+             precision (e.g. `4 % + 0.01 [g/L]`), or leave the declaration out"
+        )
+    )]
+    ZeroNoise {
+        /// The terms as written.
+        found: String,
+        /// Where.
+        #[label("zero")]
+        span: SourceSpan,
+    },
     /// A unit symbol gbc does not know (in a `[...]` annotation or after `time`).
     #[error("unknown unit `{symbol}`")]
     #[diagnostic(code(gbm::E0150))]

@@ -112,7 +112,7 @@ fn item_sites<'a>(item: &'a ast::Item, scope: Scope, out: &mut Vec<Site<'a>>) {
                 }
             }
         }
-        ItemKind::Time(_) | ItemKind::Effect(_) => {}
+        ItemKind::Time(_) | ItemKind::Effect(_) | ItemKind::Noise(_) => {}
     }
 }
 

@@ -4,10 +4,11 @@
 //!
 //! Families: [`symbols`] (declarations, duplicates), [`exprs`] (names, functions, constant
 //! expressions, cycles), [`structure`] (balances, closures, params, effects), [`units`]
-//! (units of measure: inference and agreement).
+//! (units of measure: inference and agreement), [`noise`] (measurement noise).
 
 mod error;
 pub mod exprs;
+pub mod noise;
 mod structure;
 pub mod symbols;
 pub mod units;
@@ -43,6 +44,8 @@ pub struct Checked {
     pub values: HashMap<(Scope, String), f64>,
     /// Units of measure, declared and inferred (empty for a model without units).
     pub units: units::UnitTable,
+    /// The declared measurement noise, one level per quantity, in declaration order.
+    pub noise: Vec<noise::NoiseLevel>,
 }
 
 impl Checked {
@@ -72,12 +75,14 @@ pub fn check(model: ast::Model) -> Result<Checked, Vec<CheckError>> {
     let values = exprs::evaluate_constants(&model, &symbols, &mut sink);
     structure::check_all(&model, &symbols, &values, &mut sink);
     let units = units::check_units(&model, &symbols, &values, &mut sink);
+    let noise = noise::check_noise(&model, &symbols, &units, &mut sink);
     if sink.errors.is_empty() {
         Ok(Checked {
             ast: model,
             symbols,
             values,
             units,
+            noise,
         })
     } else {
         sink.errors.sort_by_key(first_offset);

@@ -187,30 +187,7 @@ impl Checker<'_> {
     }
 
     fn unknown_unit(&mut self, symbol: &str, span: Span) {
-        let alias = ALIASES
-            .iter()
-            .find(|(word, _)| word.eq_ignore_ascii_case(symbol));
-        let refused = Symbol::refused_prefix(symbol).map(|base| {
-            format!(
-                "`{}` takes no SI prefix: only `g mol L m K s` do (`mg`, `mmol`, `mL`, `ms`)",
-                base.symbol()
-            )
-        });
-        let suggestion = alias
-            .map(|(_, unit)| *unit)
-            .or(super::closest(symbol, SYMBOL_NAMES))
-            .map(|best| format!("did you mean `{best}`?"));
-        let help = refused.or(suggestion).unwrap_or_else(|| {
-            format!(
-                "units are products of {} with SI prefixes (`mg`, `mmol`, `mL`, `ms`), or `-`",
-                SYMBOL_NAMES.map(|s| format!("`{s}`")).join(" ")
-            )
-        });
-        self.errors.push(CheckError::UnknownUnit {
-            symbol: symbol.to_string(),
-            span: span.into(),
-            help,
-        });
+        self.errors.push(unknown_unit(symbol, span));
     }
 
     fn key(&self, scope: Scope, name: &str) -> Key {
@@ -367,6 +344,34 @@ impl Checker<'_> {
     }
 }
 
+/// The error for a unit symbol gbc does not know, with the symbol meant or the known ones.
+pub(super) fn unknown_unit(symbol: &str, span: Span) -> CheckError {
+    let alias = ALIASES
+        .iter()
+        .find(|(word, _)| word.eq_ignore_ascii_case(symbol));
+    let refused = Symbol::refused_prefix(symbol).map(|base| {
+        format!(
+            "`{}` takes no SI prefix: only `g mol L m K s` do (`mg`, `mmol`, `mL`, `ms`)",
+            base.symbol()
+        )
+    });
+    let suggestion = alias
+        .map(|(_, unit)| *unit)
+        .or(super::closest(symbol, SYMBOL_NAMES))
+        .map(|best| format!("did you mean `{best}`?"));
+    let help = refused.or(suggestion).unwrap_or_else(|| {
+        format!(
+            "units are products of {} with SI prefixes (`mg`, `mmol`, `mL`, `ms`), or `-`",
+            SYMBOL_NAMES.map(|s| format!("`{s}`")).join(" ")
+        )
+    });
+    CheckError::UnknownUnit {
+        symbol: symbol.to_string(),
+        span: span.into(),
+        help,
+    }
+}
+
 /// Words people write for units, and the symbol gbc reads.
 const ALIASES: [(&str, &str); 18] = [
     ("gram", "g"),
@@ -397,7 +402,7 @@ fn prepend_help(error: &mut CheckError, note: &str) {
 }
 
 /// A unit for messages: its text, or `dimensionless` for `-`.
-fn shown(unit: &Unit) -> String {
+pub(super) fn shown(unit: &Unit) -> String {
     if unit.is_one() {
         "dimensionless".to_string()
     } else {

@@ -3,12 +3,15 @@
 //! model ([`whatif`]).
 //!
 //! Columns: `t`, the inputs, the measured states, the hidden states (with `--hidden`), then
-//! the outputs. `--noise S` perturbs the measured states only, relatively:
-//! `y * (1 + S * N(0, 1))`, drawn row by row from a ChaCha8 generator seeded with `--seed`;
-//! hidden states and outputs stay noise-free. `--init X=V` replaces a state's declared
+//! the outputs. `--noise SPEC` adds measurement noise ([`noise`]): `--noise 0.01` perturbs
+//! the measured states relatively, `y * (1 + 0.01 N(0, 1))`, `--noise declared` by the
+//! model's `noise` declarations, `--noise X=4%+0.01` one quantity by the combined model;
+//! drawn row by row from a ChaCha8 generator seeded with `--seed`; hidden states and
+//! outputs without noise stay exact. `--init X=V` replaces a state's declared
 //! initial value; `--params FILE` sets the params to those `gbc train` or `gbc diagnose`
 //! fitted ([`params`]); `--effect NAME` applies a candidate effect before lowering.
 
+mod noise;
 mod params;
 mod whatif;
 
@@ -18,9 +21,6 @@ use crate::ir::Model;
 use crate::signal::Signal;
 use crate::sim::{SimOptions, Tolerances, Trajectory};
 use miette::Diagnostic;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -80,9 +80,18 @@ pub struct SimulateArgs {
     /// Settle this long at the first input values before recording.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub warmup: f64,
-    /// Relative Gaussian noise on the measured states (standard deviation).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub noise: f64,
+    /// Measurement noise of the record (repeatable): `0.01` (1 % relative on every measured
+    /// state, and on outputs that declare noise), `declared` (the model's `noise`
+    /// declarations), `X=4%+0.01` (one state or output: 4 % of the value and 0.01 in its
+    /// unit, sigma = sqrt(0.01^2 + (0.04 X)^2)), `3%`, `0%+0.02`; specs replace the
+    /// declarations per quantity, `X=0` removes one. Gaussian, drawn with --seed.
+    #[arg(
+        long = "noise",
+        value_name = "SPEC",
+        allow_negative_numbers = true,
+        value_parser = crate::ir::parse_noise_spec
+    )]
+    pub noise: Vec<crate::ir::NoiseSpec>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -139,13 +148,6 @@ pub enum SimulateError {
     DuplicateInput {
         /// The input.
         name: String,
-    },
-    /// The noise level is negative or not a number.
-    #[error("expected a noise level >= 0, found {found}")]
-    #[diagnostic(code(gbm::E0711), help("`--noise 0.01` adds 1 % relative noise"))]
-    BadNoise {
-        /// The level given.
-        found: f64,
     },
     /// `--init` names no state of the model.
     #[error("expected a state of the model in `--init`, found `{name}`")]
@@ -220,11 +222,6 @@ fn initial_values(model: &Model, init: &[(String, f64)]) -> Result<Vec<Option<f6
 
 /// Simulates the model and writes the record.
 pub fn run(args: &SimulateArgs) -> CommandResult {
-    if !(args.noise >= 0.0 && args.noise.is_finite()) {
-        return Err(CommandError::user(SimulateError::BadNoise {
-            found: args.noise,
-        }));
-    }
     let mut inputs: Vec<&Path> = vec![&args.model];
     inputs.extend(args.history.as_deref());
     inputs.extend(args.params.as_deref());
@@ -239,6 +236,7 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
             eprintln!("note: {note}");
         }
     }
+    let noise = noise::record_noise(&model, &args.noise)?;
     let t_start = args.t_start.unwrap_or(0.0);
     let dt = args.dt.ok_or_else(missing_dt)?;
     let signals = input_signals(&model, args, (t_start, args.t_end, dt))?;
@@ -268,7 +266,7 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
     let simulated = crate::sim::simulate_with_progress(&model, &signals, &options, &mut progress);
     reporter.finish();
     let mut trajectory = simulated.map_err(CommandError::user)?;
-    add_noise(&mut trajectory, args.noise, args.seed);
+    noise::add_noise(&mut trajectory, &noise, args.seed);
     let table = csv_table(&model, &trajectory, args.hidden, &args.output)?;
     crate::io::write_atomic(&args.output, &table).map_err(CommandError::user)?;
     Ok(())
@@ -335,20 +333,6 @@ fn input_signals(
 
 fn report(diagnostic: impl Diagnostic + Send + Sync + 'static) -> miette::Report {
     miette::Report::new(diagnostic)
-}
-
-/// Multiplies every measured state by `1 + sigma * N(0, 1)`, row by row.
-fn add_noise(trajectory: &mut Trajectory, sigma: f64, seed: u64) {
-    if sigma == 0.0 {
-        return;
-    }
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    for k in 0..trajectory.len() {
-        for column in &mut trajectory.states {
-            let draw: f64 = StandardNormal.sample(&mut rng);
-            column[k] *= 1.0 + sigma * draw;
-        }
-    }
 }
 
 /// The record as CSV text: `t`, inputs, measured states, hidden states (if asked), outputs.
@@ -504,33 +488,6 @@ mod tests {
         assert_eq!(changed, clean.len());
     }
 
-    #[test]
-    fn noise_has_the_requested_spread() {
-        let samples = 20_000;
-        let mut trajectory = Trajectory {
-            times: vec![0.0; samples],
-            inputs: vec![],
-            states: vec![vec![2.0; samples], vec![-5.0; samples]],
-            hidden: vec![vec![1.0; samples]],
-            outputs: vec![],
-            lets: vec![],
-            stats: Default::default(),
-        };
-        add_noise(&mut trajectory, 0.05, 1);
-        for (column, level) in trajectory.states.iter().zip([2.0, -5.0]) {
-            let draws: Vec<f64> = column.iter().map(|y| (y / level - 1.0) / 0.05).collect();
-            let mean = draws.iter().sum::<f64>() / samples as f64;
-            let variance = draws.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / samples as f64;
-            assert!(mean.abs() < 0.03, "mean {mean}");
-            assert!(
-                (variance.sqrt() - 1.0).abs() < 0.03,
-                "std {}",
-                variance.sqrt()
-            );
-        }
-        assert!(trajectory.hidden[0].iter().all(|&h| h == 1.0));
-    }
-
     fn codes(error: CommandError) -> Vec<String> {
         match error {
             CommandError::User(reports) => reports
@@ -552,10 +509,26 @@ mod tests {
             codes(run(&args(&output, &twice)).unwrap_err()),
             ["gbm::E0710"]
         );
-        let noise = ["--input", "E0=const(0.01)", "--noise", "-1"];
+        let noise = [
+            "--input",
+            "E0=const(0.01)",
+            "--noise",
+            "S=1%",
+            "--noise",
+            "S=2%",
+        ];
         assert_eq!(
             codes(run(&args(&output, &noise)).unwrap_err()),
-            ["gbm::E0711"]
+            ["gbm::E0135"]
+        );
+        let negative = [
+            "simulate", "m.gbm", "--t-end", "1", "--dt", "1", "-o", "o.csv",
+        ];
+        let refused = Command::try_parse_from([&negative[..], &["--noise", "-1"]].concat());
+        let message = refused.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(
+            message.contains("expected a finite noise level >= 0, found `-1`"),
+            "{message}"
         );
         assert!(!output.exists());
     }

@@ -74,6 +74,7 @@ fn small_model() -> Model {
         balances: vec![],
         effects: vec![],
         units: Default::default(),
+        noise: vec![],
     }
 }
 

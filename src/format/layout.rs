@@ -364,8 +364,51 @@ fn item_head(source: &str, kind: &ItemKind, tail: &mut Vec<Piece>) -> Option<(St
             tail.extend(pieces(source, &patch.expr));
             (patch.target.node.clone(), false)
         }
+        ItemKind::Noise(noise) => noise_head(source, noise, tail),
         ItemKind::Closure(_) | ItemKind::Effect(_) => return None,
     })
+}
+
+/// `noise X = 4 % + 0.01 [g/L]`: one name is alignable (on `=`), a list of names is not.
+fn noise_head(source: &str, noise: &ast::NoiseDecl, tail: &mut Vec<Piece>) -> (String, bool) {
+    let head = match noise.targets.as_slice() {
+        [target] => format!("noise {}", target.node),
+        targets => {
+            list(tail, 0, targets, |pieces, name| {
+                text(pieces, name.node.clone())
+            });
+            "noise ".to_string()
+        }
+    };
+    text(tail, " = ");
+    for (index, term) in noise.terms.iter().enumerate() {
+        if index > 0 {
+            text(tail, " +");
+            tail.push(Piece::Break(1));
+            text(tail, " ");
+        }
+        text(tail, noise_term(source, term));
+    }
+    (head, noise.targets.len() == 1)
+}
+
+/// A noise term with its number as written: `4 %`, `-0.01`, `10 [mg/L]`.
+fn noise_term(source: &str, term: &ast::NoiseTerm) -> String {
+    let value = term.value.node;
+    let written = source
+        .get(term.value.span.start..term.value.span.end)
+        .unwrap_or_default();
+    let literal = written.trim_start_matches('-').trim();
+    let magnitude = if literal.parse::<f64>().ok() == Some(value.abs()) {
+        literal.to_string()
+    } else {
+        ast::format_number(value.abs())
+    };
+    let sign = if value.is_sign_negative() { "-" } else { "" };
+    match &term.kind {
+        ast::NoiseKind::Relative => format!("{sign}{magnitude} %"),
+        ast::NoiseKind::Absolute(unit) => format!("{sign}{magnitude}{}", unit_text(unit)),
+    }
 }
 
 fn param_tail(source: &str, param: &ast::ParamDecl, pieces: &mut Vec<Piece>) {

@@ -97,6 +97,40 @@ fn long_lines_wrap_after_an_operator() {
 }
 
 #[test]
+fn noise_declarations_print_canonically() {
+    check(
+        "model m\nstate X [g/L], S\nnoise X=4%+0.01[ g / L ]\nnoise S ,X=  1e-2\nnoise X = -.5 %\n",
+        "model m\nstate X [g/L], S\nnoise X = 4 % + 0.01 [g/L]\nnoise S, X = 1e-2\nnoise X = -.5 %\n",
+    );
+    // One target aligns on `=` with its neighbours; a list of targets does not.
+    check(
+        "model m\nstate X, OD\nnoise X = 1 %\nnoise OD=0.02 + 3 %\nnoise X, OD = 1 %\n",
+        "model m\nstate X, OD\nnoise X  = 1 %\nnoise OD = 0.02 + 3 %\nnoise X, OD = 1 %\n",
+    );
+    // Continuation lines after `,` and `+` join; doc comments and comments stay.
+    check(
+        "model m\nstate X\n## precision of the assay\nnoise X = 2 % +\n    0.1 [-] # from the lab\n",
+        "model m\nstate X\n## precision of the assay\nnoise X = 2 % + 0.1 [-] # from the lab\n",
+    );
+}
+
+#[test]
+fn long_noise_declarations_wrap_after_a_comma_or_a_plus() {
+    let names: Vec<String> = (0..20).map(|i| format!("Quantity{i}")).collect();
+    let source = format!(
+        "model m\nstate {}\nnoise {} = 4 % + 0.01\n",
+        names.join(", "),
+        names.join(", ")
+    );
+    let formatted = format_source(&source).expect("formats");
+    assert!(
+        formatted.lines().all(|l| l.chars().count() <= WIDTH),
+        "{formatted}"
+    );
+    assert_eq!(format_source(&formatted).expect("again"), formatted);
+}
+
+#[test]
 fn syntax_errors_are_reported_not_formatted() {
     assert!(matches!(
         format_source("model m\nstate X = \n"),

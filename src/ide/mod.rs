@@ -98,12 +98,26 @@ pub fn hover(source: &str, offset: usize) -> Option<String> {
         (None, Some((unit, true))) => Some(format!("unit: `{unit}` (inferred)")),
         _ => None,
     };
+    let noise = (declaration.scope == Scope::Model)
+        .then(|| noise_of(&model, &name))
+        .flatten();
     let mut text = format!("```gbm\n{} {}\n```", declaration.kind, declaration.name);
-    for part in [unit, declaration.doc.clone()].into_iter().flatten() {
+    for part in [unit, noise, declaration.doc.clone()].into_iter().flatten() {
         text.push_str("\n\n");
         text.push_str(&part);
     }
     Some(text)
+}
+
+/// `noise: `4 % + 0.01 [g/L]`` for a quantity with a noise declaration.
+fn noise_of(model: &ast::Model, name: &str) -> Option<String> {
+    model.items.iter().find_map(|item| match &item.kind {
+        ItemKind::Noise(noise) if noise.targets.iter().any(|t| t.node == name) => Some(format!(
+            "noise: `{}` (standard deviation `sqrt(absolute^2 + (relative * {name})^2)`)",
+            noise.terms_text()
+        )),
+        _ => None,
+    })
 }
 
 fn lookup<'a>(

@@ -70,3 +70,25 @@ fn line_index_counts_utf16_columns() {
     assert_eq!(index.position(0), (0, 0));
     assert_eq!(index.offset(9, 0), text.len());
 }
+
+#[test]
+fn hover_shows_declared_noise_and_definition_works_from_a_noise_line() {
+    let source = format!("{MODEL}noise X = 4 % + 0.01 [g/L]\n");
+    let noise_x = offset_of(&source, "X = 4", 0);
+    let declared = definition(&source, noise_x).expect("declared");
+    assert_eq!(declared.start, offset_of(&source, "X [g/L]", 0));
+    let text = hover(&source, noise_x).expect("hover");
+    assert!(text.contains("state X"), "{text}");
+    assert!(
+        text.contains("noise: `4 % + 0.01 [g/L]` (standard deviation"),
+        "{text}"
+    );
+    let plain = hover(MODEL, offset_of(MODEL, "X", 2)).expect("hover");
+    assert!(!plain.contains("noise"), "{plain}");
+    assert!(diagnostics("m.gbm", &source).is_empty());
+    let hidden = source.replace("noise X", "noise k");
+    let problems = diagnostics("m.gbm", &hidden);
+    assert_eq!(problems.len(), 1, "{problems:?}");
+    assert_eq!(problems[0].code.as_deref(), Some("gbm::E0140"));
+    assert_eq!(&hidden[problems[0].span.start..problems[0].span.end], "k");
+}

@@ -292,6 +292,7 @@ impl<'a> Lowerer<'a> {
             balances: Vec::new(),
             effects: Vec::new(),
             units: Units::default(),
+            noise: Vec::new(),
         };
         let mut balance_items: HashMap<String, (Scope, &ast::Equation)> = HashMap::new();
         let mut balance_patches: Vec<(Scope, &ast::Equation)> = Vec::new();
@@ -353,6 +354,7 @@ impl<'a> Lowerer<'a> {
         model.balances = self.balances(&model, &balance_items, &balance_patches)?;
         model.effects = self.effects();
         model.units = self.units();
+        model.noise = super::noise::lower_noise(&self.checked.noise, &model);
         Ok(model)
     }
 

@@ -13,9 +13,13 @@ pub use crate::vocabulary::{sigmoid, softplus, Activation, Func};
 use std::collections::BTreeMap;
 
 mod lower;
+mod noise;
 mod print;
 
 pub use lower::{lower, uses_closure, LowerError};
+pub use noise::{
+    merge_noise, parse_noise_spec, sigma_of, Measured, Noise, NoiseSpec, NoiseSpecError,
+};
 pub use print::{expr_text, print, var_name};
 
 /// A resolved reference to a model quantity.
@@ -286,6 +290,9 @@ pub struct Model {
     pub effects: Vec<Effect>,
     /// Units of measure of the named quantities (empty when the model declares none).
     pub units: Units,
+    /// The declared measurement noise, at most one per measured state or output, sorted by
+    /// quantity (states first); `--noise` specs are laid over it with [`merge_noise`].
+    pub noise: Vec<Noise>,
 }
 
 impl Model {

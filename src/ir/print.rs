@@ -85,6 +85,7 @@ fn write_model(out: &mut String, model: &Model) -> std::fmt::Result {
     }
     write_definitions(out, model, "lets", &model.lets)?;
     write_definitions(out, model, "outputs", &model.outputs)?;
+    write_noise(out, model)?;
     writeln!(out, "\nbalances")?;
     let keyword = match model.dynamics {
         Dynamics::Continuous => "der",
@@ -225,6 +226,32 @@ fn write_closure(
             out,
             "  out {k}: {}{unit} ~ {scale}{constraint}; {form}",
             output.name
+        )?;
+    }
+    Ok(())
+}
+
+/// The declared measurement noise, when the model declares any.
+fn write_noise(out: &mut String, model: &Model) -> std::fmt::Result {
+    if model.noise.is_empty() {
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "\nnoise (sigma(y) = sqrt(absolute^2 + (relative * y)^2))"
+    )?;
+    for noise in &model.noise {
+        let kind = match noise.target {
+            Measured::State(_) => "state",
+            Measured::Output(_) => "output",
+        };
+        let name = model.measured_name(noise.target);
+        writeln!(
+            out,
+            "  {kind} {name}{}: relative {}, absolute {}",
+            unit_text(model.unit(name)),
+            format_number(noise.relative),
+            format_number(noise.absolute)
         )?;
     }
     Ok(())

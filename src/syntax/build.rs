@@ -144,6 +144,7 @@ fn item(source: &str, pair: Pair<Rule>, place: Place) -> Result<Item> {
         Rule::closure_decl => ItemKind::Closure(closure(&pair)?),
         Rule::effect_decl => ItemKind::Effect(effect(source, &pair, place)?),
         Rule::patch => ItemKind::Patch(patch(&pair)?),
+        Rule::noise_decl => ItemKind::Noise(noise(&pair, place)?),
         _ => return Err(unexpected_shape(&pair)),
     };
     Ok(Item { doc, kind, span })
@@ -289,6 +290,56 @@ fn der(pair: &Pair<Rule>, place: Place) -> Result<ItemKind> {
         });
     }
     Ok(ItemKind::DerPatch(equation))
+}
+
+/// `noise X, S = 4 % + 0.01 [g/L]`, refused inside an effect.
+fn noise(pair: &Pair<Rule>, place: Place) -> Result<NoiseDecl> {
+    if place == Place::Effect {
+        return Err(SyntaxError::Misplaced {
+            span: span_of(pair).into(),
+            what: "a noise declaration".to_string(),
+            place: "inside an effect".to_string(),
+            help: "measurement noise belongs to the data, not to a candidate effect: declare \
+                   `noise` at the top level of the model"
+                .to_string(),
+        });
+    }
+    let mut targets = Vec::new();
+    let mut terms = Vec::new();
+    for child in pair.clone().into_inner() {
+        match child.as_rule() {
+            Rule::ident => targets.push(ident(child)),
+            _ => terms.push(noise_term(&child)?),
+        }
+    }
+    Ok(NoiseDecl { targets, terms })
+}
+
+/// `-`? number, then `%` or an optional unit.
+fn noise_term(pair: &Pair<Rule>) -> Result<NoiseTerm> {
+    let span = span_of(pair);
+    let mut negative = None;
+    let mut number = None;
+    let mut kind = NoiseKind::Absolute(None);
+    for child in pair.clone().into_inner() {
+        match child.as_rule() {
+            Rule::neg => negative = Some(span_of(&child)),
+            Rule::number => number = Some(child),
+            Rule::percent => kind = NoiseKind::Relative,
+            Rule::unit => kind = NoiseKind::Absolute(Some(super::unit::unit(&child)?)),
+            _ => return Err(unexpected_shape(&child)),
+        }
+    }
+    let number = number.ok_or_else(|| unexpected_shape(pair))?;
+    let Expr::Num(magnitude) = primary(number.clone())?.node else {
+        return Err(unexpected_shape(&number));
+    };
+    let literal = span_of(&number);
+    let value = match negative {
+        Some(sign) => Spanned::new(-magnitude, sign.join(literal)),
+        None => Spanned::new(magnitude, literal),
+    };
+    Ok(NoiseTerm { value, kind, span })
 }
 
 fn assign_op(pair: &Pair<Rule>) -> Result<PatchOp> {

@@ -169,7 +169,10 @@ fn describe_rule(rule: Rule) -> &'static str {
         | Rule::closure_decl
         | Rule::der_decl
         | Rule::next_decl
-        | Rule::effect_decl => "a declaration",
+        | Rule::effect_decl
+        | Rule::noise_decl => "a declaration",
+        Rule::noise_term => "a noise term such as `4 %` or `0.01 [g/L]`",
+        Rule::percent => "`%`",
         Rule::outputs_item
         | Rule::observe_item
         | Rule::embed_item
@@ -213,9 +216,9 @@ fn join_alternatives(words: &[&str]) -> String {
 }
 
 fn help_for(expected: &[&str], found: &str) -> String {
-    const KEYWORDS: [&str; 15] = [
+    const KEYWORDS: [&str; 16] = [
         "model", "time", "input", "state", "hidden", "const", "param", "let", "output", "closure",
-        "der", "next", "effect", "positive", "in",
+        "der", "next", "effect", "noise", "positive", "in",
     ];
     let bare = found.trim_matches('`');
     if expected.contains(&"a name") && KEYWORDS.contains(&bare) {

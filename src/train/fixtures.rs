@@ -71,6 +71,7 @@ impl ModelBuilder {
                 balances: Vec::new(),
                 effects: Vec::new(),
                 units: Default::default(),
+                noise: Vec::new(),
             },
             names: HashMap::new(),
             lets: HashMap::new(),

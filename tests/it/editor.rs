@@ -194,6 +194,14 @@ fn grammar_gives_the_expected_scopes() {
             "string.quoted.double.gbm",
         ),
         ("const k = 1.5e-2 [1/h]", "1.5e-2", "constant.numeric.gbm"),
+        ("noise X = 4 % + 0.01 [g/L]", "noise", "keyword.other.gbm"),
+        ("noise X = 4 % + 0.01 [g/L]", "%", "keyword.operator.gbm"),
+        (
+            "noise X = 4 % + 0.01 [g/L]",
+            "[g/L]",
+            "constant.other.unit.gbm",
+        ),
+        ("noise X = 4 % + 0.01 [g/L]", "0.01", "constant.numeric.gbm"),
     ];
     for (line, text, scope) in cases {
         assert_eq!(scope_of(line, text), scope, "`{text}` in `{line}`");

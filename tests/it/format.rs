@@ -273,9 +273,35 @@ impl Generator {
             lines.push(format!("{}der {state} = {expr}", self.doc()));
         }
         if self.chance(0.5) {
+            lines.push(self.noise(&states));
+        }
+        if self.chance(0.5) {
             lines.push(self.effect(&states, &names, &lets));
         }
         self.join(lines)
+    }
+
+    /// `noise X0, X1 = 4 % + 0.01 [-]` in a random layout: some states, one or two terms in
+    /// either order, with or without a dimensionless unit.
+    fn noise(&mut self, states: &[String]) -> String {
+        let count = self.rng.gen_range(1..=states.len());
+        let separator = format!(",{}", self.soft_break());
+        let targets = states[..count].join(&separator);
+        let relative = format!("{}{}%", self.number(), self.space());
+        let unit = ["", " [-]", "[%]", " [ - ]"][self.rng.gen_range(0..4)];
+        let absolute = format!("{}{unit}", self.number());
+        let terms = match self.rng.gen_range(0..4) {
+            0 => relative,
+            1 => absolute,
+            2 => format!("{relative}{}+{}{absolute}", self.space(), self.soft_break()),
+            _ => format!("{absolute}{}+{}{relative}", self.space(), self.soft_break()),
+        };
+        format!(
+            "{}noise {targets}{}={}{terms}",
+            self.doc(),
+            self.space(),
+            self.space()
+        )
     }
 
     fn declare_states(&mut self, states: &[String], with_units: bool, lines: &mut Vec<String>) {

@@ -8,6 +8,7 @@ mod editor;
 mod format;
 mod golden;
 mod lsp;
+mod noise;
 mod parser;
 mod records;
 mod safety;

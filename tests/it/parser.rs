@@ -96,9 +96,9 @@ fn arb_expr() -> impl Strategy<Value = SExpr> {
     })
 }
 
-const KEYWORDS: [&str; 15] = [
+const KEYWORDS: [&str; 16] = [
     "model", "time", "input", "state", "hidden", "const", "param", "let", "output", "closure",
-    "der", "next", "effect", "positive", "in",
+    "der", "next", "effect", "noise", "positive", "in",
 ];
 
 proptest! {
@@ -122,7 +122,8 @@ proptest! {
                 Just("model m".to_string()), Just("state X = 1".to_string()),
                 Just("der X = -X".to_string()), Just("closure c {".to_string()), Just("}".to_string()),
                 Just("outputs r ~ 0.1".to_string()), Just("effect e {".to_string()),
-                Just("r *= 2".to_string()), "[ -~]{0,30}",
+                Just("r *= 2".to_string()), Just("noise X = 1 % + 0.1".to_string()),
+                "[ -~]{0,30}",
             ],
             0..12,
         )
@@ -228,5 +229,65 @@ fn syntax_error_points_at_the_offending_token() {
             assert_eq!(span.offset(), source.rfind("* X").unwrap_or(0));
         }
         other => panic!("unexpected error {other:?}"),
+    }
+}
+
+#[test]
+fn noise_declarations_parse_with_their_terms_in_order() {
+    use gbc::ast::{ItemKind, NoiseKind};
+    let source = "model m\nstate X = 1, S = 2\nder X = -X\nder S = -S\n\
+                  ## assay precision\nnoise X, \n  S = 0.01 [g/L] +\n 4%\nnoise X=1e-3;noise S = - 2 %\n";
+    let model = parse(source).expect("parses");
+    let noise: Vec<_> = (model.items.iter())
+        .filter_map(|item| match &item.kind {
+            ItemKind::Noise(noise) => Some((item.doc.clone(), noise)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(noise.len(), 3);
+    let (doc, first) = &noise[0];
+    assert_eq!(doc.as_deref(), Some("assay precision"));
+    let targets: Vec<&str> = first.targets.iter().map(|t| t.node.as_str()).collect();
+    assert_eq!(targets, ["X", "S"]);
+    assert_eq!(first.terms.len(), 2);
+    assert_eq!(first.terms[0].value.node, 0.01);
+    assert!(
+        matches!(&first.terms[0].kind, NoiseKind::Absolute(Some(unit)) if unit.node.to_string() == "g/L")
+    );
+    assert_eq!(first.terms[1].value.node, 4.0);
+    assert_eq!(first.terms[1].kind, NoiseKind::Relative);
+    assert_eq!(
+        &source[first.terms[1].span.start..first.terms[1].span.end],
+        "4%"
+    );
+    assert_eq!(first.terms_text(), "0.01 [g/L] + 4 %");
+    assert_eq!(noise[1].1.terms[0].kind, NoiseKind::Absolute(None));
+    // A sign is parsed (for the check to refuse it in words), with the literal in its span.
+    let negative = &noise[2].1.terms[0];
+    assert_eq!(negative.value.node, -2.0);
+    assert_eq!(
+        &source[negative.value.span.start..negative.value.span.end],
+        "- 2"
+    );
+}
+
+#[test]
+fn malformed_noise_declarations_say_what_was_expected() {
+    let head = "model m\nstate X = 1\nder X = -X\n";
+    let cases = [
+        ("noise = 4 %", "expected a name"),
+        ("noise X 4 %", "expected"),
+        (
+            "noise X =",
+            "expected a noise term such as `4 %` or `0.01 [g/L]`",
+        ),
+        ("noise X = 4 % - 1", "found `-`"),
+        ("noise X = 4 % *", "found `*`"),
+        ("noise X = k", "expected a noise term"),
+    ];
+    for (line, expected) in cases {
+        let source = format!("{head}{line}\n");
+        let message = expect_error(&source).to_string();
+        assert!(message.contains(expected), "{line:?}: {message}");
     }
 }

@@ -141,7 +141,7 @@ fn item_sites<'a>(item: &'a ast::Item, scope: Scope, symbols: &Symbols, out: &mu
             }
         }
         ItemKind::Closure(closure) => closure_sites(closure, &mut c),
-        ItemKind::Time(_) | ItemKind::Effect(_) => {}
+        ItemKind::Time(_) | ItemKind::Effect(_) | ItemKind::Noise(_) => {}
     }
 }
 

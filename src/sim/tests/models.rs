@@ -75,6 +75,7 @@ pub fn empty_model(name: &str, dynamics: Dynamics) -> Model {
         balances: vec![],
         effects: vec![],
         units: Default::default(),
+        noise: vec![],
     }
 }
 
