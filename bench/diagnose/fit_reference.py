@@ -65,6 +65,10 @@ CASES = {
         "holdout": [],
         "pairs": [],
         "true_set": ["glucose_repression"],
+        # With X hidden only these products are identified (the free direction scales X0
+        # and Y_X up and every q_max down).
+        "combos": {"X0*q_Gmax": ("X0", "q_Gmax"), "X0*q_Xymax": ("X0", "q_Xymax"),
+                   "X0*q_Fmax": ("X0", "q_Fmax"), "Y_X/X0": ("Y_X", "/X0")},
     },
     "campaign": {
         "model": "models/diagnose/campaign/noshift.gbm",
@@ -111,6 +115,15 @@ def run_start(args):
         "ode_rhs_evals": problem.rhs_evals, "failed_runs": problem.failures, "wall_s": wall,
         "cpu_s": time.process_time(),
     }
+
+
+def combos(case, params):
+    """The identified products of a case's params (CASES[case]["combos"])."""
+    out = {}
+    for name, (a, b) in CASES[case].get("combos", {}).items():
+        if a in params and b.lstrip("/") in params:
+            out[name] = params[a] / params[b[1:]] if b.startswith("/") else params[a] * params[b]
+    return out
 
 
 def true_values(problem, truth, effects):
@@ -188,14 +201,16 @@ def main():
                                   for p, k, _ in problem.fitted],
                 "cells": problem.cells, "std": dict(zip(problem.model.states, problem.std.tolist())),
                 "gap_declared": gap_declared, "gap_truth": gap_truth,
-                "best": {"gap": best["gap"], "params": best["params"], "start": best["start"]},
+                "best": {"gap": best["gap"], "params": best["params"], "start": best["start"],
+                         "identified_products": combos(args.case, best["params"])},
                 "starts_reaching_best": agree, "wall_s": wall,
                 "starts": [{k: v for k, v in r.items() if k != "theta"} for r in results],
             })
             print(f"{label:32s} best gap {best['gap']:.6g} (start {best['start']}, {agree}/{len(results)} "
                   f"within 0.1 %), declared {gap_declared:.4g}"
                   + (f", truth {gap_truth:.6g}" if gap_truth is not None else "")
-                  + f", {wall:.1f} s; " + " ".join(f"{k} {v:.4g}" for k, v in best["params"].items()),
+                  + f", {wall:.1f} s; " + " ".join(f"{k} {v:.4g}" for k, v in best["params"].items())
+                  + "".join(f"; {k} {v:.4g}" for k, v in combos(args.case, best["params"]).items()),
                   file=sys.stderr, flush=True)
     doc = {
         "what": f"scipy least_squares (trf) reference fits of {case['model']} to {case['record']} "
