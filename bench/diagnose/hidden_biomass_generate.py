@@ -17,6 +17,10 @@ of the single cells are missing (never at t = 0). Noise: log-normal 4 % plus an 
 floor (G, Xy, E 0.05 g/L; Fur 0.005 g/L), clipped at 0, 4 significant digits. The held-out
 part is gbc diagnose's default tail: the last 30 % of the measured rows.
 
+--replicates 1,2,3 also writes data/replicates/hidden_biomass_s<seed>.csv: the same batch
+with other assay times and noise (the record of each seed alone), to measure how a
+diagnosis's verdict moves with the noise.
+
 numpy + scipy + sympy and a built gbc (target/release/gbc, for the truth's IR);
 deterministic by --seed.
 """
@@ -47,20 +51,10 @@ def assay_times(hours, rng):
     return times
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hours", type=float, default=90.0)
-    ap.add_argument("--seed", type=int, default=4242)
-    ap.add_argument("--out", default=str(CASE / "data/hidden_biomass.csv"))
-    ap.add_argument("--truth", default=str(CASE / "data/hidden_biomass_truth.json"))
-    ap.add_argument("--clean", default=str(CASE / "data/hidden_biomass_clean.csv"))
-    args = ap.parse_args()
-
-    rng = np.random.default_rng(args.seed)
-    model = gbmlib.Model(CASE / "truth.gbm")
-    assert model.states == STATES and model.hidden == ["X"] and not model.inputs
-    y0, _ = model.declared_start([])
-    times = assay_times(args.hours, rng)
+def record(model, y0, hours, seed):
+    """The record's rows and their noise-free twins for one seed."""
+    rng = np.random.default_rng(seed)
+    times = assay_times(hours, rng)
     truth = run_truth(model, y0, programme([0.0], np.zeros((1, 0))), times)
     rows, clean = [], []
     for t, y in zip(times, truth):
@@ -70,7 +64,28 @@ def main():
             row[s] = math.nan if missing else noisy(y[k], NOISE_REL[s], NOISE_ABS[s], rng)
         rows.append(row)
         clean.append({"experiment": "H1", "t": t, **dict(zip(STATES + ["X"], y))})
+    return rows, clean
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--hours", type=float, default=90.0)
+    ap.add_argument("--seed", type=int, default=4242)
+    ap.add_argument("--out", default=str(CASE / "data/hidden_biomass.csv"))
+    ap.add_argument("--truth", default=str(CASE / "data/hidden_biomass_truth.json"))
+    ap.add_argument("--clean", default=str(CASE / "data/hidden_biomass_clean.csv"))
+    ap.add_argument("--replicates", default="", help="comma-separated seeds of replicate records")
+    args = ap.parse_args()
+
+    model = gbmlib.Model(CASE / "truth.gbm")
+    assert model.states == STATES and model.hidden == ["X"] and not model.inputs
+    y0, _ = model.declared_start([])
+    rows, clean = record(model, y0, args.hours, args.seed)
     write_record(args.out, STATES, UNITS, rows)
+    for seed in [int(s) for s in args.replicates.split(",") if s]:
+        path = CASE / f"data/replicates/hidden_biomass_s{seed}.csv"
+        write_record(path, STATES, UNITS, record(model, y0, args.hours, seed)[0])
+        print(f"wrote {rel(path)}", file=sys.stderr)
     write_clean(args.clean, STATES + ["X"], UNITS, clean)
     dense = gbmlib.simulate(model, [], y0, programme([0.0], np.zeros((1, 0))),
                             np.arange(0, args.hours + 1e-9, 0.05), method="Radau", rtol=1e-11, atol=1e-13)
@@ -81,7 +96,8 @@ def main():
     write_json(args.truth, {
         "description": "truth of models/diagnose/hidden_biomass/data/hidden_biomass.csv, made by "
                        "bench/diagnose/hidden_biomass_generate.py from models/diagnose/hidden_biomass/truth.gbm",
-        "command": f"python bench/diagnose/hidden_biomass_generate.py --hours {args.hours:g} --seed {args.seed}",
+        "command": f"python bench/diagnose/hidden_biomass_generate.py --hours {args.hours:g} --seed {args.seed}"
+                   + (f" --replicates {args.replicates}" if args.replicates else ""),
         "seed": args.seed,
         "integrator": {"method": "scipy Radau", "rtol": 1e-11, "atol": 1e-13},
         "truth_model": "models/diagnose/hidden_biomass/truth.gbm",
@@ -100,11 +116,12 @@ def main():
         "noise": {"relative_lognormal": NOISE_REL, "absolute_floor": NOISE_ABS, "clip": 0.0,
                   "missing_cells": 0.04},
         "glucose_gone_at": g_gone, "furfural_gone_at": f_gone,
-        "final_state": dict(zip(STATES + ["X"], map(float, truth[-1]))),
+        "final_state": dict(zip(STATES + ["X"], map(float, dense[-1]))),
+        "replicate_seeds": [int(s) for s in args.replicates.split(",") if s],
         "rows": len(rows),
     })
     print(f"H1: {args.hours:g} h, {len(rows)} assays, glucose gone at {g_gone:.2f} h, furfural at "
-          f"{f_gone:.2f} h, end " + " ".join(f"{s} {v:.3g}" for s, v in zip(STATES + ['X'], truth[-1])),
+          f"{f_gone:.2f} h, end " + " ".join(f"{s} {v:.3g}" for s, v in zip(STATES + ['X'], dense[-1])),
           file=sys.stderr)
     print(f"wrote {rel(args.out)}, {rel(args.clean)}, {rel(args.truth)}", file=sys.stderr)
 
