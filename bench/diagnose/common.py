@@ -76,4 +76,5 @@ def write_json(path, doc):
 
 
 def rel(path):
-    return str(Path(path).resolve().relative_to(ROOT))
+    path = Path(path).resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
