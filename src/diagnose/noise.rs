@@ -138,7 +138,8 @@ pub fn estimate(experiments: &[Vec<(f64, f64)>]) -> NoiseEstimate {
 fn deviation(window: &[(f64, f64)]) -> Option<f64> {
     let origin = window[0].0;
     let span = window[window.len() - 1].0 - origin;
-    if !(span > 0.0) || window.windows(2).any(|w| !(w[1].0 > w[0].0)) {
+    let increasing = |a: f64, b: f64| a.partial_cmp(&b) == Some(std::cmp::Ordering::Less);
+    if !increasing(0.0, span) || window.windows(2).any(|w| !increasing(w[0].0, w[1].0)) {
         return None;
     }
     // Times on [0, 1]: the divided difference's scale cancels in d^2 / sum c^2.
@@ -188,11 +189,11 @@ pub fn cap_by_fit(
     let mut cells = residuals.iter();
     for (_, record, rows) in split.training() {
         for row in rows {
-            for k in 0..states {
-                if record.states[k][row].is_some() {
+            for (sum, column) in sums.iter_mut().zip(&record.states) {
+                if column[row].is_some() {
                     let r = cells.next().copied().unwrap_or(f64::NAN);
-                    sums[k].0 += r * r;
-                    sums[k].1 += 1;
+                    sum.0 += r * r;
+                    sum.1 += 1;
                 }
             }
         }
