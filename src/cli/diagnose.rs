@@ -74,7 +74,7 @@ pub struct DiagnoseArgs {
     /// Measurement noise of the data, laid over the model's `noise` declarations
     /// (repeatable): `X=4%+0.01` (a measured state or output: 4 % of the value and 0.01 in
     /// its unit), `S=0.02`, `3%` (every measured quantity not named), `declared`; `X=0`
-    /// removes one. Checked against the model; not yet used by the diagnosis itself.
+    /// removes one. Used for the noise floor and the fits' weights.
     #[arg(
         long = "noise",
         value_name = "SPEC",
@@ -122,8 +122,9 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     let compiled = crate::driver::compile(&name, &source, &[])?;
     let model = &compiled.model;
     // The run's noise (`ir::merge_noise`): refused here when a spec names no measured
-    // quantity; the diagnosis does not take it in yet.
-    crate::ir::merge_noise(model, &args.noise, &model.measured()).map_err(CommandError::user)?;
+    // quantity.
+    let noise = crate::ir::merge_noise(model, &args.noise, &model.measured())
+        .map_err(CommandError::user)?;
     let records = load_records(model, &args.data, &args.columns)?;
     check_holdout_names(&records, &args.holdout)?;
     let (train, mut held) = hold_out(records, &args.holdout)?;
@@ -144,6 +145,7 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         dim: args.dim,
         fit_initial: args.fit_initial,
         locate: !args.skip_loci,
+        noise: Some(noise),
         ..Options::default()
     };
     let pool = rayon::ThreadPoolBuilder::new()

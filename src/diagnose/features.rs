@@ -15,6 +15,9 @@
 /// bounded when a free run leaves the training range.
 pub const CLIP: f64 = 4.0;
 
+/// Most quadratic monomials a sparse refinement adjusts ([`FeatureMap::sparse_directions`]).
+pub const SPARSE_QUADRATIC_UP_TO: usize = 30;
+
 /// How to turn variables into features.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FeatureMap {
@@ -67,6 +70,20 @@ impl FeatureMap {
                 directions.push(2 * q + signal * block);
             }
         }
+        directions
+    }
+
+    /// The directions of a refinement grown from no correction (sparse records): every
+    /// quadratic monomial of the present variables when there are at most
+    /// [`SPARSE_QUADRATIC_UP_TO`] of them, else the constant and the linear ones; and `l`.
+    pub fn sparse_directions(&self) -> Vec<usize> {
+        let q = self.quadratic();
+        let mut directions: Vec<usize> = if q <= SPARSE_QUADRATIC_UP_TO {
+            (0..q).collect()
+        } else {
+            (0..=self.variables()).collect()
+        };
+        directions.push(q);
         directions
     }
 

@@ -126,7 +126,7 @@ impl Objective<'_> {
         finite.then_some(columns)
     }
 
-    /// `value(row, k) / std_k / sqrt(cells)` at every measured training cell of `record`
+    /// `value(row, k) * weight / std_k / sqrt(cells)` at every measured training cell of `record`
     /// in `rows` (the residuals' order: row by row, state by state); with `value` the
     /// simulation's deviation that gives the residuals, and its derivative their Jacobian.
     fn record_residuals(
@@ -140,8 +140,9 @@ impl Objective<'_> {
         let mut out = Vec::new();
         for row in rows {
             for (k, cells) in record.states.iter().enumerate() {
-                if cells[row].is_some() {
-                    out.push(value(row, k) / norm.state_std[k] / scale);
+                if let Some(measured) = cells[row] {
+                    let weight = self.split.weight(k, measured);
+                    out.push(value(row, k) * weight / norm.state_std[k] / scale);
                 }
             }
         }

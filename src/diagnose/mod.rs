@@ -105,6 +105,9 @@ pub struct Options {
     /// Whether to search the loci (free corrections at every let, group and balance; most
     /// of the cost). Without it the report answers which effects and how far only.
     pub locate: bool,
+    /// The measurement noise (`ir::merge_noise` of the model's declarations and the
+    /// command line's `--noise`); `None`: the model's declarations.
+    pub noise: Option<Vec<crate::ir::Noise>>,
 }
 
 impl Default for Options {
@@ -118,6 +121,7 @@ impl Default for Options {
             dim: 5,
             fit_initial: false,
             locate: true,
+            noise: None,
         }
     }
 }
@@ -420,7 +424,8 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
         None if !held.is_empty() => Holdout::Experiments,
         None => Holdout::Tail(DEFAULT_TAIL),
     };
-    let split = Split::new(model, train, held, (holdout, options.fit_initial))?;
+    let mut split = Split::new(model, train, held, (holdout, options.fit_initial))?;
+    split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     Ok(Context {
         problem: *problem,
         options,

@@ -47,6 +47,8 @@ pub enum NoiseSource {
         /// How many windows were averaged.
         windows: usize,
     },
+    /// Declared in the model (`noise X = ...`) or on the command line (`--noise`).
+    Declared(String),
     /// The fitted model's training residual of the state, lower than the differences.
     FitResidual {
         /// The training cells of the state.
@@ -76,6 +78,7 @@ impl NoiseEstimate {
                  +-{:.0} %)",
                 100.0 * self.relative_error
             ),
+            NoiseSource::Declared(ref text) => format!("declared: {text}"),
             NoiseSource::FitResidual { cells } => format!(
                 "at most the fitted model's training residual ({cells} cells, +-{:.0} %)",
                 100.0 * self.relative_error
@@ -205,12 +208,24 @@ pub fn cap_by_fit(
             continue;
         }
         let bound = sum * total / count as f64 * correction;
-        if bound.is_finite() && bound < estimate.variance {
+        let declared = matches!(estimate.source, NoiseSource::Declared(_));
+        if !declared && bound.is_finite() && bound < estimate.variance {
             estimate.variance = bound;
             estimate.relative_error = (2.0 / count as f64).sqrt();
             estimate.source = NoiseSource::FitResidual { cells: count };
         }
     }
+}
+
+/// `4 % + 0.01` (in the state's unit).
+fn declared_text(noise: &crate::ir::Noise) -> String {
+    let relative = (noise.relative > 0.0).then(|| format!("{} %", 100.0 * noise.relative));
+    let absolute = (noise.absolute > 0.0).then(|| format!("{}", noise.absolute));
+    [relative, absolute]
+        .into_iter()
+        .flatten()
+        .collect::<Vec<_>>()
+        .join(" + ")
 }
 
 /// Per measured state, the noise estimate in normalised units (variance divided by the
@@ -226,7 +241,14 @@ pub fn noise_floors(split: &Split) -> Vec<NoiseEstimate> {
                         .collect()
                 })
                 .collect();
-            let mut estimate = estimate(&experiments);
+            let mut estimate = match &split.declared[k] {
+                Some((noise, rms)) => NoiseEstimate {
+                    variance: rms * rms,
+                    relative_error: 0.0,
+                    source: NoiseSource::Declared(declared_text(noise)),
+                },
+                None => estimate(&experiments),
+            };
             estimate.variance /= norm.state_std[k].powi(2);
             estimate
         })

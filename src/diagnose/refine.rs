@@ -7,7 +7,10 @@
 //! starts), a gain on each slot's one-step weights and the weights of a few directions per
 //! slot ([`FeatureMap::directions`]: a constant, a term proportional to the corrected
 //! quantity and, with history, its lags) to the training free runs by Levenberg–Marquardt;
-//! the result is kept only if it lowers the training gap.
+//! the result is kept only if it lowers the training gap. On sparse records (fewer than
+//! [`SPARSE_SHARE`] of the cells have a one-step pair), where the one-step correction does
+//! worse in the loop than no correction, the refinement starts from no correction (gain 0)
+//! and adjusts every present feature's weight ([`FeatureMap::sparse_directions`]).
 
 use super::correction::{filtered_for, Corrected, Solution};
 use super::evaluate::{scored_errors, Errors};
@@ -19,6 +22,10 @@ use super::split::Split;
 use crate::numeric::dot;
 use crate::record::Record;
 use crate::sim::IntegrationError;
+
+/// Below this share of one-step pairs ([`Split::one_step_share`]) a record is sparse: a
+/// one-step correction that does worse in the loop than none is grown from none instead.
+pub const SPARSE_SHARE: f64 = 0.5;
 
 /// What a free-run refinement may change besides the params: a gain on each slot's one-step
 /// weights and the weights of some features of each slot.
@@ -38,12 +45,71 @@ pub fn refine(
     refinement: &Refinement,
     split: &Split,
 ) -> Solution {
-    let slots = corrected.loci.len();
-    let width = map.width();
-    let unknowns = solution.theta.len();
-    let directions = refinement.directions.len();
-    let apply = |x: &[f64]| {
-        let mut weights = solution.weights.clone();
+    let problem = Problem {
+        corrected,
+        map,
+        solution,
+        split,
+    };
+    let gains_only = Refinement {
+        directions: Vec::new(),
+        reference: refinement.reference.clone(),
+    };
+    let one_step_cost = problem.cost(&gains_only, &problem.start(&gains_only, 1.0));
+    let none_cost = if split.one_step_share() < SPARSE_SHARE {
+        problem.cost(&gains_only, &problem.start(&gains_only, 0.0))
+    } else {
+        f64::INFINITY
+    };
+    let (refined, cost) = if one_step_cost <= none_cost {
+        problem.polish(refinement, 1.0)
+    } else {
+        // The one-step correction does worse in the loop than none at all (a sparse
+        // record's few one-step pairs): grow it from none, along every present feature.
+        let wide = Refinement {
+            directions: map.sparse_directions(),
+            reference: refinement.reference.clone(),
+        };
+        problem.polish(&wide, 0.0)
+    };
+    if cost < one_step_cost.min(none_cost) {
+        refined
+    } else if none_cost < one_step_cost {
+        problem.apply(&gains_only, &problem.start(&gains_only, 0.0))
+    } else {
+        solution.clone()
+    }
+}
+
+/// What [`refine`] works on.
+struct Problem<'a> {
+    corrected: &'a Corrected,
+    map: &'a FeatureMap,
+    solution: &'a Solution,
+    split: &'a Split,
+}
+
+impl Problem<'_> {
+    /// The unknowns at the solution's params, one gain for every slot and no move.
+    fn start(&self, refinement: &Refinement, gain: f64) -> Vec<f64> {
+        let slots = self.corrected.loci.len();
+        let mut start = self.solution.theta.clone();
+        start.extend(std::iter::repeat_n(gain, slots));
+        start.extend(std::iter::repeat_n(
+            0.0,
+            slots * refinement.directions.len(),
+        ));
+        start
+    }
+
+    /// The solution the unknowns `x` stand for: params, then a gain on each slot's weights,
+    /// then per slot the moves along the refinement's directions.
+    fn apply(&self, refinement: &Refinement, x: &[f64]) -> Solution {
+        let slots = self.corrected.loci.len();
+        let width = self.map.width();
+        let unknowns = self.solution.theta.len();
+        let directions = refinement.directions.len();
+        let mut weights = self.solution.weights.clone();
         for slot in 0..slots {
             let gain = x[unknowns + slot];
             let block = &mut weights[slot * width..(slot + 1) * width];
@@ -57,36 +123,48 @@ pub fn refine(
             weights,
             theta: x[..unknowns].to_vec(),
         }
-    };
-    let scale = (split.training_cells().max(1) as f64).sqrt();
-    let residuals = |x: &[f64]| -> Option<Vec<f64>> {
-        let mut corrected = corrected.clone();
-        let candidate = apply(x);
+    }
+
+    /// The weighted, normalised training residuals of the free runs at `x` (`None` if a
+    /// run fails).
+    fn residuals(&self, refinement: &Refinement, x: &[f64]) -> Option<Vec<f64>> {
+        let split = self.split;
+        let scale = (split.training_cells().max(1) as f64).sqrt();
+        let mut corrected = self.corrected.clone();
+        let candidate = self.apply(refinement, x);
         let mut out = Vec::new();
         for (index, record, rows) in split.training() {
-            let run =
-                corrected_run(&mut corrected, map, &candidate, (split, index), rows.end).ok()?;
+            let run = corrected_run(
+                &mut corrected,
+                self.map,
+                &candidate,
+                (split, index),
+                rows.end,
+            )
+            .ok()?;
             for row in rows {
                 for (k, cells) in record.states.iter().enumerate() {
                     if let Some(value) = cells[row] {
-                        out.push(
-                            (run.row(row)[k] - value) / split.normalisation.state_std[k] / scale,
-                        );
+                        let weight = split.weight(k, value) / split.normalisation.state_std[k];
+                        out.push((run.row(row)[k] - value) * weight / scale);
                     }
                 }
             }
         }
         out.iter().all(|r| r.is_finite()).then_some(out)
-    };
-    let mut start = solution.theta.clone();
-    start.extend(std::iter::repeat_n(1.0, slots));
-    start.extend(std::iter::repeat_n(0.0, slots * directions));
-    let (x, cost) = polish(&residuals, start.clone());
-    let before = residuals(&start).map_or(f64::INFINITY, |r| dot(&r, &r));
-    if cost < before {
-        apply(&x)
-    } else {
-        solution.clone()
+    }
+
+    /// The training cost at `x` (infinite if a run fails).
+    fn cost(&self, refinement: &Refinement, x: &[f64]) -> f64 {
+        self.residuals(refinement, x)
+            .map_or(f64::INFINITY, |r| dot(&r, &r))
+    }
+
+    /// Levenberg–Marquardt from the start with `gain`: the solution and its cost.
+    fn polish(&self, refinement: &Refinement, gain: f64) -> (Solution, f64) {
+        let residuals = |x: &[f64]| self.residuals(refinement, x);
+        let (x, cost) = polish(&residuals, self.start(refinement, gain));
+        (self.apply(refinement, &x), cost)
     }
 }
 

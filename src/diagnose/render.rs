@@ -405,6 +405,9 @@ fn how_far_section(out: &mut String, report: &Report) {
         [] => {
             let _ = writeln!(out, "   credited: none ({})", report.selection.stop);
         }
+        [name] => {
+            let _ = writeln!(out, "   credited: {name}");
+        }
         names => {
             let _ = writeln!(out, "   credited: {} (together)", names.join(" + "));
         }

@@ -73,6 +73,9 @@ pub struct Split {
     pub fit_hidden: bool,
     /// Mean and standard deviation of each measured state over the training cells.
     pub normalisation: Normalisation,
+    /// Per state, its declared measurement noise and the root mean square of its standard
+    /// deviation over the training cells (`None`: not declared, estimated from the data).
+    pub declared: Vec<Option<(crate::ir::Noise, f64)>>,
 }
 
 impl Split {
@@ -127,9 +130,65 @@ impl Split {
             holdout,
             fit_hidden,
             normalisation,
+            declared: vec![None; model.states.len()],
         };
         split.plan_starts(model);
         Ok(split)
+    }
+
+    /// The share of the training cells (after each experiment's first row) whose previous
+    /// row measures the same state: the one-step pairs a correction can be fitted on. Dense
+    /// records have 1; off-line assays between on-line rows, much less.
+    pub fn one_step_share(&self) -> f64 {
+        let (mut paired, mut cells) = (0usize, 0usize);
+        for (_, record, rows) in self.training() {
+            for column in &record.states {
+                for row in rows.clone().skip(1) {
+                    if column[row].is_some() {
+                        cells += 1;
+                        paired += usize::from(column[row - 1].is_some());
+                    }
+                }
+            }
+        }
+        paired as f64 / cells.max(1) as f64
+    }
+
+    /// Takes the declared measurement noise of the states (`ir::Noise`; outputs are not
+    /// diagnosed): their noise floor and the weights of their cells in the fits.
+    pub fn declare_noise(&mut self, noise: &[crate::ir::Noise]) {
+        for declared in noise {
+            let crate::ir::Measured::State(k) = declared.target else {
+                continue;
+            };
+            let variances: Vec<f64> = (self.training())
+                .flat_map(|(_, record, rows)| record.states[k][rows].iter().flatten().copied())
+                .map(|value| declared.variance(value))
+                .collect();
+            let mean = variances.iter().sum::<f64>() / variances.len().max(1) as f64;
+            if mean > 0.0 && mean.is_finite() {
+                self.declared[k] = Some((declared.clone(), mean.sqrt()));
+            }
+        }
+    }
+
+    /// The weight of a measured cell of state `k` with value `value` in the fits: the
+    /// declared noise's root mean square over the state's training cells divided by the
+    /// cell's own (1 without a declaration). Relative noise weighs small values more; the
+    /// weights of a state average 1 in the square, so the fit's gap stays on the scale of the
+    /// variance-normalised error.
+    pub fn weight(&self, k: usize, value: f64) -> f64 {
+        match &self.declared[k] {
+            Some((noise, rms)) => {
+                let sigma = noise.sigma(value);
+                if sigma > 0.0 {
+                    rms / sigma
+                } else {
+                    1.0
+                }
+            }
+            None => 1.0,
+        }
     }
 
     /// Decides where every measured state's free run starts (see the module documentation).
