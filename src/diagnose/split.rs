@@ -167,7 +167,7 @@ impl Split {
                 .collect();
             let mean = variances.iter().sum::<f64>() / variances.len().max(1) as f64;
             if mean > 0.0 && mean.is_finite() {
-                self.declared[k] = Some((declared.clone(), mean.sqrt()));
+                self.declared[k] = Some((*declared, mean.sqrt()));
             }
         }
     }
