@@ -12,8 +12,28 @@ use super::simulate::Simulator;
 use super::split::{measured_rows, Holdout, Start};
 use super::{noise, origin, Context};
 
+/// Per measured state, its noise: estimated from the data ([`noise::noise_floors`]), at
+/// most the training residual of the model's fit and of the best effect's (by BIC).
+pub fn noise_estimates(
+    context: &Context,
+    before: &Scored,
+    ranking: &Ranking,
+) -> Vec<noise::NoiseEstimate> {
+    let mut estimates = noise::noise_floors(&context.split);
+    let best = (ranking.fits.iter()).min_by(|a, b| a.summary.bic.total_cmp(&b.summary.bic));
+    for fit in std::iter::once(before).chain(best) {
+        noise::cap_by_fit(&mut estimates, &fit.training_squares, fit.fitted.x.len());
+    }
+    estimates
+}
+
 /// Per measured state: its share of the held-out error, online and offline errors, noise.
-pub fn state_gaps(context: &Context, base: &Simulator, before: &Scored) -> Vec<StateGap> {
+pub fn state_gaps(
+    context: &Context,
+    base: &Simulator,
+    before: &Scored,
+    noise: &[noise::NoiseEstimate],
+) -> Vec<StateGap> {
     let model = context.model;
     let split = &context.split;
     let online = before.errors.per_state(model.states.len());
@@ -21,14 +41,6 @@ pub fn state_gaps(context: &Context, base: &Simulator, before: &Scored) -> Vec<S
     simulator.set_params(&before.fitted.x);
     let fitted = &before.fitted.x[model.params.len()..];
     let offline = offline_errors(&mut simulator, split, fitted);
-    let mut noise = noise::noise_floors(split);
-    let objective = super::fit::Objective {
-        simulator: &simulator,
-        split,
-    };
-    if let Some(residuals) = objective.residuals(&before.fitted.x) {
-        noise::cap_by_fit(&mut noise, split, &residuals, before.fitted.x.len());
-    }
     let cells: Vec<usize> = (0..model.states.len())
         .map(|k| {
             (split.scored())

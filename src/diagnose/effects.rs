@@ -29,6 +29,24 @@ pub struct Scored {
     pub gap: f64,
     /// Free runs of the scored records (`None` where one failed).
     pub runs: Vec<Option<Run>>,
+    /// Per measured state, the sum of its squared normalised training residuals and their
+    /// count (empty if the fit's free runs failed): an upper bound of its noise.
+    pub training_squares: Vec<(f64, usize)>,
+}
+
+/// A fit pinned along a free direction is kept when its training gap is within this share
+/// of the free fit's.
+pub const PIN_TOLERANCE: f64 = 1e-3;
+
+/// The unknown to pin when a fit leaves a direction free: the largest component of the free
+/// direction, if that unknown is not identified.
+fn pin(summary: &FitSummary, names: &[String]) -> Option<usize> {
+    let (name, _) = summary.free_direction.first()?;
+    let estimate = summary.estimates.iter().find(|e| &e.name == name)?;
+    if estimate.identified {
+        return None;
+    }
+    names.iter().position(|n| n == name)
 }
 
 /// Fits `model` from the unknowns `start` (by name: params and `STATE@EXPERIMENT` starts;
@@ -49,9 +67,35 @@ pub fn fit_and_score(
         split: &context.split,
     };
     let starts = Starts::new(context.options.restarts);
-    let fitted = fit(&objective, constraints, &x, (starts, &[]), seed);
-    let mut summary = summarise(&objective, constraints, &fitted.x, &unknowns.names);
+    let free = vec![false; x.len()];
+    let mut fitted = fit(&objective, constraints, &x, (starts, &free), seed);
+    let names = unknowns.names.as_slice();
+    let mut summary = summarise(&objective, constraints, &fitted.x, (names, &free));
+    if let Some(pinned) = pin(&summary, names) {
+        // The data leave a direction free: hold its largest component at its declared
+        // value, so that fits are compared at one point of the ridge, not at arbitrary
+        // ones; kept if the gap stays within [`PIN_TOLERANCE`] (the direction was free).
+        let mut fixed = free;
+        fixed[pinned] = true;
+        let mut held = fitted.x.clone();
+        held[pinned] = unknowns.defaults[pinned];
+        let refit = fit(
+            &objective,
+            constraints,
+            &held,
+            (Starts::new(0), &fixed),
+            seed,
+        );
+        if refit.gap <= fitted.gap * (1.0 + PIN_TOLERANCE) {
+            let starts = fitted.starts + refit.starts;
+            summary = summarise(&objective, constraints, &refit.x, (names, &fixed));
+            fitted = Fitted { starts, ..refit };
+        }
+    }
     let (errors, runs) = held_out(context, &simulator, &fitted.x);
+    let training_squares = (objective.residuals(&fitted.x))
+        .map(|r| super::noise::by_state(&context.split, &r))
+        .unwrap_or_default();
     summary.starts = fitted.starts;
     summary.seconds = started.elapsed().as_secs_f64();
     Ok(Scored {
@@ -63,6 +107,7 @@ pub fn fit_and_score(
         summary,
         errors,
         runs,
+        training_squares,
     })
 }
 

@@ -268,9 +268,6 @@ pub fn diagnose(
         seconds: before.summary.seconds,
     });
     let gap_before = before.gap;
-    let states = assemble::state_gaps(&context, &base, &before);
-    let noise_floor = assemble::noise_floor(&states);
-    let significant = gap_before.is_finite() && gap_before > SIGNIFICANCE * noise_floor;
     progress(Progress::Stage {
         name: "fitting effects",
         total: context.model.effects.len(),
@@ -279,6 +276,10 @@ pub fn diagnose(
     let effects_started = Instant::now();
     let ranking = effects::rank_effects(&context, &before.named, gap_before, progress)?;
     let effects_seconds = effects_started.elapsed().as_secs_f64();
+    let noise = assemble::noise_estimates(&context, &before, &ranking);
+    let states = assemble::state_gaps(&context, &base, &before, &noise);
+    let noise_floor = assemble::noise_floor(&states);
+    let significant = gap_before.is_finite() && gap_before > SIGNIFICANCE * noise_floor;
     progress(Progress::Stage {
         name: "selecting effects",
         total: context.model.effects.len().saturating_sub(1),

@@ -22,8 +22,8 @@
 //!
 //! A second bound holds whatever the sampling: the fitted model's own training residual of
 //! a state (corrected for the fitted unknowns) is noise plus misfit, so the noise is at
-//! most that ([`cap_by_fit`]). Where a few assays follow a curve the model fits well, this
-//! bound is the tighter one.
+//! most that ([`cap_by_fit`]); so is the best effect's fit (by BIC). Where a few assays
+//! follow a curve a model fits well, this bound is the tighter one.
 
 use super::split::Split;
 
@@ -177,37 +177,40 @@ fn trimmed_mean(mut squares: Vec<f64>) -> (f64, f64) {
     )
 }
 
-/// Bounds each state's noise (normalised) by the fitted model's mean squared training
-/// residual of that state times `cells / (cells - unknowns)`, the residuals as
+/// Per measured state, the sum of the squares of its cells' residuals (rescaled to
+/// normalised units) and their count, from the residuals as
 /// [`super::fit::Objective::residuals`] gives them (row by row, state by state, scaled by
 /// the square root of the training cells).
-pub fn cap_by_fit(
-    estimates: &mut [NoiseEstimate],
-    split: &Split,
-    residuals: &[f64],
-    unknowns: usize,
-) {
-    let states = estimates.len();
+pub fn by_state(split: &Split, residuals: &[f64]) -> Vec<(f64, usize)> {
+    let states = split.normalisation.state_std.len();
     let mut sums = vec![(0.0, 0usize); states];
     let mut cells = residuals.iter();
+    let total = residuals.len() as f64;
     for (_, record, rows) in split.training() {
         for row in rows {
             for (sum, column) in sums.iter_mut().zip(&record.states) {
                 if column[row].is_some() {
                     let r = cells.next().copied().unwrap_or(f64::NAN);
-                    sum.0 += r * r;
+                    sum.0 += r * r * total;
                     sum.1 += 1;
                 }
             }
         }
     }
-    let total = residuals.len() as f64;
-    let correction = total / (total - unknowns as f64).max(1.0);
-    for (estimate, (sum, count)) in estimates.iter_mut().zip(sums) {
+    sums
+}
+
+/// Bounds each estimated (not declared) state's noise, normalised, by a fitted model's
+/// mean squared training residual of that state ([`by_state`]) times
+/// `cells / (cells - unknowns)`: noise plus misfit is at least the noise.
+pub fn cap_by_fit(estimates: &mut [NoiseEstimate], squares: &[(f64, usize)], unknowns: usize) {
+    let total: usize = squares.iter().map(|s| s.1).sum();
+    let correction = total as f64 / (total as f64 - unknowns as f64).max(1.0);
+    for (estimate, &(sum, count)) in estimates.iter_mut().zip(squares) {
         if count == 0 {
             continue;
         }
-        let bound = sum * total / count as f64 * correction;
+        let bound = sum / count as f64 * correction;
         let declared = matches!(estimate.source, NoiseSource::Declared(_));
         if !declared && bound.is_finite() && bound < estimate.variance {
             estimate.variance = bound;

@@ -162,17 +162,20 @@ fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
     }
     let params: Vec<String> = (fit.estimates.iter())
         .map(|e| {
+            if fit.pinned.iter().any(|(name, _)| name == &e.name) {
+                return format!("{} = {} (held)", e.name, num(e.value));
+            }
             let flag = if e.identified {
                 ""
             } else {
                 " (not identified)"
             };
-            format!(
-                "{} = {} +- {}{flag}",
-                e.name,
-                num(e.value),
+            let error = if e.std_error.is_finite() {
                 num(e.std_error)
-            )
+            } else {
+                "unbounded".to_string()
+            };
+            format!("{} = {} +- {error}{flag}", e.name, num(e.value))
         })
         .collect();
     let _ = writeln!(out, "   {label}: {}", params.join(", "));
@@ -184,6 +187,16 @@ fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
             out,
             "   the data leave free the direction {} (logarithms of positive params): the fit cannot tell these apart",
             parts.join(", ")
+        );
+    }
+    if !fit.pinned.is_empty() {
+        let held: Vec<String> = (fit.pinned.iter())
+            .map(|(name, value)| format!("{name} = {}", num(*value)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "   held at the declared value (the fit left a direction free along it, the gap is the same): {}",
+            held.join(", ")
         );
     }
 }

@@ -210,6 +210,10 @@ pub struct FitSummary {
     /// Seconds the fit took.
     #[serde(with = "crate::json")]
     pub seconds: f64,
+    /// Unknowns held at their declared values because the fit left a direction free along
+    /// them and holding them kept the gap (name, value); not counted in `unknowns`.
+    #[serde(default, with = "crate::json")]
+    pub pinned: Vec<(String, f64)>,
 }
 
 /// A candidate effect after fitting.

@@ -39,6 +39,7 @@ fn fit() -> FitSummary {
         unknowns: 2,
         starts: 3,
         seconds: NAN,
+        pinned: vec![("X0".into(), INF)],
     }
 }
 

@@ -24,13 +24,21 @@ pub use crate::train::polish::IDENTIFIABILITY_LIMIT;
 const SMALL_COMPONENT: f64 = 0.05;
 
 /// The uncertainty of the fit at `x` (constrained values; `names` one per unknown) and its
-/// information criteria, into a [`FitSummary`] (starts and seconds left at 0).
+/// information criteria, into a [`FitSummary`] (starts and seconds left at 0). Unknowns
+/// where `fixed` is set were held (pinned): they count in neither the criteria nor the
+/// uncertainty, and are listed in `pinned`.
 pub fn summarise(
     objective: &Objective,
     constraints: &[Constraint],
     x: &[f64],
-    names: &[String],
+    (names, fixed): (&[String], &[bool]),
 ) -> FitSummary {
+    let is_fixed = |i: usize| fixed.get(i).copied().unwrap_or(false);
+    let free: Vec<usize> = (0..x.len()).filter(|&i| !is_fixed(i)).collect();
+    let pinned: Vec<(String, f64)> = (0..x.len())
+        .filter(|&i| is_fixed(i))
+        .map(|i| (names[i].clone(), x[i]))
+        .collect();
     let cells = objective.split.training_cells();
     let theta = thetas(constraints, x);
     let residuals = |theta: &[f64]| objective.residuals(&values(constraints, theta));
@@ -39,14 +47,21 @@ pub fn summarise(
             gap_train: f64::INFINITY,
             aic: f64::INFINITY,
             bic: f64::INFINITY,
-            unknowns: x.len(),
+            unknowns: free.len(),
+            pinned,
             ..FitSummary::default()
         };
     };
     let gap: f64 = r.iter().map(|v| v * v).sum();
-    let (aic, bic) = criteria(gap, cells, x.len());
-    let columns = objective.theta_jacobian(constraints, &theta);
-    let errors = standard_errors(&columns, &r, x.len());
+    let (aic, bic) = criteria(gap, cells, free.len());
+    let all = objective.theta_jacobian(constraints, &theta);
+    let columns: Vec<Vec<f64>> = free.iter().map(|&i| all[i].clone()).collect();
+    let free_errors = standard_errors(&columns, &r, free.len());
+    let mut errors = vec![0.0; x.len()];
+    for (&i, &e) in free.iter().zip(&free_errors) {
+        errors[i] = e;
+    }
+    let free_names: Vec<String> = free.iter().map(|&i| names[i].clone()).collect();
     let estimates: Vec<ParamEstimate> = (0..x.len())
         .map(|i| {
             let std_error = errors[i] * slope(constraints[i], theta[i]).abs();
@@ -68,7 +83,7 @@ pub fn summarise(
     let free_direction = if estimates.iter().all(|e| e.identified) {
         Vec::new()
     } else {
-        free_direction(&columns, names)
+        free_direction(&columns, &free_names)
     };
     FitSummary {
         estimates,
@@ -76,9 +91,10 @@ pub fn summarise(
         gap_train: gap,
         aic,
         bic,
-        unknowns: x.len(),
+        unknowns: free.len(),
         starts: 0,
         seconds: 0.0,
+        pinned,
     }
 }
 
