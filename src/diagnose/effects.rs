@@ -38,15 +38,20 @@ pub struct Scored {
 /// of the free fit's.
 pub const PIN_TOLERANCE: f64 = 1e-3;
 
-/// The unknown to pin when a fit leaves a direction free: the largest component of the free
-/// direction, if that unknown is not identified.
+/// Components of a free direction within this share of the largest are equally large.
+const PIN_TIE: f64 = 0.9;
+
+/// The unknown to pin when a fit leaves a direction free: among the direction's largest
+/// components (within [`PIN_TIE`] of the largest; an exact scaling symmetry gives several
+/// of equal size) the first declared, if it is not identified.
 fn pin(summary: &FitSummary, names: &[String]) -> Option<usize> {
-    let (name, _) = summary.free_direction.first()?;
-    let estimate = summary.estimates.iter().find(|e| &e.name == name)?;
-    if estimate.identified {
-        return None;
-    }
-    names.iter().position(|n| n == name)
+    let largest = summary.free_direction.first()?.1.abs();
+    let index = (summary.free_direction.iter())
+        .filter(|(_, v)| v.abs() >= PIN_TIE * largest)
+        .filter_map(|(name, _)| names.iter().position(|n| n == name))
+        .min()?;
+    let estimate = summary.estimates.iter().find(|e| e.name == names[index])?;
+    (!estimate.identified).then_some(index)
 }
 
 /// Fits `model` from the unknowns `start` (by name: params and `STATE@EXPERIMENT` starts;

@@ -514,4 +514,6 @@ mod tests_jacobian;
 #[cfg(test)]
 mod tests_json;
 #[cfg(test)]
+mod tests_lab;
+#[cfg(test)]
 mod tests_sets;
