@@ -9,6 +9,12 @@ gbc does), i.e. what a perfect model would score, per state.
   python bench/diagnose/fit_reference.py --case campaign --json /tmp/campaign_fit.json
   python bench/diagnose/reference_summary.py --case campaign --fit-json /tmp/campaign_fit.json
 
+The training gaps compared: the base fit and each candidate (the report's effects[].fit,
+with its seconds and starts) and every set of effects scipy fitted that gbc's selection
+also fitted (selection.steps[], gap_train only: the steps carry no per-fit time).
+`--seed` runs gbc diagnose once per seed given: the first run gives the figures, every run
+its verdict (selection.credited and .undecided) and training gaps (seeds[]).
+
 numpy + scipy + sympy, and a built gbc (target/release/gbc unless --gbc).
 """
 
@@ -92,7 +98,7 @@ def noise_check(case, holdout):
     return out
 
 
-def run_gbc(gbc, case, holdout, jobs):
+def run_gbc(gbc, case, holdout, jobs, seed=None):
     c = CASES[case]
     with tempfile.TemporaryDirectory() as tmp:
         report = Path(tmp) / "report.json"
@@ -101,6 +107,8 @@ def run_gbc(gbc, case, holdout, jobs):
             cmd += ["--holdout", *holdout]
         if jobs:
             cmd += ["--jobs", str(jobs)]
+        if seed is not None:
+            cmd += ["--seed", str(seed)]
         shown = " ".join(["gbc", *cmd[1:]])
         t0 = time.perf_counter()
         proc = subprocess.run(cmd + ["--json", str(report)], cwd=ROOT, capture_output=True, text=True)
@@ -110,6 +118,22 @@ def run_gbc(gbc, case, holdout, jobs):
         return shown, wall, json.loads(report.read_text()), proc.stdout
 
 
+def gbc_fit(report, label):
+    """gbc's fit of `label` (base, an effect, or a set a+b): the report's base fit or
+    effects[].fit (with seconds, starts, estimates), else the selection step of that set
+    (its training gap only)."""
+    if label == "base":
+        return dict(report["base_fit"], source="base_fit")
+    for e in report["effects"]:
+        if e["name"] == label:
+            return dict(e["fit"], source="effects")
+    wanted = sorted(label.split("+"))
+    for step in report["selection"]["steps"]:
+        if sorted(step["effects"]) == wanted:
+            return {"gap_train": step["gap_train"], "source": "selection.steps"}
+    return None
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--case", required=True, choices=sorted(CASES))
@@ -117,39 +141,59 @@ def main():
     ap.add_argument("--gbc", default=str(ROOT / "target/release/gbc"))
     ap.add_argument("--jobs", type=int, default=None, help="gbc diagnose --jobs (default: every core)")
     ap.add_argument("--out", default=None, help="default bench/diagnose/<case>_reference.json")
+    ap.add_argument("--seed", type=int, nargs="+", default=None,
+                    help="gbc diagnose --seed, one run per seed (the first gives the figures; default: gbc's)")
     args = ap.parse_args()
 
     c = CASES[args.case]
     fits = json.loads(Path(args.fit_json).read_text())
     holdout = fits["holdout"]
     assert fits["case"] == args.case and fits["val_fraction"] is None, "the reference fit used another split"
-    load_before = os.getloadavg()
-    shown, wall, report, text = run_gbc(args.gbc, args.case, holdout, args.jobs)
-    load_after = os.getloadavg()
+    seeds = args.seed or [None]
+    runs = []
+    for seed in seeds:
+        load_before = os.getloadavg()
+        shown, wall, report, text = run_gbc(args.gbc, args.case, holdout, args.jobs, seed)
+        load_after = os.getloadavg()
+        runs.append({"seed": seed, "command": shown, "wall_s": wall, "report": report, "text": text,
+                     "load_average_before": load_before, "load_average_after": load_after})
+    shown, wall, report, text = (runs[0][k] for k in ("command", "wall_s", "report", "text"))
+    load_before, load_after = runs[0]["load_average_before"], runs[0]["load_average_after"]
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                             text=True).stdout.strip()
     dirty = bool(subprocess.run(["git", "status", "--porcelain", "--", "src", "Cargo.toml", "Cargo.lock"],
                                 cwd=ROOT, capture_output=True, text=True).stdout.strip())
-    gbc_fits = {"base": report["base_fit"]}
-    gbc_fits.update({e["name"]: e["fit"] for e in report["effects"]})
     comparison = []
     for f in fits["fits"]:
-        g = gbc_fits.get(f["fit"])
+        g = gbc_fit(report, f["fit"])
         if g is None:
             continue
         s = f["best"]["gap"]
         comparison.append({
-            "fit": f["fit"], "train_gap_gbc": g["gap_train"], "train_gap_scipy": s,
+            "fit": f["fit"], "source_gbc": g["source"], "train_gap_gbc": g["gap_train"], "train_gap_scipy": s,
             "relative_difference": (g["gap_train"] - s) / s, "gap_at_truth": f["gap_truth"],
-            "seconds_gbc": g["seconds"], "starts_gbc": g["starts"],
+            "seconds_gbc": g.get("seconds"), "starts_gbc": g.get("starts"),
             "seconds_scipy": f["wall_s"], "starts_scipy": len(f["starts"]),
             "starts_scipy_reaching_best": f["starts_reaching_best"],
-            "params_gbc": {e["name"]: e["value"] for e in g["estimates"]},
+            "pinned_gbc": dict(g.get("pinned") or []),
+            "params_gbc": {e["name"]: e["value"] for e in g["estimates"]} if "estimates" in g else None,
             "params_scipy": f["best"]["params"],
+            "identified_products_scipy": f["best"].get("identified_products") or None,
         })
-        print(f"{f['fit']:28s} training gap gbc {g['gap_train']:.10g} ({g['seconds']:.1f} s, {g['starts']} starts)"
+        secs = f"{g['seconds']:.1f} s, {g['starts']} starts" if "seconds" in g else "selection step"
+        print(f"{f['fit']:28s} training gap gbc {g['gap_train']:.10g} ({secs})"
               f"  scipy {s:.10g} ({f['wall_s']:.0f} s, {len(f['starts'])} starts)"
               f"  rel. diff {(g['gap_train'] - s) / s:+.2e}", file=sys.stderr)
+    per_seed = []
+    for r in runs:
+        rep_, sel = r["report"], r["report"]["selection"]
+        per_seed.append({
+            "seed": r["seed"], "command": r["command"], "wall_s": r["wall_s"], "timing": rep_["timing"],
+            "load_average_before": r["load_average_before"], "load_average_after": r["load_average_after"],
+            "credited": sel["credited"], "undecided": sel.get("undecided"), "stop": sel.get("stop"),
+            "gap_after_credited": sel["gap_after"],
+            "train_gaps": {f["fit"]: (gbc_fit(rep_, f["fit"]) or {}).get("gap_train") for f in fits["fits"]},
+        })
     noise = noise_check(args.case, holdout)
     selection = report["selection"]
     doc = {
@@ -164,6 +208,7 @@ def main():
             "timing": report["timing"], "split": {k: report["split"][k] for k in ("train_rows", "test_rows")},
             "gap_before": report["gap_before"], "noise_floor": report["noise_floor"],
             "significant": report["significant"], "credited": selection["credited"],
+            "undecided": selection.get("undecided"), "pinned_base": dict(report["base_fit"].get("pinned") or []),
             "gap_after_credited": selection["gap_after"], "stop": selection.get("stop"),
             "noise_floor_per_state": {s["name"]: s["noise"] for s in report["states"]},
             "ranking": [{"effect": e["name"], "gap_after": e["gap_after"], "shrink": e["shrink"],
@@ -173,6 +218,7 @@ def main():
         },
         "scipy": {"settings": fits["settings"], "wall_s": fits["wall_s"], "versions": fits["versions"]},
         "training_gap": comparison,
+        "seeds": per_seed,
         "noise_check": noise,
     }
     out = Path(args.out) if args.out else HERE / f"{args.case}_reference.json"
