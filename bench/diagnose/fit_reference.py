@@ -27,6 +27,11 @@ Starts: the declared values, then --starts - 1 perturbations theta0 + --spread *
 in transformed coordinates, drawn with --seed (the same draws for every fit of a case;
 an effect's own params are perturbed too). Starts run in parallel on --jobs processes.
 
+--pin [FIT:]NAME=VALUE (repeatable) holds a param at VALUE in the fits that have it (only
+in FIT, base / an effect / a pair a+b, when given), fitting the rest: the optimum under the
+pins gbc diagnose reports (base_fit.pinned, effects[].fit.pinned), to tell the cost of a pin
+from a fit that stopped short.
+
 Writes bench/diagnose/<case>_fit.json (--json): per fit the best training gap, its params,
 the gap at the declared and (where the fit contains the truth) at the true values, every
 start's gap, and wall times. numpy + scipy + sympy, and a built gbc.
@@ -96,20 +101,49 @@ def problem_for(case, effects, settings):
     return _PROBLEMS[key]
 
 
+def pins_of(effects, pins):
+    """{param: value} of the --pin entries that apply to the fit of `effects`."""
+    label = "+".join(effects) or "base"
+    out = {}
+    for fit, name, value in pins:
+        if fit is None or fit == label or (fit != "base" and sorted(fit.split("+")) == sorted(effects)):
+            out[name] = value
+    return out
+
+
+def pinned(problem, pin, theta):
+    """`theta` with the pinned params at their values, and the indices of the free unknowns."""
+    theta = np.array(theta, float)
+    held = []
+    for i, (name, c) in enumerate(zip(problem.model.param_names, problem.constraints)):
+        if name in pin:
+            theta[i] = gbmlib.to_theta(c, pin[name])
+            held.append(i)
+    return theta, np.array([i for i in range(len(theta)) if i not in held], int)
+
+
 def run_start(args):
     case, effects, settings, index, theta = args
     problem = problem_for(case, effects, settings)
     problem.nfev = problem.njev = problem.rhs_evals = problem.failures = 0
-    theta = np.asarray(theta, float)
+    theta, free = pinned(problem, pins_of(effects, settings.get("pin") or []), theta)
+
+    def full(x):
+        out = theta.copy()
+        out[free] = x
+        return out
+
     t0 = time.perf_counter()
     gap_start = problem.gap(theta)
-    sol = least_squares(problem.residuals, theta, jac=problem.jacobian, method="trf",
+    sol = least_squares(lambda x: problem.residuals(full(x)), theta[free],
+                        jac=lambda x: problem.jacobian(full(x))[:, free], method="trf",
                         ftol=settings["tol"], xtol=settings["tol"], gtol=settings["tol"],
                         max_nfev=settings["max_nfev"])
     wall = time.perf_counter() - t0
+    x = full(sol.x)
     return {
         "start": index, "gap_start": gap_start, "gap": float(sol.fun @ sol.fun),
-        "params": problem.named(sol.x), "theta": [float(v) for v in sol.x],
+        "params": problem.named(x), "theta": [float(v) for v in x],
         "status": int(sol.status), "message": sol.message, "nfev": int(sol.nfev),
         "njev": int(sol.njev) if sol.njev is not None else None,
         "ode_rhs_evals": problem.rhs_evals, "failed_runs": problem.failures, "wall_s": wall,
@@ -154,14 +188,21 @@ def main():
     ap.add_argument("--budget", type=float, default=1e6)
     ap.add_argument("--tol", type=float, default=1e-10, help="ftol, xtol and gtol")
     ap.add_argument("--jobs", type=int, default=os.cpu_count())
+    ap.add_argument("--pin", action="append", default=[], metavar="[FIT:]NAME=VALUE",
+                    help="hold a param at VALUE (in FIT only, when given); repeatable")
     ap.add_argument("--json", default=None, help="default bench/diagnose/<case>_fit.json")
     args = ap.parse_args()
+    pins = []
+    for entry in args.pin:
+        fit, _, rest = entry.rpartition(":")
+        name, _, value = rest.partition("=")
+        pins.append((fit or None, name, float(value)))
 
     case = CASES[args.case]
     holdout = case["holdout"] if args.holdout is None else args.holdout
     settings = {"holdout": holdout, "val_fraction": args.val_fraction, "method": args.method,
                 "rtol": args.rtol, "atol": args.atol, "budget": args.budget, "tol": args.tol,
-                "max_nfev": args.max_nfev}
+                "max_nfev": args.max_nfev, "pin": pins}
     truth = json.loads((ROOT / case["truth"]).read_text())
     declared = gbmlib.Model(ROOT / case["model"])
     effect_names = truth.get("effects") or []
@@ -181,7 +222,8 @@ def main():
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for effects in fits:
             problem = problem_for(args.case, effects, settings)
-            theta0 = problem.theta0()
+            pin = pins_of(effects, pins)
+            theta0, _ = pinned(problem, pin, problem.theta0())
             rng = np.random.default_rng(args.seed)
             starts = [theta0] + [theta0 + args.spread * rng.standard_normal(len(theta0))
                                  for _ in range(args.starts - 1)]
@@ -196,7 +238,7 @@ def main():
             agree = sum(1 for r in results if r["gap"] <= best["gap"] * (1 + 1e-3) + 1e-15)
             label = "+".join(effects) or "base"
             out_fits.append({
-                "fit": label, "effects": effects, "params": problem.model.param_names,
+                "fit": label, "effects": effects, "params": problem.model.param_names, "pinned": pin,
                 "fitted_starts": [f"{problem.parts[p][0]['name']}.{problem.model.states[k]}"
                                   for p, k, _ in problem.fitted],
                 "cells": problem.cells, "std": dict(zip(problem.model.states, problem.std.tolist())),

@@ -36,7 +36,7 @@ pub struct Scored {
 
 /// A fit pinned along a free direction is kept when its training gap is within this share
 /// of the free fit's.
-pub const PIN_TOLERANCE: f64 = 1e-4;
+pub const PIN_TOLERANCE: f64 = 1e-6;
 
 /// Components of a free direction within this share of the largest are equally large.
 const PIN_TIE: f64 = 0.9;
