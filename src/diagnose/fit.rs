@@ -430,12 +430,20 @@ pub fn levenberg_marquardt(
 }
 
 /// [`levenberg_marquardt`] with the looser settings of a refinement (a polish), by
-/// forward differences.
-pub fn polish(residuals: &Residuals, theta: Vec<f64>) -> (Vec<f64>, f64) {
+/// forward differences, with at most `linearisations` Jacobians.
+pub fn polish_within(
+    residuals: &Residuals,
+    theta: Vec<f64>,
+    linearisations: usize,
+) -> (Vec<f64>, f64) {
     let jacobian = Jacobian::ForwardDifferences {
         step: JACOBIAN_STEP,
     };
-    minimise(residuals, jacobian, theta, &POLISH)
+    let settings = Settings {
+        max_linearisations: linearisations,
+        ..POLISH
+    };
+    minimise(residuals, jacobian, theta, &settings)
 }
 
 fn minimise(

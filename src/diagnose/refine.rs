@@ -15,7 +15,7 @@
 use super::correction::{filtered_for, Corrected, Solution};
 use super::evaluate::{scored_errors, Errors};
 use super::features::FeatureMap;
-use super::fit::{polish, values};
+use super::fit::{polish_within, values};
 use super::memory::FilterBank;
 use super::simulate::{inputs_at, Run};
 use super::split::Split;
@@ -26,6 +26,13 @@ use crate::sim::IntegrationError;
 /// Below this share of one-step pairs ([`Split::one_step_share`]) a record is sparse: a
 /// one-step correction that does worse in the loop than none is grown from none instead.
 pub const SPARSE_SHARE: f64 = 0.5;
+
+/// Most linearisations of a refinement ...
+const LINEARISATIONS: usize = 20;
+/// ... but one with more unknowns than this is wide ...
+const WIDE: usize = 16;
+/// ... and gets at most this many linearisations.
+const WIDE_LINEARISATIONS: usize = 8;
 
 /// What a free-run refinement may change besides the params: a gain on each slot's one-step
 /// weights and the weights of some features of each slot.
@@ -163,7 +170,15 @@ impl Problem<'_> {
     /// Levenberg–Marquardt from the start with `gain`: the solution and its cost.
     fn polish(&self, refinement: &Refinement, gain: f64) -> (Solution, f64) {
         let residuals = |x: &[f64]| self.residuals(refinement, x);
-        let (x, cost) = polish(&residuals, self.start(refinement, gain));
+        // A wide refinement's forward differences cost a free run per unknown: fewer
+        // linearisations (the first ones do most of the work).
+        let start = self.start(refinement, gain);
+        let linearisations = if start.len() > WIDE {
+            WIDE_LINEARISATIONS
+        } else {
+            LINEARISATIONS
+        };
+        let (x, cost) = polish_within(&residuals, start, linearisations);
         (self.apply(refinement, &x), cost)
     }
 }
