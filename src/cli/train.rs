@@ -182,8 +182,8 @@ pub struct TrainArgs {
     #[arg(long, value_name = "N")]
     pub checkpoint_every: Option<usize>,
     /// Stop when the validation loss (the pooled online error, else the offline one,
-    /// computed after every epoch) has not improved for PATIENCE epochs; the weights of
-    /// the best epoch are kept.
+    /// computed after every epoch) has not improved for PATIENCE epochs, counted from the
+    /// full rollout (after the warm-up); the weights of the best epoch are kept.
     #[arg(long, value_name = "PATIENCE")]
     pub early_stop: Option<usize>,
     /// Stop after this epoch as if interrupted (tests of --resume).

@@ -285,6 +285,8 @@ pub(super) struct Safety<'a> {
     before: f64,
     log: Vec<EpochRow>,
     early: Option<EarlyStop>,
+    /// The first epoch early stopping watches (the objective's last phase).
+    count_from: usize,
     best_weights: Vec<NamedTensor>,
     validate: Option<&'a mut ValidateNow<'a>>,
 }
@@ -309,9 +311,17 @@ impl<'a> Safety<'a> {
             before: 0.0,
             log: Vec::new(),
             early,
+            count_from: 1,
             best_weights: Vec::new(),
             validate: validate.filter(|_| control.early_stop.is_some()),
         }
+    }
+
+    /// Early stopping watches epochs from `epoch` on: earlier ones train another objective
+    /// (the one-step warm-up, the growing rollout), whose validation losses neither count
+    /// as the best nor use up the patience.
+    pub fn count_from(&mut self, epoch: usize) {
+        self.count_from = epoch.max(1);
     }
 
     /// Before the first epoch: with a checkpoint, sets the network, the training tracks,
@@ -389,7 +399,7 @@ impl<'a> Safety<'a> {
                 online,
             });
             let loss = online.or(offline).unwrap_or(f64::NAN);
-            if let Some(early) = self.early.as_mut() {
+            if let Some(early) = self.early.as_mut().filter(|_| epoch >= self.count_from) {
                 if early.observe(epoch, loss) {
                     self.best_weights = end.state().0;
                 }

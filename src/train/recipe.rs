@@ -199,6 +199,16 @@ impl Recipe {
                 .unwrap_or(self.objective == Objective::MultiStep)
     }
 
+    /// The first epoch (1-based, of `epochs`) whose rollout has its final length: before it
+    /// the objective still changes (one-step warm-up, then the growing rollout), so early
+    /// stopping counts from there.
+    pub fn full_horizon_from(&self, epochs: usize) -> usize {
+        let last = self.horizon_at(epochs.max(1), epochs);
+        (1..=epochs.max(1))
+            .find(|&epoch| self.horizon_at(epoch, epochs) == last)
+            .unwrap_or(1)
+    }
+
     /// The rollout length of 1-based `epoch` out of `epochs` (1: one-step pairs).
     pub fn horizon_at(&self, epoch: usize, epochs: usize) -> usize {
         if self.objective == Objective::OneStep || self.horizon <= 1 {
@@ -233,5 +243,30 @@ mod tests {
         assert_eq!(schedule[62], 5);
         assert!(schedule[75..].iter().all(|&k| k == 10));
         assert!((1..=100).all(|e| Recipe::paper().horizon_at(e, 100) == 1));
+    }
+
+    /// Early stopping counts from the first epoch of the full rollout: every earlier epoch
+    /// is shorter, every later one full; a one-step recipe counts from the first epoch.
+    #[test]
+    fn early_stopping_counts_from_the_full_rollout() {
+        let recipe = Recipe::default();
+        for epochs in [1, 7, 100, 333] {
+            let from = recipe.full_horizon_from(epochs);
+            let last = recipe.horizon_at(epochs, epochs);
+            assert!(
+                (1..from).all(|e| recipe.horizon_at(e, epochs) < last),
+                "{epochs}"
+            );
+            assert!((from..=epochs).all(|e| recipe.horizon_at(e, epochs) == last));
+        }
+        assert!(
+            recipe.full_horizon_from(100) > 70,
+            "after the one-step warm-up"
+        );
+        let one_step = Recipe {
+            objective: Objective::OneStep,
+            ..Recipe::default()
+        };
+        assert_eq!(one_step.full_horizon_from(100), 1);
     }
 }

@@ -245,6 +245,7 @@ impl Run<'_> {
         };
         let validate_now = (!scorings.is_empty()).then_some(&mut validate_now as _);
         let mut safety = Safety::new(control, (options, started), validate_now);
+        safety.count_from(recipe.full_horizon_from(options.epochs));
         fit.run(&mut self.network, &mut self.training, on_event, &mut safety)
     }
 
