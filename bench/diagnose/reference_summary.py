@@ -118,6 +118,17 @@ def run_gbc(gbc, case, holdout, jobs, seed=None):
         return shown, wall, json.loads(report.read_text()), proc.stdout
 
 
+def binary_identity(gbc):
+    """The gbc binary run: its path, size, modification time and SHA-256 (the `commit` field is
+    the checkout's HEAD, which a frozen binary elsewhere need not match)."""
+    import datetime
+    import hashlib
+    path = Path(gbc)
+    data = path.read_bytes()
+    return {"path": str(path), "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(),
+            "modified": datetime.datetime.fromtimestamp(path.stat().st_mtime, datetime.timezone.utc).isoformat()}
+
+
 def gbc_fit(report, label):
     """gbc's fit of `label` (base, an effect, or a set a+b): the report's base fit or
     effects[].fit (with seconds, starts, estimates), else the selection step of that set
@@ -205,6 +216,7 @@ def main():
                     "load_average_after": load_after, "platform": platform.platform()},
         "gbc": {
             "command": shown, "commit": commit + ("+dirty" if dirty else ""), "wall_s": wall,
+            "binary": binary_identity(args.gbc),
             "timing": report["timing"], "split": {k: report["split"][k] for k in ("train_rows", "test_rows")},
             "gap_before": report["gap_before"], "noise_floor": report["noise_floor"],
             "significant": report["significant"], "credited": selection["credited"],
