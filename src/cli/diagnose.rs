@@ -68,6 +68,10 @@ pub struct DiagnoseArgs {
     /// Write an HTML report with figures to this file.
     #[arg(long, value_name = "FILE")]
     pub html: Option<PathBuf>,
+    /// Measured rows the training part and the held-out part each need (a score on a few
+    /// rows is noisy; below the default, say so in what you report).
+    #[arg(long, value_name = "N", default_value_t = crate::diagnose::MIN_ROWS)]
+    pub min_rows: usize,
     /// Write the report's figures as SVG files into this directory.
     #[arg(long, value_name = "DIR")]
     pub figures: Option<PathBuf>,
@@ -146,6 +150,7 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
         fit_initial: args.fit_initial,
         locate: !args.skip_loci,
         noise: Some(noise),
+        min_rows: args.min_rows,
         ..Options::default()
     };
     let pool = rayon::ThreadPoolBuilder::new()

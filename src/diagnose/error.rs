@@ -38,7 +38,8 @@ pub enum DiagnoseError {
         help(
             "the diagnosis fits on the training part and scores on the held-out part: hold out \
              other experiments (--holdout NAME, --val FILE) or another share of each \
-             (--val-fraction SHARE)"
+             (--val-fraction SHARE), or accept fewer rows with --min-rows N (the score of a \
+             few rows is noisy)"
         )
     )]
     TooFewRows {

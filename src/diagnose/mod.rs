@@ -108,6 +108,8 @@ pub struct Options {
     /// The measurement noise (`ir::merge_noise` of the model's declarations and the
     /// command line's `--noise`); `None`: the model's declarations.
     pub noise: Option<Vec<crate::ir::Noise>>,
+    /// Measured rows each part (training, held-out) needs; default [`MIN_ROWS`].
+    pub min_rows: usize,
 }
 
 impl Default for Options {
@@ -122,6 +124,7 @@ impl Default for Options {
             fit_initial: false,
             locate: true,
             noise: None,
+            min_rows: MIN_ROWS,
         }
     }
 }
@@ -425,7 +428,8 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
         None if !held.is_empty() => Holdout::Experiments,
         None => Holdout::Tail(DEFAULT_TAIL),
     };
-    let mut split = Split::new(model, train, held, (holdout, options.fit_initial))?;
+    let parts = (holdout, options.fit_initial);
+    let mut split = Split::with_min_rows(model, (train, held), parts, options.min_rows)?;
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     Ok(Context {
         problem: *problem,
@@ -454,6 +458,14 @@ fn check_options(options: &Options) -> Result<(), DiagnoseError> {
                 "--val-fraction 0.3 scores the last 30 % of each experiment's measured rows",
             ));
         }
+    }
+    if options.min_rows < 2 {
+        return Err(bad(
+            "--min-rows",
+            "at least 2 measured rows",
+            options.min_rows.to_string(),
+            "a fit and a score each need a few measured rows; the default is 10",
+        ));
     }
     if options.dim < 1 {
         return Err(bad(

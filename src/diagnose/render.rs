@@ -77,12 +77,17 @@ fn header(out: &mut String, report: &Report) {
 
 fn where_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "1. Where the gap lies");
-    let ratio = if report.noise_floor > 0.0 {
+    let ratio = if !report.gap_before.is_finite() {
+        "-".to_string()
+    } else if report.noise_floor > 0.0 {
         format!("{}x", num(report.gap_before / report.noise_floor))
     } else {
         "noise-free data".to_string()
     };
-    let verdict = if report.significant {
+    let verdict = if !report.gap_before.is_finite() {
+        "the fitted model's free run diverges on the held-out part, so the gap cannot be \
+         measured: hold out whole experiments (--holdout) or a shorter tail (--val-fraction)"
+    } else if report.significant {
         "significant"
     } else {
         "not significant: the model explains the data to the noise level"

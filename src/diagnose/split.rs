@@ -80,12 +80,23 @@ pub struct Split {
 
 impl Split {
     /// The split of `train` (experiments that fit; with `Tail`, their tails are scored) and
-    /// `held` (experiments that are only scored).
+    /// `held` (experiments that are only scored), each part needing [`MIN_ROWS`].
+    #[cfg(test)]
     pub fn new(
         model: &Model,
         train: Vec<Record>,
         held: Vec<Record>,
         (holdout, fit_hidden): (Holdout, bool),
+    ) -> Result<Split, DiagnoseError> {
+        Split::with_min_rows(model, (train, held), (holdout, fit_hidden), MIN_ROWS)
+    }
+
+    /// [`Split::new`], each part needing `min_rows` measured rows (`--min-rows`).
+    pub fn with_min_rows(
+        model: &Model,
+        (train, held): (Vec<Record>, Vec<Record>),
+        (holdout, fit_hidden): (Holdout, bool),
+        min_rows: usize,
     ) -> Result<Split, DiagnoseError> {
         let mut parts = Vec::with_capacity(train.len() + held.len());
         for record in &train {
@@ -109,9 +120,9 @@ impl Split {
                 .sum()
         };
         let (fit, scored) = (count(&|p| p.train.clone()), count(&|p| p.test.clone()));
-        if fit < MIN_ROWS || scored < MIN_ROWS {
+        if fit < min_rows || scored < min_rows {
             return Err(DiagnoseError::TooFewRows {
-                needed: MIN_ROWS,
+                needed: min_rows,
                 train: fit,
                 test: scored,
                 how: describe(&records, &parts, holdout),
