@@ -62,6 +62,18 @@ pub fn fit_and_score(
     start: &BTreeMap<String, f64>,
     seed: u64,
 ) -> Result<Scored, DiagnoseError> {
+    let starts = Starts::new(context.options.restarts);
+    fit_and_score_with(context, model, (start, starts), seed)
+}
+
+/// [`fit_and_score`] with its own budget of starts (the fits that decide a verdict get
+/// more).
+pub fn fit_and_score_with(
+    context: &Context,
+    model: &Model,
+    (start, starts): (&BTreeMap<String, f64>, Starts),
+    seed: u64,
+) -> Result<Scored, DiagnoseError> {
     let started = Instant::now();
     let simulator = Simulator::new(model, &[], tolerances())?;
     let unknowns = context.unknowns(model, &simulator);
@@ -71,7 +83,6 @@ pub fn fit_and_score(
         simulator: &simulator,
         split: &context.split,
     };
-    let starts = Starts::new(context.options.restarts);
     let free = vec![false; x.len()];
     let mut fitted = fit(&objective, constraints, &x, (starts, &free), seed);
     let names = unknowns.names.as_slice();

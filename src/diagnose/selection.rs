@@ -27,7 +27,7 @@
 //! and the block-bootstrap spread of its decrease ([`super::ranking`]) are reported, and a
 //! credited set that does worse on the held-out data than the model is flagged.
 
-use super::effects::{block_sums, fit_and_score, lower, Ranking, Scored};
+use super::effects::{block_sums, fit_and_score, fit_and_score_with, lower, Ranking, Scored};
 use super::ranking::compare;
 use super::render::num;
 use super::report::{Selection, SelectionStep};
@@ -43,6 +43,8 @@ pub const TIE: f64 = 2.0;
 /// A set beats its subset only when it removes at least this share of what the subset
 /// leaves above the noise floor.
 pub const MARGINAL: f64 = 0.25;
+/// The fits that decide a verdict are searched again with this many times the restarts.
+pub const CONFIRM_RESTARTS: usize = 2;
 /// Triples are tried when the model has at most this many candidate effects.
 pub const TRIPLES_UP_TO: usize = 5;
 /// Pairs are tried among at most this many candidates (the best by BIC alone).
@@ -91,7 +93,76 @@ pub fn select(
         candidates.extend(combinations(context, ranking, size, progress)?);
     }
     candidates.sort_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic));
+    let (selection, _) = decide(context, base, &candidates, levels);
+    if confirm(context, &mut candidates, &selection, progress)? {
+        candidates.sort_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic));
+    }
     Ok(decide(context, base, &candidates, levels))
+}
+
+/// The fits that decide the verdict (the credited set, or the sets it is undecided between;
+/// else the best by BIC) searched again with [`CONFIRM_RESTARTS`] times the restarts when
+/// their best was reached by one start only or rivals stand within [`TIE`] of BIC; each
+/// keeps the better fit. Returns whether any was searched again.
+fn confirm(
+    context: &Context,
+    candidates: &mut [Candidate],
+    selection: &Selection,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<bool, DiagnoseError> {
+    if candidates.is_empty() {
+        return Ok(false);
+    }
+    let deciding: Vec<usize> = if !selection.undecided.is_empty() {
+        (0..candidates.len())
+            .filter(|&i| {
+                selection
+                    .undecided
+                    .contains(&candidates[i].effects.join(" + "))
+            })
+            .collect()
+    } else {
+        vec![0]
+    };
+    let needed = !selection.undecided.is_empty()
+        || deciding
+            .iter()
+            .any(|&i| candidates[i].fit.fitted.agreeing < 2);
+    if !needed || deciding.is_empty() {
+        return Ok(false);
+    }
+    progress(Progress::Stage {
+        name: "confirming the deciding fits",
+        total: deciding.len(),
+    });
+    let restarts = CONFIRM_RESTARTS * context.options.restarts.max(1);
+    let refits: Vec<(usize, Scored)> = deciding
+        .par_iter()
+        .map(|&i| {
+            let candidate = &candidates[i];
+            let names: Vec<&str> = candidate.effects.iter().map(String::as_str).collect();
+            let model = lower(context, &names)?;
+            let starts = super::fit::Starts::new(restarts);
+            let seed = context.seed(6000 + i as u64);
+            let fit = fit_and_score_with(context, &model, (&candidate.fit.named, starts), seed)?;
+            progress(Progress::Done {
+                item: names.join(" + "),
+                seconds: fit.summary.seconds,
+            });
+            Ok((i, fit))
+        })
+        .collect::<Result<_, DiagnoseError>>()?;
+    for (i, fit) in refits {
+        let old = &candidates[i].fit;
+        if fit.fitted.gap < old.fitted.gap * (1.0 - 1e-9) {
+            candidates[i].fit = fit;
+        } else if (fit.fitted.gap - old.fitted.gap).abs() <= super::fit::AGREE * old.fitted.gap {
+            // The wider search (its first start the old best) counts who reached it again.
+            let agreeing = old.fitted.agreeing.max(fit.fitted.agreeing);
+            candidates[i].fit.fitted.agreeing = agreeing;
+        }
+    }
+    Ok(true)
 }
 
 /// The candidate with the lowest BIC.
