@@ -69,6 +69,17 @@ pub fn state_gaps(
         .collect()
 }
 
+/// The mean over states of each one's held-out normalised MSE (states without a scored
+/// cell left out): how `gbc train` and `gbc predict` pool the errors
+/// (`train::evaluate::ErrorSet::overall`). Infinite when a free run diverged.
+pub fn mean_over_states(states: &[StateGap]) -> f64 {
+    let errors: Vec<f64> = states.iter().filter_map(|s| s.online).collect();
+    if errors.is_empty() {
+        return f64::NAN;
+    }
+    errors.iter().sum::<f64>() / errors.len() as f64
+}
+
 /// The noise floor: the states' normalised noise variances weighted by their scored cells
 /// (the gap a perfect model would show).
 pub fn noise_floor(states: &[StateGap]) -> f64 {

@@ -328,6 +328,7 @@ pub fn diagnose(
     Ok(Report {
         model: context.model.name.clone(),
         gap_before,
+        gap_before_per_state: assemble::mean_over_states(&states),
         noise_floor,
         significant,
         states,

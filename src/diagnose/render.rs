@@ -98,6 +98,11 @@ fn where_section(out: &mut String, report: &Report) {
         num(report.gap_before),
         num(report.noise_floor),
     );
+    let _ = writeln!(
+        out,
+        "   (the gap pools the measured cells; as gbc train and predict report errors, the mean over states: {})",
+        num(report.gap_before_per_state)
+    );
     fit_lines(out, "fitted params", &report.base_fit);
     for start in &report.initial_states {
         let _ = writeln!(

@@ -15,6 +15,11 @@ pub struct Report {
     /// Held-out gap of the model with its own params fitted.
     #[serde(with = "crate::json")]
     pub gap_before: f64,
+    /// The same held-out errors as `gbc train` and `gbc predict` pool them: the mean over
+    /// measured states of each state's normalised MSE (`StateGap::online`), where the gap
+    /// pools the cells.
+    #[serde(default, with = "crate::json")]
+    pub gap_before_per_state: f64,
     /// Gap a perfect model would show: the measurement noise in normalised units.
     #[serde(with = "crate::json")]
     pub noise_floor: f64,

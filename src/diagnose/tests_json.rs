@@ -49,6 +49,7 @@ fn every_number_non_finite() -> Report {
     Report {
         model: "chemostat".into(),
         gap_before: INF,
+        gap_before_per_state: NAN,
         noise_floor: NAN,
         significant: true,
         states: vec![StateGap {

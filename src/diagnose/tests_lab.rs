@@ -81,6 +81,14 @@ fn overflow_with_uptake_is_credited_as_a_pair_at_the_acetate_balance() {
     // variance (second differences alone take about a quarter).
     let acetate = report.states.iter().find(|s| s.name == "A").unwrap();
     assert!(acetate.noise < 0.1, "{acetate:?}");
+    // Beside the pooled gap, train's measure: the mean of the states' own errors.
+    let online: Vec<f64> = report.states.iter().filter_map(|s| s.online).collect();
+    let mean = online.iter().sum::<f64>() / online.len() as f64;
+    assert!((report.gap_before_per_state - mean).abs() <= 1e-12 * mean);
+    assert!(
+        report.gap_before_per_state > report.gap_before,
+        "acetate dominates one state"
+    );
 }
 
 /// The same case with the assays' precision declared (4 % + 0.01 g/L, as generated): the
