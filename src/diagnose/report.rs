@@ -15,16 +15,16 @@ pub struct Report {
     /// Held-out gap of the model with its own params fitted.
     #[serde(with = "crate::json")]
     pub gap_before: f64,
-    /// The same held-out errors as `gbc train` and `gbc predict` pool them: the mean over
-    /// measured states of each state's normalised MSE (`StateGap::online`), where the gap
-    /// pools the cells.
-    #[serde(default, with = "crate::json")]
-    pub gap_before_per_state: f64,
     /// Gap a perfect model would show: the measurement noise in normalised units.
     #[serde(with = "crate::json")]
     pub noise_floor: f64,
     /// Whether the gap clearly exceeds the noise (see [`super::SIGNIFICANCE`]).
     pub significant: bool,
+    /// The same held-out errors as `gbc train` and `gbc predict` pool them: the mean over
+    /// measured states of each state's normalised MSE (`StateGap::online`), where the gap
+    /// pools the cells.
+    #[serde(default, with = "crate::json")]
+    pub gap_before_per_state: f64,
     /// Per measured state, largest share first.
     pub states: Vec<StateGap>,
     /// Rates, groups of rates and balances where a free correction closes the gap, best

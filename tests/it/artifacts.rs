@@ -242,6 +242,7 @@ fn a_diagnosis_json_reads_back_into_its_report() {
     name_every_float(&mut value, &mut count);
     assert!(count > 100, "{count} floats");
     let named: gbc::diagnose::Report = serde_json::from_value(value.clone()).unwrap();
-    assert!(named.gap_before.is_infinite() && named.noise_floor.is_nan());
+    // Which name each float gets depends on the fields' (sorted) order: both are named.
+    assert!(!named.gap_before.is_finite() && !named.noise_floor.is_finite());
     assert_eq!(serde_json::to_value(&named).unwrap(), value);
 }
