@@ -222,8 +222,9 @@ pub fn cap_by_fit(estimates: &mut [NoiseEstimate], squares: &[(f64, usize)], unk
 
 /// `4 % + 0.01` (in the state's unit).
 fn declared_text(noise: &crate::ir::Noise) -> String {
-    let relative = (noise.relative > 0.0).then(|| format!("{} %", 100.0 * noise.relative));
-    let absolute = (noise.absolute > 0.0).then(|| format!("{}", noise.absolute));
+    use super::render::num;
+    let relative = (noise.relative > 0.0).then(|| format!("{} %", num(100.0 * noise.relative)));
+    let absolute = (noise.absolute > 0.0).then(|| num(noise.absolute));
     [relative, absolute]
         .into_iter()
         .flatten()

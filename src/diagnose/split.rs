@@ -236,13 +236,19 @@ impl Split {
                 Start::Cell | Start::Declared => None,
             })
             .collect();
+        let first = self.first_hidden_start(record, hidden);
+        overrides.extend((0..hidden).map(|h| first.and_then(|f| fitted.get(f + h).copied())));
+        overrides
+    }
+
+    /// The index into the fitted starts of `record`'s first hidden start, where its hidden
+    /// starts are fitted (`--fit-initial` and a training record).
+    fn first_hidden_start(&self, record: usize, hidden: usize) -> Option<usize> {
         let slot = self
             .fit_hidden
             .then(|| self.training_slot(record))
-            .flatten();
-        let first = self.fitted_starts.len() + slot.unwrap_or(0) * hidden;
-        overrides.extend((0..hidden).map(|h| slot.and_then(|_| fitted.get(first + h).copied())));
-        overrides
+            .flatten()?;
+        Some(self.fitted_starts.len() + slot * hidden)
     }
 
     /// Per state (measured, then the `hidden` hidden ones) of `record`: the index into the
@@ -255,12 +261,8 @@ impl Split {
                 _ => None,
             })
             .collect();
-        let slot = self
-            .fit_hidden
-            .then(|| self.training_slot(record))
-            .flatten();
-        let first = self.fitted_starts.len() + slot.unwrap_or(0) * hidden;
-        indices.extend((0..hidden).map(|h| slot.map(|_| first + h)));
+        let first = self.first_hidden_start(record, hidden);
+        indices.extend((0..hidden).map(|h| first.map(|f| f + h)));
         indices
     }
 
