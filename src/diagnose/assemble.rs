@@ -11,6 +11,7 @@ use super::selection::Levels;
 use super::simulate::Simulator;
 use super::split::{measured_rows, Holdout, Start};
 use super::{noise, origin, Context};
+use crate::record::measure;
 
 /// Per measured state, its noise: estimated from the data ([`noise::noise_floors`]), at
 /// most the training residual of the model's fit and of the best effect's (by BIC).
@@ -69,15 +70,11 @@ pub fn state_gaps(
         .collect()
 }
 
-/// The mean over states of each one's held-out normalised MSE (states without a scored
-/// cell left out): how `gbc train` and `gbc predict` pool the errors
-/// (`train::evaluate::ErrorSet::overall`). Infinite when a free run diverged.
+/// The error of the held-out free runs: the mean over states of each one's NMSE
+/// ([`measure`], the measure `gbc train` and `gbc predict` report). Infinite when a free run
+/// diverged.
 pub fn mean_over_states(states: &[StateGap]) -> f64 {
-    let errors: Vec<f64> = states.iter().filter_map(|s| s.online).collect();
-    if errors.is_empty() {
-        return f64::NAN;
-    }
-    errors.iter().sum::<f64>() / errors.len() as f64
+    measure::mean_over_states(states.iter().filter_map(|s| s.online))
 }
 
 /// The noise floor: the states' normalised noise variances weighted by their scored cells

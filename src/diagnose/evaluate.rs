@@ -4,6 +4,7 @@
 use super::report::{Regime, Window};
 use super::simulate::{Run, Simulator};
 use super::split::Split;
+use crate::record::measure::{cell_error, StateErrors};
 use crate::record::{Normalisation, Record};
 use std::ops::Range;
 
@@ -69,19 +70,23 @@ impl Errors {
     /// Per measured state, the mean squared error over its scored cells (`None` without
     /// cells; infinite when a run diverged).
     pub fn per_state(&self, states: usize) -> Vec<Option<f64>> {
-        (0..states)
-            .map(|k| {
-                let values: Vec<f64> = (self.records.iter())
-                    .flat_map(|r| r.squares.iter().filter_map(move |row| row[k]))
-                    .collect();
-                if values.is_empty() {
-                    return None;
+        let mut sums = StateErrors::new(states);
+        for row in self.records.iter().flat_map(|r| &r.squares) {
+            for (k, error) in row.iter().enumerate().take(states) {
+                if let Some(error) = error {
+                    sums.add(k, *error);
                 }
-                let mean = values.iter().sum::<f64>() / values.len() as f64;
-                Some(if self.diverged || !mean.is_finite() {
-                    f64::INFINITY
-                } else {
-                    mean
+            }
+        }
+        let diverged = self.diverged;
+        (sums.nmse().into_iter())
+            .map(|nmse| {
+                nmse.map(|e| {
+                    if diverged || !e.is_finite() {
+                        f64::INFINITY
+                    } else {
+                        e
+                    }
                 })
             })
             .collect()
@@ -98,7 +103,7 @@ pub fn cell_errors(
     rows.map(|row| {
         (record.states.iter().enumerate())
             .map(|(k, cells)| {
-                cells[row].map(|value| ((run.row(row)[k] - value) / norm.state_std[k]).powi(2))
+                cells[row].map(|value| cell_error(run.row(row)[k], value, norm.state_std[k]))
             })
             .collect()
     })

@@ -100,7 +100,7 @@ fn where_section(out: &mut String, report: &Report) {
     );
     let _ = writeln!(
         out,
-        "   (the gap pools the measured cells; as gbc train and predict report errors, the mean over states: {})",
+        "   error before {} (the mean over states of each state's NMSE, the measure of gbc train and predict; the gap pools cells)",
         num(report.gap_before_per_state)
     );
     fit_lines(out, "fitted params", &report.base_fit);

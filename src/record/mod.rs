@@ -8,6 +8,7 @@
 
 pub mod bind;
 pub mod grid;
+pub mod measure;
 #[cfg(test)]
 mod tests;
 

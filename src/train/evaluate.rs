@@ -10,6 +10,7 @@ use std::fmt;
 
 use crate::backend::{BackendError, Batch, Network, Normalisation};
 use crate::ir;
+use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Track;
 
 use super::pairs::{embedding_row, PairTable};
@@ -301,8 +302,7 @@ pub fn run_in_hidden(
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ErrorSum {
     names: Vec<String>,
-    squared: Vec<f64>,
-    cells: Vec<usize>,
+    errors: StateErrors,
     rows: usize,
     divergence: Option<Divergence>,
 }
@@ -317,26 +317,22 @@ impl ErrorSum {
             )
             .collect();
         ErrorSum {
-            squared: vec![0.0; names.len()],
-            cells: vec![0; names.len()],
+            errors: StateErrors::new(names.len()),
             names,
             rows: 0,
             divergence: None,
         }
     }
 
-    /// Adds the squared error of one cell of column `column` (states, then observables).
+    /// Adds the squared z-scored error of one cell of column `column` (states, then
+    /// observables).
     pub fn add(&mut self, column: usize, squared: f64) {
-        self.squared[column] += squared;
-        self.cells[column] += 1;
+        self.errors.add(column, squared);
     }
 
     /// Adds another sum (a diverged run makes the whole set infinite).
     pub fn merge(&mut self, other: &ErrorSum) {
-        for column in 0..self.squared.len().min(other.squared.len()) {
-            self.squared[column] += other.squared[column];
-            self.cells[column] += other.cells[column];
-        }
+        self.errors.merge(&other.errors);
         self.rows += other.rows;
         if self.divergence.is_none() {
             self.divergence = other.divergence.clone();
@@ -346,7 +342,7 @@ impl ErrorSum {
     /// The mean squared errors per column (columns without a cell left out) and their
     /// mean; `None` when no cell was scored.
     pub fn finish(&self) -> Option<ErrorSet> {
-        let cells: usize = self.cells.iter().sum();
+        let cells = self.errors.cells();
         if let Some(divergence) = &self.divergence {
             return Some(ErrorSet {
                 per_state: (self.names.iter())
@@ -361,17 +357,12 @@ impl ErrorSum {
         if cells == 0 {
             return None;
         }
-        let per_state: Vec<(String, f64)> = (self.names.iter().enumerate())
-            .filter(|&(index, _)| self.cells[index] > 0)
-            .map(|(index, name)| {
-                let mean = self.squared[index] / self.cells[index] as f64;
-                (name.clone(), mean)
-            })
+        let per_state: Vec<(String, f64)> = (self.names.iter().zip(self.errors.nmse()))
+            .filter_map(|(name, nmse)| Some((name.clone(), nmse?)))
             .collect();
-        let overall = per_state.iter().map(|(_, e)| e).sum::<f64>() / per_state.len() as f64;
         Some(ErrorSet {
+            overall: self.errors.error(),
             per_state,
-            overall,
             rows: self.rows,
             cells,
             divergence: None,
@@ -400,18 +391,23 @@ pub fn offline_error(
                 if batch.weights[row * measured + state] <= 0.0 {
                     continue;
                 }
-                let error = prediction.next_states[row * width + state]
-                    - batch.targets[row * measured + state];
-                sum.add(state, (error / normalisation.state_std[state]).powi(2));
+                let predicted = prediction.next_states[row * width + state];
+                let target = batch.targets[row * measured + state];
+                sum.add(
+                    state,
+                    cell_error(predicted, target, normalisation.state_std[state]),
+                );
             }
             for index in 0..observables {
                 let cell = row * observables + index;
                 if batch.observed_weights[cell] <= 0.0 {
                     continue;
                 }
-                let error = prediction.observed[cell] - batch.observed[cell];
                 let std = normalisation.observable_std[index];
-                sum.add(measured + index, (error / std).powi(2));
+                sum.add(
+                    measured + index,
+                    cell_error(prediction.observed[cell], batch.observed[cell], std),
+                );
             }
         }
     }
@@ -444,8 +440,8 @@ pub fn online_error(
         }
         for (state, &value) in next.iter().enumerate().take(measured) {
             if track.measured[state][knot] {
-                let error = value - track.states[state][knot];
-                sum.add(state, (error / normalisation.state_std[state]).powi(2));
+                let std = normalisation.state_std[state];
+                sum.add(state, cell_error(value, track.states[state][knot], std));
             }
         }
         // The outputs at a knot come from the step that starts there.
@@ -454,7 +450,7 @@ pub fn online_error(
             let predicted = outputs.and_then(|o| o.get(output));
             if let (Some(value), Some(predicted)) = (track.observed_cell(output, knot), predicted) {
                 let std = normalisation.observable_std[index];
-                sum.add(measured + index, ((predicted - value) / std).powi(2));
+                sum.add(measured + index, cell_error(*predicted, value, std));
             }
         }
         sum.rows += 1;

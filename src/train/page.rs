@@ -10,6 +10,7 @@ use super::predict::{predict, Mode, PredictionTable};
 use super::{History, Trained};
 use crate::ir;
 use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style, PALETTE};
+use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Record;
 
 /// Figure width in pixels.
@@ -229,10 +230,14 @@ pub fn fit_percent(pairs: &[(f64, f64)]) -> f64 {
     }
 }
 
-/// The paper's normalised MSE: mean squared error over `scale²` (the training std).
+/// The paper's normalised MSE of one state ([`crate::record::measure`]): the mean cell error
+/// with `scale` the training std.
 pub fn nmse(pairs: &[(f64, f64)], scale: f64) -> f64 {
-    let sum: f64 = pairs.iter().map(|(y, p)| ((y - p) / scale).powi(2)).sum();
-    sum / pairs.len().max(1) as f64
+    let mut errors = StateErrors::new(1);
+    for &(measured, predicted) in pairs {
+        errors.add(0, cell_error(predicted, measured, scale));
+    }
+    errors.nmse()[0].unwrap_or(0.0)
 }
 
 /// Params with standard errors and identifiability.

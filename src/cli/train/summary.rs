@@ -67,7 +67,13 @@ pub(super) fn summary(
 
 /// One row per measured state; an error that could not be measured shows as `-`.
 fn print_errors(out: &mut String, offline: Option<&ErrorSet>, online: Option<&ErrorSet>) {
-    line!(out, "  {:<16} {:>12} {:>12}", "state", "offline", "online");
+    line!(
+        out,
+        "  {:<16} {:>12} {:>12}",
+        "NMSE of state",
+        "offline",
+        "online"
+    );
     let names: Vec<&String> = (offline.iter().chain(online.iter()))
         .flat_map(|set| set.per_state.iter().map(|(name, _)| name))
         .fold(Vec::new(), |mut names, name| {
@@ -92,7 +98,7 @@ fn print_errors(out: &mut String, offline: Option<&ErrorSet>, online: Option<&Er
     line!(
         out,
         "  {:<16} {:>12} {:>12}",
-        "overall",
+        "error (mean)",
         overall(offline),
         overall(online)
     );
