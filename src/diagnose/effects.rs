@@ -272,7 +272,7 @@ pub fn block_sums(context: &Context, scored: &Scored) -> Vec<(f64, usize)> {
 
 /// The model with the named effects applied.
 pub fn lower(context: &Context, effects: &[&str]) -> Result<Model, DiagnoseError> {
-    ir::lower(context.checked, effects).map_err(|error| DiagnoseError::Unsimulable {
+    ir::lower(context.problem()?.checked, effects).map_err(|error| DiagnoseError::Unsimulable {
         reason: format!("effect {}: {error}", effects.join(" + ")),
     })
 }

@@ -85,8 +85,8 @@ impl Target {
 
 /// Every let that reaches a balance, every group of them, then every balance (measured,
 /// then hidden states).
-pub fn targets(context: &Context) -> Vec<Target> {
-    let graph = Graph::of(context.checked);
+pub fn targets(context: &Context) -> Result<Vec<Target>, DiagnoseError> {
+    let graph = Graph::of(context.problem()?.checked);
     let model = context.model;
     let lets: Vec<String> = (model.lets.iter())
         .map(|l| l.name.clone())
@@ -112,7 +112,7 @@ pub fn targets(context: &Context) -> Vec<Target> {
         members: vec![s.name.clone()],
         depth: 0,
     }));
-    targets
+    Ok(targets)
 }
 
 /// A fitted correction along the training rows, for the symbolic hint.
@@ -183,7 +183,7 @@ pub fn locate(
     gaps: (f64, f64),
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Located, DiagnoseError> {
-    let targets = targets(context);
+    let targets = targets(context)?;
     progress(Progress::Stage {
         name: "fitting corrections",
         total: targets.len(),
@@ -220,14 +220,14 @@ pub fn locate(
             seconds: started.elapsed().as_secs_f64(),
         });
     });
-    Ok(summarise(context, trials, gaps))
+    summarise(context, trials, gaps)
 }
 
 fn summarise(
     context: &Context,
     mut trials: Vec<Trial>,
     (gap_before, noise_floor): (f64, f64),
-) -> Located {
+) -> Result<Located, DiagnoseError> {
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
     let sums: Vec<_> = (trials.iter())
         .map(|t| match t.best() {
@@ -238,7 +238,7 @@ fn summarise(
     let comparison = compare(&sums, context.seed(5000));
     let best_bound = trials.first().map_or(f64::INFINITY, Trial::bound);
     let excess = |gap: f64| (gap - noise_floor).max(0.0);
-    let graph = Graph::of(context.checked);
+    let graph = Graph::of(context.problem()?.checked);
     let upstream = |i: usize| {
         let best = &trials[0].target;
         (trials[i].target.members.iter())
@@ -299,11 +299,11 @@ fn summarise(
         let variant = trial.present.as_ref().filter(|v| v.gap.is_finite())?;
         (trial.target.members.len() == 1).then(|| along(context, trial, variant))
     });
-    Located {
+    Ok(Located {
         loci,
         history_dependent,
         along,
-    }
+    })
 }
 
 /// The model with corrections at `target`; `None` when no balance uses them.
@@ -316,12 +316,12 @@ pub(super) fn synthesise(
         .collect();
     let source = format!(
         "{}\n\nclosure {CLOSURE} {{\n  outputs {}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
-        context.problem.source,
+        context.problem()?.source,
         outputs.join(", "),
         target.patches().join("\n  ")
     );
     let compiled =
-        crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
+        crate::driver::compile(context.problem()?.name, &source, &[EFFECT]).map_err(|reports| {
             let messages: Vec<String> = reports.iter().map(|r| r.to_string()).collect();
             DiagnoseError::internal(format!(
                 "correction at `{}` does not compile: {}",

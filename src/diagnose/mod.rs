@@ -29,6 +29,7 @@ mod fit;
 mod graph;
 pub mod html;
 mod locus;
+pub mod mechanism;
 mod memory;
 mod noise;
 mod ranking;
@@ -47,7 +48,7 @@ pub use report::*;
 pub use split::MIN_ROWS;
 
 use crate::check::Checked;
-use crate::ir::{Constraint, Dynamics, Model};
+use crate::ir::{Constraint, Model};
 use crate::record::Record;
 use crate::sim::Method;
 use ranking::Blocks;
@@ -150,10 +151,11 @@ pub enum Progress {
 
 /// Everything the stages share.
 pub struct Context<'a> {
-    problem: Problem<'a>,
+    /// The model's text and checked form, which effects and corrections are lowered from
+    /// (`None` for a fit alone, [`mechanism::fit_mechanism`]).
+    problem: Option<Problem<'a>>,
     options: &'a Options,
     model: &'a Model,
-    checked: &'a Checked,
     split: Split,
     blocks: Blocks,
     /// How the corrected models of the loci integrate: explicitly where the model's own
@@ -163,7 +165,14 @@ pub struct Context<'a> {
     corrections: Method,
 }
 
-impl Context<'_> {
+impl<'a> Context<'a> {
+    /// The problem's text and checked model, for the stages that lower effects and
+    /// corrections (an internal error in a fit-only context).
+    fn problem(&self) -> Result<&Problem<'a>, DiagnoseError> {
+        (self.problem.as_ref())
+            .ok_or_else(|| DiagnoseError::internal("a fit-only context lowers no effect"))
+    }
+
     /// A seed for task `index`, derived from the user's seed.
     fn seed(&self, index: u64) -> u64 {
         self.options
@@ -388,40 +397,8 @@ fn memory_time_constants(context: &Context, base: &Simulator, x: &[f64]) -> Vec<
 
 fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a>, DiagnoseError> {
     let model = problem.model;
-    if !model.closures.is_empty() {
-        let names: Vec<&str> = model.closures.iter().map(|c| c.name.as_str()).collect();
-        return Err(DiagnoseError::HasClosures {
-            model: model.name.clone(),
-            closures: names.join(", "),
-        });
-    }
     check_options(options)?;
-    let records = problem.records.iter().chain(problem.held_out);
-    for record in records.clone() {
-        if let Some(observable) = record.observables.first() {
-            return Err(DiagnoseError::MeasuredOutput {
-                model: model.name.clone(),
-                output: observable.name.clone(),
-            });
-        }
-    }
-    if model.dynamics == Dynamics::Discrete {
-        let steps: Vec<Option<f64>> = records.clone().map(Record::uniform_step).collect();
-        let first = steps.first().copied().flatten();
-        if let Some(record) = (records.zip(&steps))
-            .find(|(_, step)| {
-                step.is_none()
-                    || step
-                        .zip(first)
-                        .is_some_and(|(a, b)| (a - b).abs() > 1e-6 * b)
-            })
-            .map(|(record, _)| record)
-        {
-            return Err(DiagnoseError::IrregularMap {
-                experiment: record.name.clone(),
-            });
-        }
-    }
+    mechanism::check_fittable(model, problem.records.iter().chain(problem.held_out))?;
     let train = problem.records.to_vec();
     let held = problem.held_out.to_vec();
     let holdout = match options.val_fraction {
@@ -433,10 +410,9 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
     let mut split = Split::with_min_rows(model, (train, held), parts, options.min_rows)?;
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     Ok(Context {
-        problem: *problem,
+        problem: Some(*problem),
         options,
         model,
-        checked: problem.checked,
         blocks: Blocks::new(&split),
         split,
         corrections: Method::Auto,

@@ -128,6 +128,53 @@ impl Split {
                 how: describe(&records, &parts, holdout),
             });
         }
+        Ok(Split::from_parts(
+            model,
+            (records, parts),
+            (holdout, fit_hidden),
+        ))
+    }
+
+    /// A split that only fits: every row of every experiment in `train` trains and none is
+    /// scored (a mechanism fitted for `gbc train`, which scores on its own split). Needs
+    /// `min_rows` measured rows.
+    pub fn fit_only(
+        model: &Model,
+        train: Vec<Record>,
+        fit_hidden: bool,
+        min_rows: usize,
+    ) -> Result<Split, DiagnoseError> {
+        let parts: Vec<Part> = (train.iter())
+            .map(|record| Part {
+                train: 0..record.len(),
+                test: 0..0,
+            })
+            .collect();
+        let fit: usize = (train.iter())
+            .map(|record| measured_rows(record, 0..record.len()).count())
+            .sum();
+        if fit < min_rows {
+            return Err(DiagnoseError::TooFewRows {
+                needed: min_rows,
+                train: fit,
+                test: 0,
+                how: "every row of the training experiments fits".into(),
+            });
+        }
+        let split = (train, parts);
+        Ok(Split::from_parts(
+            model,
+            split,
+            (Holdout::Experiments, fit_hidden),
+        ))
+    }
+
+    /// The split of `records` into `parts`: the training statistics and every start.
+    fn from_parts(
+        model: &Model,
+        (records, parts): (Vec<Record>, Vec<Part>),
+        (holdout, fit_hidden): (Holdout, bool),
+    ) -> Split {
         let trained: Vec<(&Record, Range<usize>)> = (records.iter().zip(&parts))
             .filter(|(_, part)| !part.train.is_empty())
             .map(|(record, part)| (record, part.train.clone()))
@@ -144,7 +191,7 @@ impl Split {
             declared: vec![None; model.states.len()],
         };
         split.plan_starts(model);
-        Ok(split)
+        split
     }
 
     /// The share of the training cells (after each experiment's first row) whose previous

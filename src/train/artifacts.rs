@@ -74,6 +74,9 @@ pub struct RunInfo {
     /// The params' estimate from the balances, when they came from there.
     #[serde(default)]
     pub balance_fit: Option<super::BalanceFit>,
+    /// The fit of a model without closures by free runs, when its params came from there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mechanism_fit: Option<crate::diagnose::FitSummary>,
     /// Validation errors.
     pub metrics: Metrics,
     /// Stiffness warnings issued.
@@ -246,6 +249,7 @@ pub fn run_info(
         estimates: report.estimates.clone(),
         polish: report.polish.clone(),
         balance_fit: report.balance_fit.clone(),
+        mechanism_fit: report.mechanism_fit.clone(),
         metrics: report.metrics.clone(),
         warnings: report.warnings.clone(),
         weights: WEIGHTS_FILE.to_string(),

@@ -322,6 +322,10 @@ pub enum TrainError {
     #[error(transparent)]
     #[diagnostic(transparent)]
     Backend(#[from] BackendError),
+    /// Fitting a model without closures by free runs failed.
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    Mechanism(#[from] crate::diagnose::DiagnoseError),
     /// Writing an artifact failed.
     #[error(transparent)]
     #[diagnostic(transparent)]

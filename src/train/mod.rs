@@ -32,6 +32,7 @@ mod error;
 pub mod evaluate;
 mod fit;
 pub mod initial;
+pub mod mechanism;
 pub mod page;
 pub mod pairs;
 pub mod polish;
@@ -44,6 +45,8 @@ pub mod split;
 pub mod step;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_mechanism;
 #[cfg(test)]
 mod tests_recipe;
 #[cfg(test)]
@@ -264,6 +267,9 @@ pub struct TrainReport {
     /// The params' estimate from the balances, when they came from there (then held
     /// fixed while the network trained; see [`balances`]).
     pub balance_fit: Option<BalanceFit>,
+    /// The fit of a model without closures by free runs, when its params came from there
+    /// ([`mechanism`]; then no epoch ran).
+    pub mechanism_fit: Option<crate::diagnose::FitSummary>,
     /// Each experiment's initial state (training experiments first).
     pub initial_states: Vec<InitialState>,
     /// The grid's longest step.

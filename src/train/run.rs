@@ -18,9 +18,11 @@ use super::prepare::Layout;
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
-    polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part, PhysicalRange,
-    Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
+    mechanism, polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part,
+    PhysicalRange, Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained,
+    TrainingData,
 };
+use crate::diagnose::mechanism::MechanismFit;
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
 /// params from the balances), fit, evaluate, report.
@@ -65,6 +67,8 @@ pub fn train_run(
     Ok(run.report(options, recipe, (initial, evaluation), fitted))
 }
 
+/// The phase that fits a model without closures ([`mechanism`]).
+pub const FITTING: &str = "fitting the params by free runs (as gbc diagnose)";
 /// The phase before the epochs ([`Event::Phase`]).
 pub const VALIDATING: &str = "validating the untrained network";
 /// The phase of the epochs.
@@ -82,6 +86,7 @@ struct Run<'m> {
     fractions: Vec<f64>,
     warnings: Vec<StiffnessWarning>,
     balance_fit: Option<BalanceFit>,
+    mechanism_fit: Option<MechanismFit>,
     setup: Setup,
     network: Network,
     training: Course,
@@ -127,7 +132,13 @@ fn prepare<'m>(
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }
-    let balance_fit = if recipe.params_from_balances() {
+    let mechanism_fit = if mechanism::applies(model, &data, recipe) {
+        on_event(Event::Phase(FITTING));
+        Some(mechanism::fit(model, &data, &layout, options)?)
+    } else {
+        None
+    };
+    let balance_fit = if recipe.params_from_balances() && mechanism_fit.is_none() {
         balances::estimate(model, &scales, &layout.tracks, &layout.intervals)?
     } else {
         None
@@ -137,9 +148,10 @@ fn prepare<'m>(
             model: model.name.clone(),
         });
     }
-    let model = match &balance_fit {
-        Some(fit) => Cow::Owned(with_initial_params(model, fit)),
-        None => Cow::Borrowed(model),
+    let model = match (&balance_fit, &mechanism_fit) {
+        (Some(fit), _) => Cow::Owned(with_initial_params(model, fit)),
+        (None, Some(fit)) => Cow::Owned(mechanism::with_fitted_params(model, fit)),
+        (None, None) => Cow::Borrowed(model),
     };
     let setup = Setup {
         step: layout.grid.max_step,
@@ -173,7 +185,11 @@ fn prepare<'m>(
     );
     let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
     on_event(Event::Started {
-        epochs: options.epochs,
+        epochs: if mechanism_fit.is_some() {
+            0
+        } else {
+            options.epochs
+        },
         train_pairs: layout.pairs.len(),
         validation_pairs,
     });
@@ -184,6 +200,7 @@ fn prepare<'m>(
         fractions,
         warnings,
         balance_fit,
+        mechanism_fit,
         setup,
         network,
         training,
@@ -221,13 +238,22 @@ impl Run<'_> {
         (control, started): (&RunControl, std::time::Instant),
         on_event: &mut dyn FnMut(Event),
     ) -> Result<Fitted, TrainError> {
+        // A fitted mechanism has nothing left to train: no epoch runs.
+        let fitted_options = TrainOptions {
+            epochs: 0,
+            ..options.clone()
+        };
+        let options = match self.mechanism_fit {
+            Some(_) => &fitted_options,
+            None => options,
+        };
         let fit = fit::Fit {
             model: &self.model,
             setup: &self.setup,
             options,
             recipe,
             hidden_init: &self.hidden_init,
-            freeze_params: self.balance_fit.is_some(),
+            freeze_params: self.balance_fit.is_some() || self.mechanism_fit.is_some(),
             trainings: &self.layout.trainings,
         };
         let range = PhysicalRange::new(&self.setup.normalisation, recipe.range_factor);
@@ -282,9 +308,10 @@ impl Run<'_> {
             &self.setup.normalisation,
             refit,
         )?;
-        let (polish, estimates) = match &self.balance_fit {
-            Some(fit) => (None, fit.estimates.clone()),
-            None => polish::polish_and_estimate(
+        let (polish, estimates) = match (&self.balance_fit, &self.mechanism_fit) {
+            (Some(fit), _) => (None, fit.estimates.clone()),
+            (None, Some(fit)) => (None, mechanism::param_estimates(&self.model, &fit.summary)),
+            (None, None) => polish::polish_and_estimate(
                 &mut self.network,
                 &self.model,
                 &self.training.table,
@@ -328,6 +355,7 @@ impl Run<'_> {
             estimates: evaluation.estimates,
             polish: evaluation.polish,
             balance_fit: self.balance_fit,
+            mechanism_fit: self.mechanism_fit.map(|fit| fit.summary),
             initial_states: evaluation.initial_states,
             dt: self.layout.grid.max_step,
             learning_rate: options.learning_rate,

@@ -138,6 +138,20 @@ fn print_params(out: &mut String, trained: &Trained) {
         return;
     }
     match (&report.polish, &report.balance_fit) {
+        _ if report.mechanism_fit.is_some() => {
+            let fit = report
+                .mechanism_fit
+                .as_ref()
+                .map_or((0, 0.0), |f| (f.starts, f.gap_train));
+            line!(
+                out,
+                "params (fitted by free runs to every measured training cell, as gbc diagnose \
+                 fits them; {} starts, training gap {:.4e}; held fixed, no epoch ran; +- \
+                 standard error):",
+                fit.0,
+                fit.1
+            )
+        }
         (_, Some(fit)) => line!(
             out,
             "params (from the balances over {} intervals, held fixed in training; rms scaled \

@@ -1,0 +1,66 @@
+//! A model without closures is fitted, not trained: `gbc train` hands it to the one fitter
+//! of mechanistic params ([`crate::diagnose::mechanism`], the free-run least squares of
+//! `gbc diagnose`: starts until no new basin appears, declared noise as weights, exact
+//! sensitivities, standard errors), so that both commands give the same fit. The params
+//! are then held fixed, no epoch runs, and the run is scored and saved like any other
+//! (`docs/training.md`, "Models without closures").
+
+use crate::diagnose::mechanism::{check_fittable, fit_mechanism, MechanismFit};
+use crate::diagnose::{self, FitSummary};
+use crate::ir;
+
+use super::prepare::Layout;
+use super::{ParamEstimate, ParamSource, Recipe, TrainError, TrainOptions, TrainingData};
+
+/// Random restarts of the fit besides the declared start, as in `gbc diagnose`.
+pub const RESTARTS: usize = 15;
+/// Measured rows the fit needs at least (the training split has its own checks).
+const MIN_ROWS: usize = 2;
+
+/// Whether `model` is fitted by free runs on `data`: it has params and no closures, the
+/// recipe does not ask for Adam (`--params train`), and the fitter takes the records (no
+/// measured outputs; a discrete map on one uniform step).
+pub fn applies(model: &ir::Model, data: &TrainingData, recipe: &Recipe) -> bool {
+    model.closures.is_empty()
+        && !model.params.is_empty()
+        && recipe.params != ParamSource::Train
+        && check_fittable(model, data.train.iter().chain(data.validation)).is_ok()
+}
+
+/// Fits `model`'s params to the training rows of every training experiment of `layout`
+/// (the rows its normalisation is taken over), seeded by `--seed`.
+pub fn fit(
+    model: &ir::Model,
+    data: &TrainingData,
+    layout: &Layout,
+    options: &TrainOptions,
+) -> Result<MechanismFit, TrainError> {
+    let training: Vec<_> = (data.train.iter().zip(&layout.trainings))
+        .map(|(record, part)| record.rows(part.rows.clone()))
+        .collect();
+    let settings = diagnose::Options {
+        restarts: RESTARTS,
+        seed: options.seed,
+        min_rows: MIN_ROWS,
+        ..diagnose::Options::default()
+    };
+    Ok(fit_mechanism(model, &training, &settings)?)
+}
+
+/// `model` with its params' declared values replaced by the fitted ones.
+pub fn with_fitted_params(model: &ir::Model, fit: &MechanismFit) -> ir::Model {
+    let mut fitted = model.clone();
+    for (param, value) in fitted.params.iter_mut().zip(&fit.params) {
+        param.init = *value;
+    }
+    fitted
+}
+
+/// The params' estimates of a fit (its fitted starts left out: a training run re-fits the
+/// starts of its own experiments).
+pub fn param_estimates(model: &ir::Model, summary: &FitSummary) -> Vec<ParamEstimate> {
+    (summary.estimates.iter())
+        .filter(|estimate| model.params.iter().any(|p| p.name == estimate.name))
+        .cloned()
+        .collect()
+}
