@@ -4,7 +4,7 @@
 //! every error.
 //!
 //! - **Whole experiments** (`--holdout NAME`, `--val FILE`): a training experiment fits on
-//!   all its rows, a held-out one is scored on all its rows.
+//!   all its rows, a held-out one is scored on all its rows after the first (its start).
 //! - **Tail** (`--val-fraction SHARE`, and by default, when no experiment is held out, a
 //!   share of 0.3 of every experiment):
 //!   the last share of each training experiment's measured rows is scored and the rows
@@ -108,9 +108,12 @@ impl Split {
                 },
             });
         }
+        // A held-out experiment's free run starts from its first row: those cells are the
+        // start, not a prediction, and are not scored (as `gbc train` and `gbc predict`
+        // score; `docs/error-measure.md`).
         parts.extend(held.iter().map(|record| Part {
             train: 0..0,
-            test: 0..record.len(),
+            test: 1.min(record.len())..record.len(),
         }));
         let mut records = train;
         records.extend(held);

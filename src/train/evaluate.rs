@@ -14,6 +14,7 @@ use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Track;
 
 use super::pairs::{embedding_row, PairTable};
+use super::stepping::{Stepper, Stepping};
 
 /// Rows per prediction batch when evaluating many pairs at once.
 const EVALUATION_CHUNK: usize = 512;
@@ -166,13 +167,18 @@ pub fn simulate(
     fractions: &[f64],
     knots: (usize, usize),
     hidden_start: &[f64],
-    (feed, range): (Feed, Option<&PhysicalRange>),
+    (feed, range, stepping): (Feed, Option<&PhysicalRange>, Stepping),
 ) -> Result<Trajectory, BackendError> {
     let (start, end) = knots;
     let measured = model.states.len();
     let mut history = track.clone();
     let mut state: Vec<f64> = track.states.iter().map(|s| s[start]).collect();
     state.extend_from_slice(hidden_start);
+    let scales: Vec<f64> = (track.states.iter())
+        .map(|s| s.iter().fold(0.0, |m: f64, v| m.max(v.abs())))
+        .chain(hidden_start.iter().map(|h| h.abs()))
+        .collect();
+    let mut stepper = Stepper::new(&scales);
     let mut trajectory = Trajectory {
         start,
         states: Vec::new(),
@@ -182,21 +188,21 @@ pub fn simulate(
         divergence: None,
     };
     for knot in start..=end {
-        let batch = Batch {
-            rows: 1,
-            states: state.clone(),
-            inputs: track.inputs.iter().map(|u| u[knot]).collect(),
-            embeddings: (model.closures.iter())
-                .map(|c| {
-                    (fractions.iter())
-                        .map(|&f| embedding_row(c, &history, knot, f))
-                        .collect()
-                })
-                .collect(),
-            step_sizes: vec![track.steps[knot]],
-            ..Batch::default()
+        let prediction = match stepping {
+            Stepping::Fixed => network.predict(&fixed_batch(
+                model,
+                (track, &history),
+                knot,
+                &state,
+                fractions,
+            ))?,
+            Stepping::Controlled => {
+                let place = (track, &history);
+                stepper
+                    .step((network, model), place, (knot, &state), fractions)?
+                    .0
+            }
         };
-        let prediction = network.predict(&batch)?;
         trajectory.states.push(std::mem::take(&mut state));
         trajectory.closure_outputs.push(prediction.closure_outputs);
         trajectory.outputs.push(prediction.outputs);
@@ -229,6 +235,30 @@ pub fn simulate(
         trajectory.next_states.push(next);
     }
     Ok(trajectory)
+}
+
+/// The one-step batch of knot `knot` of `track` (its history `history`) from `state`.
+fn fixed_batch(
+    model: &ir::Model,
+    (track, history): (&Track, &Track),
+    knot: usize,
+    state: &[f64],
+    fractions: &[f64],
+) -> Batch {
+    Batch {
+        rows: 1,
+        states: state.to_vec(),
+        inputs: track.inputs.iter().map(|u| u[knot]).collect(),
+        embeddings: (model.closures.iter())
+            .map(|c| {
+                (fractions.iter())
+                    .map(|&f| embedding_row(c, history, knot, f))
+                    .collect()
+            })
+            .collect(),
+        step_sizes: vec![track.steps[knot]],
+        ..Batch::default()
+    }
 }
 
 /// What a run along a whole track from its first knot gives: hidden-state estimates at
@@ -271,7 +301,7 @@ pub fn run_in(
         fractions,
         (0, track.len() - 1),
         initial,
-        (Feed::Data, None),
+        (Feed::Data, None, Stepping::Fixed),
     )?;
     let hidden = (run.states.iter())
         .map(|s| s[measured..].to_vec())

@@ -9,6 +9,7 @@
 //! part, the network and params frozen ([`super::evaluate`]), and reported with the params.
 //! Hidden states take their declared initial values.
 
+use super::stepping::Stepping;
 use crate::ir;
 use crate::record::Record;
 
@@ -125,7 +126,7 @@ pub(super) fn fit_initial_states(
                 fractions,
                 (0, last - 1),
                 hidden_init,
-                (Feed::Data, None),
+                (Feed::Data, None, Stepping::Fixed),
             )
             .ok()?;
             let mut errors = Vec::new();

@@ -43,6 +43,7 @@ mod run;
 pub mod settings;
 pub mod split;
 pub mod step;
+pub mod stepping;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]

@@ -23,6 +23,7 @@ use super::pairs::stage_fractions;
 use super::prepare::grid_for;
 use super::recipe::DEFAULT_RANGE_FACTOR;
 use super::split::{window_start, History};
+use super::stepping::Stepping;
 use super::{hidden_initial_values, TrainError};
 
 pub mod whatif;
@@ -153,9 +154,10 @@ pub fn predict_on_track(
         }
     }
     let last = track.len() - 1;
-    let feed = match mode {
-        Mode::Offline => Feed::Data,
-        Mode::Online => Feed::Own,
+    // A free run controls its steps; one step from the data is the step training took.
+    let (feed, stepping) = match mode {
+        Mode::Offline => (Feed::Data, Stepping::Fixed),
+        Mode::Online => (Feed::Own, Stepping::Controlled),
     };
     let run = simulate(
         network,
@@ -164,7 +166,7 @@ pub fn predict_on_track(
         &fractions,
         (first, last),
         &hidden_start,
-        (feed, range),
+        (feed, range, stepping),
     )?;
     let knots = last + 1 - first;
     let states: Vec<Vec<f64>> = match mode {

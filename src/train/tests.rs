@@ -3,6 +3,7 @@
 use super::evaluate::{online_error, simulate, Feed};
 use super::fixtures::{chemostat, normalise, options, record, track, train_one};
 use super::pairs::{stage_fractions, PairTable};
+use super::stepping::Stepping;
 use super::*;
 use crate::backend::Network;
 use crate::data::Dataset;
@@ -166,7 +167,7 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
     // The exact rate law itself blows up at the sampling step and runs stably with the
     // recommended sub-steps.
     let exact = chemostat::exact_law(chemostat::KCAT);
-    let free_run_error = |substeps: usize| {
+    let free_run_error = |substeps: usize, stepping: Stepping| {
         let setup = Setup {
             step: 1.0,
             substeps,
@@ -186,19 +187,25 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
             &fractions,
             (0, 298),
             &[enzyme[0]],
-            (Feed::Own, None),
+            (Feed::Own, None, stepping),
         )
         .unwrap();
         let errors = online_error(&exact, &record, &run, (&setup.normalisation, f64::MIN));
         errors.finish().unwrap().overall
     };
-    let unstable = free_run_error(1);
+    let unstable = free_run_error(1, Stepping::Fixed);
     assert!(
         unstable.is_nan() || unstable > 1e3,
         "free run without sub-steps: {unstable}"
     );
-    let stable = free_run_error(warning.substeps_needed);
+    let stable = free_run_error(warning.substeps_needed, Stepping::Fixed);
     assert!(stable < 1e-3, "free run with sub-steps: {stable}");
+    // A free run that controls its steps needs no sub-steps from the user.
+    let controlled = free_run_error(1, Stepping::Controlled);
+    assert!(
+        controlled < 1e-3,
+        "free run with controlled steps: {controlled}"
+    );
     // `train` tells its caller before the first epoch.
     let mut heard = Vec::new();
     let stiff_records = [record(&model, &stiff)];

@@ -94,6 +94,17 @@ fn a_model_without_closures_is_fitted_as_gbc_diagnose_fits_it() {
         "train's fit {} above scipy's {scipy}",
         fit.gap_train
     );
+    // The held-out free run: glucose runs out under the feed and its balance turns stiff
+    // (an explicit step of the record's ~1 h is unstable there); the controlled steps
+    // follow the diagnosis's implicit integrator, and the two report one error.
+    let online = trained.report.metrics.online.as_ref().unwrap();
+    assert!(online.divergence.is_none(), "{:?}", online.divergence);
+    let exact = diagnosis.gap_before_per_state;
+    assert!(
+        (online.overall - exact).abs() <= 1e-3 * exact,
+        "train's held-out error {} against the diagnosis's {exact}",
+        online.overall
+    );
     // Standard errors come with the params, as in the diagnosis.
     assert_eq!(trained.report.estimates.len(), model.params.len());
     assert!(trained

@@ -2,6 +2,7 @@
 //! the model's fill of unknown stretches, their pair table, and the paper's two validation
 //! errors per scored experiment and pooled.
 
+use super::stepping::Stepping;
 use crate::backend::{Network, Setup};
 use crate::ir;
 use crate::record::Track;
@@ -130,7 +131,7 @@ pub(super) fn validate(
             &fractions,
             (start, end.saturating_sub(1).max(start)),
             &hidden,
-            (Feed::Own, range),
+            (Feed::Own, range, Stepping::Controlled),
         )?;
         let online = online_error(model, track, &run, (norm, scoring.scored_from));
         offline_all.merge(&offline);

@@ -495,7 +495,7 @@ mod tests {
                 &fractions,
                 (from, last),
                 &[],
-                (Feed::Own, None),
+                (Feed::Own, None, crate::train::stepping::Stepping::Fixed),
             )
             .unwrap();
             for (step, predicted) in rolled.iter().enumerate() {

@@ -1,0 +1,171 @@
+//! Step control of free runs: each step of a `der` model's free run is cut into as many
+//! equal sub-steps as its stiffness needs there, so that a balance that turns stiff (a
+//! substrate running out under a feed) is integrated stably and accurately whatever
+//! `--substeps` the network was trained with.
+//!
+//! The control is step doubling: the step from a knot is taken in `m` and in `2m` sub-steps
+//! (each the network's own RK4 step of `h / m`, its stages reading the delay embedding at
+//! their own fractions of the step); where the two differ by more than [`TOLERANCE`] of the
+//! state's scale, `m` doubles, up to [`MOST_SUBSTEPS`]. The finer result is kept (local
+//! extrapolation), and the next knot starts from the `m` that sufficed, halved when the
+//! step was far more accurate than asked. An unstable explicit step shows as two results
+//! far apart, so this finds the stable step without estimating the Jacobian. A step that
+//! needs more than [`MOST_SUBSTEPS`] keeps the finest result and lets the physical range
+//! judge it.
+
+use crate::backend::{BackendError, Batch, Network, Prediction};
+use crate::ir;
+use crate::record::Track;
+
+use super::pairs::embedding_row;
+
+/// Largest relative difference between the `m`- and `2m`-sub-step results of a step that
+/// is accepted, per state, on the scale `|x| + floor`.
+pub const TOLERANCE: f64 = 1e-4;
+/// Most sub-steps of one step.
+pub const MOST_SUBSTEPS: usize = 4096;
+
+/// How a free run steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stepping {
+    /// One network step per knot: what training windows do.
+    Fixed,
+    /// As many sub-steps per knot as the step needs (this module).
+    Controlled,
+}
+
+/// The step control's state along one run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stepper {
+    /// Sub-steps to try first at the next knot.
+    substeps: usize,
+    /// Per state, the absolute part of its scale.
+    floors: Vec<f64>,
+    /// The most sub-steps any step needed.
+    pub most: usize,
+}
+
+impl Stepper {
+    /// A controller for states whose typical sizes are `scales` (zero where unknown).
+    pub fn new(scales: &[f64]) -> Self {
+        Stepper {
+            substeps: 1,
+            floors: scales.iter().map(|s| 1e-3 * s.abs().max(1e-9)).collect(),
+            most: 1,
+        }
+    }
+
+    /// The step from `knot` of `track` (its history in `history`) starting at `state`:
+    /// the prediction at the knot (closure and model outputs) and the state at the next
+    /// knot.
+    pub fn step(
+        &mut self,
+        (network, model): (&Network, &ir::Model),
+        (track, history): (&Track, &Track),
+        (knot, state): (usize, &[f64]),
+        fractions: &[f64],
+    ) -> Result<(Prediction, Vec<f64>), BackendError> {
+        let step = Step {
+            network,
+            model,
+            track,
+            history,
+            knot,
+            fractions,
+        };
+        let first = network.predict(&step.batch(state, 0, 1))?;
+        if model.dynamics == ir::Dynamics::Discrete {
+            let next = first.next_states.clone();
+            return Ok((first, next));
+        }
+        let mut m = self.substeps;
+        let mut coarse = step.advance(state, m, &first)?;
+        loop {
+            let fine = step.advance(state, 2 * m, &first)?;
+            let error = self.error(&coarse.next_states, &fine.next_states);
+            if error <= 1.0 || 2 * m >= MOST_SUBSTEPS {
+                self.substeps = if error < 1.0 / 32.0 { m.div_ceil(2) } else { m };
+                self.most = self.most.max(2 * m);
+                let mut prediction = first;
+                prediction.next_states.clone_from(&fine.next_states);
+                prediction.observed = fine.observed;
+                return Ok((prediction, fine.next_states));
+            }
+            m *= 2;
+            coarse = fine;
+        }
+    }
+
+    /// The largest difference of `a` and `b` on the states' scales, over [`TOLERANCE`];
+    /// infinite where either is not finite.
+    fn error(&self, a: &[f64], b: &[f64]) -> f64 {
+        (a.iter().zip(b).enumerate())
+            .map(|(i, (x, y))| {
+                let floor = self.floors.get(i).copied().unwrap_or(1e-9);
+                let scale = x.abs().max(y.abs()) + floor;
+                let difference = (x - y).abs() / scale / TOLERANCE;
+                if difference.is_nan() {
+                    f64::INFINITY
+                } else {
+                    difference
+                }
+            })
+            .fold(0.0, f64::max)
+    }
+}
+
+/// One knot's step, for [`Stepper::step`].
+struct Step<'a> {
+    network: &'a Network,
+    model: &'a ir::Model,
+    track: &'a Track,
+    history: &'a Track,
+    knot: usize,
+    fractions: &'a [f64],
+}
+
+impl Step<'_> {
+    /// The batch of sub-step `j` of `m` from `state`: the step `h / m`, the embedding at
+    /// the sub-step's stage fractions of the whole step.
+    fn batch(&self, state: &[f64], j: usize, m: usize) -> Batch {
+        let (knot, m) = (self.knot, m as f64);
+        Batch {
+            rows: 1,
+            states: state.to_vec(),
+            inputs: self.track.inputs.iter().map(|u| u[knot]).collect(),
+            embeddings: (self.model.closures.iter())
+                .map(|c| {
+                    (self.fractions.iter())
+                        .map(|&f| embedding_row(c, self.history, knot, (j as f64 + f) / m))
+                        .collect()
+                })
+                .collect(),
+            step_sizes: vec![self.track.steps[knot] / m],
+            ..Batch::default()
+        }
+    }
+
+    /// The step in `m` sub-steps from `state` (`first`: the prediction of one sub-step of
+    /// the whole step, reused when `m` is 1).
+    fn advance(
+        &self,
+        state: &[f64],
+        m: usize,
+        first: &Prediction,
+    ) -> Result<Prediction, BackendError> {
+        if m == 1 {
+            return Ok(first.clone());
+        }
+        let mut current = state.to_vec();
+        let mut last = None;
+        for j in 0..m {
+            let prediction = self.network.predict(&self.batch(&current, j, m))?;
+            current.clone_from(&prediction.next_states);
+            if current.iter().any(|v| !v.is_finite()) {
+                return Ok(prediction);
+            }
+            last = Some(prediction);
+        }
+        last.ok_or_else(|| BackendError::internal("a step of no sub-steps"))
+    }
+}
