@@ -85,6 +85,12 @@ pub struct Keep<'a> {
     pub recoveries: usize,
 }
 
+/// Who hears of the folds: `(on_fold, on_event)` of [`cross_validate`].
+pub type Listeners<'l> = (
+    &'l mut dyn FnMut(usize, usize),
+    &'l mut dyn for<'a> FnMut(Event<'a>),
+);
+
 /// Trains one model per experiment of `records`, on all the others, and scores it on the
 /// one held out; with `keep`, saves each fold ([`Keep`]). `on_fold(k, folds)` hears before
 /// fold `k` (0-based) starts, `on_event` of every fold's training.
@@ -93,7 +99,7 @@ pub fn cross_validate(
     records: &[Record],
     (options, recipe): (&TrainOptions, &Recipe),
     keep: Option<&Keep>,
-    (on_fold, on_event): (&mut dyn FnMut(usize, usize), &mut dyn FnMut(Event)),
+    (on_fold, on_event): Listeners,
 ) -> Result<CrossValidation, TrainError> {
     if records.len() < 2 {
         return Err(TrainError::BadOption {
