@@ -15,7 +15,6 @@ use super::data::{load_records, ColumnArgs, HistoryArg};
 use super::progress::{Announce, Count, Reporter};
 use super::train::{read_source, train_error};
 use super::{CommandError, CommandResult};
-use crate::train::recipe::DEFAULT_RANGE_FACTOR;
 use crate::train::{artifacts, predict, PhysicalRange};
 
 /// How predictions are made.
@@ -68,8 +67,7 @@ pub fn run(args: &PredictArgs) -> CommandResult {
         ModeArg::Offline => predict::Mode::Offline,
         ModeArg::Online => predict::Mode::Online,
     };
-    let factor = info.recipe.map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
-    let range = PhysicalRange::new(&setup.normalisation, factor);
+    let range = PhysicalRange::of_run(&info);
     let mut header = Vec::new();
     let mut columns: Vec<Vec<f64>> = Vec::new();
     let mut labels = Vec::new();

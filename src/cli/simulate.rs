@@ -13,6 +13,7 @@
 
 mod noise;
 mod params;
+mod range;
 mod whatif;
 
 use super::progress::{Announce, Count, Reporter};
@@ -95,6 +96,12 @@ pub struct SimulateArgs {
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Bounds of a measured state, `NAME=LO..HI` (repeatable; `..HI`, `LO..` for one
+    /// side): the run stops before the first sample outside them, with a warning saying
+    /// where and why. Without it only a value that is not finite ends a run (with
+    /// `--weights`, the run's range from its training data applies instead).
+    #[arg(long = "range", value_name = "NAME=LO..HI", value_parser = range::parse_range)]
+    pub ranges: Vec<(String, f64, f64)>,
     /// Also write the hidden states (a what-if run, `--weights`, always does).
     #[arg(long)]
     pub hidden: bool,
@@ -148,6 +155,15 @@ pub enum SimulateError {
     DuplicateInput {
         /// The input.
         name: String,
+    },
+    /// `--range` names no measured state of the model.
+    #[error("expected a measured state of the model in `--range`, found `{name}`")]
+    #[diagnostic(code(gbm::E0718), help("{states}"))]
+    UnknownRangeState {
+        /// The name given.
+        name: String,
+        /// The measured states, with a suggestion.
+        states: String,
     },
     /// `--init` names no state of the model.
     #[error("expected a state of the model in `--init`, found `{name}`")]
@@ -237,6 +253,7 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
         }
     }
     let noise = noise::record_noise(&model, &args.noise)?;
+    let range = range::simulation_range(&model, &args.ranges)?;
     let t_start = args.t_start.unwrap_or(0.0);
     let dt = args.dt.ok_or_else(missing_dt)?;
     let signals = input_signals(&model, args, (t_start, args.t_end, dt))?;
@@ -266,6 +283,7 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
     let simulated = crate::sim::simulate_with_progress(&model, &signals, &options, &mut progress);
     reporter.finish();
     let mut trajectory = simulated.map_err(CommandError::user)?;
+    range::stop_outside(&model, &mut trajectory, &range);
     noise::add_noise(&mut trajectory, &noise, args.seed);
     let table = csv_table(&model, &trajectory, args.hidden, &args.output)?;
     crate::io::write_atomic(&args.output, &table).map_err(CommandError::user)?;

@@ -9,18 +9,22 @@
 //! line every few seconds) go to stderr; the summary goes to stdout: errors per validation
 //! set, where a free run left the physical range, and each param with its standard error.
 //! `-o DIR` writes `weights.safetensors` and `run.json`; `--json FILE` writes the same
-//! metadata (metrics, params, warnings, normalisation, ...) to FILE. A run that goes
-//! non-finite is saved with its last finite epoch's weights and fails with E0415.
+//! metadata (metrics, params, warnings, normalisation, ...) to FILE. An epoch that goes
+//! non-finite sends training back to the last finite one at half the learning rate (up to
+//! `--recoveries` times, each a warning); after that the run, in `-o DIR` or the default
+//! directory alike, is saved with its last finite epoch's weights and a run.json saying it
+//! failed, and fails with E0415. `--cv` keeps every fold under `DIR/cv/` ([`cv`]).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod cv;
 mod progress;
 mod safety;
 mod summary;
 
 use progress::Progress;
-use summary::{error, summary};
+use summary::summary;
 
 use super::data::{hold_out, load_records, ColumnArgs, HistoryArg};
 use super::options::TrainingFlags;
@@ -32,8 +36,7 @@ use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
 use crate::train::{
-    self, artifacts, ErrorSet, Objective, ParamSource, Part, Recipe, TrainError, TrainOptions,
-    TrainingData,
+    self, artifacts, Objective, ParamSource, Part, Recipe, TrainError, TrainOptions, TrainingData,
 };
 
 /// The loss training minimises.
@@ -189,6 +192,28 @@ pub struct TrainArgs {
     /// Stop after this epoch as if interrupted (tests of --resume).
     #[arg(long, value_name = "N", hide = true)]
     pub stop_after_epochs: Option<usize>,
+    /// How many times an epoch that goes non-finite sends training back to the last finite
+    /// epoch, at half the learning rate (and half the rollout length), before the run ends
+    /// with E0415 (each time a warning; 0: end at the first).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_RECOVERIES)]
+    pub recoveries: usize,
+    /// The loss of epoch E reads NaN on its first T tries, `E:T` (tests of E0415).
+    #[arg(long, value_name = "E:T", hide = true, value_parser = parse_poison)]
+    pub poison_epoch: Option<(usize, usize)>,
+}
+
+/// Recoveries from a non-finite epoch by default (`--recoveries`).
+pub const DEFAULT_RECOVERIES: usize = 3;
+
+/// `E:T`, two counts.
+fn parse_poison(argument: &str) -> Result<(usize, usize), String> {
+    let (epoch, tries) = argument
+        .split_once(':')
+        .ok_or_else(|| format!("expected EPOCH:TRIES, found `{argument}`"))?;
+    let count = |text: &str| {
+        (text.trim().parse::<usize>()).map_err(|_| format!("expected a count, found `{text}`"))
+    };
+    Ok((count(epoch)?, count(tries)?))
 }
 
 /// Trains the model and reports.
@@ -231,8 +256,19 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         Some(_) => args.output.clone().unwrap_or_default(),
         None => run_directory(args)?,
     };
+    let model_path = model_file.display().to_string();
+    let data_path = (args.data.iter())
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
     if checkpoint.is_none() && args.cv {
-        cross_validate(&model, &train_records, (&options, &recipe))?;
+        let keep = train::cv::Keep {
+            directory: directory.clone(),
+            model: (&model_path, &source),
+            data: &data_path,
+            recoveries: args.recoveries,
+        };
+        cv::cross_validate(&model, &train_records, (&options, &recipe), &keep)?;
     }
     let command = match &checkpoint {
         Some(checkpoint) => checkpoint.command.clone(),
@@ -263,6 +299,8 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         resume: checkpoint,
         command,
         keep_last_finite: true,
+        recoveries: args.recoveries,
+        poison: args.poison_epoch,
     };
     let outcome = train::train_run(&model, &data, (&options, &recipe), &control, &mut |event| {
         progress.observe(event, options.epochs)
@@ -274,11 +312,6 @@ pub fn run(args: &TrainArgs) -> CommandResult {
             .map_err(CommandError::user)?;
     }
     let trained = outcome.map_err(train_error)?;
-    let model_path = model_file.display().to_string();
-    let data_path = (args.data.iter())
-        .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(" ");
     let info = artifacts::run_info(
         &model,
         (&model_path, &source),
@@ -314,7 +347,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         return Err(diverged_run(diverged, &directory));
     }
     let seconds = started.elapsed().as_secs_f64();
-    let text = summary(&model, &trained, seconds, Some(&directory));
+    let text = summary(&model, &trained, seconds, (Some(&directory), args.cv));
     if json_to_stdout {
         eprint!("{text}");
     } else {
@@ -324,20 +357,29 @@ pub fn run(args: &TrainArgs) -> CommandResult {
 }
 
 /// A run that went non-finite and was saved with its last finite weights: says which
-/// epoch those are on stderr, and fails with E0415 naming the epoch that diverged.
+/// epoch those are and what to try on stderr, and fails with E0415 naming the epoch and
+/// phase that diverged.
 fn diverged_run(diverged: &train::EpochDivergence, directory: &Path) -> CommandError {
     let kept = match diverged.kept_epoch {
         0 => "the initial weights (no epoch ended finite)".to_string(),
         epoch => format!("the weights of epoch {epoch}, the last finite one"),
     };
     eprintln!(
-        "{} keeps {kept}: `gbc predict --weights {}` reads them",
+        "{} keeps {kept} and a run.json that says the run failed: `gbc predict --weights {}` \
+         reads them",
         directory.display(),
         directory.display()
     );
+    if !diverged.advice.is_empty() {
+        eprintln!("try {}", diverged.advice);
+    }
+    let what = match diverged.phase.as_str() {
+        "" => diverged.what.clone(),
+        phase => format!("{} ({phase})", diverged.what),
+    };
     train_error(TrainError::Diverged {
         epoch: diverged.epoch,
-        what: diverged.what.clone(),
+        what,
     })
 }
 
@@ -440,55 +482,6 @@ fn part_of(
         }
     }
     Ok(Part::All)
-}
-
-/// Runs leave-one-experiment-out cross-validation and prints each fold and the medians.
-fn cross_validate(
-    model: &Model,
-    records: &[Record],
-    settings: (&TrainOptions, &Recipe),
-) -> CommandResult {
-    let progress = std::cell::RefCell::new(Progress::default());
-    let epochs = settings.0.epochs;
-    let result = train::cv::cross_validate(
-        model,
-        records,
-        settings,
-        &mut |fold, folds| {
-            progress.borrow_mut().finish();
-            let name = &records[fold].name;
-            eprintln!(
-                "cross-validation fold {}/{folds}: holding out `{name}`",
-                fold + 1
-            );
-        },
-        &mut |event| progress.borrow_mut().observe(event, epochs),
-    );
-    progress.borrow_mut().finish();
-    let result = result.map_err(train_error)?;
-    println!(
-        "leave-one-experiment-out cross-validation ({} folds):",
-        result.folds.len()
-    );
-    println!("  {:<24} {:>12} {:>12}", "held out", "offline", "online");
-    for fold in &result.folds {
-        let overall =
-            |set: &Option<ErrorSet>| set.as_ref().map_or("-".into(), |s| error(s.overall));
-        println!(
-            "  {:<24} {:>12} {:>12}",
-            fold.held_out,
-            overall(&fold.offline),
-            overall(&fold.online)
-        );
-    }
-    let median = |value: Option<f64>| value.map_or("-".into(), error);
-    println!(
-        "  {:<24} {:>12} {:>12}",
-        "median",
-        median(result.median_offline),
-        median(result.median_online)
-    );
-    Ok(())
 }
 
 /// `NAME=W` with a number.

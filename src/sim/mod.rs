@@ -104,6 +104,21 @@ impl Trajectory {
     pub fn is_empty(&self) -> bool {
         self.times.is_empty()
     }
+
+    /// Keeps the first `rows` samples.
+    pub fn truncate(&mut self, rows: usize) {
+        self.times.truncate(rows);
+        let tables = [
+            &mut self.inputs,
+            &mut self.states,
+            &mut self.hidden,
+            &mut self.outputs,
+            &mut self.lets,
+        ];
+        for table in tables {
+            table.iter_mut().for_each(|column| column.truncate(rows));
+        }
+    }
 }
 
 /// Why a model could not be simulated.

@@ -87,6 +87,19 @@ pub struct RunInfo {
     /// (`gbc train` exits with E0415).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diverged: Option<super::EpochDivergence>,
+    /// `finished`, or `failed` when training went non-finite and no recovery was left
+    /// (then [`RunInfo::diverged`] says where, in which phase, why and what to try).
+    #[serde(default = "finished")]
+    pub status: String,
+    /// Each time training went back to its last finite epoch and continued, with a lower
+    /// learning rate ([`super::recovery`]); warnings, the run went on.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub recoveries: Vec<super::Recovery>,
+}
+
+/// The status of a run saved before [`RunInfo::status`] was recorded.
+fn finished() -> String {
+    "finished".into()
 }
 
 /// The model a run belongs to.
@@ -254,6 +267,12 @@ pub fn run_info(
         warnings: report.warnings.clone(),
         weights: WEIGHTS_FILE.to_string(),
         diverged: report.diverged.clone(),
+        status: if report.diverged.is_some() {
+            "failed".into()
+        } else {
+            finished()
+        },
+        recoveries: report.recoveries.clone(),
     }
 }
 
@@ -487,7 +506,8 @@ pub fn read_tensors(path: &Path) -> Result<Vec<NamedTensor>, TrainError> {
     Ok(weights)
 }
 
-fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {
+/// A run file that cannot be read or written, as [`TrainError::BadRun`].
+pub(crate) fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {
     TrainError::BadRun {
         path: path.display().to_string(),
         reason: error.to_string(),

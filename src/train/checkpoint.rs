@@ -56,6 +56,12 @@ pub struct RunControl {
     /// finite epoch's weights and report where ([`super::TrainReport::diverged`]) instead of
     /// failing with [`TrainError::Diverged`].
     pub keep_last_finite: bool,
+    /// Under `keep_last_finite`, how many times a non-finite epoch sends training back to
+    /// the last finite one at half the learning rate (and half the rollout) before the run
+    /// ends ([`super::recovery`]).
+    pub recoveries: usize,
+    /// Test hook: the loss of epoch `.0` reads NaN on its first `.1` tries.
+    pub poison: Option<(usize, usize)>,
 }
 
 /// One epoch in the training log.
@@ -289,6 +295,8 @@ pub(super) struct Safety<'a> {
     count_from: usize,
     best_weights: Vec<NamedTensor>,
     validate: Option<&'a mut ValidateNow<'a>>,
+    /// Epochs poisoned so far ([`RunControl::poison`]).
+    poisoned: usize,
 }
 
 impl<'a> Safety<'a> {
@@ -314,6 +322,7 @@ impl<'a> Safety<'a> {
             count_from: 1,
             best_weights: Vec::new(),
             validate: validate.filter(|_| control.early_stop.is_some()),
+            poisoned: 0,
         }
     }
 
@@ -451,6 +460,27 @@ impl<'a> Safety<'a> {
                 .map(|(epoch, _)| epoch));
         }
         Ok(None)
+    }
+
+    /// How many recoveries a non-finite epoch may use ([`RunControl::recoveries`]; none
+    /// without [`RunControl::keep_last_finite`]).
+    pub fn recoveries(&self) -> usize {
+        if self.control.keep_last_finite {
+            self.control.recoveries
+        } else {
+            0
+        }
+    }
+
+    /// Test hook ([`RunControl::poison`]): whether epoch `epoch`'s loss reads NaN on this
+    /// try.
+    pub fn poisoned(&mut self, epoch: usize) -> bool {
+        let Some((at, tries)) = self.control.poison else {
+            return false;
+        };
+        let hit = at == epoch && self.poisoned < tries;
+        self.poisoned += usize::from(hit);
+        hit
     }
 
     /// Whether a divergence ends training with the last finite weights

@@ -61,7 +61,11 @@ impl PhysicalRange {
     /// never negative in training, else `[-factor * max|x|, factor * max|x|]`. `None` when
     /// the normalisation has no extremes (runs saved before they were recorded).
     pub fn new(normalisation: &Normalisation, factor: f64) -> Option<PhysicalRange> {
-        let (min, max) = (&normalisation.state_min, &normalisation.state_max);
+        Self::from_extremes(&normalisation.state_min, &normalisation.state_max, factor)
+    }
+
+    /// [`PhysicalRange::new`]'s rule on the smallest and largest value of each state.
+    pub fn from_extremes(min: &[f64], max: &[f64], factor: f64) -> Option<PhysicalRange> {
         if min.is_empty() || min.len() != max.len() {
             return None;
         }
@@ -78,12 +82,67 @@ impl PhysicalRange {
         Some(PhysicalRange { lower, upper })
     }
 
+    /// The range of a saved run: its training data's extremes and its `--range-factor`
+    /// (the default for runs saved before recipes were recorded). What `gbc predict` and
+    /// `gbc simulate --weights` judge a free run by.
+    pub fn of_run(info: &super::artifacts::RunInfo) -> Option<PhysicalRange> {
+        let factor =
+            (info.recipe.as_ref()).map_or(super::recipe::DEFAULT_RANGE_FACTOR, |r| r.range_factor);
+        Self::new(&info.normalisation, factor)
+    }
+
+    /// No bounds for `states` states: only a value that is not finite leaves it.
+    pub fn unbounded(states: usize) -> PhysicalRange {
+        PhysicalRange {
+            lower: vec![f64::NEG_INFINITY; states],
+            upper: vec![f64::INFINITY; states],
+        }
+    }
+
     /// The first measured state of `state` outside the range or not finite.
     fn violation(&self, state: &[f64]) -> Option<usize> {
         (0..self.lower.len()).find(|&i| {
             let value = state.get(i).copied().unwrap_or(f64::NAN);
-            let slack = 1e-9 * self.upper[i].abs().max(self.lower[i].abs());
-            !value.is_finite() || value < self.lower[i] - slack || value > self.upper[i] + slack
+            let (lo, hi) = (self.lower[i], self.upper[i]);
+            let slack = 1e-9
+                * [lo, hi]
+                    .iter()
+                    .filter(|b| b.is_finite())
+                    .fold(0.0, |m, b| b.abs().max(m));
+            !value.is_finite() || value < lo - slack || value > hi + slack
+        })
+    }
+
+    /// The divergence of `state` (measured states named by `names`) at knot `row` and
+    /// `time` of `experiment`, if one of its values leaves the range or is not finite.
+    pub fn check(
+        &self,
+        names: &[String],
+        (experiment, row, time): (&str, usize, f64),
+        state: &[f64],
+    ) -> Option<Divergence> {
+        let index = self.violation(state)?;
+        Some(Divergence {
+            experiment: experiment.to_string(),
+            row,
+            time,
+            state: names.get(index).cloned().unwrap_or_default(),
+            value: state.get(index).copied().unwrap_or(f64::NAN),
+            range: (self.lower[index], self.upper[index]),
+        })
+    }
+
+    /// The first row of a run (`columns[i][row]`: state `i` at `times[row]`) that leaves
+    /// the range ([`PhysicalRange::check`]).
+    pub fn first_exit(
+        &self,
+        names: &[String],
+        experiment: &str,
+        (times, columns): (&[f64], &[Vec<f64>]),
+    ) -> Option<Divergence> {
+        (0..times.len()).find_map(|row| {
+            let state: Vec<f64> = columns.iter().map(|c| c[row]).collect();
+            self.check(names, (experiment, row, times[row]), &state)
         })
     }
 }
@@ -109,23 +168,43 @@ pub struct Divergence {
     pub range: (f64, f64),
 }
 
+impl Divergence {
+    /// Why, in words: "below its floor -0.1", "above its ceiling 12", "not finite".
+    pub fn why(&self) -> String {
+        let (lo, hi) = self.range;
+        if !self.value.is_finite() {
+            "not finite".into()
+        } else if self.value < lo {
+            format!("below its floor {}", short(lo))
+        } else {
+            format!("above its ceiling {}", short(hi))
+        }
+    }
+}
+
+/// A bound or value with about 4 significant digits.
+fn short(value: f64) -> String {
+    super::analysis::compact(value)
+}
+
 impl fmt::Display for Divergence {
     fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let (lo, hi) = self.range;
-        if self.value.is_finite() {
-            write!(
-                formatter,
-                "the free run of `{}` left the physical range at t = {}: {} = {:.4e}, outside \
-                 [{lo:.4e}, {hi:.4e}]",
-                self.experiment, self.time, self.state, self.value
-            )
+        let run = match self.experiment.as_str() {
+            "" => "the free run".to_string(),
+            name => format!("the free run of `{name}`"),
+        };
+        let value = if self.value.is_finite() {
+            short(self.value)
         } else {
-            write!(
-                formatter,
-                "the free run of `{}` diverged at t = {}: {} = {}",
-                self.experiment, self.time, self.state, self.value
-            )
-        }
+            self.value.to_string()
+        };
+        write!(
+            formatter,
+            "{run} diverged: {} = {value} at t = {}, {}",
+            self.state,
+            self.time,
+            self.why()
+        )
     }
 }
 
@@ -208,15 +287,11 @@ pub fn simulate(
         trajectory.outputs.push(prediction.outputs);
         let next = prediction.next_states;
         if let Some(range) = range.filter(|_| feed == Feed::Own) {
-            if let Some(index) = range.violation(&next) {
-                trajectory.divergence = Some(Divergence {
-                    experiment: track.name.clone(),
-                    row: knot + 1,
-                    time: track.times.get(knot + 1).copied().unwrap_or(f64::NAN),
-                    state: model.states[index].name.clone(),
-                    value: next[index],
-                    range: (range.lower[index], range.upper[index]),
-                });
+            let time = track.times.get(knot + 1).copied().unwrap_or(f64::NAN);
+            let names: Vec<String> = model.states.iter().map(|s| s.name.clone()).collect();
+            let at = (track.name.as_str(), knot + 1, time);
+            if let Some(divergence) = range.check(&names, at, &next) {
+                trajectory.divergence = Some(divergence);
                 trajectory.next_states.push(next);
                 break;
             }

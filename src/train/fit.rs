@@ -20,11 +20,14 @@ use crate::ir;
 
 use super::checkpoint::Safety;
 use super::pairs::stage_fractions;
+use super::recovery::{self, Recovery};
 use super::split::Training;
 use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
 use super::windows::{rollout_batch_into, shooting_starts};
-use super::{Engine, EpochDivergence, Event, Recipe, TrainError, TrainOptions, FILL_REFRESH};
+use super::{
+    Engine, EpochDivergence, Event, Objective, Recipe, TrainError, TrainOptions, FILL_REFRESH,
+};
 use crate::backend::RolloutBatch;
 
 /// What the epochs need besides the network.
@@ -79,20 +82,43 @@ impl Fit<'_> {
             optimiser: Optimiser::from_network(network, options.precision)?,
             network,
             windows: RolloutBatch::default(),
+            scale: 1.0,
+            cap: usize::MAX,
+            recovered: 0,
         };
         // The last state whose weights were all finite, and its epoch.
         let mut kept = (first - 1, engines.optimiser.clone());
         let mut diverged = None;
+        let mut recoveries = Vec::new();
         let fill = fill_schedule(training);
-        for epoch in first..=options.epochs {
-            let horizon = self.recipe.horizon_at(epoch, options.epochs);
+        let mut epoch = first;
+        while epoch <= options.epochs {
+            let horizon = self
+                .recipe
+                .horizon_at(epoch, options.epochs)
+                .min(engines.cap);
             self.refresh_before(epoch, &mut engines, training, (&fractions, fill))?;
             let how = ((epoch, horizon), fractions.as_slice());
-            let loss = match self.checked_epoch(&mut engines, training, how, &mut rng, on_event)? {
+            let mut checked =
+                self.checked_epoch(&mut engines, training, how, &mut rng, on_event)?;
+            if safety.poisoned(epoch) {
+                checked = Err("the loss became NaN (injected by a test)".into());
+            }
+            let loss = match checked {
                 Ok(loss) => loss,
                 Err(what) => {
-                    diverged = Some((epoch, what));
-                    break;
+                    let failed = (epoch, horizon, what);
+                    match self.recover(failed, &kept, &mut engines, safety) {
+                        Ok(recovery) => {
+                            on_event(Event::Recovered(&recovery));
+                            recoveries.push(recovery);
+                            continue;
+                        }
+                        Err(failed) => {
+                            diverged = Some(failed);
+                            break;
+                        }
+                    }
                 }
             };
             losses.push(loss);
@@ -115,6 +141,7 @@ impl Fit<'_> {
             if stop {
                 break;
             }
+            epoch += 1;
         }
         let engine = match engines.fused {
             Some(_) => Engine::Fused,
@@ -130,6 +157,42 @@ impl Fit<'_> {
                 kept_epoch: best.unwrap_or(d.kept_epoch),
                 ..d
             }),
+            recoveries,
+        })
+    }
+
+    /// After epoch `failed.0` (of `failed.1` steps) went non-finite (`failed.2`): while
+    /// recoveries are left, the optimiser goes back to `kept` at half the learning rate
+    /// (and half the rollout) and the recovery is returned; else the failure, described.
+    fn recover(
+        &self,
+        (epoch, horizon, what): (usize, usize, String),
+        (kept_epoch, kept): &(usize, Optimiser),
+        engines: &mut Engines,
+        safety: &Safety,
+    ) -> Result<Recovery, Failure> {
+        let multi_step = self.recipe.objective == Objective::MultiStep;
+        let phase = recovery::phase(horizon, multi_step);
+        let learning_rate = self.options.learning_rate * engines.scale;
+        if engines.recovered >= safety.recoveries() {
+            let advice = recovery::advice(&phase, learning_rate);
+            return Err(Failure {
+                epoch,
+                what,
+                phase,
+                advice,
+            });
+        }
+        engines.recovered += 1;
+        (engines.scale, engines.cap) = recovery::backed_off((engines.scale, engines.cap), horizon);
+        engines.optimiser = kept.clone();
+        Ok(Recovery {
+            epoch,
+            what,
+            phase,
+            back_to: *kept_epoch,
+            learning_rate: self.options.learning_rate * engines.scale,
+            horizon: horizon.min(engines.cap),
         })
     }
 
@@ -293,26 +356,39 @@ fn fill_schedule(training: &Course) -> (bool, usize) {
     (needs_fill, if unmeasured { 1 } else { FILL_REFRESH })
 }
 
+/// An epoch that went non-finite with no recovery left.
+struct Failure {
+    epoch: usize,
+    what: String,
+    phase: String,
+    advice: String,
+}
+
 /// After the epochs: a divergence is [`TrainError::Diverged`], or under
 /// [`super::RunControl::keep_last_finite`] the optimiser goes back to `kept` (the last
 /// finite epoch and its state) and the divergence is reported.
 fn settle(
-    diverged: Option<(usize, String)>,
+    diverged: Option<Failure>,
     (kept_epoch, kept): (usize, Optimiser),
     engines: &mut Engines,
     safety: &Safety,
 ) -> Result<Option<EpochDivergence>, TrainError> {
-    let Some((epoch, what)) = diverged else {
+    let Some(failure) = diverged else {
         return Ok(None);
     };
     if !safety.keeps_last_finite() {
-        return Err(TrainError::Diverged { epoch, what });
+        return Err(TrainError::Diverged {
+            epoch: failure.epoch,
+            what: failure.what,
+        });
     }
     engines.optimiser = kept;
     Ok(Some(EpochDivergence {
-        epoch,
-        what,
+        epoch: failure.epoch,
+        what: failure.what,
         kept_epoch,
+        phase: failure.phase,
+        advice: failure.advice,
     }))
 }
 
@@ -324,6 +400,8 @@ pub(super) struct Fitted {
     pub engine: Engine,
     /// Where training went non-finite (under [`super::RunControl::keep_last_finite`]).
     pub diverged: Option<EpochDivergence>,
+    /// Each recovery from a non-finite epoch ([`super::recovery`]).
+    pub recoveries: Vec<Recovery>,
 }
 
 /// The state after an epoch, for the run's safety hooks ([`Safety`]).
@@ -362,6 +440,12 @@ struct Engines<'n> {
     optimiser: Optimiser,
     /// The rollout batch, its buffers kept from batch to batch.
     windows: RolloutBatch,
+    /// The learning rates' scale after recoveries (1: as asked).
+    scale: f64,
+    /// The longest rollout after recoveries (`usize::MAX`: as the recipe says).
+    cap: usize,
+    /// Recoveries so far.
+    recovered: usize,
 }
 
 impl Engines<'_> {
@@ -372,7 +456,12 @@ impl Engines<'_> {
             Some(fused) => fused,
             None => self.network,
         };
-        self.optimiser.step(engine, batch, settings)
+        let settings = StepSettings {
+            learning_rate: settings.learning_rate * self.scale,
+            param_learning_rate: settings.param_learning_rate * self.scale,
+            ..*settings
+        };
+        self.optimiser.step(engine, batch, &settings)
     }
 
     /// The optimiser's current weights as the network's named tensors.

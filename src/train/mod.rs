@@ -39,6 +39,7 @@ pub mod polish;
 pub mod predict;
 pub(crate) mod prepare;
 pub mod recipe;
+pub mod recovery;
 mod run;
 pub mod settings;
 pub mod split;
@@ -69,6 +70,7 @@ pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 pub use initial::{InitialState, Origin};
 pub use polish::{ParamEstimate, PolishSummary};
 pub use recipe::{Engine, Objective, ParamSource, Recipe};
+pub use recovery::Recovery;
 pub use run::{train_run, train_with, EVALUATING, TRAINING, VALIDATING};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
@@ -149,6 +151,9 @@ impl TrainOptions {
 pub enum Event<'a> {
     /// Before the first epoch: the stiffness estimate found a problem.
     Warning(&'a StiffnessWarning),
+    /// An epoch went non-finite and training went back to the last finite one
+    /// ([`recovery`]).
+    Recovered(&'a Recovery),
     /// Before the first epoch.
     Started {
         /// Epochs to run.
@@ -242,6 +247,13 @@ pub struct EpochDivergence {
     /// The epoch whose weights were kept: the last one whose weights were all finite (the
     /// best one with early stopping; 0: the initial weights).
     pub kept_epoch: usize,
+    /// The phase it went non-finite in: "one-step warm-up", "one-step", "rollouts of K
+    /// steps" ([`recovery::phase`]; empty in runs saved before it was recorded).
+    #[serde(default)]
+    pub phase: String,
+    /// What to try ([`recovery::advice`]).
+    #[serde(default)]
+    pub advice: String,
 }
 
 /// What a training run reports.
@@ -287,6 +299,9 @@ pub struct TrainReport {
     /// [`RunControl::keep_last_finite`]; the network then holds the kept epoch's weights,
     /// unpolished).
     pub diverged: Option<EpochDivergence>,
+    /// Each time training went back to its last finite epoch and continued
+    /// ([`RunControl::recoveries`]).
+    pub recoveries: Vec<Recovery>,
 }
 
 /// A trained network with everything needed to reuse it.

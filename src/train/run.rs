@@ -56,13 +56,29 @@ pub fn train_run(
     let fitted = run.fit((options, recipe), (control, started), on_event)?;
     on_event(Event::Phase(EVALUATING));
     let polishes = fitted.diverged.is_none() && recipe.polishes(&run.model);
-    let evaluation = run.evaluate(options, recipe, polishes)?;
+    let trained = run.network.weights();
+    let mut evaluation = run.evaluate(options, recipe, polishes)?;
     let params: Vec<String> = run.model.params.iter().map(|p| p.name.clone()).collect();
+    let mut fitted = fitted;
     if let Some(found) = crate::finite::in_tensors(&run.network.weights(), &params) {
-        return Err(TrainError::Diverged {
-            epoch: fitted.losses.len(),
-            what: format!("{found} after the polish"),
-        });
+        let epoch = fitted.losses.len();
+        let what = format!("{found} after the polish");
+        if !control.keep_last_finite {
+            return Err(TrainError::Diverged { epoch, what });
+        }
+        // The polish went non-finite: the trained weights stay, unpolished.
+        run.network.set_weights(&trained)?;
+        evaluation = run.evaluate(options, recipe, false)?;
+        let recovery = super::Recovery {
+            epoch,
+            what,
+            phase: "polish".into(),
+            back_to: epoch,
+            learning_rate: options.learning_rate,
+            horizon: recipe.horizon_at(epoch.max(1), options.epochs),
+        };
+        on_event(Event::Recovered(&recovery));
+        fitted.recoveries.push(recovery);
     }
     Ok(run.report(options, recipe, (initial, evaluation), fitted))
 }
@@ -362,6 +378,7 @@ impl Run<'_> {
             validated_from: super::validated_from(&self.layout),
             engine: fitted.engine,
             diverged: fitted.diverged,
+            recoveries: fitted.recoveries,
         };
         Trained {
             network: self.network,

@@ -163,8 +163,8 @@ fn cross_validation_holds_out_each_experiment_once() {
         &model,
         &records,
         (&options, &Recipe::paper()),
-        &mut |fold, folds| started.push((fold, folds)),
-        &mut quiet,
+        None,
+        (&mut |fold, folds| started.push((fold, folds)), &mut quiet),
     )
     .unwrap();
     assert_eq!(started, vec![(0, 3), (1, 3), (2, 3)]);
@@ -179,8 +179,8 @@ fn cross_validation_holds_out_each_experiment_once() {
         &model,
         &records[..1],
         (&options, &Recipe::paper()),
-        &mut |_, _| {},
-        &mut quiet,
+        None,
+        (&mut |_, _| {}, &mut quiet),
     );
     assert!(matches!(alone, Err(TrainError::BadOption { .. })));
 }

@@ -188,7 +188,12 @@ fn cross_validations_read_back() {
             offline: None,
             online: Some(diverged("X")),
             seconds: 2.0,
+            run: Some("cv/fold-01-run2".into()),
+            diverged: None,
+            nothing_validates: Some("its training failed".into()),
         }],
+        pooled_offline: None,
+        pooled_online: Some(diverged("X")),
         median_offline: None,
         median_online: Some(f64::INFINITY),
     };

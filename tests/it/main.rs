@@ -11,6 +11,7 @@ mod lsp;
 mod noise;
 mod parser;
 mod records;
+mod runs;
 mod safety;
 mod stiff;
 mod whatif;

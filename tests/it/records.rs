@@ -107,8 +107,32 @@ fn training_on_several_irregular_experiments_validates_the_held_out_one() {
     ]);
     let stdout = text(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    assert!(stdout.contains("cross-validation (3 folds)"), "{stdout}");
+    assert!(stdout.contains("cross-validation (3 folds"), "{stdout}");
     assert!(stdout.contains("median"), "{stdout}");
+    assert!(stdout.contains("pooled"), "{stdout}");
+    assert!(!stdout.contains("nothing validates"), "{stdout}");
+    // Every fold is kept: its run, its held-out free run, and the summary.
+    let kept = dir.join("cv").join("cv");
+    for (k, name) in ["a", "b", "c"].iter().enumerate() {
+        let fold = kept.join(format!("fold-0{}-{name}", k + 1));
+        assert!(
+            fold.join("weights.safetensors").is_file(),
+            "{}",
+            fold.display()
+        );
+        assert!(fold.join("run.json").is_file());
+        let predicted = std::fs::read_to_string(fold.join("predictions.csv")).unwrap();
+        assert!(predicted.starts_with("t,S,r\n"), "{predicted}");
+        assert!(predicted.lines().count() > 10, "{predicted}");
+    }
+    let summary = std::fs::read_to_string(kept.join("summary.json")).unwrap();
+    let summary: serde_json::Value = serde_json::from_str(&summary).unwrap();
+    assert_eq!(summary["folds"].as_array().unwrap().len(), 3);
+    assert_eq!(summary["folds"][1]["run"], "cv/fold-02-b");
+    assert!(
+        summary["pooled_online"]["per_state"].is_array(),
+        "{summary}"
+    );
 }
 
 #[test]

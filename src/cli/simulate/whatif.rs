@@ -17,7 +17,6 @@ use super::{
 };
 use crate::ir::Model;
 use crate::train::predict::whatif::{what_if, WhatIf, WhatIfError};
-use crate::train::recipe::DEFAULT_RANGE_FACTOR;
 use crate::train::{artifacts, PhysicalRange};
 
 /// Runs the trained model of `weights` under the arguments' programmes and writes the table.
@@ -44,8 +43,7 @@ pub fn run(model: &Model, weights: &Path, args: &SimulateArgs) -> CommandResult 
         initial: initial_values(model, &args.init)?,
         history: history.as_ref(),
     };
-    let factor = (restored.info.recipe.as_ref()).map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
-    let range = PhysicalRange::new(&restored.setup.normalisation, factor);
+    let range = PhysicalRange::of_run(&restored.info);
     let mut table = what_if(
         model,
         (&restored.network, &restored.setup),

@@ -33,6 +33,9 @@ impl Progress {
     pub(super) fn observe(&mut self, event: Event, epochs: usize) {
         match event {
             Event::Warning(warning) => self.reporter.println(&format!("warning: {warning}")),
+            Event::Recovered(recovery) => {
+                self.reporter.println(&format!("warning: {recovery}"));
+            }
             Event::Started {
                 train_pairs,
                 validation_pairs,

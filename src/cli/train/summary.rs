@@ -15,12 +15,13 @@ macro_rules! line {
     }};
 }
 
-/// The summary of `trained` (`seconds` of training; `run`: where the run was written).
+/// The summary of `trained` (`seconds` of training; `run`: where the run was written;
+/// `cross_validated`: `--cv` scored it, nothing else validates).
 pub(super) fn summary(
     model: &Model,
     trained: &Trained,
     seconds: f64,
-    run: Option<&Path>,
+    (run, cross_validated): (Option<&Path>, bool),
 ) -> String {
     let mut out = String::new();
     let report = &trained.report;
@@ -37,7 +38,12 @@ pub(super) fn summary(
             .map_or("-".into(), |l| format!("{l:.4e}"))
     );
     let metrics = &report.metrics;
-    if metrics.validations.is_empty() {
+    if metrics.validations.is_empty() && cross_validated {
+        line!(
+            out,
+            "this model trains on every experiment: the cross-validation above scores it"
+        );
+    } else if metrics.validations.is_empty() {
         line!(
             out,
             "nothing validates: pass --val FILE, --holdout NAME, --val-fraction SHARE or a \
