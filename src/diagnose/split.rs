@@ -487,7 +487,7 @@ mod tests {
     }
 
     #[test]
-    fn held_out_experiments_are_scored_whole() {
+    fn held_out_experiments_are_scored_after_their_start_row() {
         let split = Split::new(
             &model(),
             vec![record("a", 12)],
@@ -498,7 +498,7 @@ mod tests {
         assert_eq!(split.training().count(), 1);
         assert_eq!(
             split.scored().map(|(i, _, r)| (i, r)).collect::<Vec<_>>(),
-            vec![(1, 0..11)]
+            vec![(1, 1..11)]
         );
     }
 
@@ -514,7 +514,7 @@ mod tests {
         assert_eq!(
             error.to_string(),
             "expected at least 10 measured rows in the training part and 10 in the held-out \
-             part, found 34 and 6 (experiment `b` held out)"
+             part, found 34 and 5 (experiment `b` held out)"
         );
         let error = Split::new(
             &model(),

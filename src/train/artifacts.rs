@@ -77,6 +77,9 @@ pub struct RunInfo {
     /// The fit of a model without closures by free runs, when its params came from there.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mechanism_fit: Option<crate::diagnose::FitSummary>,
+    /// What of each training experiment trained.
+    #[serde(default)]
+    pub coverage: super::coverage::Coverage,
     /// Validation errors.
     pub metrics: Metrics,
     /// Stiffness warnings issued.
@@ -263,6 +266,7 @@ pub fn run_info(
         polish: report.polish.clone(),
         balance_fit: report.balance_fit.clone(),
         mechanism_fit: report.mechanism_fit.clone(),
+        coverage: report.coverage.clone(),
         metrics: report.metrics.clone(),
         warnings: report.warnings.clone(),
         weights: WEIGHTS_FILE.to_string(),

@@ -27,6 +27,7 @@ pub mod artifacts;
 pub mod balances;
 pub mod bench;
 pub mod checkpoint;
+pub mod coverage;
 pub mod cv;
 mod error;
 pub mod evaluate;
@@ -163,6 +164,9 @@ pub enum Event<'a> {
         /// Validation pairs.
         validation_pairs: usize,
     },
+    /// Before the first epoch: what of each training experiment trains, and the warm-up
+    /// share the multi-step objective uses for it ([`coverage`]).
+    Coverage(&'a coverage::Coverage, f64),
     /// A phase of the run starts: "validating the untrained network", "training" (the
     /// epochs), "evaluating the trained network" (initial states, polish, validation).
     Phase(&'static str),
@@ -283,6 +287,8 @@ pub struct TrainReport {
     /// The fit of a model without closures by free runs, when its params came from there
     /// ([`mechanism`]; then no epoch ran).
     pub mechanism_fit: Option<crate::diagnose::FitSummary>,
+    /// What of each training experiment trained ([`coverage`]).
+    pub coverage: coverage::Coverage,
     /// Each experiment's initial state (training experiments first).
     pub initial_states: Vec<InitialState>,
     /// The grid's longest step.

@@ -11,6 +11,7 @@ use crate::ir;
 
 use super::balances::{self, BalanceFit};
 use super::checkpoint::{RunControl, Safety};
+use super::coverage::Coverage;
 use super::fit::Fitted;
 use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
@@ -48,6 +49,12 @@ pub fn train_run(
 ) -> Result<Trained, TrainError> {
     let started = std::time::Instant::now();
     let mut run = prepare(model, data, options, recipe, on_event)?;
+    // On a sparse record the one-step warm-up reaches few cells: it shrinks in proportion.
+    let sparse = Recipe {
+        warmup_share: run.coverage.warmup_share(recipe.warmup_share),
+        ..recipe.clone()
+    };
+    let recipe = &sparse;
     if !run.layout.scorings.is_empty() {
         on_event(Event::Phase(VALIDATING));
     }
@@ -103,6 +110,7 @@ struct Run<'m> {
     warnings: Vec<StiffnessWarning>,
     balance_fit: Option<BalanceFit>,
     mechanism_fit: Option<MechanismFit>,
+    coverage: Coverage,
     setup: Setup,
     network: Network,
     training: Course,
@@ -135,6 +143,11 @@ fn prepare<'m>(
         ..*data
     };
     let layout = Layout::new(model, &data, options)?;
+    let coverage = Coverage::of(model, (&layout.tracks, &layout.trainings), &layout.pairs);
+    on_event(Event::Coverage(
+        &coverage,
+        coverage.warmup_share(recipe.warmup_share),
+    ));
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
     let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
@@ -217,6 +230,7 @@ fn prepare<'m>(
         warnings,
         balance_fit,
         mechanism_fit,
+        coverage,
         setup,
         network,
         training,
@@ -372,6 +386,7 @@ impl Run<'_> {
             polish: evaluation.polish,
             balance_fit: self.balance_fit,
             mechanism_fit: self.mechanism_fit.map(|fit| fit.summary),
+            coverage: self.coverage,
             initial_states: evaluation.initial_states,
             dt: self.layout.grid.max_step,
             learning_rate: options.learning_rate,

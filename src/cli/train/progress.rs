@@ -47,6 +47,22 @@ impl Progress {
                     "training on {train_pairs} pairs, validating on {validation_pairs}"
                 ));
             }
+            Event::Coverage(coverage, warmup) => {
+                let share = coverage.one_step_share();
+                if share < train::coverage::DENSE_SHARE {
+                    for record in &coverage.records {
+                        self.reporter.println(&format!("note: {record}"));
+                    }
+                    self.reporter.println(&format!(
+                        "note: one-step pairs reach {:.0} % of the measured cells; the one-step \
+                         warm-up is shortened to {:.0} % of the epochs and free-run windows \
+                         train on every cell (help: --objective one-step would train on the \
+                         pairs alone)",
+                        100.0 * share,
+                        100.0 * warmup
+                    ));
+                }
+            }
             Event::Phase(train::TRAINING) => {
                 let count = Count::Items("epochs");
                 self.reporter
