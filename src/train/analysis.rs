@@ -74,7 +74,7 @@ impl fmt::Display for StiffnessWarning {
 }
 
 /// A number with about four significant digits, without trailing zeros.
-fn compact(value: f64) -> String {
+pub(crate) fn compact(value: f64) -> String {
     if value != 0.0 && (value.abs() < 1e-3 || value.abs() >= 1e6) {
         return format!("{value:.3e}");
     }

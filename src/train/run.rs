@@ -19,7 +19,7 @@ use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
     polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part, PhysicalRange,
-    Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
+    Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData, Warning,
 };
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
@@ -80,7 +80,7 @@ struct Run<'m> {
     layout: Layout,
     hidden_init: Vec<f64>,
     fractions: Vec<f64>,
-    warnings: Vec<StiffnessWarning>,
+    warnings: Vec<Warning>,
     balance_fit: Option<BalanceFit>,
     setup: Setup,
     network: Network,
@@ -117,13 +117,17 @@ fn prepare<'m>(
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
     let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
-    let warnings = analysis::stiffness(
+    let stiff = analysis::stiffness(
         model,
         &scales,
         (&layout.tracks, &layout.intervals),
         &hidden_init,
         options.substeps,
     )?;
+    let dropped = layout.dropped.clone().map(Warning::DroppedPairs);
+    let warnings: Vec<Warning> = (stiff.into_iter().map(Warning::Stiffness))
+        .chain(dropped)
+        .collect();
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }
