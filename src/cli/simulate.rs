@@ -15,6 +15,9 @@ mod noise;
 mod params;
 mod whatif;
 
+#[cfg(test)]
+mod tests_inputs;
+
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
 use crate::ir::Model;
