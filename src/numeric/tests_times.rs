@@ -12,7 +12,7 @@ fn printed(x: f64) -> f64 {
 fn jitter(i: usize, size: f64) -> f64 {
     let scrambled = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
     let share = 0.8 + 0.2 * scrambled as f64 / (1u64 << 53) as f64;
-    let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+    let sign = if i.is_multiple_of(2) { 1.0 } else { -1.0 };
     sign * size * share
 }
 
