@@ -13,7 +13,7 @@
 //!   uniformly by `a` around a grid give steps within `2a` of it and an interquartile range
 //!   of about `1.2 a`; a Gaussian jitter of deviation `s`, steps rarely beyond `5 s` and a
 //!   range of about `1.9 s`; a missing row or an irregular step now and then does not move
-//!   a quartile);
+//!   a quartile; not counted below [`MIN_SCATTER_STEPS`] steps);
 //! - [`FLOOR_SHARE`] of the median step (the relative tolerance used before);
 //!
 //! bounded by [`CAP_SHARE`] of the median step, plus a few ulps of the largest time. Every
@@ -25,6 +25,10 @@ use super::stats::{median, order_statistic};
 
 /// The scatter term of the tolerance, in interquartile ranges of the steps.
 pub const SCATTER_FACTOR: f64 = 4.0;
+
+/// The fewest steps whose scatter says something about a jitter (with fewer, one odd step
+/// would be a quartile).
+pub const MIN_SCATTER_STEPS: usize = 8;
 
 /// The least tolerance, as a share of the median step.
 pub const FLOOR_SHARE: f64 = 1e-6;
@@ -46,7 +50,11 @@ pub fn time_tolerance(times: &[f64]) -> f64 {
         return ulps;
     };
     let quartile = |fraction| order_statistic(&steps, fraction).unwrap_or(typical);
-    let scatter = quartile(0.75) - quartile(0.25);
+    let scatter = if steps.len() >= MIN_SCATTER_STEPS {
+        quartile(0.75) - quartile(0.25)
+    } else {
+        0.0
+    };
     let cap = CAP_SHARE * typical.abs();
     let quantum = decimal_quantum(times);
     let precision = if quantum <= cap { quantum } else { 0.0 };
