@@ -16,6 +16,9 @@ mod params;
 mod range;
 mod whatif;
 
+#[cfg(test)]
+mod tests_inputs;
+
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
 use crate::ir::Model;

@@ -3,12 +3,9 @@
 
 use super::error::{ColumnRef, DataError, DataSource, Location};
 use super::source::{clean, clean_range, scan_record, span};
+use crate::numeric::OffGrid;
 use miette::SourceSpan;
 use std::path::PathBuf;
-
-/// Relative tolerance on the time step: a step is uniform when it differs from the typical
-/// step by at most this fraction of it.
-pub const STEP_TOLERANCE: f64 = 1e-6;
 
 /// A data set: the experiments of one or more files, in the order read (files in the order
 /// given, experiments of a file in the order of their first row).
@@ -162,9 +159,10 @@ impl Experiment {
             .iter()
             .all(|series| series.values.iter().all(Option::is_some))
     }
-    /// The mean step, when the time step is uniform: every step within a relative
-    /// [`STEP_TOLERANCE`] of the median step (plus a few ulps of the largest time). `None`
-    /// for irregular times or fewer than two samples.
+    /// The mean step, when the times lie on a uniform grid within the tolerance fitted to
+    /// them ([`crate::numeric::times`]: their printed precision and the scatter of their
+    /// steps, at most a small share of the step). `None` for irregular times or fewer than
+    /// two samples.
     pub fn uniform_step(&self) -> Option<f64> {
         step_defect(&self.times).ok().flatten()
     }
@@ -187,7 +185,7 @@ impl Experiment {
                         .at(self.rows.get(last).copied().unwrap_or(1), None),
                 })
             }
-            Err(Uneven { sample, expected }) => Err(DataError::UnevenStep {
+            Err(OffGrid { sample, expected }) => Err(DataError::UnevenStep {
                 src: self.origin.source.clone(),
                 span: self.origin.span(sample, Some(self.origin.time.index)),
                 expected,
@@ -251,44 +249,9 @@ impl Experiment {
     }
 }
 
-/// A step off the typical step: into sample `sample`, where `expected` was typical.
-struct Uneven {
-    sample: usize,
-    expected: f64,
-}
-
-/// The mean step of `times` if every step lies within tolerance of the median step
-/// (`None` for fewer than two times), else the first step that does not.
-fn step_defect(times: &[f64]) -> Result<Option<f64>, Uneven> {
-    let steps: Vec<f64> = times.windows(2).map(|pair| pair[1] - pair[0]).collect();
-    let Some(typical) = median(&steps) else {
-        return Ok(None);
-    };
-    let magnitude = times
-        .iter()
-        .fold(0.0_f64, |largest, t| largest.max(t.abs()));
-    let tolerance = STEP_TOLERANCE * typical + 8.0 * f64::EPSILON * magnitude;
-    match steps
-        .iter()
-        .position(|step| (step - typical).abs() > tolerance)
-    {
-        Some(index) => Err(Uneven {
-            sample: index + 1,
-            expected: typical,
-        }),
-        None => Ok(Some(
-            (times[times.len() - 1] - times[0]) / steps.len() as f64,
-        )),
-    }
-}
-
-/// The median of `values` (the upper one of an even count), if any.
-fn median(values: &[f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    let mut sorted = values.to_vec();
-    let middle = sorted.len() / 2;
-    let (_, value, _) = sorted.select_nth_unstable_by(middle, f64::total_cmp);
-    Some(*value)
+/// The mean step of `times` if they lie on a uniform grid within their own fitted
+/// tolerance ([`crate::numeric::time_tolerance`]; `None` for fewer than two times), else
+/// the first sample off it.
+fn step_defect(times: &[f64]) -> Result<Option<f64>, OffGrid> {
+    crate::numeric::grid_step(times, crate::numeric::time_tolerance(times))
 }

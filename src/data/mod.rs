@@ -65,7 +65,7 @@ mod sniff;
 mod source;
 
 pub use error::{ColumnRef, DataError, DataSource, Location};
-pub use experiment::{DataSet, Experiment, Origin, Series, STEP_TOLERANCE};
+pub use experiment::{DataSet, Experiment, Origin, Series};
 pub use legacy::{read, read_str};
 pub use set::{read_set, read_set_str};
 

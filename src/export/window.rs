@@ -109,9 +109,11 @@ pub fn window_map(model: &ir::Model, setup: &Setup) -> WindowMap {
 /// A complete uniform track of `knots` knots of step `step`, every value 0.
 fn uniform_track(model: &ir::Model, step: f64, knots: usize) -> Track {
     let zeros = || vec![0.0; knots];
+    let times: Vec<f64> = (0..knots).map(|k| k as f64 * step).collect();
     Track {
         name: "window".into(),
-        times: (0..knots).map(|k| k as f64 * step).collect(),
+        tolerance: crate::numeric::time_tolerance(&times),
+        times,
         rows: (0..knots).map(Some).collect(),
         steps: (0..knots)
             .map(|k| if k + 1 < knots { step } else { 0.0 })

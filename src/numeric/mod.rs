@@ -2,8 +2,9 @@
 //! ([`linalg`]: Cholesky, normal equations; [`lu`]: LU with pivoting, real or complex;
 //! [`eigen`]: symmetric eigen-decomposition), one
 //! Levenberg–Marquardt driver ([`lm`]), the training element types with the one safe
-//! softplus ([`real`]), the one optimiser of training, Adam with clipping ([`adam`]), and
-//! library-call-free exact rounding ([`rounding`]).
+//! softplus ([`real`]), the one optimiser of training, Adam with clipping ([`adam`]),
+//! library-call-free exact rounding ([`rounding`]), and the one tolerance times of a record
+//! are compared with ([`times`]).
 //!
 //! Training (`train::polish`, `train::balances`), the gap diagnosis (`diagnose::fit`,
 //! `diagnose::correction`, `diagnose::symbolic`) and the experiments all call these; none
@@ -19,11 +20,14 @@ pub mod lu;
 pub mod real;
 pub mod rounding;
 pub mod stats;
+pub mod times;
 
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
 mod tests_lm;
+#[cfg(test)]
+mod tests_times;
 
 pub use adam::{clip, Adam, AdamState, Update};
 pub use eigen::symmetric_eigen;
@@ -32,3 +36,4 @@ pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Se
 pub use lu::{Complex, Lu};
 pub use real::Real;
 pub use stats::{mean_std, median, order_statistic, root_mean_square};
+pub use times::{grid_step, time_tolerance, uniform_step, OffGrid};

@@ -46,9 +46,13 @@ pub struct Track {
     pub rows: Vec<Option<usize>>,
     /// Per knot: the step to the next knot (0 at the last).
     pub steps: Vec<f64>,
-    /// The common step when every step is the same (within a relative `1e-6`): positions
-    /// are then computed by arithmetic, as on the paper's uniform records.
+    /// The common step when the knots lie on a uniform grid within [`Track::tolerance`]:
+    /// positions are then computed by arithmetic, as on the paper's uniform records.
     pub uniform: Option<f64>,
+    /// The distance below which two times are the same time: the record's
+    /// ([`Record::time_tolerance`]), so that times that jitter around a grid fall on its
+    /// knots.
+    pub tolerance: f64,
     /// `inputs[i][knot]`: the value held from that knot to the next.
     pub inputs: Vec<Vec<f64>>,
     /// `states[i][knot]`: the reference value of measured state `i`.
@@ -72,11 +76,12 @@ impl Track {
     /// Lays `record` on its grid; `initial[i]` is the value of state `i` at the first knot
     /// when the record has no cell there (ignored where it has one).
     pub fn lay(record: &Record, options: &GridOptions, initial: &[f64]) -> Track {
-        let (times, rows) = knots(record, options);
+        let tolerance = record.time_tolerance();
+        let (times, rows) = knots(record, options, tolerance);
         let steps = (0..times.len())
             .map(|k| times.get(k + 1).map_or(0.0, |next| next - times[k]))
             .collect();
-        let uniform = super::uniform_step(&times);
+        let uniform = crate::numeric::grid_step(&times, tolerance).ok().flatten();
         let row_at = held_rows(&rows);
         let inputs = (record.inputs.iter())
             .map(|column| row_at.iter().map(|&row| column[row]).collect())
@@ -87,6 +92,7 @@ impl Track {
             rows,
             steps,
             uniform,
+            tolerance,
             inputs,
             states: Vec::new(),
             known: Vec::new(),
@@ -127,11 +133,13 @@ impl Track {
         self.times.is_empty()
     }
 
-    /// The fractional knot index of `time`, clamped to the track.
+    /// The fractional knot index of `time`, clamped to the track; a time within
+    /// [`Track::tolerance`] of a knot is that knot.
     pub fn position(&self, time: f64) -> f64 {
         let last = self.len().saturating_sub(1);
         if let Some(step) = self.uniform {
-            return snap((time - self.times[0]) / step).clamp(0.0, last as f64);
+            let position = (time - self.times[0]) / step;
+            return self.snap_knot(position).clamp(0.0, last as f64);
         }
         let after = self.times.partition_point(|&t| t <= time);
         if after == 0 {
@@ -141,8 +149,40 @@ impl Track {
             return last as f64;
         }
         let below = after - 1;
+        if time - self.times[below] <= self.tolerance {
+            return below as f64;
+        }
+        if self.times[after] - time <= self.tolerance {
+            return after as f64;
+        }
         let fraction = (time - self.times[below]) / (self.times[after] - self.times[below]);
         snap(below as f64 + fraction)
+    }
+
+    /// `lag` delays in knots of a uniform track of step `step`: a delay within
+    /// [`Track::tolerance`] of a whole number of steps is that number (a jittered grid's mean
+    /// step is not exactly its rounded version's).
+    fn lag_knots(&self, lag: usize, delay: f64, step: f64) -> f64 {
+        let ratio = delay / step;
+        let whole = rounding::round(ratio);
+        let ratio = if (delay - whole * step).abs() <= self.tolerance {
+            whole
+        } else {
+            ratio
+        };
+        lag as f64 * ratio
+    }
+
+    /// A position on a uniform track snapped onto the nearest knot when within
+    /// [`Track::tolerance`] of it (or within rounding, [`snap`]).
+    fn snap_knot(&self, position: f64) -> f64 {
+        let nearest = rounding::round(position);
+        let step = self.uniform.unwrap_or(0.0);
+        if (position - nearest).abs() * step <= self.tolerance {
+            nearest
+        } else {
+            snap(position)
+        }
     }
 
     /// The position `lag` delays of `delay` before the stage at `fraction` of the step
@@ -151,11 +191,11 @@ impl Track {
     /// `knot + fraction - lag (delay / h)`, the paper's arithmetic.
     pub fn stage_position(&self, knot: usize, fraction: f64, (lag, delay): (usize, f64)) -> f64 {
         match self.uniform {
-            Some(step) => snap(knot as f64 + fraction - lag as f64 * (delay / step)),
+            Some(step) => self.snap_knot(knot as f64 + fraction - self.lag_knots(lag, delay, step)),
             None => {
                 let step = self.steps.get(knot).copied().unwrap_or(0.0);
                 let time = self.times[knot] + fraction * step - lag as f64 * delay;
-                if time < self.times[0] {
+                if time < self.times[0] - self.tolerance {
                     return snap((time - self.times[0]) / self.steps[0].max(f64::MIN_POSITIVE));
                 }
                 self.position(time)
@@ -173,7 +213,7 @@ impl Track {
         (lag, delay): (usize, f64),
     ) -> f64 {
         match self.uniform {
-            Some(h) => snap(step as f64 + fraction - lag as f64 * (delay / h)),
+            Some(h) => self.snap_knot(step as f64 + fraction - self.lag_knots(lag, delay, h)),
             None => {
                 let position = self.stage_position(start + step, fraction, (lag, delay));
                 snap(position - start as f64)
@@ -244,7 +284,8 @@ impl Track {
                     (Some((t, v)), _) if t == time => (v, true),
                     (Some((ta, va)), Some(&(tb, vb))) => {
                         let value = va + (vb - va) * (time - ta) / (tb - ta);
-                        (value, tb - ta <= gap_limit * (1.0 + SNAP))
+                        let within = tb - ta <= gap_limit * (1.0 + SNAP) + self.tolerance;
+                        (value, within)
                     }
                     (Some((_, v)), None) => (v, false),
                     (None, Some(&(tb, vb))) => match initial.filter(|_| !has_first) {
@@ -269,14 +310,15 @@ impl Track {
 }
 
 /// The knot times of `record` and the row at each (rows, plus equal cuts of intervals
-/// longer than the maximum step).
-fn knots(record: &Record, options: &GridOptions) -> (Vec<f64>, Vec<Option<usize>>) {
+/// longer than the maximum step by more than `tolerance`).
+fn knots(record: &Record, options: &GridOptions, tolerance: f64) -> (Vec<f64>, Vec<Option<usize>>) {
     let mut times = Vec::with_capacity(record.len());
     let mut rows = Vec::with_capacity(record.len());
     for (row, &time) in record.times.iter().enumerate() {
         if let (Some(&previous), true) = (times.last(), options.subdivide) {
             let gap: f64 = time - previous;
-            let pieces = (gap / options.max_step - SNAP).ceil().max(1.0) as usize;
+            let longest = options.max_step + tolerance;
+            let pieces = (gap / longest - SNAP).ceil().max(1.0) as usize;
             for piece in 1..pieces {
                 times.push(previous + gap * piece as f64 / pieces as f64);
                 rows.push(None);

@@ -85,11 +85,18 @@ impl Record {
         self.states.iter().flatten().all(Option::is_some)
     }
 
-    /// The sampling step when the rows are uniformly spaced (every step within a relative
-    /// `1e-6` of the median): the mean step. `None` for irregular times or fewer than two
-    /// rows.
+    /// The sampling step when the rows lie on a uniform grid within
+    /// [`Record::time_tolerance`]: the mean step. `None` for irregular times or fewer than
+    /// two rows.
     pub fn uniform_step(&self) -> Option<f64> {
         uniform_step(&self.times)
+    }
+
+    /// The distance below which two times of this record are the same time, fitted to its
+    /// times ([`crate::numeric::time_tolerance`]: their printed precision and the scatter
+    /// of their steps, at most a small share of the step).
+    pub fn time_tolerance(&self) -> f64 {
+        crate::numeric::time_tolerance(&self.times)
     }
 
     /// The rows `range` as a record of their own (a tail split's training part).
@@ -125,17 +132,10 @@ impl Record {
     }
 }
 
-/// The mean step of `times` when every step lies within a relative `1e-6` of the median
-/// step (plus a few ulps of the largest time); `None` otherwise.
+/// The mean step of `times` when they lie on a uniform grid within the tolerance fitted to
+/// them ([`crate::numeric::times`]); `None` otherwise.
 pub fn uniform_step(times: &[f64]) -> Option<f64> {
-    let steps: Vec<f64> = times.windows(2).map(|pair| pair[1] - pair[0]).collect();
-    let typical = crate::numeric::median(&steps)?;
-    let magnitude = times.iter().fold(0.0_f64, |m, t| m.max(t.abs()));
-    let tolerance = 1e-6 * typical + 8.0 * f64::EPSILON * magnitude;
-    steps
-        .iter()
-        .all(|step| (step - typical).abs() <= tolerance)
-        .then(|| (times[times.len() - 1] - times[0]) / steps.len() as f64)
+    crate::numeric::uniform_step(times)
 }
 
 /// Per-column normalisation from the training split (records spec, section 3): the mean

@@ -19,8 +19,8 @@ use crate::backend::{NamedTensor, Network, Normalisation, Precision, Setup};
 use crate::ir;
 
 use super::{
-    Engine, Metrics, ParamEstimate, PolishSummary, Recipe, StiffnessWarning, TrainError,
-    TrainOptions, Trained,
+    Engine, Metrics, ParamEstimate, PolishSummary, Recipe, TrainError, TrainOptions, Trained,
+    Warning,
 };
 
 /// File name of the weights inside a run directory.
@@ -82,8 +82,9 @@ pub struct RunInfo {
     pub coverage: super::coverage::Coverage,
     /// Validation errors.
     pub metrics: Metrics,
-    /// Stiffness warnings issued.
-    pub warnings: Vec<StiffnessWarning>,
+    /// Warnings issued before training: stiff balances, steps with a target that do not
+    /// train.
+    pub warnings: Vec<Warning>,
     /// The weights file, relative to the run directory.
     pub weights: String,
     /// Where training went non-finite, when it did: the weights are then the kept epoch's

@@ -49,12 +49,15 @@ pub mod stepping;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_jitter;
+#[cfg(test)]
 mod tests_mechanism;
 #[cfg(test)]
 mod tests_recipe;
 #[cfg(test)]
 mod tests_records;
 mod validation;
+pub mod warnings;
 pub mod windows;
 
 #[cfg(test)]
@@ -75,6 +78,7 @@ pub use recovery::Recovery;
 pub use run::{train_run, train_with, EVALUATING, TRAINING, VALIDATING};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
+pub use warnings::{DropCause, DroppedPairs, Warning};
 
 /// Epochs between refreshes of the model's fill of unknown stretches.
 pub const FILL_REFRESH: usize = 10;
@@ -150,8 +154,8 @@ impl TrainOptions {
 /// Something worth telling the user while training runs.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event<'a> {
-    /// Before the first epoch: the stiffness estimate found a problem.
-    Warning(&'a StiffnessWarning),
+    /// Before the first epoch: a balance is too stiff, or steps with a target do not train.
+    Warning(&'a Warning),
     /// An epoch went non-finite and training went back to the last finite one
     /// ([`recovery`]).
     Recovered(&'a Recovery),
@@ -267,8 +271,8 @@ pub struct TrainReport {
     pub metrics: Metrics,
     /// Trained param values, in declaration order.
     pub params: Vec<(String, f64)>,
-    /// Stiffness warnings issued before training.
-    pub warnings: Vec<StiffnessWarning>,
+    /// Warnings issued before training: stiff balances, steps that do not train.
+    pub warnings: Vec<Warning>,
     /// Mean training loss of each epoch.
     pub losses: Vec<f64>,
     /// Number of training pairs.

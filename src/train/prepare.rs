@@ -11,6 +11,7 @@ use super::split::{
     known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training,
     TrainingData,
 };
+use super::warnings::{dropped_pairs, DroppedPairs};
 use super::{History, TrainError, TrainOptions};
 
 /// Everything the data fix before training.
@@ -25,6 +26,8 @@ pub struct Layout {
     pub trainings: Vec<Training>,
     /// The one-step pairs that train.
     pub pairs: Vec<PairAt>,
+    /// The steps with a target that do not train, when some do not.
+    pub dropped: Option<DroppedPairs>,
     /// The steps of the training part known from data at both ends (magnitudes,
     /// stiffness, params from the balances).
     pub intervals: Vec<PairAt>,
@@ -71,6 +74,7 @@ impl Layout {
             &fractions,
         )?;
         let pairs = training_pairs(model, &tracks, &trainings);
+        let dropped = dropped_pairs(model, &tracks, &trainings, &grid.gap_limits);
         let intervals = known_intervals(model, &tracks, &trainings);
         let mut validation_tracks = if scorings.is_empty() {
             Vec::new()
@@ -105,6 +109,7 @@ impl Layout {
             tracks,
             trainings,
             pairs,
+            dropped,
             intervals,
             validation_tracks,
             scorings,
@@ -229,7 +234,7 @@ fn check_long_enough(model: &ir::Model, track: &Track) -> Result<(), TrainError>
 fn check_uniform(records: &[&Record], step: f64) -> Result<(), TrainError> {
     for record in records {
         let found = match record.uniform_step() {
-            Some(h) if (h - step).abs() <= 1e-6 * step => continue,
+            Some(h) if (h - step).abs() <= record.time_tolerance() => continue,
             Some(h) => format!("a step of {h:.6} where others step {step:.6}"),
             None => {
                 let steps: Vec<f64> = record.times.windows(2).map(|w| w[1] - w[0]).collect();

@@ -20,8 +20,7 @@ use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
     mechanism, polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part,
-    PhysicalRange, Recipe, StiffnessWarning, TrainError, TrainOptions, TrainReport, Trained,
-    TrainingData,
+    PhysicalRange, Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData, Warning,
 };
 use crate::diagnose::mechanism::MechanismFit;
 
@@ -107,7 +106,7 @@ struct Run<'m> {
     layout: Layout,
     hidden_init: Vec<f64>,
     fractions: Vec<f64>,
-    warnings: Vec<StiffnessWarning>,
+    warnings: Vec<Warning>,
     balance_fit: Option<BalanceFit>,
     mechanism_fit: Option<MechanismFit>,
     coverage: Coverage,
@@ -151,13 +150,17 @@ fn prepare<'m>(
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
     let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
-    let warnings = analysis::stiffness(
+    let stiff = analysis::stiffness(
         model,
         &scales,
         (&layout.tracks, &layout.intervals),
         &hidden_init,
         options.substeps,
     )?;
+    let dropped = layout.dropped.clone().map(Warning::DroppedPairs);
+    let warnings: Vec<Warning> = (stiff.into_iter().map(Warning::Stiffness))
+        .chain(dropped)
+        .collect();
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }

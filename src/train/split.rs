@@ -88,7 +88,8 @@ pub struct Scoring {
     pub pairs: Vec<usize>,
 }
 
-/// The first knot whose whole embedding (every closure's span) lies inside the track.
+/// The first knot whose whole embedding (every closure's span) lies inside the track (a
+/// knot within the track's time tolerance of the span's end counts as at it).
 pub fn first_inside(model: &ir::Model, track: &Track) -> usize {
     let span = (model.closures.iter())
         .map(|c| c.embedding.span())
@@ -96,7 +97,7 @@ pub fn first_inside(model: &ir::Model, track: &Track) -> usize {
     let Some(&start) = track.times.first() else {
         return 0;
     };
-    let threshold = start + span - 1e-9 * span.max(1.0);
+    let threshold = start + span - 1e-9 * span.max(1.0) - track.tolerance;
     track.times.partition_point(|&t| t < threshold)
 }
 

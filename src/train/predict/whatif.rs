@@ -196,13 +196,13 @@ fn record_of(
     Ok((record, start_row))
 }
 
-/// The history's row at `t_start` (within rounding of the history's spacing).
+/// The history's row at `t_start` (within the history's time tolerance, or rounding).
 fn start_row(history: &Record, t_start: f64) -> Result<usize, WhatIfError> {
     let (first, last) = match (history.times.first(), history.times.last()) {
         (Some(&first), Some(&last)) => (first, last),
         _ => (f64::NAN, f64::NAN),
     };
-    let tolerance = 1e-9 * (last - first).abs().max(1.0);
+    let tolerance = (1e-9 * (last - first).abs().max(1.0)).max(history.time_tolerance());
     (history.times.iter())
         .position(|&t| (t - t_start).abs() <= tolerance)
         .ok_or(WhatIfError::StartOutsideHistory {
