@@ -32,6 +32,8 @@ mod tests;
 #[cfg(test)]
 mod tests_irregular;
 #[cfg(test)]
+pub(crate) mod tests_positive;
+#[cfg(test)]
 mod tests_rollout;
 
 use std::ops::Range;

@@ -45,6 +45,8 @@ pub mod step;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_outputs;
+#[cfg(test)]
 mod tests_recipe;
 #[cfg(test)]
 mod tests_records;
