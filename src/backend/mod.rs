@@ -16,8 +16,11 @@
 //!
 //! Meaning of closure outputs (spec section 3), with network output `n` and magnitude `s`:
 //! no prior `o = s n`; `prior o *= p`: `o = p (1 + n)`; `prior o += p`: `o = p + s n`. A
-//! `positive` output is then mapped through `s softplus(o / s)` and an `in [lo, hi]` output
-//! through `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))` (unit slope at the middle).
+//! `positive` output without a prior is then mapped through `s softplus(o / s)` and an
+//! `in [lo, hi]` output through `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))` (unit
+//! slope at the middle). A `positive` output with a prior keeps it exactly at `n = 0` and
+//! vanishes with it: `max(p, 0) g(n)` with `g(n) = max(n, 0) + exp(min(0, n))` under `*=`,
+//! `max(p + s n, 0)` under `+=` (`program::outputs`).
 //! Params are trained unconstrained: `positive` through softplus (initialised at the
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
 
@@ -31,6 +34,8 @@ pub mod program;
 mod tests;
 #[cfg(test)]
 mod tests_irregular;
+#[cfg(test)]
+pub(crate) mod tests_positive;
 #[cfg(test)]
 mod tests_rollout;
 

@@ -8,6 +8,8 @@
 //! a param or a network output take part in the reverse sweep. The graph backend wraps
 //! [`Program::forward`] and [`Program::backward`] as one fused operation.
 
+mod outputs;
+
 use std::collections::HashMap;
 
 use super::elementwise::{
@@ -15,7 +17,7 @@ use super::elementwise::{
     unary_column_reverse, unary_derivative, Binary, Operands, Unary,
 };
 use super::BackendError;
-use crate::ir::{self, BinOp, Constraint, Func, PriorKind, Var};
+use crate::ir::{self, BinOp, Constraint, Func, Var};
 use crate::numeric::Real;
 
 /// One instruction; operands are earlier registers.
@@ -107,66 +109,24 @@ struct Compiler<'m> {
     closure_output_regs: HashMap<(usize, usize), usize>,
     param_regs: HashMap<usize, usize>,
     in_progress: Vec<(usize, usize)>,
+    /// Whether closure outputs are their known part plus their network slot:
+    /// [`Program::compile_with_free_outputs`].
+    free_outputs: bool,
 }
 
 impl Program {
     /// Compiles the physics of `model` (spec section 3 for closure outputs; params through
     /// their transforms: `positive` as softplus, `in [lo, hi]` as `lo + (hi - lo) sigmoid`).
     pub fn compile(model: &ir::Model, scales: &[Vec<f64>]) -> Result<Program, BackendError> {
-        let mut compiler = Compiler {
-            model,
-            scales,
-            instrs: Vec::new(),
-            interned: HashMap::new(),
-            closure_output_regs: HashMap::new(),
-            param_regs: HashMap::new(),
-            in_progress: Vec::new(),
-        };
-        let state_count = model.states.len() + model.hidden.len();
-        let mut balances = vec![None; state_count];
-        for balance in &model.balances {
-            let index = state_index(model, balance.state)?;
-            balances[index] = Some(compiler.expr(&balance.expr)?);
-        }
-        let balances = balances
-            .into_iter()
-            .enumerate()
-            .map(|(index, reg)| {
-                reg.ok_or_else(|| BackendError::internal(format!("state {index} has no balance")))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut closure_outputs = Vec::new();
-        for (closure, spec) in model.closures.iter().enumerate() {
-            for output in 0..spec.outputs.len() {
-                closure_outputs.push(compiler.closure_output(closure, output)?);
-            }
-        }
-        let param_values = (0..model.params.len())
-            .map(|index| compiler.param(index))
-            .collect::<Result<Vec<_>, _>>()?;
-        let outputs = model
-            .outputs
-            .iter()
-            .map(|definition| compiler.expr(&definition.expr))
-            .collect::<Result<Vec<_>, _>>()?;
-        let shape = ProgramShape {
-            states: state_count,
-            inputs: model.inputs.len(),
-            params: model.params.len(),
-            nets: model.closures.iter().map(|c| c.outputs.len()).collect(),
-        };
-        let active = activity(&compiler.instrs);
-        let uniform = uniformity(&compiler.instrs);
-        Ok(Program {
-            instrs: compiler.instrs,
-            active,
-            uniform,
-            shape,
-            balances,
-            closure_outputs,
-            param_values,
-            outputs,
-        })
+        Compiler::new(model, scales, false).program()
+    }
+
+    /// The physics with every closure output `o = k_o + v_o`: `k_o` its value at network
+    /// output 0 when it has a prior (0 without one), `v_o` read from its network slot, so that
+    /// callers set the unknown part of each output themselves: what the balances ask of the
+    /// outputs before training (`train::analysis`).
+    pub fn compile_with_free_outputs(model: &ir::Model) -> Result<Program, BackendError> {
+        Compiler::new(model, &[], true).program()
     }
 
     /// What the program reads per row.
@@ -382,6 +342,71 @@ fn operand_adjoints<E>(adjoint: &mut [E], rows: usize, a: usize, b: usize) -> Op
     }
 }
 
+impl<'m> Compiler<'m> {
+    fn new(model: &'m ir::Model, scales: &'m [Vec<f64>], free_outputs: bool) -> Self {
+        Compiler {
+            model,
+            scales,
+            instrs: Vec::new(),
+            interned: HashMap::new(),
+            closure_output_regs: HashMap::new(),
+            param_regs: HashMap::new(),
+            in_progress: Vec::new(),
+            free_outputs,
+        }
+    }
+
+    /// The program of the whole model: balances, closure outputs, params, `output`s.
+    fn program(mut self) -> Result<Program, BackendError> {
+        let model = self.model;
+        let state_count = model.states.len() + model.hidden.len();
+        let mut balances = vec![None; state_count];
+        for balance in &model.balances {
+            let index = state_index(model, balance.state)?;
+            balances[index] = Some(self.expr(&balance.expr)?);
+        }
+        let balances = balances
+            .into_iter()
+            .enumerate()
+            .map(|(index, reg)| {
+                reg.ok_or_else(|| BackendError::internal(format!("state {index} has no balance")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut closure_outputs = Vec::new();
+        for (closure, spec) in model.closures.iter().enumerate() {
+            for output in 0..spec.outputs.len() {
+                closure_outputs.push(self.closure_output(closure, output)?);
+            }
+        }
+        let param_values = (0..model.params.len())
+            .map(|index| self.param(index))
+            .collect::<Result<Vec<_>, _>>()?;
+        let outputs = model
+            .outputs
+            .iter()
+            .map(|definition| self.expr(&definition.expr))
+            .collect::<Result<Vec<_>, _>>()?;
+        let shape = ProgramShape {
+            states: state_count,
+            inputs: model.inputs.len(),
+            params: model.params.len(),
+            nets: model.closures.iter().map(|c| c.outputs.len()).collect(),
+        };
+        let active = activity(&self.instrs);
+        let uniform = uniformity(&self.instrs);
+        Ok(Program {
+            instrs: self.instrs,
+            active,
+            uniform,
+            shape,
+            balances,
+            closure_outputs,
+            param_values,
+            outputs,
+        })
+    }
+}
+
 impl Compiler<'_> {
     fn push(&mut self, instr: Instr) -> usize {
         if let Some(folded) = self.fold(instr) {
@@ -515,68 +540,6 @@ impl Compiler<'_> {
                 let low = self.constant(lo);
                 self.binary(Binary::Add, low, spread)
             }
-        }
-    }
-
-    /// Output `output` of closure `closure`: network output, prior and scale combined as in
-    /// spec section 3, then its declared constraint.
-    fn closure_output(&mut self, closure: usize, output: usize) -> Result<usize, BackendError> {
-        if let Some(&reg) = self.closure_output_regs.get(&(closure, output)) {
-            return Ok(reg);
-        }
-        if self.in_progress.contains(&(closure, output)) {
-            return Err(BackendError::internal(
-                "a closure prior depends on its own output".to_string(),
-            ));
-        }
-        let spec = (self.model.closures.get(closure))
-            .and_then(|c| c.outputs.get(output))
-            .ok_or_else(|| {
-                BackendError::internal(format!("no closure output {closure}.{output}"))
-            })?;
-        let scale = (self.scales.get(closure))
-            .and_then(|s| s.get(output))
-            .copied()
-            .ok_or_else(|| BackendError::internal(format!("no scale for {}", spec.name)))?;
-        self.in_progress.push((closure, output));
-        let net = self.push(Instr::Net { closure, output });
-        let combined = match &spec.prior {
-            None => {
-                let s = self.constant(scale);
-                self.binary(Binary::Mul, s, net)
-            }
-            Some(prior) => {
-                let p = self.expr(&prior.expr)?;
-                match prior.kind {
-                    PriorKind::Mul => {
-                        let one = self.constant(1.0);
-                        let factor = self.binary(Binary::Add, one, net);
-                        self.binary(Binary::Mul, p, factor)
-                    }
-                    PriorKind::Add => {
-                        let s = self.constant(scale);
-                        let correction = self.binary(Binary::Mul, s, net);
-                        self.binary(Binary::Add, p, correction)
-                    }
-                }
-            }
-        };
-        let reg = self.constrain_output(combined, spec.constraint, scale);
-        self.in_progress.pop();
-        self.closure_output_regs.insert((closure, output), reg);
-        Ok(reg)
-    }
-
-    fn constrain_output(&mut self, combined: usize, constraint: Constraint, scale: f64) -> usize {
-        match constraint {
-            Constraint::Bounds(lo, hi) => {
-                let middle = self.constant(-(lo + hi) / 2.0);
-                let centred = self.binary(Binary::Add, combined, middle);
-                let slope = self.constant(4.0 / (hi - lo));
-                let argument = self.binary(Binary::Mul, slope, centred);
-                self.constrain(argument, constraint, 1.0)
-            }
-            other => self.constrain(combined, other, scale),
         }
     }
 }

@@ -109,29 +109,15 @@ impl<'m> Physics<'m> {
         let spec = &self.model.closures[closure].outputs[output];
         let scale = self.scales[closure][output];
         let net = Value::Column(graph.column(&stage.nets[closure], output));
-        let combined = match &spec.prior {
-            None => graph.binary("Mul", &Value::Const(scale), &net),
+        let value = match &spec.prior {
+            None => {
+                let plain = graph.binary("Mul", &Value::Const(scale), &net);
+                constrain_output(graph, &plain, spec.constraint, scale)
+            }
             Some(prior) => {
                 let p = self.expr(graph, stage, &prior.expr);
-                match prior.kind {
-                    PriorKind::Mul => {
-                        let factor = graph.binary("Add", &Value::Const(1.0), &net);
-                        graph.binary("Mul", &p, &factor)
-                    }
-                    PriorKind::Add => {
-                        let correction = graph.binary("Mul", &Value::Const(scale), &net);
-                        graph.binary("Add", &p, &correction)
-                    }
-                }
+                with_prior(graph, (&p, prior.kind), &net, spec.constraint, scale)
             }
-        };
-        let value = match spec.constraint {
-            Constraint::Bounds(lo, hi) => {
-                let centred = graph.binary("Add", &combined, &Value::Const(-(lo + hi) / 2.0));
-                let argument = graph.binary("Mul", &Value::Const(4.0 / (hi - lo)), &centred);
-                constrain(graph, &argument, spec.constraint, 1.0)
-            }
-            other => constrain(graph, &combined, other, scale),
         };
         stage.memo.insert(key, value.clone());
         value
@@ -174,6 +160,62 @@ impl<'m> Physics<'m> {
         let indices = graph.ints("param_index", &[], &[index as i64]);
         let raw = Value::Scalar(graph.node("Gather", &[&raw_params, &indices], &[("axis", 0)]));
         constrain(graph, &raw, self.model.params[index].constraint, 1.0)
+    }
+}
+
+/// A closure output with a prior `p` from its network output `net`, as the physics program
+/// computes it (`backend::program::outputs`): a `positive` output is `max(p, 0) g(n)` with
+/// `g(n) = max(n, 0) + exp(min(0, n))` under `*=` and `max(p + s n, 0)` under `+=`.
+fn with_prior(
+    graph: &mut Builder,
+    (p, kind): (&Value, PriorKind),
+    net: &Value,
+    constraint: Constraint,
+    scale: f64,
+) -> Value {
+    let zero = Value::Const(0.0);
+    let positive = matches!(constraint, Constraint::Positive);
+    match (kind, positive) {
+        (PriorKind::Mul, true) => {
+            let clipped = graph.binary("Max", p, &zero);
+            let upper = graph.binary("Max", net, &zero);
+            let lower = graph.binary("Min", &zero, net);
+            let decay = unary(graph, Func::Exp, &lower);
+            let factor = graph.binary("Add", &upper, &decay);
+            graph.binary("Mul", &clipped, &factor)
+        }
+        (PriorKind::Mul, false) => {
+            let factor = graph.binary("Add", &Value::Const(1.0), net);
+            let combined = graph.binary("Mul", p, &factor);
+            constrain_output(graph, &combined, constraint, scale)
+        }
+        (PriorKind::Add, positive) => {
+            let correction = graph.binary("Mul", &Value::Const(scale), net);
+            let combined = graph.binary("Add", p, &correction);
+            if positive {
+                graph.binary("Max", &combined, &zero)
+            } else {
+                constrain_output(graph, &combined, constraint, scale)
+            }
+        }
+    }
+}
+
+/// An output's constraint map: `s softplus(o / s)` for `positive`, and for `in [lo, hi]`
+/// `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))`.
+fn constrain_output(
+    graph: &mut Builder,
+    combined: &Value,
+    constraint: Constraint,
+    scale: f64,
+) -> Value {
+    match constraint {
+        Constraint::Bounds(lo, hi) => {
+            let centred = graph.binary("Add", combined, &Value::Const(-(lo + hi) / 2.0));
+            let argument = graph.binary("Mul", &Value::Const(4.0 / (hi - lo)), &centred);
+            constrain(graph, &argument, constraint, 1.0)
+        }
+        other => constrain(graph, combined, other, scale),
     }
 }
 

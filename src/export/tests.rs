@@ -208,6 +208,19 @@ fn the_exported_bioreactor_gb1_steps_as_gbc_predicts_online() {
     eprintln!("bioreactor GB1, f32: largest relative error {error:e}");
 }
 
+const GB2: (&str, &str, usize) = (
+    "models/bioreactor/gb2.gbm",
+    "models/bioreactor/data/steps.csv",
+    200,
+);
+
+/// GB2's outputs are `positive` under `*=` priors: `max(p, 0) (max(n, 0) + exp(min(0, n)))`.
+#[test]
+fn the_exported_gb2_with_positive_priors_steps_as_gbc_predicts_online() {
+    let error = matches_online_prediction(GB2, Precision::F64, 1e-11);
+    eprintln!("bioreactor GB2, f64: largest relative error {error:e}");
+}
+
 /// In `f64` the export is the trainable network's arithmetic up to summation order.
 #[test]
 fn an_f64_export_steps_as_gbc_predicts_online_to_rounding() {

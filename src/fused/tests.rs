@@ -84,6 +84,23 @@ fn gradients_match_the_backend_with_irregular_steps_and_loss_weights() {
     }
 }
 
+/// `positive` outputs under `*=` and `+=` priors: the `max` joins and the exponential piece
+/// of the correction factor, at network outputs on both sides of zero.
+#[test]
+fn gradients_match_the_backend_for_positive_outputs_under_priors() {
+    let model = crate::backend::tests_positive::positive_priors();
+    for precision in [Precision::F64, Precision::F32] {
+        let setup = setup(&model, precision, 1);
+        let batch = random_batch(&model, &setup, 6, 4);
+        let tolerance = if precision == Precision::F64 {
+            1e-11
+        } else {
+            2e-5
+        };
+        assert_matches_backend(&model, &setup, &batch, tolerance, false);
+    }
+}
+
 #[test]
 fn gradients_match_the_backend_in_f32() {
     let model = kitchen_sink(Activation::Softplus);

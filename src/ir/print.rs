@@ -215,9 +215,15 @@ fn write_closure(
             None => format!("{} = s * n{k}", output.name),
             Some(prior) => {
                 let p = expr_text(model, &prior.expr);
-                match prior.kind {
-                    PriorKind::Mul => format!("{} = ({p}) * (1 + n{k})", output.name),
-                    PriorKind::Add => format!("{} = {p} + s * n{k}", output.name),
+                let positive = matches!(output.constraint, Constraint::Positive);
+                match (prior.kind, positive) {
+                    (PriorKind::Mul, false) => format!("{} = ({p}) * (1 + n{k})", output.name),
+                    (PriorKind::Mul, true) => format!(
+                        "{} = max({p}, 0) * (max(n{k}, 0) + exp(min(n{k}, 0)))",
+                        output.name
+                    ),
+                    (PriorKind::Add, false) => format!("{} = {p} + s * n{k}", output.name),
+                    (PriorKind::Add, true) => format!("{} = max({p} + s * n{k}, 0)", output.name),
                 }
             }
         };

@@ -1,32 +1,38 @@
 //! What the data says before training: default closure-output magnitudes and a stiffness
 //! estimate of the balances.
 //!
-//! Both evaluate the physics with every network output at zero (the *known part*: the
-//! balances with the closure outputs at their priors, or zero without one) at the rows of
-//! the training split, the hidden states at their initial values, and compare it with what
-//! the data asks of it: the finite-difference derivative `d_i = (x_{i+1} - x_i) / h` for
-//! `der` models, the next value `d_i = x_{i+1}` for `next` models.
+//! Both evaluate the physics at the rows of the training split (hidden states at their
+//! initial values) with every closure output split into its *known part* (its value at
+//! network output 0 when it has a prior, 0 without one) and an *unknown part* set freely
+//! (`Program::compile_with_free_outputs`), and compare the balances with what the data asks
+//! of them: the finite-difference derivative `d_i = (x_{i+1} - x_i) / h` for `der` models,
+//! the next value `d_i = x_{i+1}` for `next` models. The *residual* of a measured balance
+//! `X` is `r_i = d_i - known_i`, the balance with every unknown part at 0. The outputs
+//! *sharing* it are those without a `*=` prior whose sensitivity `J_i = d f_X / d o`
+//! (exact, by the program's reverse sweep) is not zero at most rows; `m_X` counts them.
 //!
 //! **Default magnitude `s_o`** (an output without `~` and without a `*=` prior): for each
-//! measured balance `X` that `o` enters, with sensitivity `J_i = d f_X / d o` (central
-//! difference), the data asks `o_i ~ (d_i - known_i) / J_i` of the network; `s_o` is the
-//! root mean square of that over the rows (those where `|J_i|` is at least a tenth of its
-//! median), taking the smallest over balances (a balance shared with other unknown outputs
-//! overstates it). Without any estimate `s_o = 1`.
+//! measured balance `X` that `o` shares, the data asks `o_i ~ r_i / (m_X J_i)` of it, its
+//! even share of the residual divided by the factor that multiplies it there (`X` itself
+//! in `der X = mu * X`), over the rows where `|J_i|` is at least a tenth of its median;
+//! `s_o` is the root mean square of that, from the balances with the fewest sharers (the
+//! smallest when several tie). Without any estimate `s_o = 1`.
 //!
 //! **Stiffness**: RK4 is stable for `h * lambda >= -2.785` on the negative real axis. For
-//! each balance the local rate is estimated as the diagonal Jacobian of the known part
-//! (central difference) minus, for measured states, the unknown consumption the data shows
-//! per unit of the state, `max(0, known_i - d_i) / |x_i|` — a first-order rate law removing
-//! that flux would have exactly that eigenvalue, and saturating laws have smaller ones.
-//! The estimate is the 1st percentile over the rows; a warning names the balance, the
-//! step that would be stable and the `--substeps` that would make it so.
+//! each balance the local rate is the diagonal Jacobian `d f_X / d X` of the known part
+//! (central difference) plus, for a measured balance whose residual is a consumption at
+//! most rows (median below 0), what the unknown part would add if it were a first-order
+//! law in `X`: `min(0, r_i) / |x_i|`, times the fraction of the sharers whose closure
+//! observes `X` (only those can depend on it). A saturating law has a smaller eigenvalue, a
+//! production (a positive residual, as in `der P = q * X`) adds none. The estimate is the
+//! 1st percentile over the rows; a warning names the balance, the step that would be
+//! stable and the `--substeps` that would make it so.
 
 use std::fmt;
 
 use crate::backend::program::{Program, ProgramInputs};
 use crate::backend::{initial_raw_params, BackendError};
-use crate::ir::{self, Dynamics, PriorKind};
+use crate::ir::{self, Dynamics, PriorKind, Var};
 use crate::numeric::order_statistic;
 
 use crate::record::Track;
@@ -82,7 +88,8 @@ pub(crate) fn compact(value: f64) -> String {
     text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-/// The physics evaluated at the training rows.
+/// The physics evaluated at the training rows, every closure output its known part plus a
+/// free unknown part (module documentation).
 struct Probe {
     program: Program,
     rows: usize,
@@ -101,11 +108,10 @@ impl Probe {
     /// The physics at the pairs whose states are known from data at both ends.
     fn new(
         model: &ir::Model,
-        scales: &[Vec<f64>],
         (tracks, pairs): (&[Track], &[PairAt]),
         hidden: &[f64],
     ) -> Result<Probe, BackendError> {
-        let program = Program::compile(model, scales)?;
+        let program = Program::compile_with_free_outputs(model)?;
         let measured = model.states.len();
         let usable: Vec<PairAt> = (pairs.iter().copied())
             .filter(|&(index, knot)| {
@@ -147,25 +153,110 @@ impl Probe {
         self.program.shape().states
     }
 
-    /// `rows x states` balances for the given states and network outputs.
-    fn balances(&self, states: &[f64], nets: &[Vec<f64>]) -> Vec<f64> {
-        let net_slices: Vec<&[f64]> = nets.iter().map(Vec::as_slice).collect();
-        let inputs = ProgramInputs {
+    fn program_inputs<'a>(
+        &'a self,
+        states: &'a [f64],
+        nets: &'a [&'a [f64]],
+    ) -> ProgramInputs<'a, f64> {
+        ProgramInputs {
             rows: self.rows,
             states,
             inputs: &self.inputs,
             params: &self.params,
-            nets: &net_slices,
-        };
-        let values = self.program.forward(&inputs);
+            nets,
+        }
+    }
+
+    /// `rows x states` balances for the given states, every unknown part at 0.
+    fn known(&self, states: &[f64]) -> Vec<f64> {
+        let silent = self.silent_nets();
+        let nets: Vec<&[f64]> = silent.iter().map(Vec::as_slice).collect();
+        let values = self.program.forward(&self.program_inputs(states, &nets));
         self.program
             .read(&values, self.rows, &self.program.balances)
+    }
+
+    /// Per closure, `rows x outputs`: `d f_state / d o` at every row (unknown parts at 0).
+    fn sensitivities(&self, state: usize) -> Vec<Vec<f64>> {
+        let silent = self.silent_nets();
+        let nets: Vec<&[f64]> = silent.iter().map(Vec::as_slice).collect();
+        let inputs = self.program_inputs(&self.states, &nets);
+        let values = self.program.forward(&inputs);
+        let width = self.state_width();
+        let mut seed = vec![0.0; self.rows * width];
+        for row in 0..self.rows {
+            seed[row * width + state] = 1.0;
+        }
+        let balances = &self.program.balances;
+        (self.program.backward(&inputs, &values, balances, &seed)).nets
     }
 
     fn silent_nets(&self) -> Vec<Vec<f64>> {
         (self.net_widths.iter())
             .map(|&w| vec![0.0; self.rows * w])
             .collect()
+    }
+}
+
+/// What one measured balance asks of the outputs sharing it.
+struct Demand {
+    /// `d_i - known_i` per row.
+    residual: Vec<f64>,
+    /// The sharing outputs `(closure, output)` with `d f / d o` per row.
+    sharers: Vec<((usize, usize), Vec<f64>)>,
+}
+
+impl Demand {
+    /// The demand on measured balance `state`, given the known balances.
+    fn of(probe: &Probe, model: &ir::Model, state: usize, known: &[f64]) -> Demand {
+        let (width, measured) = (probe.state_width(), model.states.len());
+        let residual = (0..probe.rows)
+            .map(|r| probe.targets[r * measured + state] - known[r * width + state])
+            .collect();
+        let sensitivities = probe.sensitivities(state);
+        let mut sharers = Vec::new();
+        for (closure, spec) in model.closures.iter().enumerate() {
+            let outputs = spec.outputs.len();
+            for (output, out) in spec.outputs.iter().enumerate() {
+                if matches!(&out.prior, Some(p) if p.kind == PriorKind::Mul) {
+                    continue;
+                }
+                let column: Vec<f64> = (0..probe.rows)
+                    .map(|r| sensitivities[closure][r * outputs + output])
+                    .collect();
+                if median_magnitude(&column) > 0.0 {
+                    sharers.push(((closure, output), column));
+                }
+            }
+        }
+        Demand { residual, sharers }
+    }
+
+    /// The root mean square of `r_i / (m J_i)` for `output`, if it shares the balance.
+    fn magnitude(&self, output: (usize, usize)) -> Option<f64> {
+        let (_, sensitivity) = self.sharers.iter().find(|(at, _)| *at == output)?;
+        let median = median_magnitude(sensitivity);
+        let share = self.sharers.len() as f64;
+        let (mut total, mut count) = (0.0, 0usize);
+        for (residual, &j) in self.residual.iter().zip(sensitivity) {
+            if j.abs() >= 0.1 * median {
+                total += (residual / (share * j)).powi(2);
+                count += 1;
+            }
+        }
+        let rms = (total / count.max(1) as f64).sqrt();
+        (rms.is_finite() && rms > 0.0).then_some(rms)
+    }
+}
+
+/// The median of `|values|` (0 when there are none or it is not finite).
+fn median_magnitude(values: &[f64]) -> f64 {
+    let magnitudes: Vec<f64> = values.iter().map(|j| j.abs()).collect();
+    let median = order_statistic(&magnitudes, 0.5).unwrap_or(0.0);
+    if median.is_finite() {
+        median
+    } else {
+        0.0
     }
 }
 
@@ -177,73 +268,35 @@ pub fn closure_scales(
     pairs: &[PairAt],
     hidden: &[f64],
 ) -> Result<Vec<Vec<f64>>, BackendError> {
-    let unit: Vec<Vec<f64>> = (model.closures.iter())
+    let mut scales: Vec<Vec<f64>> = (model.closures.iter())
         .map(|c| c.outputs.iter().map(|o| o.scale.unwrap_or(1.0)).collect())
         .collect();
-    let probe = Probe::new(model, &unit, (tracks, pairs), hidden)?;
-    let known = probe.balances(&probe.states, &probe.silent_nets());
-    let mut scales = unit.clone();
+    let probe = Probe::new(model, (tracks, pairs), hidden)?;
+    if probe.rows == 0 {
+        return Ok(scales);
+    }
+    let known = probe.known(&probe.states);
+    let demands: Vec<Demand> = (0..model.states.len())
+        .map(|state| Demand::of(&probe, model, state, &known))
+        .collect();
     for (closure, spec) in model.closures.iter().enumerate() {
         for (output, out) in spec.outputs.iter().enumerate() {
             let multiplicative = matches!(&out.prior, Some(p) if p.kind == PriorKind::Mul);
-            if out.scale.is_some() || multiplicative || probe.rows == 0 {
+            if out.scale.is_some() || multiplicative {
                 continue;
             }
-            scales[closure][output] = default_scale(&probe, &known, model, closure, output);
+            let best = (demands.iter())
+                .filter_map(|d| Some((d.sharers.len(), d.magnitude((closure, output))?)))
+                .min_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+            scales[closure][output] = best.map_or(1.0, |(_, magnitude)| magnitude);
         }
     }
     Ok(scales)
 }
 
-fn default_scale(
-    probe: &Probe,
-    known: &[f64],
-    model: &ir::Model,
-    closure: usize,
-    output: usize,
-) -> f64 {
-    let delta = 1e-3;
-    let shifted = |sign: f64| {
-        let mut nets = probe.silent_nets();
-        let width = probe.net_widths[closure];
-        for row in 0..probe.rows {
-            nets[closure][row * width + output] = sign * delta;
-        }
-        probe.balances(&probe.states, &nets)
-    };
-    let (up, down) = (shifted(1.0), shifted(-1.0));
-    let width = probe.state_width();
-    let measured = model.states.len();
-    let mut best: Option<f64> = None;
-    for state in 0..measured {
-        let sensitivity: Vec<f64> = (0..probe.rows)
-            .map(|r| (up[r * width + state] - down[r * width + state]) / (2.0 * delta))
-            .collect();
-        let magnitudes: Vec<f64> = sensitivity.iter().map(|j| j.abs()).collect();
-        let median = order_statistic(&magnitudes, 0.5).unwrap_or(0.0);
-        if !(median > 0.0 && median.is_finite()) {
-            continue;
-        }
-        let (mut total, mut count) = (0.0, 0usize);
-        for (row, &j) in sensitivity.iter().enumerate() {
-            if j.abs() >= 0.1 * median {
-                let residual = probe.targets[row * measured + state] - known[row * width + state];
-                total += (residual / j).powi(2);
-                count += 1;
-            }
-        }
-        let rms = (total / count.max(1) as f64).sqrt();
-        if rms.is_finite() && rms > 0.0 {
-            best = Some(best.map_or(rms, |b: f64| b.min(rms)));
-        }
-    }
-    best.unwrap_or(1.0)
-}
-
 /// Stiffness warnings for the balances of a `der` model at step `h / substeps`.
 pub fn stiffness(
     model: &ir::Model,
-    scales: &[Vec<f64>],
     (tracks, pairs): (&[Track], &[PairAt]),
     hidden: &[f64],
     substeps: usize,
@@ -251,43 +304,15 @@ pub fn stiffness(
     if model.dynamics == Dynamics::Discrete {
         return Ok(Vec::new());
     }
-    let probe = Probe::new(model, scales, (tracks, pairs), hidden)?;
+    let probe = Probe::new(model, (tracks, pairs), hidden)?;
     if probe.rows == 0 {
         return Ok(Vec::new());
     }
-    let silent = probe.silent_nets();
-    let known = probe.balances(&probe.states, &silent);
-    let width = probe.state_width();
-    let measured = model.states.len();
+    let known = probe.known(&probe.states);
     let names = (model.states.iter().chain(&model.hidden)).map(|s| s.name.clone());
     let mut warnings = Vec::new();
     for (state, name) in names.enumerate() {
-        let typical = (0..probe.rows)
-            .map(|r| probe.states[r * width + state].abs())
-            .fold(0.0, f64::max);
-        let delta = 1e-6 * typical.max(1e-12);
-        let perturbed = |sign: f64| {
-            let mut states = probe.states.clone();
-            for row in 0..probe.rows {
-                states[row * width + state] += sign * delta;
-            }
-            probe.balances(&states, &silent)
-        };
-        let (up, down) = (perturbed(1.0), perturbed(-1.0));
-        let floor = 1e-3 * typical.max(1e-300);
-        let rates: Vec<f64> = (0..probe.rows)
-            .map(|r| {
-                let index = r * width + state;
-                let diagonal = (up[index] - down[index]) / (2.0 * delta);
-                if state >= measured {
-                    return diagonal;
-                }
-                let unknown = probe.targets[r * measured + state] - known[index];
-                let magnitude = probe.states[index].abs().max(floor);
-                diagonal - (-unknown).max(0.0) / magnitude
-            })
-            .filter(|rate| rate.is_finite())
-            .collect();
+        let rates = local_rates(&probe, model, state, &known);
         let Some(eigenvalue) = order_statistic(&rates, 0.01) else {
             continue;
         };
@@ -305,4 +330,62 @@ pub fn stiffness(
         }
     }
     Ok(warnings)
+}
+
+/// The local rate of balance `state` at every row (module documentation), finite ones only.
+fn local_rates(probe: &Probe, model: &ir::Model, state: usize, known: &[f64]) -> Vec<f64> {
+    let width = probe.state_width();
+    let typical = (0..probe.rows)
+        .map(|r| probe.states[r * width + state].abs())
+        .fold(0.0, f64::max);
+    let delta = 1e-6 * typical.max(1e-12);
+    let perturbed = |sign: f64| {
+        let mut states = probe.states.clone();
+        for row in 0..probe.rows {
+            states[row * width + state] += sign * delta;
+        }
+        probe.known(&states)
+    };
+    let (up, down) = (perturbed(1.0), perturbed(-1.0));
+    let first_order = if state < model.states.len() {
+        consumption(probe, model, state, known)
+    } else {
+        None
+    };
+    let floor = 1e-3 * typical.max(1e-300);
+    (0..probe.rows)
+        .map(|r| {
+            let index = r * width + state;
+            let diagonal = (up[index] - down[index]) / (2.0 * delta);
+            let Some((fraction, residual)) = &first_order else {
+                return diagonal;
+            };
+            let magnitude = probe.states[index].abs().max(floor);
+            diagonal + fraction * residual[r].min(0.0) / magnitude
+        })
+        .filter(|rate| rate.is_finite())
+        .collect()
+}
+
+/// For a measured balance whose residual is a consumption at most rows: the fraction of
+/// its sharers whose closure observes the state, and the residual per row.
+fn consumption(
+    probe: &Probe,
+    model: &ir::Model,
+    state: usize,
+    known: &[f64],
+) -> Option<(f64, Vec<f64>)> {
+    let demand = Demand::of(probe, model, state, known);
+    let median = order_statistic(&demand.residual, 0.5)?;
+    if demand.sharers.is_empty() || median.is_nan() || median >= 0.0 {
+        return None;
+    }
+    let observing = (demand.sharers.iter())
+        .filter(|((closure, _), _)| {
+            let observe = &model.closures[*closure].embedding.observe;
+            observe.contains(&Var::State(state))
+        })
+        .count();
+    let fraction = observing as f64 / demand.sharers.len() as f64;
+    (observing > 0).then_some((fraction, demand.residual))
 }

@@ -152,7 +152,6 @@ fn prepare<'m>(
     let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
     let stiff = analysis::stiffness(
         model,
-        &scales,
         (&layout.tracks, &layout.intervals),
         &hidden_init,
         options.substeps,

@@ -154,8 +154,7 @@ fn stiff_data_warns_and_substeps_make_the_free_run_stable() {
     let warnings = |data: &Dataset, substeps: usize| {
         let tracks = [track(&model, data)];
         let pairs: Vec<(usize, usize)> = (40..299).map(|r| (0, r)).collect();
-        let scales = analysis::closure_scales(&model, &tracks, &pairs, &[]).unwrap();
-        analysis::stiffness(&model, &scales, (&tracks, &pairs), &[], substeps).unwrap()
+        analysis::stiffness(&model, (&tracks, &pairs), &[], substeps).unwrap()
     };
     assert!(warnings(&calm, 1).is_empty());
     let found = warnings(&stiff, 1);
