@@ -2,7 +2,7 @@
 """Check an exported model with onnxruntime against gbc's own online prediction.
 
 Exports the trained run with `gbc export`, predicts the record online with `gbc predict
---mode online`, then steps the ONNX file over the same free run with onnxruntime (window
+--mode online-trained-step`, then steps the ONNX file over the same free run with onnxruntime (window
 from the record before the start, the model's own predictions after it) and reports the
 largest relative error of the states and closure outputs (relative to each column's
 largest magnitude).
@@ -47,7 +47,7 @@ def main():
     subprocess.run([args.gbc, "export", args.model, "--weights", args.weights,
                     "-o", str(onnx_path)], check=True)
     subprocess.run([args.gbc, "predict", args.model, args.data, "--weights", args.weights,
-                    "--mode", "online", "-o", str(predicted_path)], check=True)
+                    "--mode", "online-trained-step", "-o", str(predicted_path)], check=True)
 
     session = ort.InferenceSession(str(onnx_path))
     meta = session.get_modelmeta().custom_metadata_map

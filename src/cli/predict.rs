@@ -22,8 +22,12 @@ use crate::train::{artifacts, predict, PhysicalRange};
 pub enum ModeArg {
     /// One step from the true history.
     Offline,
-    /// A free run from the initial history, driven by the inputs alone.
+    /// A free run from the initial history, driven by the inputs alone; each step cut
+    /// into as many sub-steps as the model's stiffness needs there.
     Online,
+    /// A free run at the trained step alone: what the exported ONNX map gives when
+    /// iterated.
+    OnlineTrainedStep,
 }
 
 /// Arguments of `gbc predict`.
@@ -66,6 +70,7 @@ pub fn run(args: &PredictArgs) -> CommandResult {
     let mode = match args.mode {
         ModeArg::Offline => predict::Mode::Offline,
         ModeArg::Online => predict::Mode::Online,
+        ModeArg::OnlineTrainedStep => predict::Mode::OnlineTrainedStep,
     };
     let range = PhysicalRange::of_run(&info);
     let mut header = Vec::new();

@@ -212,11 +212,16 @@ impl Differentiator<'_, '_> {
             terms.push((a, self.mul(b, lowered)));
         }
         // A literal zero base gives `0^b`, constant where it is defined (`ln 0` would
-        // make the term NaN).
+        // make the term NaN). A negative base takes `ln |a|`: `a^b` is real there only
+        // where `b` is held at an integer, so the term is `0 * finite` where `b` does not
+        // move (`(-2)^max(2, u)` below `u = 2`), not `0 * NaN`.
         if !self.partials_of(b).is_empty() && !is(a, 0.0) {
+            let size = self
+                .builder
+                .emit(Instr::Call(Func::Abs, a, Operand::Value(0.0)));
             let log = self
                 .builder
-                .emit(Instr::Call(Func::Log, a, Operand::Value(0.0)));
+                .emit(Instr::Call(Func::Log, size, Operand::Value(0.0)));
             terms.push((b, self.mul(result, log)));
         }
         self.chain(&terms)

@@ -228,7 +228,7 @@ fn predictions<'a>(
         let (index, network, setup, id) = entry;
         let model = &prepared.models[*index].model;
         let table = match mode {
-            Mode::Online => free_run(model, network, setup, data),
+            Mode::Online | Mode::OnlineTrainedStep => free_run(model, network, setup, data),
             Mode::Offline => crate::train::record_of(model, data).and_then(|record| {
                 predict(model, network, setup, &record, (mode, History::Measured))
             }),

@@ -148,7 +148,7 @@ fn worst_relative(found: &[Vec<f64>], expected: &[Vec<f64>]) -> f64 {
 }
 
 /// Exports a trained run in `precision`, steps it in tract over a free run and compares
-/// with `gbc predict --mode online` on the same record (trained in that precision); the
+/// with `gbc predict --mode online-trained-step` on the same record (trained in that precision); the
 /// largest relative error must stay below `tolerance`.
 fn matches_online_prediction(
     (model_file, data_file, rows): (&str, &str, usize),
@@ -158,7 +158,9 @@ fn matches_online_prediction(
     let (model, record) = shipped(model_file, data_file, rows);
     let trained = trained(&model, &record, precision);
     let exported = super::onnx(&model, &trained.network, &trained.setup, precision).unwrap();
-    let how = (Mode::Online, History::Measured, None);
+    // The exported map is the trained step; `gbc predict --mode online-trained-step`
+    // iterates it.
+    let how = (Mode::OnlineTrainedStep, History::Measured, None);
     let online = predict_in_range(&model, &trained.network, &trained.setup, &record, how).unwrap();
     let start = (record.times.iter())
         .position(|&t| t == online.columns[0][0])

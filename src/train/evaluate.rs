@@ -72,7 +72,10 @@ impl PhysicalRange {
         let (lower, upper) = (min.iter().zip(max))
             .map(|(&lo, &hi)| {
                 let largest = lo.abs().max(hi.abs());
-                if lo >= 0.0 {
+                if !(lo <= hi && largest.is_finite()) {
+                    // A state without a measured cell in training: no bound but finiteness.
+                    (f64::NEG_INFINITY, f64::INFINITY)
+                } else if lo >= 0.0 {
                     (-UNDERSHOOT * hi, factor * hi)
                 } else {
                     (-factor * largest, factor * largest)

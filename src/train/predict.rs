@@ -33,8 +33,12 @@ pub mod whatif;
 pub enum Mode {
     /// One step from the true history.
     Offline,
-    /// A free run from the initial history.
+    /// A free run from the initial history, each step cut into as many sub-steps as its
+    /// stiffness needs ([`super::stepping`]).
     Online,
+    /// A free run at the trained step alone (`--substeps` of the run): the trained one-step
+    /// map iterated, as its ONNX export steps.
+    OnlineTrainedStep,
 }
 
 /// A table of predictions: column names (starting with `t`) and columns.
@@ -158,6 +162,7 @@ pub fn predict_on_track(
     let (feed, stepping) = match mode {
         Mode::Offline => (Feed::Data, Stepping::Fixed),
         Mode::Online => (Feed::Own, Stepping::Controlled),
+        Mode::OnlineTrainedStep => (Feed::Own, Stepping::Fixed),
     };
     let run = simulate(
         network,
@@ -170,7 +175,7 @@ pub fn predict_on_track(
     )?;
     let knots = last + 1 - first;
     let states: Vec<Vec<f64>> = match mode {
-        Mode::Online => stopped_states(&run, knots),
+        Mode::Online | Mode::OnlineTrainedStep => stopped_states(&run, knots),
         Mode::Offline => std::iter::once(run.states[0].clone())
             .chain(
                 run.next_states

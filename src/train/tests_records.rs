@@ -64,7 +64,11 @@ fn a_measured_output_trains_a_model_whose_state_is_not_measured() {
     assert_eq!(trained.setup.normalisation.observables, vec![0]);
     let online = metrics.online.as_ref().unwrap();
     let names: Vec<&str> = online.per_state.iter().map(|(n, _)| n.as_str()).collect();
-    assert_eq!(names, vec!["absorbance"], "only the sensor has cells");
+    assert_eq!(
+        names,
+        vec!["absorbance"],
+        "only the sensor has cells: {online:?}"
+    );
     let before = metrics.initial_online.as_ref().unwrap().overall;
     assert!(
         online.overall < before / 5.0,
