@@ -13,6 +13,7 @@ pub use crate::vocabulary::{sigmoid, softplus, Activation, Func};
 use std::collections::BTreeMap;
 
 mod lower;
+mod mechanism;
 mod noise;
 mod print;
 

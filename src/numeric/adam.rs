@@ -105,6 +105,10 @@ impl<E: Real> Adam<E> {
         let (beta1, beta2) = (E::from_double(BETA1), E::from_double(BETA2));
         let (keep1, keep2) = (E::from_double(1.0 - BETA1), E::from_double(1.0 - BETA2));
         for (range, rate) in update.groups {
+            // A group at rate 0 is held: it never moves, not even by a non-finite gradient.
+            if *rate == 0.0 {
+                continue;
+            }
             let step = E::from_double(rate * correction2.sqrt() / correction1);
             let (Some(weights), Some(gradient), Some(first), Some(second)) = (
                 weights.get_mut(range.clone()),

@@ -106,7 +106,7 @@ fn record_coverage(
         .filter(|(_, count)| *count > 0)
         .map(|(state, count)| (state.name.clone(), count))
         .collect();
-    limiting.sort_by(|a, b| b.1.cmp(&a.1));
+    limiting.sort_by_key(|entry| std::cmp::Reverse(entry.1));
     RecordCoverage {
         experiment: track.name.clone(),
         cells,

@@ -237,6 +237,8 @@ pub struct Trajectory {
     pub outputs: Vec<Vec<f64>>,
     /// Where the run stopped early, if it left the physical range.
     pub divergence: Option<Divergence>,
+    /// The most sub-steps one step needed (1 at the trained step; [`Stepping`]).
+    pub substeps: usize,
 }
 
 /// Simulates knots `start..=end` of `track` step by step, starting from the reference
@@ -268,6 +270,7 @@ pub fn simulate(
         closure_outputs: Vec::new(),
         outputs: Vec::new(),
         divergence: None,
+        substeps: 1,
     };
     for knot in start..=end {
         let prediction = match stepping {
@@ -312,6 +315,7 @@ pub fn simulate(
         }
         trajectory.next_states.push(next);
     }
+    trajectory.substeps = stepper.most;
     Ok(trajectory)
 }
 

@@ -4,27 +4,50 @@
 //! sensitivities, standard errors), so that both commands give the same fit. The params
 //! are then held fixed, no epoch runs, and the run is scored and saved like any other
 //! (`docs/training.md`, "Models without closures").
+//!
+//! A grey box on a sparse record starts from its mechanism the same way: its params are
+//! fitted with every closure output at its prior (or zero, [`ir::Model::mechanism`]) and
+//! held while the networks learn the correction. On a dense record the balances give the
+//! params instead ([`super::balances`]).
 
 use crate::diagnose::mechanism::{check_fittable, fit_mechanism, MechanismFit};
 use crate::diagnose::{self, FitSummary};
 use crate::ir;
 
+use super::coverage::{Coverage, DENSE_SHARE};
 use super::prepare::Layout;
-use super::{ParamEstimate, ParamSource, Recipe, TrainError, TrainOptions, TrainingData};
+use super::{
+    Objective, ParamEstimate, ParamSource, Recipe, TrainError, TrainOptions, TrainingData,
+};
 
 /// Random restarts of the fit besides the declared start, as in `gbc diagnose`.
 pub const RESTARTS: usize = 15;
 /// Measured rows the fit needs at least (the training split has its own checks).
 const MIN_ROWS: usize = 2;
 
-/// Whether `model` is fitted by free runs on `data`: it has params and no closures, the
-/// recipe does not ask for Adam (`--params train`), and the fitter takes the records (no
-/// measured outputs; a discrete map on one uniform step).
-pub fn applies(model: &ir::Model, data: &TrainingData, recipe: &Recipe) -> bool {
-    model.closures.is_empty()
-        && !model.params.is_empty()
-        && recipe.params != ParamSource::Train
-        && check_fittable(model, data.train.iter().chain(data.validation)).is_ok()
+/// The model whose params are fitted by free runs before training, if any: `model` itself
+/// when it has params and no closures; its mechanism when it is a grey box on a sparse
+/// record (one-step pairs reach under [`DENSE_SHARE`] of the cells) trained by the
+/// multi-step objective. Never with `--params train`, and only where the fitter takes the
+/// records (no measured outputs; a discrete map on one uniform step).
+pub fn source(
+    model: &ir::Model,
+    data: &TrainingData,
+    recipe: &Recipe,
+    coverage: &Coverage,
+) -> Option<ir::Model> {
+    if model.params.is_empty() || recipe.params == ParamSource::Train {
+        return None;
+    }
+    let fitted = if model.closures.is_empty() {
+        model.clone()
+    } else if recipe.objective == Objective::MultiStep && coverage.one_step_share() < DENSE_SHARE {
+        model.mechanism()
+    } else {
+        return None;
+    };
+    let records = data.train.iter().chain(data.validation);
+    check_fittable(&fitted, records).is_ok().then_some(fitted)
 }
 
 /// Fits `model`'s params to the training rows of every training experiment of `layout`

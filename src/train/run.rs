@@ -19,8 +19,9 @@ use super::prepare::Layout;
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
-    mechanism, polish, with_initial_params, Event, InitialState, Metrics, ParamSource, Part,
-    PhysicalRange, Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData, Warning,
+    mechanism, polish, with_initial_params, Event, InitialState, Metrics, Objective, ParamSource,
+    Part, PhysicalRange, Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
+    Warning,
 };
 use crate::diagnose::mechanism::MechanismFit;
 
@@ -89,7 +90,7 @@ pub fn train_run(
     Ok(run.report(options, recipe, (initial, evaluation), fitted))
 }
 
-/// The phase that fits a model without closures ([`mechanism`]).
+/// The phase that fits a model without closures, or a grey box's mechanism ([`mechanism`]).
 pub const FITTING: &str = "fitting the params by free runs (as gbc diagnose)";
 /// The phase before the epochs ([`Event::Phase`]).
 pub const VALIDATING: &str = "validating the untrained network";
@@ -156,18 +157,20 @@ fn prepare<'m>(
         &hidden_init,
         options.substeps,
     )?;
-    let dropped = layout.dropped.clone().map(Warning::DroppedPairs);
+    // Under the multi-step objective the steps without a pair still train in windows: the
+    // coverage note says what trains instead.
+    let dropped = (layout.dropped.clone())
+        .filter(|_| recipe.objective == Objective::OneStep)
+        .map(Warning::DroppedPairs);
     let warnings: Vec<Warning> = (stiff.into_iter().map(Warning::Stiffness))
         .chain(dropped)
         .collect();
-    for warning in &warnings {
-        on_event(Event::Warning(warning));
-    }
-    let mechanism_fit = if mechanism::applies(model, &data, recipe) {
-        on_event(Event::Phase(FITTING));
-        Some(mechanism::fit(model, &data, &layout, options)?)
-    } else {
-        None
+    let mechanism_fit = match mechanism::source(model, &data, recipe, &coverage) {
+        Some(fitted) => {
+            on_event(Event::Phase(FITTING));
+            Some(mechanism::fit(&fitted, &data, &layout, options)?)
+        }
+        None => None,
     };
     let balance_fit = if recipe.params_from_balances() && mechanism_fit.is_none() {
         balances::estimate(model, &scales, &layout.tracks, &layout.intervals)?
@@ -193,6 +196,9 @@ fn prepare<'m>(
         scales,
     };
     let network = Network::build(&model, &setup)?;
+    for warning in &warnings {
+        on_event(Event::Warning(warning));
+    }
     let weights = column_weights(&model, options)?;
     let observables = &layout.normalisation.observables;
     let mut training = Course::new(
@@ -216,7 +222,7 @@ fn prepare<'m>(
     );
     let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
     on_event(Event::Started {
-        epochs: if mechanism_fit.is_some() {
+        epochs: if mechanism_fit.is_some() && model.closures.is_empty() {
             0
         } else {
             options.epochs
@@ -276,8 +282,8 @@ impl Run<'_> {
             ..options.clone()
         };
         let options = match self.mechanism_fit {
-            Some(_) => &fitted_options,
-            None => options,
+            Some(_) if self.model.closures.is_empty() => &fitted_options,
+            _ => options,
         };
         let fit = fit::Fit {
             model: &self.model,

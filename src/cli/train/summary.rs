@@ -149,11 +149,15 @@ fn print_params(out: &mut String, trained: &Trained) {
                 .mechanism_fit
                 .as_ref()
                 .map_or((0, 0.0), |f| (f.starts, f.gap_train));
+            let what = if trained.setup.scales.is_empty() {
+                "the model, as gbc diagnose fits it"
+            } else {
+                "the mechanism (closure outputs at their priors), as gbc diagnose fits it"
+            };
             line!(
                 out,
-                "params (fitted by free runs to every measured training cell, as gbc diagnose \
-                 fits them; {} starts, training gap {:.4e}; held fixed, no epoch ran; +- \
-                 standard error):",
+                "params (fitted by free runs of {what} to every measured training cell; {} \
+                 starts, training gap {:.4e}; held fixed in training; +- standard error):",
                 fit.0,
                 fit.1
             )
