@@ -134,3 +134,50 @@ fn params_train_keeps_adam_for_a_model_without_closures() {
     assert!(trained.report.mechanism_fit.is_none());
     assert_eq!(trained.report.losses.len(), 3);
 }
+
+/// A grey box on the sparse overflow record starts from its mechanism: the params the
+/// model without the closure gets (`bench/training/overflow_greybox.gbm` is `monod.gbm`
+/// with a learned acetate exchange, which no other balance reads), held in training.
+#[test]
+fn a_grey_box_on_a_sparse_record_starts_from_its_fitted_mechanism() {
+    let (compiled, _, train, held) = overflow();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("bench/training/overflow_greybox.gbm");
+    let source = crate::driver::read_source(&path).unwrap();
+    let grey = crate::driver::compile("overflow_greybox.gbm", &source, &[])
+        .unwrap()
+        .model;
+    let data = TrainingData {
+        train: &train,
+        validation: &held,
+        part: Part::FirstPairs(None),
+    };
+    // One (one-step) epoch: the rollouts on this stiff record are the open case of
+    // docs/training.md.
+    let options = TrainOptions {
+        epochs: 1,
+        seed: 1,
+        ..TrainOptions::default()
+    };
+    let plain = train_with(
+        &compiled.model,
+        &data,
+        &options,
+        &Recipe::default(),
+        &mut quiet,
+    );
+    let boxed = train_with(&grey, &data, &options, &Recipe::default(), &mut quiet).unwrap();
+    assert!(boxed.report.mechanism_fit.is_some());
+    assert_eq!(boxed.report.losses.len(), 1, "the networks still train");
+    for ((name, ours), (_, theirs)) in boxed
+        .report
+        .params
+        .iter()
+        .zip(&plain.unwrap().report.params)
+    {
+        assert!(
+            (ours - theirs).abs() <= 1e-5 * theirs.abs(),
+            "{name}: {ours} vs {theirs}"
+        );
+    }
+}
