@@ -173,6 +173,9 @@ pub enum Event<'a> {
     /// Before the first epoch: what of each training experiment trains, and the warm-up
     /// share the multi-step objective uses for it ([`coverage`]).
     Coverage(&'a coverage::Coverage, f64),
+    /// Before the first epoch: the model's free runs over the training knots need this
+    /// many sub-steps per step, and training takes them ([`stepping::training_substeps`]).
+    Substeps(usize),
     /// A phase of the run starts: "validating the untrained network", "training" (the
     /// epochs), "evaluating the trained network" (initial states, polish, validation).
     Phase(&'static str),

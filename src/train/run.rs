@@ -11,11 +11,12 @@ use crate::ir;
 
 use super::balances::{self, BalanceFit};
 use super::checkpoint::{RunControl, Safety};
-use super::coverage::Coverage;
+use super::coverage::{Coverage, DENSE_SHARE};
 use super::fit::Fitted;
 use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
+use super::stepping;
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
@@ -55,6 +56,12 @@ pub fn train_run(
         ..recipe.clone()
     };
     let recipe = &sparse;
+    // The sub-steps prepare chose for a stiff model.
+    let stepped = TrainOptions {
+        substeps: run.setup.substeps,
+        ..options.clone()
+    };
+    let options = &stepped;
     if !run.layout.scorings.is_empty() {
         on_event(Event::Phase(VALIDATING));
     }
@@ -187,7 +194,7 @@ fn prepare<'m>(
         (None, Some(fit)) => Cow::Owned(mechanism::with_fitted_params(model, fit)),
         (None, None) => Cow::Borrowed(model),
     };
-    let setup = Setup {
+    let mut setup = Setup {
         step: layout.grid.max_step,
         substeps: options.substeps,
         precision: options.precision,
@@ -195,7 +202,34 @@ fn prepare<'m>(
         normalisation: layout.normalisation.clone(),
         scales,
     };
-    let network = Network::build(&model, &setup)?;
+    let mut network = Network::build(&model, &setup)?;
+    // Training steps as finely as a stiff balance needs, so that no user picks
+    // `--substeps`: on a sparse record as the model's own free runs over the training
+    // knots need (the data's intervals say little there); on a dense one as the stiffness
+    // estimate asks, where it warns.
+    let substeps = if coverage.one_step_share() < DENSE_SHARE {
+        let place = (&layout.tracks[..], &layout.trainings[..]);
+        let how = (&fractions[..], &hidden_init[..]);
+        stepping::training_substeps((&network, &model), place, how, options.substeps)
+    } else {
+        (warnings.iter())
+            .filter_map(|w| match w {
+                Warning::Stiffness(s) => Some(s.substeps_needed),
+                _ => None,
+            })
+            .fold(options.substeps, usize::max)
+            .min(stepping::MOST_TRAINING_SUBSTEPS)
+    };
+    let mut fractions = fractions;
+    if substeps > setup.substeps {
+        setup.substeps = substeps;
+        fractions = stage_fractions(model.dynamics, substeps);
+        network = Network::build(&model, &setup)?;
+        on_event(Event::Substeps(substeps));
+    }
+    // A stiffness warning the chosen sub-steps answer is not one.
+    let mut warnings = warnings;
+    warnings.retain(|w| !matches!(w, Warning::Stiffness(s) if s.substeps_needed <= substeps));
     for warning in &warnings {
         on_event(Event::Warning(warning));
     }

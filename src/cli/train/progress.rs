@@ -63,6 +63,10 @@ impl Progress {
                     ));
                 }
             }
+            Event::Substeps(substeps) => self.reporter.println(&format!(
+                "note: the model turns stiff along the training records: training takes \
+                 {substeps} RK4 sub-steps per step (as --substeps {substeps} would)"
+            )),
             Event::Phase(train::TRAINING) => {
                 let count = Count::Items("epochs");
                 self.reporter
