@@ -19,7 +19,7 @@
 //! `positive` output without a prior is then mapped through `s softplus(o / s)` and an
 //! `in [lo, hi]` output through `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))` (unit
 //! slope at the middle). A `positive` output with a prior keeps it exactly at `n = 0` and
-//! vanishes with it: `max(p, 0) g(n)` with `g(n) = max(n, 0) + exp(min(0, n))` under `*=`,
+//! vanishes with it: `max(p, 0) g(n)` with `g(n) = max(n + 7/8, 0) + exp(8 min(0, n + 7/8)) / 8` under `*=`,
 //! `max(p + s n, 0)` under `+=` (`program::outputs`).
 //! Params are trained unconstrained: `positive` through softplus (initialised at the
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.

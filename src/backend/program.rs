@@ -8,7 +8,7 @@
 //! a param or a network output take part in the reverse sweep. The graph backend wraps
 //! [`Program::forward`] and [`Program::backward`] as one fused operation.
 
-mod outputs;
+pub mod outputs;
 
 use std::collections::HashMap;
 

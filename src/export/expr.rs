@@ -165,7 +165,8 @@ impl<'m> Physics<'m> {
 
 /// A closure output with a prior `p` from its network output `net`, as the physics program
 /// computes it (`backend::program::outputs`): a `positive` output is `max(p, 0) g(n)` with
-/// `g(n) = max(n, 0) + exp(min(0, n))` under `*=` and `max(p + s n, 0)` under `+=`.
+/// `g(n) = max(n + 7/8, 0) + exp(8 min(0, n + 7/8)) / 8` under `*=` and `max(p + s n, 0)`
+/// under `+=`.
 fn with_prior(
     graph: &mut Builder,
     (p, kind): (&Value, PriorKind),
@@ -177,11 +178,15 @@ fn with_prior(
     let positive = matches!(constraint, Constraint::Positive);
     match (kind, positive) {
         (PriorKind::Mul, true) => {
+            use crate::backend::program::outputs::{JOIN, TAIL};
             let clipped = graph.binary("Max", p, &zero);
-            let upper = graph.binary("Max", net, &zero);
-            let lower = graph.binary("Min", &zero, net);
-            let decay = unary(graph, Func::Exp, &lower);
-            let factor = graph.binary("Add", &upper, &decay);
+            let shifted = graph.binary("Add", net, &Value::Const(JOIN));
+            let upper = graph.binary("Max", &shifted, &zero);
+            let lower = graph.binary("Min", &zero, &shifted);
+            let scaled = graph.binary("Mul", &Value::Const(1.0 / TAIL), &lower);
+            let decay = unary(graph, Func::Exp, &scaled);
+            let tail = graph.binary("Mul", &Value::Const(TAIL), &decay);
+            let factor = graph.binary("Add", &upper, &tail);
             graph.binary("Mul", &clipped, &factor)
         }
         (PriorKind::Mul, false) => {

@@ -216,7 +216,7 @@ const GB2: (&str, &str, usize) = (
     200,
 );
 
-/// GB2's outputs are `positive` under `*=` priors: `max(p, 0) (max(n, 0) + exp(min(0, n)))`.
+/// GB2's outputs are `positive` under `*=` priors: `max(p, 0) (max(n + 7/8, 0) + exp(8 min(0, n + 7/8)) / 8)`.
 #[test]
 fn the_exported_gb2_with_positive_priors_steps_as_gbc_predicts_online() {
     let error = matches_online_prediction(GB2, Precision::F64, 1e-11);

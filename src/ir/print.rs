@@ -219,7 +219,7 @@ fn write_closure(
                 match (prior.kind, positive) {
                     (PriorKind::Mul, false) => format!("{} = ({p}) * (1 + n{k})", output.name),
                     (PriorKind::Mul, true) => format!(
-                        "{} = max({p}, 0) * (max(n{k}, 0) + exp(min(n{k}, 0)))",
+                        "{} = max({p}, 0) * (max(n{k} + 0.875, 0) + 0.125 * exp(8 * min(n{k} + 0.875, 0)))",
                         output.name
                     ),
                     (PriorKind::Add, false) => format!("{} = {p} + s * n{k}", output.name),

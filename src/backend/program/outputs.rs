@@ -2,15 +2,25 @@
 //! in spec section 3, then the declared constraint.
 //!
 //! A `positive` output with a prior keeps the prior exactly at `n = 0` and has no floor:
-//! - `prior o *= p`: `o = max(p, 0) * g(n)` with `g(n) = max(n, 0) + exp(min(n, 0))`, which
-//!   is `1 + n` for `n >= 0` and `e^n` below: positive, `g(0) = 1` exactly, slope 1 at 0
-//!   (the unconstrained form's), so `o` vanishes with its prior;
+//! - `prior o *= p`: `o = max(p, 0) * g(n)` with
+//!   `g(n) = max(n + 7/8, 0) + exp(8 min(n + 7/8, 0)) / 8`, which is `1 + n` (the
+//!   unconstrained form) down to `n = -7/8` and `e^(8 (n + 7/8)) / 8` below, joined with
+//!   value and slope: positive, `g(0) = 1` exactly (every constant a power of two), and it
+//!   falls to zero about where `1 + n` does (`1/25` at `n = -1.02`), so a prior 25 times
+//!   too large is corrected as easily as in the unconstrained form; `o` vanishes with its
+//!   prior;
 //! - `prior o += p`: `o = max(p + s n, 0)`, the additive form clipped at zero.
 //!
 //! Without a prior a `positive` output is `s softplus(n)`; a bounded output, and an
 //! unconstrained one, is the plain form of spec section 3 through its constraint's map.
 
 use super::{Binary, Compiler, Unary};
+
+/// Where the linear part of a positive factor under `*=` joins its exponential tail:
+/// `n = -JOIN`, the factor there `TAIL = 1 - JOIN`.
+pub const JOIN: f64 = 0.875;
+/// The factor at the join, and the tail's decay length in `n`.
+pub const TAIL: f64 = 1.0 - JOIN;
 use crate::backend::BackendError;
 use crate::ir::{ClosureOutput, Constraint, PriorKind};
 
@@ -103,14 +113,21 @@ impl Compiler<'_> {
         })
     }
 
-    /// `g(n) = max(n, 0) + exp(min(0, n))`: `1 + n` for `n >= 0`, `e^n` below. At the tie
-    /// `n = 0` `max` sends the derivative to `n` and `min` to the literal, so `g'(0) = 1`.
+    /// `g(n) = max(n + 7/8, 0) + exp(8 min(0, n + 7/8)) / 8`: `1 + n` down to `n = -7/8`,
+    /// an exponential tail below with the same value and slope at the join. At `n = 0`
+    /// every term is exact (`7/8 + 1/8`).
     fn positive_factor(&mut self, net: usize) -> usize {
         let zero = self.constant(0.0);
-        let upper = self.binary(Binary::Max, net, zero);
-        let lower = self.binary(Binary::Min, zero, net);
-        let decay = self.unary(Unary::Exp, lower);
-        self.binary(Binary::Add, upper, decay)
+        let shift = self.constant(JOIN);
+        let shifted = self.binary(Binary::Add, net, shift);
+        let upper = self.binary(Binary::Max, shifted, zero);
+        let lower = self.binary(Binary::Min, zero, shifted);
+        let steep = self.constant(1.0 / TAIL);
+        let scaled = self.binary(Binary::Mul, steep, lower);
+        let decay = self.unary(Unary::Exp, scaled);
+        let tail = self.constant(TAIL);
+        let tail = self.binary(Binary::Mul, tail, decay);
+        self.binary(Binary::Add, upper, tail)
     }
 
     /// An output's constraint map: `s softplus(o / s)` for `positive`, and for `in [lo, hi]`
