@@ -151,10 +151,12 @@ fn prepare<'m>(
     };
     let layout = Layout::new(model, &data, options)?;
     let coverage = Coverage::of(model, (&layout.tracks, &layout.trainings), &layout.pairs);
-    on_event(Event::Coverage(
-        &coverage,
-        coverage.warmup_share(recipe.warmup_share),
-    ));
+    if !model.closures.is_empty() {
+        on_event(Event::Coverage(
+            &coverage,
+            coverage.warmup_share(recipe.warmup_share),
+        ));
+    }
     let hidden_init = hidden_initial_values(model)?;
     let fractions = stage_fractions(model.dynamics, options.substeps);
     let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
@@ -207,7 +209,10 @@ fn prepare<'m>(
     // `--substeps`: on a sparse record as the model's own free runs over the training
     // knots need (the data's intervals say little there); on a dense one as the stiffness
     // estimate asks, where it warns.
-    let substeps = if coverage.one_step_share() < DENSE_SHARE {
+    let substeps = if model.closures.is_empty() {
+        // Nothing trains: the params were fitted by the exact integrator.
+        options.substeps
+    } else if coverage.one_step_share() < DENSE_SHARE {
         let place = (&layout.tracks[..], &layout.trainings[..]);
         let how = (&fractions[..], &hidden_init[..]);
         stepping::training_substeps((&network, &model), place, how, options.substeps)

@@ -21,6 +21,9 @@ pub(super) struct Progress {
     rows: Vec<EpochRow>,
     /// The last epoch's loss in words.
     last_loss: String,
+    /// Whether the run has no epochs (a model without closures, fitted by free runs, or
+    /// `--epochs 0`).
+    fitted_only: bool,
 }
 
 impl Progress {
@@ -35,6 +38,16 @@ impl Progress {
             Event::Warning(warning) => self.reporter.println(&format!("warning: {warning}")),
             Event::Recovered(recovery) => {
                 self.reporter.println(&format!("warning: {recovery}"));
+            }
+            Event::Started {
+                epochs: 0,
+                validation_pairs,
+                ..
+            } => {
+                self.fitted_only = true;
+                self.reporter.println(&format!(
+                    "no epoch runs; validating on {validation_pairs} pairs"
+                ));
             }
             Event::Started {
                 train_pairs,
@@ -67,6 +80,7 @@ impl Progress {
                 "note: the model turns stiff along the training records: training takes \
                  {substeps} RK4 sub-steps per step (as --substeps {substeps} would)"
             )),
+            Event::Phase(train::TRAINING) if self.fitted_only => {}
             Event::Phase(train::TRAINING) => {
                 let count = Count::Items("epochs");
                 self.reporter
