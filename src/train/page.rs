@@ -67,16 +67,18 @@ pub fn run_page(
         .collect();
     let report = &trained.report;
     let mut sections = Vec::new();
-    sections.push(format!(
-        "<h2>Training</h2>\n<p>{} pairs, {} epochs ({} recipe), learning rate {}, grid step up to \
-         {}. Errors are over measured cells only; NMSE is the paper's (squared error over the \
-         training data's variance), fit is MATLAB's <code>100 (1 - |y - ŷ| / |y - mean y|)</code> \
-         (100 %: exact; 0 %: no better than the mean).</p>\n{}",
-        report.train_pairs,
-        report.losses.len(),
-        report.recipe.objective.name(),
-        tick_label(report.learning_rate),
-        tick_label(report.dt),
+    let losses = if report.losses.is_empty() {
+        match &report.mechanism_fit {
+            Some(fit) => format!(
+                "<p>No epoch ran: the params were fitted by free runs to every measured \
+                 training cell, as <code>gbc diagnose</code> fits them ({} starts, training \
+                 gap {}).</p>",
+                fit.starts,
+                tick_label(fit.gap_train)
+            ),
+            None => "<p>No epoch ran.</p>".to_string(),
+        }
+    } else {
         figure(
             &loss_chart(report.losses.as_slice(), horizons, title),
             if horizons.iter().any(|&h| h > 1) {
@@ -85,8 +87,19 @@ pub fn run_page(
                  one-step epochs' and rises as the windows lengthen."
             } else {
                 "Mean training loss per epoch."
-            }
+            },
         )
+    };
+    sections.push(format!(
+        "<h2>Training</h2>\n<p>{} pairs, {} epochs ({} recipe), learning rate {}, grid step up to \
+         {}. Errors are over measured cells only; NMSE is the paper's (squared error over the \
+         training data's variance), fit is MATLAB's <code>100 (1 - |y - ŷ| / |y - mean y|)</code> \
+         (100 %: exact; 0 %: no better than the mean).</p>\n{losses}",
+        report.train_pairs,
+        report.losses.len(),
+        report.recipe.objective.name(),
+        tick_label(report.learning_rate),
+        tick_label(report.dt),
     ));
     sections.push(fit_section(model, trained, &shown));
     sections.push(params_section(report));

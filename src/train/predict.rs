@@ -158,9 +158,10 @@ pub fn predict_on_track(
         }
     }
     let last = track.len() - 1;
-    // A free run controls its steps; one step from the data is the step training took.
+    // Free runs and one step from the data control their steps (a stiff interval is
+    // integrated stably either way); `OnlineTrainedStep` iterates the trained map.
     let (feed, stepping) = match mode {
-        Mode::Offline => (Feed::Data, Stepping::Fixed),
+        Mode::Offline => (Feed::Data, Stepping::Controlled),
         Mode::Online => (Feed::Own, Stepping::Controlled),
         Mode::OnlineTrainedStep => (Feed::Own, Stepping::Fixed),
     };

@@ -9,7 +9,7 @@
 //! state's scale, `m` doubles, up to [`MOST_SUBSTEPS`]. The result of the `m` that sufficed
 //! is kept, so where the step the model was trained with is stable and accurate the run is
 //! exactly the trained model's (and its ONNX export's) step; the next knot starts from that
-//! `m`, halved when the step was far more accurate than asked. The tolerance guards
+//! `m`; it never falls back to fewer within a run (below). The tolerance guards
 //! stability, not the last digit: an unstable explicit step shows as two results far
 //! apart, so this finds the stable step without estimating the Jacobian. A step that needs
 //! more than [`MOST_SUBSTEPS`] keeps the finest result and lets the physical range judge
@@ -131,7 +131,10 @@ impl Stepper {
             let error = self.error(&coarse.next_states, &fine.next_states);
             if error <= 1.0 || 2 * m >= MOST_SUBSTEPS {
                 let kept = if error <= 1.0 { coarse } else { fine };
-                self.substeps = if error < 1.0 / 32.0 { m.div_ceil(2) } else { m };
+                // Never fewer later: a step that agrees at `m` and `2m` may still have
+                // jumped, at both, past a singularity of the rates (Monod's `S = -K`) onto a
+                // smooth spurious branch; a stiff stretch stays stiff (seen on a fed-batch).
+                self.substeps = m;
                 self.most = self.most.max(m);
                 let mut prediction = first;
                 prediction.next_states.clone_from(&kept.next_states);

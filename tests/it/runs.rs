@@ -8,24 +8,8 @@ use std::process::{Command, Output};
 
 use crate::cli::{gbc, scratch};
 
-const GB1: &str = "models/bioreactor/gb1.gbm";
-const STEPS: &str = "models/bioreactor/data/steps.csv";
-
-/// Eight epochs of GB1: one-step warm-up in epochs 1 to 4, rollouts from epoch 5 on.
-const SHORT: [&str; 12] = [
-    "--epochs",
-    "8",
-    "--train-points",
-    "200",
-    "--horizon",
-    "4",
-    "--warmup-share",
-    "0.5",
-    "--ramp",
-    "0.25",
-    "--seed",
-    "3",
-];
+// Eight epochs of GB1: one-step warm-up in epochs 1 to 4, rollouts from epoch 5 on.
+use crate::safety::{GB1, SHORT, STEPS};
 
 fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).to_string()

@@ -8,11 +8,13 @@ use std::process::{Command, Stdio};
 
 use crate::cli::{gbc, scratch};
 
-const GB1: &str = "models/bioreactor/gb1.gbm";
-const STEPS: &str = "models/bioreactor/data/steps.csv";
+/// The bioreactor GB1 model and its record, trained by the run tests here and in `runs`.
+pub const GB1: &str = "models/bioreactor/gb1.gbm";
+/// The bioreactor record.
+pub const STEPS: &str = "models/bioreactor/data/steps.csv";
 
 /// A short multi-step training of GB1 that crosses the curriculum's switch to rollouts.
-const SHORT: [&str; 12] = [
+pub const SHORT: [&str; 12] = [
     "--epochs",
     "8",
     "--train-points",
