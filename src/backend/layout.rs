@@ -24,8 +24,8 @@ pub struct ClosureLayout {
     /// Per input column: mean and std used for normalisation.
     column_mean: Vec<f64>,
     column_std: Vec<f64>,
-    /// Which columns are lag-0 states (their constant part is `-mean/std`).
-    is_stage_state: Vec<bool>,
+    /// The lag-0 state columns and their constant part, `(0 - mean) / std`.
+    stage_columns: Vec<(usize, f64)>,
     /// Hidden-layer activation.
     pub activation: Activation,
     /// Index of its first tensor in the weight list.
@@ -77,14 +77,22 @@ impl ClosureLayout {
     /// one embedding normalisation of training, which the fused step calls too.
     pub fn normalise_into<E: Real>(&self, raw: &[f64], values: &mut Vec<E>) {
         values.clear();
-        values.reserve(raw.len());
-        let columns = (self.column_mean.iter())
-            .zip(&self.column_std)
-            .zip(&self.is_stage_state);
-        for row in raw.chunks(self.width) {
-            for (&value, ((&mean, &std), &stage)) in row.iter().zip(columns.clone()) {
-                let source = if stage { 0.0 } else { value };
-                values.push(E::from_double((source - mean) / std));
+        values.resize(raw.len(), E::ZERO);
+        let width = self.width.min(self.column_mean.len());
+        let (mean, std) = (&self.column_mean[..width], &self.column_std[..width]);
+        for (row, out) in raw.chunks(self.width).zip(values.chunks_mut(self.width)) {
+            let columns = row.len().min(width);
+            // Every column first, over equal-length slices so that the division is
+            // vectorised (exactly rounded: the same bits as one at a time) ...
+            let (row, out) = (&row[..columns], &mut out[..columns]);
+            for column in 0..columns {
+                out[column] = E::from_double((row[column] - mean[column]) / std[column]);
+            }
+            // ... then the lag-0 state columns, whose source is 0.
+            for &(column, constant) in &self.stage_columns {
+                if let Some(out) = out.get_mut(column) {
+                    *out = E::from_double(constant);
+                }
             }
         }
     }
@@ -331,7 +339,7 @@ pub fn closure_layout(
     let norm = &setup.normalisation;
     let layout = closure.embedding.layout();
     let (mut column_mean, mut column_std) = (Vec::new(), Vec::new());
-    let (mut entries, mut is_stage_state) = (Vec::new(), Vec::new());
+    let (mut entries, mut stage_columns) = (Vec::new(), Vec::new());
     for (column, &(var, lag)) in layout.iter().enumerate() {
         let (mean, std) = match var {
             Var::Input(i) => (norm.input_mean.get(i), norm.input_std.get(i)),
@@ -358,15 +366,15 @@ pub fn closure_layout(
                 factor: 1.0 / std,
                 rows: None,
             });
+            stage_columns.push((column, (0.0 - mean) / std));
         }
-        is_stage_state.push(stage_state);
     }
     Ok(ClosureLayout {
         width: layout.len(),
         state_columns: Arc::new(EmbedColumns { entries }),
         column_mean,
         column_std,
-        is_stage_state,
+        stage_columns,
         activation: closure.network.activation,
         first_tensor,
         layers: closure.network.hidden.len() + 1,
