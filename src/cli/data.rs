@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use super::CommandError;
-use crate::data::{parse_mapping, MinRows};
+use crate::data::parse_mapping;
 use crate::ir::Model;
 use crate::record::Record;
 
@@ -17,53 +17,13 @@ pub struct ColumnArgs {
     pub columns: Vec<(String, String)>,
 }
 
-/// Reads `files` as one data set and binds it to `model`: every experiment of every file,
-/// in order.
+/// Reads `files` as one data set and binds it to `model` ([`crate::api::read_records`]).
 pub fn load_records(
     model: &Model,
     files: &[PathBuf],
     columns: &ColumnArgs,
 ) -> Result<Vec<Record>, CommandError> {
-    if files.is_empty() {
-        return Ok(Vec::new());
-    }
-    let request = crate::record::request(
-        model,
-        &columns.columns,
-        MinRows::new(2, "one step needs two rows"),
-    );
-    let data = crate::data::read_set(files, &request).map_err(CommandError::user)?;
-    crate::record::bind(model, &data).map_err(CommandError::user)
-}
-
-/// Splits `records` into the experiments that train and those named in `holdout`; an
-/// unknown name is an error that lists the experiments, and holding out every experiment
-/// leaves none to train.
-pub fn hold_out(
-    records: Vec<Record>,
-    holdout: &[String],
-) -> Result<(Vec<Record>, Vec<Record>), CommandError> {
-    let names: Vec<&str> = records.iter().map(|r| r.name.as_str()).collect();
-    for name in holdout {
-        if !names.contains(&name.as_str()) {
-            return Err(CommandError::user(crate::train::TrainError::BadOption {
-                option: "--holdout".into(),
-                expected: format!(
-                    "the name of an experiment ({})",
-                    crate::suggest::did_you_mean(name, &names, "experiments")
-                ),
-                found: name.clone(),
-            }));
-        }
-    }
-    let (held, kept): (Vec<Record>, Vec<Record>) =
-        records.into_iter().partition(|r| holdout.contains(&r.name));
-    if kept.is_empty() {
-        return Err(CommandError::user(
-            crate::train::TrainError::NoTrainingExperiment,
-        ));
-    }
-    Ok((kept, held))
+    Ok(crate::api::read_records(model, files, &columns.columns)?)
 }
 
 /// Where whole-experiment free runs and training windows start.

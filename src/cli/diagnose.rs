@@ -4,10 +4,11 @@
 //! Data are read as `gbc train` reads them (records spec). Text on stdout, optionally
 //! `--json` and `--html` reports and `--figures` SVG files.
 
-use super::data::{hold_out, load_records, ColumnArgs};
+use super::data::ColumnArgs;
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
-use crate::diagnose::{self, DiagnoseError, Options, Problem, Progress};
+use crate::api;
+use crate::diagnose::{DiagnoseError, Options, Progress};
 use std::path::PathBuf;
 
 /// Arguments of `gbc diagnose`.
@@ -96,130 +97,62 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     for output in [&args.json, &args.html].into_iter().flatten() {
         crate::io::ensure_not_input(output, &inputs).map_err(CommandError::user)?;
     }
-    let bad = |option: &str, expected: String, found: String, help: &str| {
-        CommandError::user(DiagnoseError::BadOption {
-            option: option.into(),
-            expected,
-            found,
-            help: help.into(),
-        })
-    };
-    if let Some(delay) = args.delay {
-        return Err(bad(
-            "--delay",
-            "--span T, the longest time constant of the history".into(),
-            delay.to_string(),
-            "the history of the free corrections is a fading memory now: --span sets its \
-             longest time constant and --dim how many it has",
-        ));
-    }
-    if args.jobs == Some(0) {
-        return Err(bad(
-            "--jobs",
-            "at least 1 thread".into(),
-            "0".into(),
-            "--jobs 2 runs two fits at a time",
-        ));
-    }
-    let name = args.model.display().to_string();
-    let source = crate::driver::read_source(&args.model).map_err(|r| vec![r])?;
-    let compiled = crate::driver::compile(&name, &source, &[])?;
-    let model = &compiled.model;
-    // The run's noise (`ir::merge_noise`): refused here when a spec names no measured
-    // quantity.
-    let noise = crate::ir::merge_noise(model, &args.noise, &model.measured())
-        .map_err(CommandError::user)?;
-    let records = load_records(model, &args.data, &args.columns)?;
-    check_holdout_names(&records, &args.holdout)?;
-    let (train, mut held) = hold_out(records, &args.holdout)?;
-    held.extend(load_records(model, &args.val, &args.columns)?);
-    let problem = Problem {
-        name: &name,
-        source: &source,
-        checked: &compiled.checked,
-        model,
-        records: &train,
-        held_out: &held,
-    };
-    let options = Options {
-        val_fraction: args.val_fraction,
-        restarts: args.restarts,
-        seed: args.seed,
-        span: args.span,
-        dim: args.dim,
-        fit_initial: args.fit_initial,
-        locate: !args.skip_loci,
-        noise: Some(noise),
-        min_rows: args.min_rows,
-        ..Options::default()
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.jobs.unwrap_or(0))
-        .build()
-        .map_err(|e| CommandError::Internal(format!("cannot start worker threads: {e}")))?;
+    let spec = spec_of(args)?;
+    let model = api::Model::from_file(&args.model)?;
+    spec.noise_of(&model)?;
+    let records = model.records_from_files(&args.data, &args.columns.columns)?;
+    let val = model.records_from_files(&args.val, &args.columns.columns)?;
     let reporter = Reporter::new();
-    let outcome =
-        pool.install(|| diagnose::diagnose(&problem, &options, &|event| report(&reporter, event)));
+    let outcome = api::diagnose(&model, (records, val), &spec, &|event| {
+        report(&reporter, event)
+    });
     reporter.finish();
-    let report = outcome.map_err(CommandError::user)?;
-    check_finite(args, &report)?;
-    print!("{}", diagnose::render::text(&report));
-    write_outputs(args, &report)
+    let diagnosis = outcome?;
+    print!("{}", diagnosis.text());
+    write_outputs(args, &diagnosis)
 }
 
-/// `--holdout 0.3` (the old spelling of a tail split) names no experiment: a clear error
-/// that points to `--val-fraction`.
-fn check_holdout_names(records: &[crate::record::Record], holdout: &[String]) -> CommandResult {
-    for name in holdout {
-        let known = records.iter().any(|r| &r.name == name);
-        if !known && name.trim().parse::<f64>().is_ok() {
-            let names: Vec<&str> = records.iter().map(|r| r.name.as_str()).collect();
-            return Err(CommandError::user(DiagnoseError::BadOption {
-                option: "--holdout".into(),
-                expected: format!("the name of an experiment ({})", names.join(", ")),
-                found: name.clone(),
-                help: format!(
-                    "--holdout names experiments to hold out; to score the last share of each \
-                     experiment use --val-fraction {name}"
-                ),
-            }));
-        }
+/// The diagnosis the flags ask for.
+pub fn spec_of(args: &DiagnoseArgs) -> Result<api::DiagnoseSpec, CommandError> {
+    if let Some(delay) = args.delay {
+        return Err(CommandError::user(DiagnoseError::BadOption {
+            option: "--delay".into(),
+            expected: "--span T, the longest time constant of the history".into(),
+            found: delay.to_string(),
+            help: "the history of the free corrections is a fading memory now: --span sets \
+                   its longest time constant and --dim how many it has"
+                .into(),
+        }));
     }
-    Ok(())
+    Ok(api::DiagnoseSpec {
+        options: Options {
+            val_fraction: args.val_fraction,
+            restarts: args.restarts,
+            seed: args.seed,
+            span: args.span,
+            dim: args.dim,
+            fit_initial: args.fit_initial,
+            locate: !args.skip_loci,
+            min_rows: args.min_rows,
+            ..Options::default()
+        },
+        holdout: args.holdout.clone(),
+        noise: args.noise.clone(),
+        jobs: args.jobs,
+    })
 }
 
-/// Refuses a report whose fitted params or initial states are not finite: they are its
-/// result (a diverged effect's gap is infinite by design and written as such).
-fn check_finite(args: &DiagnoseArgs, report: &diagnose::Report) -> CommandResult {
-    let params = (report.fitted_params.iter()).map(|(name, value)| (name.as_str(), *value));
-    let starts = (report.initial_states.iter()).map(|s| (s.state.as_str(), s.value));
-    let found = crate::finite::in_named(params)
-        .map(|what| format!("the fitted param {what}"))
-        .or_else(|| {
-            crate::finite::in_named(starts).map(|what| format!("the initial state {what}"))
-        });
-    let path = args
-        .json
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("the report"));
-    let help = "the fit of the model went non-finite: check the params' initial values and \
-                constraints";
-    crate::finite::refuse(&path, found, help).map_err(CommandError::user)
-}
-
-fn write_outputs(args: &DiagnoseArgs, report: &diagnose::Report) -> CommandResult {
+fn write_outputs(args: &DiagnoseArgs, diagnosis: &api::Diagnosis) -> CommandResult {
     if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(report)
-            .map_err(|e| CommandError::Internal(e.to_string()))?;
+        let json = diagnosis.json()?;
         crate::io::write_atomic(path, format!("{json}\n").as_bytes())
             .map_err(CommandError::user)?;
     }
     if let Some(path) = &args.html {
-        crate::io::write_atomic(path, diagnose::html::page(report).as_bytes())
-            .map_err(CommandError::user)?;
+        crate::io::write_atomic(path, diagnosis.html().as_bytes()).map_err(CommandError::user)?;
     }
     if let Some(directory) = &args.figures {
-        for (file, svg) in diagnose::html::figures(report) {
+        for (file, svg) in diagnosis.figures() {
             crate::io::write_atomic(&directory.join(file), svg.as_bytes())
                 .map_err(CommandError::user)?;
         }

@@ -5,6 +5,7 @@
 //! (a bug in gbc, including any panic).
 
 mod bench;
+pub mod binding;
 mod check;
 mod compile;
 mod completions;
@@ -50,6 +51,15 @@ impl From<Vec<miette::Report>> for CommandError {
         match reports.iter().find(|r| crate::error::is_bug(r.as_ref())) {
             Some(bug) => CommandError::Internal(bug.to_string()),
             None => CommandError::User(reports),
+        }
+    }
+}
+
+impl From<crate::api::ApiError> for CommandError {
+    fn from(error: crate::api::ApiError) -> Self {
+        match error {
+            crate::api::ApiError::User(reports) => CommandError::User(reports),
+            crate::api::ApiError::Internal(message) => CommandError::Internal(message),
         }
     }
 }

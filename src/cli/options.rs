@@ -81,46 +81,7 @@ impl TrainingFlags {
     }
 }
 
-/// The flag that sets a training field (`batch_size` -> `--batch`); the one mapping.
-pub fn flag_of(field: &str) -> Option<&'static str> {
-    Some(match field {
-        "epochs" => "--epochs",
-        "batch_size" => "--batch",
-        "learning_rate" => "--lr",
-        "precision" => "--precision",
-        "substeps" => "--substeps",
-        "engine" => "--engine",
-        "train_points" => "--train-points",
-        "online_horizon" => "--online-horizon",
-        "dt" => "--dt",
-        "column_weights" => "--weight",
-        "param_learning_rate" => "--param-lr",
-        "horizon" => "--horizon",
-        "range_factor" => "--range-factor",
-        "max_gradient_norm" => "--clip",
-        "warmup_share" => "--warmup",
-        "ramp_share" => "--ramp",
-        "windows_per_batch" => "--windows",
-        "cv" => "--cv",
-        _ => return None,
-    })
-}
-
-/// A training error whose option is a field set by a flag, renamed to the flag.
-pub fn with_flag(error: TrainError) -> TrainError {
-    match error {
-        TrainError::BadOption {
-            option,
-            expected,
-            found,
-        } => TrainError::BadOption {
-            option: flag_of(&option).map_or(option, str::to_string),
-            expected,
-            found,
-        },
-        other => other,
-    }
-}
+pub use crate::train::{flag_of, with_flag};
 
 #[cfg(test)]
 mod tests {

@@ -26,18 +26,15 @@ mod summary;
 use progress::Progress;
 use summary::summary;
 
-use super::data::{hold_out, load_records, ColumnArgs, HistoryArg};
+use super::data::{ColumnArgs, HistoryArg};
 use super::options::TrainingFlags;
 use super::{CommandError, CommandResult};
 use crate::data::MinRows;
 use crate::ir::Model;
-use crate::record::Record;
 use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
-use crate::train::{
-    self, artifacts, Objective, ParamSource, Part, Recipe, TrainError, TrainOptions, TrainingData,
-};
+use crate::train::{self, Objective, ParamSource, Recipe, TrainError, TrainOptions};
 
 /// The loss training minimises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -202,8 +199,7 @@ pub struct TrainArgs {
     pub poison_epoch: Option<(usize, usize)>,
 }
 
-/// Recoveries from a non-finite epoch by default (`--recoveries`).
-pub const DEFAULT_RECOVERIES: usize = 3;
+pub use crate::train::recovery::DEFAULT_RECOVERIES;
 
 /// `E:T`, two counts.
 fn parse_poison(argument: &str) -> Result<(usize, usize), String> {
@@ -230,54 +226,33 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     let model_file = (args.model.clone()).ok_or_else(|| {
         CommandError::Internal("a training without a model file or --resume".into())
     })?;
-    let model = super::load_model(&model_file)?;
-    let source = read_source(&model_file)?;
-    let records = load_records(&model, &args.data, &args.columns)?;
-    let (mut train_records, mut validation) = hold_out(records, &args.holdout)?;
-    validation.extend(load_records(&model, &args.val, &args.columns)?);
-    let part = part_of(args, &mut train_records, &mut validation)?;
-    let options = TrainOptions {
-        train_points: args.train_points,
-        seed: args.seed,
-        online_horizon: args.online_horizon,
-        dt: args.dt,
-        history: args.history.into(),
-        column_weights: args.weight.clone(),
-        ..TrainOptions::with(&args.settings.settings()?)
-    };
+    let model = crate::api::Model::from_file(&model_file)?;
+    let records = model.records_from_files(&args.data, &args.columns.columns)?;
+    let val = model.records_from_files(&args.val, &args.columns.columns)?;
+    let spec = spec_of(args)?;
     if args.warmup.is_some() {
         eprintln!(
             "warning: `gbc train --warmup` is deprecated: use --warmup-share (a share of the \
              epochs; `gbc simulate --warmup` is a time)"
         );
     }
-    let recipe = recipe_of(args);
     let directory = match &checkpoint {
         Some(_) => args.output.clone().unwrap_or_default(),
         None => run_directory(args)?,
     };
-    let model_path = model_file.display().to_string();
-    let data_path = (args.data.iter())
-        .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(" ");
     if checkpoint.is_none() && args.cv {
+        let (train, _) = crate::api::hold_out(records.clone(), &args.holdout)?;
         let keep = train::cv::Keep {
             directory: directory.clone(),
-            model: (&model_path, &source),
-            data: &data_path,
+            model: (&model.origin, &model.source),
+            data: spec.data.as_deref().unwrap_or_default(),
             recoveries: args.recoveries,
         };
-        cv::cross_validate(&model, &train_records, (&options, &recipe), &keep)?;
+        cv::cross_validate(model.ir(), &train, (&spec.options, &spec.recipe), &keep)?;
     }
     let command = match &checkpoint {
         Some(checkpoint) => checkpoint.command.clone(),
         None => safety::command(args)?,
-    };
-    let data = TrainingData {
-        train: &train_records,
-        validation: &validation,
-        part,
     };
     let started = Instant::now();
     let mut progress = Progress::default();
@@ -290,70 +265,86 @@ pub fn run(args: &TrainArgs) -> CommandResult {
             checkpoint.epochs
         );
     }
-    let control = train::RunControl {
+    let control = crate::api::Control {
         directory: Some(directory.clone()),
-        every: args.checkpoint_every,
         stop: safety::stop_on_signal(),
-        stop_after: args.stop_after_epochs,
-        early_stop: args.early_stop,
         resume: checkpoint,
         command,
-        keep_last_finite: true,
-        recoveries: args.recoveries,
+        stop_after: args.stop_after_epochs,
         poison: args.poison_epoch,
     };
-    let outcome = train::train_run(&model, &data, (&options, &recipe), &control, &mut |event| {
-        progress.observe(event, options.epochs)
+    let epochs = spec.options.epochs;
+    let outcome = crate::api::train(&model, (records, val), &spec, control, &mut |event| {
+        progress.observe(event, epochs)
     });
     progress.finish();
-    if let Err(TrainError::Interrupted { .. }) = &outcome {
-        let log = progress.log(None, options.learning_rate);
+    if outcome.as_ref().is_err_and(|error| error.is_interrupted()) {
+        // An interrupted run keeps its log beside its checkpoint.
+        let log = progress.log(None, spec.options.learning_rate);
         crate::io::write_atomic(&directory.join(LOG_FILE), log.as_bytes())
             .map_err(CommandError::user)?;
     }
-    let trained = outcome.map_err(train_error)?;
-    let info = artifacts::run_info(
-        &model,
-        (&model_path, &source),
-        &data_path,
-        &options,
-        &trained,
-    );
-    artifacts::save(&directory, &info, &trained.network).map_err(train_error)?;
-    train::Checkpoint::remove(&directory);
-    let log = progress.log(Some(&trained.report), options.learning_rate);
+    let run = outcome?;
+    if let Some(note) = &run.split.note {
+        eprintln!("{note}");
+    }
+    run.save(&directory)?;
+    let log = progress.log(Some(&run.trained.report), spec.options.learning_rate);
     crate::io::write_atomic(&directory.join(LOG_FILE), log.as_bytes())
-        .map_err(CommandError::user)?;
-    let title = (model_file.file_stem()).map_or(model.name.clone(), |s| s.to_string_lossy().into());
-    let page = train::page::run_page(
-        &model,
-        &trained,
-        (&train_records, &validation),
-        (options.history, &progress.horizons()),
-        &title,
-    );
-    crate::io::write_atomic(&directory.join(REPORT_FILE), page.as_bytes())
         .map_err(CommandError::user)?;
     let json_to_stdout = args
         .json
         .as_ref()
         .is_some_and(|p| p.as_os_str() == crate::io::STDOUT);
     if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(&info)
-            .map_err(|error| CommandError::Internal(format!("cannot encode metrics: {error}")))?;
-        crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
+        crate::io::write_atomic(path, run.json()?.as_bytes()).map_err(CommandError::user)?;
     }
-    if let Some(diverged) = &trained.report.diverged {
+    if let Some(diverged) = &run.trained.report.diverged {
         return Err(diverged_run(diverged, &directory));
     }
     let seconds = started.elapsed().as_secs_f64();
-    let text = summary(&model, &trained, seconds, (Some(&directory), args.cv));
+    let text = summary(
+        model.ir(),
+        &run.trained,
+        seconds,
+        (Some(&directory), args.cv),
+    );
     if json_to_stdout {
         eprint!("{text}");
     } else {
         print!("{text}");
     }
     Ok(())
+}
+
+/// The training run the flags ask for.
+pub fn spec_of(args: &TrainArgs) -> Result<crate::api::TrainSpec, CommandError> {
+    let data = (args.data.iter())
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
+    Ok(crate::api::TrainSpec {
+        options: TrainOptions {
+            train_points: args.train_points,
+            seed: args.seed,
+            online_horizon: args.online_horizon,
+            dt: args.dt,
+            history: args.history.into(),
+            column_weights: args.weight.clone(),
+            ..TrainOptions::with(&args.settings.settings()?)
+        },
+        recipe: recipe_of(args),
+        validation: crate::api::Validation {
+            holdout: args.holdout.clone(),
+            val_fraction: args.val_fraction,
+            train_points: args.train_points,
+            cv: args.cv,
+        },
+        early_stop: args.early_stop,
+        recoveries: args.recoveries,
+        checkpoint_every: args.checkpoint_every,
+        data: Some(data),
+    })
 }
 
 /// A run that went non-finite and was saved with its last finite weights: says which
@@ -386,13 +377,10 @@ fn diverged_run(diverged: &train::EpochDivergence, directory: &Path) -> CommandE
 /// The training log of a run directory.
 pub const LOG_FILE: &str = "log.csv";
 
-/// The report page of a run directory.
-pub const REPORT_FILE: &str = "report.html";
-
 /// Where the run goes: `-o DIR` (refused when it holds files, unless `--force`), else a new
 /// directory `runs/<model>-<UTC time>` announced on stderr. Checked before training, so
 /// that no run is lost to a directory that cannot take it.
-fn run_directory(args: &TrainArgs) -> Result<PathBuf, CommandError> {
+pub fn run_directory(args: &TrainArgs) -> Result<PathBuf, CommandError> {
     if let Some(directory) = &args.output {
         let occupied =
             std::fs::read_dir(directory).is_ok_and(|mut entries| entries.next().is_some());
@@ -446,42 +434,6 @@ fn utc_stamp(time: std::time::SystemTime) -> String {
         rest % 3600 / 60,
         rest % 60
     )
-}
-
-/// How the training experiments are split, from the flags: `--val-fraction`,
-/// `--train-points` (the paper's protocol), whole experiments (`--val`, `--holdout`), or by
-/// default the first 70 % of one experiment's pairs or, with several experiments, the last
-/// experiment held out (announced on stderr). With `--cv` and nothing else the final model
-/// trains on every experiment.
-fn part_of(
-    args: &TrainArgs,
-    train: &mut Vec<Record>,
-    validation: &mut Vec<Record>,
-) -> Result<Part, CommandError> {
-    if let Some(share) = args.val_fraction {
-        if !(share > 0.0 && share < 1.0) {
-            return Err(train_error(TrainError::BadOption {
-                option: "--val-fraction".into(),
-                expected: "a share strictly between 0 and 1".into(),
-                found: share.to_string(),
-            }));
-        }
-        return Ok(Part::Tail(share));
-    }
-    if args.train_points.is_some() || (train.len() == 1 && validation.is_empty()) {
-        return Ok(Part::FirstPairs(args.train_points));
-    }
-    if validation.is_empty() && !args.cv {
-        if let Some(last) = train.pop() {
-            eprintln!(
-                "validating on experiment `{}` (the last one; choose with --holdout NAME, \
-                 --val-fraction SHARE or --cv)",
-                last.name
-            );
-            validation.push(last);
-        }
-    }
-    Ok(Part::All)
 }
 
 /// `NAME=W` with a number.

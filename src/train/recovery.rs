@@ -5,6 +5,9 @@
 //! warning. When the tries are used up the run ends with the last finite weights and an
 //! [`super::EpochDivergence`] saying at which epoch, in which phase, why and what to try.
 
+/// Recoveries from a non-finite epoch by default (`--recoveries`).
+pub const DEFAULT_RECOVERIES: usize = 3;
+
 /// One recovery from a non-finite epoch.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Recovery {

@@ -143,13 +143,6 @@ impl Progress {
         }
     }
 
-    /// Each epoch's rollout length (1: one-step), a resumed run's earlier epochs first.
-    pub(super) fn horizons(&self) -> Vec<usize> {
-        (self.resumed.iter().chain(&self.rows))
-            .map(|row| row.horizon)
-            .collect()
-    }
-
     /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,
     /// seconds) and the validation errors where they were computed (before the first
     /// epoch, after every epoch with --early-stop, and after the last).

@@ -1,0 +1,303 @@
+"""gbc from Python: grey-box dynamical models (`.gbm`) — known balances, learned rate laws.
+
+The package is a thin layer over gbc's library API, the one the `gbc` command line calls:
+keyword names are the CLI's flag names with ``_`` for ``-``, with the same defaults, and
+results carry the fields of the CLI's JSON.
+
+    import gbc
+    m = gbc.Model.from_file("models/bioreactor/gb1.gbm")
+    run = m.train(df, epochs=20, train_points=300, precision="f64", seed=3)
+    pred = run.predict(df, mode="online")          # a pandas DataFrame
+    rep = gbc.diagnose(m, train_df, val=test_df, seed=1)
+    rep.credited, rep.gap_before
+
+Data are pandas DataFrames (or anything with ``columns`` and per-column ``to_numpy``, e.g.
+polars): one per experiment, or one with an ``experiment`` column; headers as a CSV file
+would have them (``t``, ``t [h]``, ``X [g/L]``); missing cells as NaN.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Callable, Iterable, Optional, Sequence, Union
+
+from . import _gbc
+from ._gbc import GbcError
+
+__all__ = ["Model", "Run", "Diagnosis", "diagnose", "GbcError"]
+
+
+def _column(values: Any) -> list:
+    """One DataFrame column as floats (missing -> NaN) or, when not numeric, strings."""
+    array = values.to_numpy() if hasattr(values, "to_numpy") else list(values)
+    try:
+        return [float("nan") if v is None else float(v) for v in array]
+    except (TypeError, ValueError):
+        return ["" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)
+                for v in array]
+
+
+def _tables(data: Any, name: str) -> list:
+    """DataFrames as the native module's tables: ``(name, headers, columns)`` each. A dict
+    names its frames (a frame without an ``experiment`` column is the experiment of its
+    name, as a CSV file is the experiment of its file's stem); a list gives them the names
+    ``data[0]``, ``data[1]``, ..."""
+    if data is None:
+        return []
+    if isinstance(data, dict):
+        named = [(str(key), frame) for key, frame in data.items()]
+    elif isinstance(data, (list, tuple)):
+        named = [(name if len(data) == 1 else f"{name}[{i}]", f) for i, f in enumerate(data)]
+    else:
+        named = [(name, data)]
+    tables = []
+    for label, frame in named:
+        headers = [str(c) for c in frame.columns]
+        columns = [_column(frame[c]) for c in frame.columns]
+        tables.append((label, headers, columns))
+    return tables
+
+
+def _flags(keywords: dict) -> list:
+    """Keywords as the CLI's flags: ``train_points=300`` -> ``--train-points 300``; True ->
+    the flag alone, False/None -> nothing; a list repeats the flag; a dict (``weight``)
+    gives ``NAME=VALUE`` entries."""
+    flags = []
+    for key, value in keywords.items():
+        flag = "--" + key.replace("_", "-")
+        if value is None or value is False:
+            continue
+        if value is True:
+            flags.append(flag)
+        elif isinstance(value, dict):
+            for name, entry in value.items():
+                flags += [flag, f"{name}={entry}"]
+        elif isinstance(value, (list, tuple)):
+            for entry in value:
+                flags += [flag, str(entry)]
+        else:
+            flags += [flag, str(value)]
+    return flags
+
+
+def _progress(total_hint: Optional[int], desc: str, progress: Union[bool, Callable, None]):
+    """The callback that shows progress: the user's callable, a tqdm bar (updated in place
+    in a notebook) when tqdm is installed, else nothing."""
+    if callable(progress):
+        return progress, None
+    if progress is False:
+        return None, None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None, None
+    bar = tqdm(total=total_hint, desc=desc, unit="epoch", leave=True)
+
+    def on_event(event: dict) -> None:
+        kind = event.get("kind")
+        if kind == "started":
+            bar.reset(total=event["epochs"])
+        elif kind == "epoch":
+            bar.set_postfix(loss=f"{event['loss']:.3g}", horizon=event["horizon"])
+            bar.update(1)
+        elif kind == "warning":
+            bar.write(f"warning: {event['message']}")
+        elif kind == "stage":
+            bar.reset(total=event["total"])
+            bar.set_description(event["name"])
+        elif kind == "done":
+            bar.update(1)
+
+    return on_event, bar
+
+
+def _frame(experiment: str, header: Sequence[str], columns: Sequence[Sequence[float]],
+           several: bool):
+    import pandas as pd
+
+    frame = pd.DataFrame({name: list(values) for name, values in zip(header, columns)})
+    if several:
+        frame.insert(0, "experiment", experiment)
+    return frame
+
+
+class Model:
+    """A compiled ``.gbm`` model."""
+
+    def __init__(self, native: "_gbc.Model"):
+        self._native = native
+
+    @staticmethod
+    def from_file(path: str) -> "Model":
+        """Reads and compiles a model file; a bad model raises :class:`GbcError`."""
+        return Model(_gbc.Model.from_file(str(path)))
+
+    @staticmethod
+    def from_text(text: str, name: str = "<text>") -> "Model":
+        """Compiles model text; ``name`` names it in diagnostics."""
+        return Model(_gbc.Model.from_text(text, name))
+
+    @property
+    def name(self) -> str:
+        """The model's name."""
+        return self._native.name
+
+    @property
+    def states(self) -> list:
+        """The measured states."""
+        return self._native.states
+
+    @property
+    def inputs(self) -> list:
+        """The inputs."""
+        return self._native.inputs
+
+    @property
+    def params(self) -> dict:
+        """The params with their declared values."""
+        return dict(self._native.params)
+
+    @property
+    def source(self) -> str:
+        """The model's text."""
+        return self._native.source
+
+    def train(self, data: Any, *, val: Any = None, progress: Union[bool, Callable, None] = None,
+              resume: Optional[str] = None, **keywords: Any) -> "Run":
+        """Trains the model on ``data`` (a DataFrame or a list of them) as ``gbc train``
+        does; ``val`` validates (``--val``); every other keyword is a ``gbc train`` flag
+        (``epochs=20``, ``train_points=300``, ``precision="f64"``, ``seed=3``,
+        ``holdout=["B4"]``, ``output="runs/mine"``, ...). Progress goes to ``progress``
+        (a callable taking an event dict), else to a tqdm bar when tqdm is installed.
+        A keyboard interrupt stops after the current epoch and keeps a checkpoint in the
+        run directory; ``resume=DIR`` with the same data and keywords continues it, ending
+        where an uninterrupted run ends."""
+        callback, bar = _progress(keywords.get("epochs"), "training", progress)
+        try:
+            native = _gbc.train(self._native, _tables(data, "data"), _tables(val, "val"),
+                                _flags(keywords), callback,
+                                None if resume is None else str(resume))
+        finally:
+            if bar is not None:
+                bar.close()
+        return Run(native, self)
+
+    def __repr__(self) -> str:
+        return f"gbc.Model({self.name!r})"
+
+
+class Run:
+    """A trained model: ``predict``, ``params``, ``report``, ``export_onnx``, and the
+    fields of ``run.json`` as :attr:`info`."""
+
+    def __init__(self, native: "_gbc.Run", model: Model):
+        self._native = native
+        self.model = model
+        self.info: dict = json.loads(native.json())
+
+    @property
+    def directory(self) -> str:
+        """The run directory (weights.safetensors, run.json, report.html)."""
+        return str(self._native.directory)
+
+    @property
+    def params(self) -> dict:
+        """The trained params."""
+        return dict(self._native.params)
+
+    @property
+    def metrics(self) -> dict:
+        """The validation errors (``run.json``'s ``metrics``)."""
+        return self.info.get("metrics", {})
+
+    @property
+    def report(self) -> "Report":
+        """The run's report page; shown inline in Jupyter."""
+        return Report(self._native.report_html())
+
+    def predict(self, data: Any, mode: str = "offline", history: str = "held"):
+        """Predictions along ``data`` (a DataFrame or a list of them) as ``gbc predict``
+        writes them: ``t``, the states, closure and model outputs; an ``experiment`` column
+        when there are several. ``mode``: ``offline``, ``online`` or
+        ``online-trained-step``. A free run that leaves the training data's range stops
+        there, with a warning."""
+        import warnings
+
+        import pandas as pd
+
+        tables = self._native.predict(_tables(data, "data"), mode, history)
+        several = len(tables) > 1
+        frames = []
+        for experiment, header, columns, divergence in tables:
+            if divergence:
+                warnings.warn(f"{experiment}: {divergence}; the predictions stop before it")
+            frames.append(_frame(experiment, header, columns, several))
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def export_onnx(self, path: str, precision: str = "f32") -> None:
+        """Writes the one-step map as an ONNX file (``gbc export``)."""
+        self._native.export_onnx(str(path), precision)
+
+    def _repr_html_(self) -> str:
+        return self._native.report_html()
+
+    def __repr__(self) -> str:
+        return f"gbc.Run({self.directory!r})"
+
+
+class Report:
+    """An HTML report, shown inline in Jupyter (``_repr_html_``)."""
+
+    def __init__(self, html: str):
+        self.html = html
+
+    def _repr_html_(self) -> str:
+        return self.html
+
+    def save(self, path: str) -> None:
+        """Writes the page to ``path``."""
+        with open(path, "w", encoding="utf-8") as file:
+            file.write(self.html)
+
+
+class Diagnosis:
+    """A finished diagnosis: the fields of ``gbc diagnose --json`` as attributes
+    (``credited``, ``gap_before``, ``states``, ...) and in :attr:`info`; ``text``; inline
+    HTML in Jupyter."""
+
+    def __init__(self, native: "_gbc.Diagnosis"):
+        self._native = native
+        self.info: dict = json.loads(native.json())
+
+    def __getattr__(self, name: str) -> Any:
+        info = self.__dict__.get("info", {})
+        if name in info:
+            return info[name]
+        raise AttributeError(f"a diagnosis has no field {name!r}; its fields: {sorted(info)}")
+
+    @property
+    def text(self) -> str:
+        """The text report ``gbc diagnose`` prints."""
+        return self._native.text()
+
+    def _repr_html_(self) -> str:
+        return self._native.html()
+
+    def __repr__(self) -> str:
+        return self._native.text()
+
+
+def diagnose(model: Model, data: Any, *, val: Any = None,
+             progress: Union[bool, Callable, None] = None, **keywords: Any) -> Diagnosis:
+    """Diagnoses ``model`` (a mechanistic model) against ``data`` as ``gbc diagnose`` does;
+    ``val`` is scored only; every other keyword is a ``gbc diagnose`` flag (``seed=1``,
+    ``holdout=["B4"]``, ``restarts=8``, ``noise=["S=5%"]``, ...)."""
+    callback, bar = _progress(None, "diagnosing", progress)
+    try:
+        native = _gbc.diagnose(model._native, _tables(data, "data"), _tables(val, "val"),
+                               _flags(keywords), callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    return Diagnosis(native)

@@ -1,0 +1,433 @@
+//! `gbc._gbc`: the native half of the `gbc` Python package. It only converts: Python
+//! values in, calls into the library API (`gbc::api`), Python values out. The pure-Python
+//! half (`gbc/__init__.py`) turns DataFrames into tables and results into DataFrames.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use gbc::api::{self, ApiError, Column, Table};
+use gbc::cli::binding;
+use gbc::cli::CommandError;
+use gbc::train::predict::Mode;
+use gbc::train::{Event, History};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyKeyboardInterrupt, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+create_exception!(_gbc, GbcError, PyException, "An error of gbc: its `code`, `message`, `file`, `line`, `column` and `help` are attributes; `diagnostics` lists every one.");
+
+/// The Python exception of an API error: the first diagnostic's facts as attributes, all
+/// of them in `diagnostics`, the rendered text as the message.
+fn raise(py: Python<'_>, error: ApiError) -> PyErr {
+    let records = error.records();
+    let err = GbcError::new_err(error.rendered());
+    let value = err.value(py);
+    let first = records.first();
+    let _ = value.setattr("code", first.and_then(|r| r.code.clone()));
+    let _ = value.setattr("message", first.map(|r| r.message.clone()));
+    let _ = value.setattr("file", first.and_then(|r| r.file.clone()));
+    let _ = value.setattr("line", first.and_then(|r| r.line));
+    let _ = value.setattr("column", first.and_then(|r| r.column));
+    let _ = value.setattr("help", first.and_then(|r| r.help.clone()));
+    let all = (records.iter())
+        .map(|r| serde_json::to_string(r).unwrap_or_default())
+        .collect::<Vec<_>>();
+    let _ = value.setattr("diagnostics", all);
+    err
+}
+
+fn command_error(py: Python<'_>, error: CommandError) -> PyErr {
+    raise(
+        py,
+        match error {
+            CommandError::User(reports) => ApiError::User(reports),
+            CommandError::Internal(message) => ApiError::Internal(message),
+        },
+    )
+}
+
+/// A compiled `.gbm` model.
+#[pyclass(module = "gbc._gbc", frozen)]
+struct Model {
+    inner: api::Model,
+}
+
+#[pymethods]
+impl Model {
+    /// Reads and compiles a model file.
+    #[staticmethod]
+    fn from_file(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
+        let inner = api::Model::from_file(&path).map_err(|e| raise(py, e))?;
+        Ok(Model { inner })
+    }
+
+    /// Compiles model text; `name` names it in diagnostics.
+    #[staticmethod]
+    #[pyo3(signature = (text, name = "<text>"))]
+    fn from_text(py: Python<'_>, text: &str, name: &str) -> PyResult<Model> {
+        let inner = api::Model::from_text(text, name).map_err(|e| raise(py, e))?;
+        Ok(Model { inner })
+    }
+
+    /// The model's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.inner.name().to_string()
+    }
+
+    /// The model's text.
+    #[getter]
+    fn source(&self) -> String {
+        self.inner.source.clone()
+    }
+
+    /// The measured states, in declaration order.
+    #[getter]
+    fn states(&self) -> Vec<String> {
+        self.inner
+            .ir()
+            .states
+            .iter()
+            .map(|s| s.name.clone())
+            .collect()
+    }
+
+    /// The inputs, in declaration order.
+    #[getter]
+    fn inputs(&self) -> Vec<String> {
+        self.inner
+            .ir()
+            .inputs
+            .iter()
+            .map(|s| s.name.clone())
+            .collect()
+    }
+
+    /// The params with their declared values.
+    #[getter]
+    fn params(&self) -> Vec<(String, f64)> {
+        (self.inner.ir().params.iter())
+            .map(|p| (p.name.clone(), p.init))
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Model({:?})", self.inner.name())
+    }
+}
+
+/// Tables from Python: `(name, headers, columns)` each, every column a list of floats
+/// (NaN missing) or of strings.
+fn tables(given: &Bound<'_, PyList>) -> PyResult<Vec<Table>> {
+    let mut out = Vec::new();
+    for item in given.iter() {
+        let (name, headers, columns): (String, Vec<String>, Vec<Bound<'_, PyAny>>) =
+            item.extract()?;
+        let columns = (columns.iter())
+            .map(|column| match column.extract::<Vec<f64>>() {
+                Ok(numbers) => Ok(Column::Numbers(numbers)),
+                Err(_) => column.extract::<Vec<String>>().map(Column::Labels),
+            })
+            .collect::<PyResult<Vec<_>>>()
+            .map_err(|_| PyValueError::new_err("a column must hold numbers or strings"))?;
+        out.push(Table {
+            name,
+            headers,
+            columns,
+        });
+    }
+    Ok(out)
+}
+
+fn records(
+    py: Python<'_>,
+    model: &api::Model,
+    given: &Bound<'_, PyList>,
+) -> PyResult<Vec<gbc::record::Record>> {
+    let tables = tables(given)?;
+    model.records(&tables, &[]).map_err(|e| raise(py, e))
+}
+
+/// A training event as a dict for the Python callback.
+fn event_dict<'py>(py: Python<'py>, event: &Event) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let dict = PyDict::new(py);
+    match event {
+        Event::Started {
+            epochs,
+            train_pairs,
+            validation_pairs,
+        } => {
+            dict.set_item("kind", "started")?;
+            dict.set_item("epochs", epochs)?;
+            dict.set_item("train_pairs", train_pairs)?;
+            dict.set_item("validation_pairs", validation_pairs)?;
+        }
+        Event::Epoch {
+            epoch,
+            loss,
+            horizon,
+        } => {
+            dict.set_item("kind", "epoch")?;
+            dict.set_item("epoch", epoch)?;
+            dict.set_item("loss", loss)?;
+            dict.set_item("horizon", horizon)?;
+        }
+        Event::Warning(warning) => {
+            dict.set_item("kind", "warning")?;
+            dict.set_item("message", warning.to_string())?;
+        }
+        Event::Recovered(recovery) => {
+            dict.set_item("kind", "warning")?;
+            dict.set_item("message", recovery.to_string())?;
+        }
+        Event::Phase(phase) => {
+            dict.set_item("kind", "phase")?;
+            dict.set_item("phase", *phase)?;
+        }
+        _ => return Ok(None),
+    }
+    Ok(Some(dict))
+}
+
+/// A trained run.
+#[pyclass(module = "gbc._gbc", unsendable)]
+struct Run {
+    inner: api::Run,
+    directory: PathBuf,
+}
+
+/// Trains `model` on `data` (tables), validating on `val` (tables), with the CLI's
+/// `flags`; `callback(event: dict)` hears of each phase, epoch and warning. A keyboard
+/// interrupt stops training after the current epoch, keeps a checkpoint in the run
+/// directory and raises `KeyboardInterrupt`; `resume=DIR` continues such a run (the same
+/// data and flags), ending where an uninterrupted run ends.
+#[pyfunction]
+#[pyo3(signature = (model, data, val, flags, callback = None, resume = None))]
+fn train(
+    py: Python<'_>,
+    model: &Model,
+    data: &Bound<'_, PyList>,
+    val: &Bound<'_, PyList>,
+    flags: Vec<String>,
+    callback: Option<PyObject>,
+    resume: Option<PathBuf>,
+) -> PyResult<Run> {
+    let model = &model.inner;
+    let (spec, directory) =
+        binding::train_spec(&flags, model, resume.as_deref()).map_err(|e| command_error(py, e))?;
+    let (records, val) = (records(py, model, data)?, records(py, model, val)?);
+    let command = serde_json::json!({ "python": flags });
+    let checkpoint = match &resume {
+        Some(resumed) => Some(checkpoint_of(py, resumed, &command)?),
+        None => None,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let control = api::Control {
+        directory: Some(directory.clone()),
+        stop: Some(stop.clone()),
+        resume: checkpoint,
+        command,
+        ..api::Control::default()
+    };
+    let mut failure: Option<PyErr> = None;
+    let outcome = api::train(model, (records, val), &spec, control, &mut |event| {
+        if let (Some(callback), Ok(Some(dict))) = (&callback, event_dict(py, &event)) {
+            if let Err(error) = callback.call1(py, (dict,)) {
+                failure.get_or_insert(error);
+                stop.store(true, Ordering::SeqCst);
+            }
+        }
+        if let Err(error) = py.check_signals() {
+            failure.get_or_insert(error);
+            stop.store(true, Ordering::SeqCst);
+        }
+    });
+    match outcome {
+        Ok(inner) => {
+            inner.save(&directory).map_err(|e| raise(py, e))?;
+            Ok(Run { inner, directory })
+        }
+        Err(error) if error.is_interrupted() => {
+            Err(failure.unwrap_or_else(|| PyKeyboardInterrupt::new_err(error.to_string())))
+        }
+        Err(error) => Err(raise(py, error)),
+    }
+}
+
+/// The checkpoint of the stopped run in `directory`, which must have been trained with the
+/// same keywords (`command`).
+fn checkpoint_of(
+    py: Python<'_>,
+    directory: &std::path::Path,
+    command: &serde_json::Value,
+) -> PyResult<gbc::train::Checkpoint> {
+    let checkpoint =
+        gbc::train::Checkpoint::load(directory).map_err(|e| raise(py, ApiError::from(e)))?;
+    if &checkpoint.command != command {
+        return Err(PyValueError::new_err(format!(
+            "the run in {} was trained with other keywords ({}): resume it with the same ones",
+            directory.display(),
+            checkpoint.command
+        )));
+    }
+    Ok(checkpoint)
+}
+
+#[pymethods]
+impl Run {
+    /// The run directory (weights, run.json, report.html).
+    #[getter]
+    fn directory(&self) -> PathBuf {
+        self.directory.clone()
+    }
+
+    /// The run's metadata, as `run.json` holds it (JSON text).
+    fn json(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.json().map_err(|e| raise(py, e))
+    }
+
+    /// The report page (HTML).
+    fn report_html(&self) -> String {
+        self.inner.report_html()
+    }
+
+    /// The trained params, in declaration order.
+    #[getter]
+    fn params(&self) -> Vec<(String, f64)> {
+        self.inner.params().to_vec()
+    }
+
+    /// Predictions of each experiment of `data` (tables): `(experiment, header, columns,
+    /// divergence)` per experiment; `mode` is `offline`, `online` or
+    /// `online-trained-step`, `history` `held` or `measured`.
+    #[pyo3(signature = (data, mode = "offline", history = "held"))]
+    #[allow(clippy::type_complexity)]
+    fn predict(
+        &self,
+        py: Python<'_>,
+        data: &Bound<'_, PyList>,
+        mode: &str,
+        history: &str,
+    ) -> PyResult<Vec<(String, Vec<String>, Vec<Vec<f64>>, Option<String>)>> {
+        let mode = match mode {
+            "offline" => Mode::Offline,
+            "online" => Mode::Online,
+            "online-trained-step" | "online_trained_step" => Mode::OnlineTrainedStep,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "expected mode `offline`, `online` or `online-trained-step`, found `{other}`"
+                )))
+            }
+        };
+        let history = match history {
+            "held" => History::Held,
+            "measured" => History::Measured,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "expected history `held` or `measured`, found `{other}`"
+                )))
+            }
+        };
+        let records = records(py, &self.inner.model, data)?;
+        let predictions =
+            (self.inner.predict(&records, mode, history)).map_err(|e| raise(py, e))?;
+        Ok(predictions
+            .into_iter()
+            .map(|p| (p.experiment, p.header, p.columns, p.divergence))
+            .collect())
+    }
+
+    /// Writes the one-step map as an ONNX file (`precision`: `f32` or `f64`).
+    #[pyo3(signature = (path, precision = "f32"))]
+    fn export_onnx(&self, py: Python<'_>, path: PathBuf, precision: &str) -> PyResult<()> {
+        let precision = match precision {
+            "f32" => gbc::backend::Precision::F32,
+            "f64" => gbc::backend::Precision::F64,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "expected precision `f32` or `f64`, found `{other}`"
+                )))
+            }
+        };
+        let bytes = self
+            .inner
+            .export_onnx(precision)
+            .map_err(|e| raise(py, e))?;
+        gbc::io::write_atomic(&path, &bytes).map_err(|e| raise(py, ApiError::user(e)))
+    }
+}
+
+/// A finished diagnosis.
+#[pyclass(module = "gbc._gbc", frozen)]
+struct Diagnosis {
+    inner: api::Diagnosis,
+}
+
+#[pymethods]
+impl Diagnosis {
+    /// The text report.
+    fn text(&self) -> String {
+        self.inner.text()
+    }
+
+    /// The report as JSON text (what `--json` writes).
+    fn json(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.json().map_err(|e| raise(py, e))
+    }
+
+    /// The HTML page (what `--html` writes).
+    fn html(&self) -> String {
+        self.inner.html()
+    }
+}
+
+/// Diagnoses `model` against `data` (tables), scoring `val` (tables) too, with the CLI's
+/// `flags`; `callback(event: dict)` hears of each stage and fit.
+#[pyfunction]
+#[pyo3(signature = (model, data, val, flags, callback = None))]
+fn diagnose(
+    py: Python<'_>,
+    model: &Model,
+    data: &Bound<'_, PyList>,
+    val: &Bound<'_, PyList>,
+    flags: Vec<String>,
+    callback: Option<PyObject>,
+) -> PyResult<Diagnosis> {
+    let model = &model.inner;
+    let spec = binding::diagnose_spec(&flags).map_err(|e| command_error(py, e))?;
+    let (records, val) = (records(py, model, data)?, records(py, model, val)?);
+    let on_progress = |event: gbc::diagnose::Progress| {
+        let Some(callback) = &callback else { return };
+        Python::with_gil(|py| {
+            let dict = PyDict::new(py);
+            let _ = match event {
+                gbc::diagnose::Progress::Stage { name, total } => dict
+                    .set_item("kind", "stage")
+                    .and(dict.set_item("name", name))
+                    .and(dict.set_item("total", total)),
+                gbc::diagnose::Progress::Done { item, seconds } => dict
+                    .set_item("kind", "done")
+                    .and(dict.set_item("item", item))
+                    .and(dict.set_item("seconds", seconds)),
+            };
+            let _ = callback.call1(py, (dict,));
+        });
+    };
+    let outcome = py.allow_threads(|| api::diagnose(model, (records, val), &spec, &on_progress));
+    let inner = outcome.map_err(|e| raise(py, e))?;
+    Ok(Diagnosis { inner })
+}
+
+/// The native module.
+#[pymodule]
+fn _gbc(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Model>()?;
+    m.add_class::<Run>()?;
+    m.add_class::<Diagnosis>()?;
+    m.add_function(wrap_pyfunction!(train, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add("GbcError", m.py().get_type::<GbcError>())?;
+    Ok(())
+}

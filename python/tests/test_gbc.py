@@ -1,0 +1,114 @@
+"""The package against the CLI: the same data, flags and seed give the same numbers.
+
+Run from the repository root after `cargo build --release` (the CLI binary) and
+`pip install ./python`:  python -m pytest python/tests
+"""
+
+import json
+import math
+import os
+import pathlib
+import subprocess
+
+import pandas as pd
+import pytest
+
+import gbc
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+GBC = pathlib.Path(os.environ.get("GBC_BIN", ROOT / "target" / "release" / "gbc"))
+GB1 = ROOT / "models" / "bioreactor" / "gb1.gbm"
+STEPS = ROOT / "models" / "bioreactor" / "data" / "steps.csv"
+MONOD = ROOT / "models" / "diagnose" / "overflow" / "monod.gbm"
+OVERFLOW = ROOT / "models" / "diagnose" / "overflow" / "data" / "overflow.csv"
+
+
+def cli(*args):
+    assert GBC.exists(), f"the CLI binary {GBC} is missing: run `cargo build --release`"
+    return subprocess.run([str(GBC), *map(str, args)], cwd=ROOT, check=True,
+                          capture_output=True, text=True)
+
+
+def read(path):
+    # The Python engine parses with float(): the exact doubles of the file, as gbc reads them.
+    return pd.read_csv(path, engine="python")
+
+
+def test_train_and_predict_equal_the_cli(tmp_path):
+    flags = ["--epochs", 4, "--train-points", 300, "--precision", "f64", "--seed", 3]
+    cli("train", GB1, STEPS, *flags, "-o", tmp_path / "cli")
+    cli("predict", GB1, STEPS, "--weights", tmp_path / "cli", "--mode", "online",
+        "-o", tmp_path / "cli.csv")
+    model = gbc.Model.from_file(GB1)
+    run = model.train({"steps": read(STEPS)}, epochs=4, train_points=300, precision="f64",
+                      seed=3, output=tmp_path / "py", progress=False)
+    expected = json.loads((tmp_path / "cli" / "run.json").read_text())
+    for key in ["initial_offline", "initial_online", "offline", "online"]:
+        assert run.metrics[key] == expected["metrics"][key], key
+    assert run.params == {p["name"]: p["value"] for p in expected["params"]}
+    assert (tmp_path / "py" / "weights.safetensors").read_bytes() == \
+        (tmp_path / "cli" / "weights.safetensors").read_bytes()
+    predicted = run.predict({"steps": read(STEPS)}, mode="online")
+    written = read(tmp_path / "cli.csv")
+    assert list(predicted.columns) == list(written.columns)
+    assert predicted.shape == written.shape
+    # The CLI's file holds each value's shortest round-trip text: the same doubles.
+    assert (predicted.to_numpy() == written.to_numpy()).all()
+    assert "<svg" in run.report._repr_html_()
+
+
+def test_a_frame_with_missing_cells_reads_as_its_csv_file(tmp_path):
+    frame = read(OVERFLOW)
+    assert frame.isna().to_numpy().any(), "the lab record has empty cells"
+    path = tmp_path / "overflow.csv"
+    frame.to_csv(path, index=False)
+    model = gbc.Model.from_file(MONOD)
+    from_frame = model.train(frame, holdout=["B4"], output=tmp_path / "a", progress=False)
+    cli("train", MONOD, OVERFLOW, "--holdout", "B4", "-o", tmp_path / "b")
+    expected = json.loads((tmp_path / "b" / "run.json").read_text())
+    assert from_frame.params == {p["name"]: p["value"] for p in expected["params"]}
+    assert from_frame.metrics["online"] == expected["metrics"]["online"]
+
+
+def test_diagnose_equals_the_cli(tmp_path):
+    flags = ["--holdout", "B4", "--skip-loci", "--restarts", 2, "--seed", 1]
+    cli("diagnose", MONOD, OVERFLOW, *flags, "--json", tmp_path / "d.json")
+    expected = json.loads((tmp_path / "d.json").read_text())
+    report = gbc.diagnose(gbc.Model.from_file(MONOD), read(OVERFLOW).assign(), holdout=["B4"],
+                          skip_loci=True, restarts=2, seed=1, progress=False)
+    assert report.gap_before == expected["gap_before"]
+    assert report.credited == expected["credited"]
+    assert report.fitted_params == expected["fitted_params"]
+    assert "<html" in report._repr_html_().lower()
+
+
+def test_errors_carry_the_diagnostic():
+    with pytest.raises(gbc.GbcError) as caught:
+        gbc.Model.from_text("model m\nstate X\nder X = -k * X\n", "bad.gbm")
+    error = caught.value
+    assert error.code == "gbm::E0101"
+    assert (error.file, error.line, error.column) == ("bad.gbm", 3, 10)
+    assert "k" in error.message
+    with pytest.raises(gbc.GbcError) as caught:
+        gbc.Model.from_file(GB1).train(read(STEPS), epochz=3, progress=False)
+    assert caught.value.code == "gbm::E1006"
+    assert "--epochz" in caught.value.message
+
+
+def test_an_interrupt_stops_after_the_epoch_and_keeps_a_checkpoint(tmp_path):
+    def interrupt(event):
+        if event.get("kind") == "epoch" and event["epoch"] == 2:
+            raise KeyboardInterrupt
+
+    model, data = gbc.Model.from_file(GB1), read(STEPS)
+    keywords = dict(epochs=6, train_points=300, output=tmp_path / "run")
+    with pytest.raises(KeyboardInterrupt):
+        model.train(data, progress=interrupt, **keywords)
+    checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
+    assert checkpoint["epoch"] == 2
+    resumed = model.train(data, progress=False, resume=tmp_path / "run", **keywords)
+    whole = model.train(data, progress=False, **{**keywords, "output": tmp_path / "whole"})
+    assert resumed.params == whole.params
+    assert (tmp_path / "run" / "weights.safetensors").read_bytes() == \
+        (tmp_path / "whole" / "weights.safetensors").read_bytes()
+    assert not (tmp_path / "run" / "checkpoint.json").exists()

@@ -1,0 +1,77 @@
+//! The flags of `gbc train` and `gbc diagnose` as the specs of the library API, for a
+//! binding whose keywords are these flags (`train_points=300` is `--train-points 300`): the
+//! same names, the same defaults, the same checks, by construction.
+
+use std::path::{Path, PathBuf};
+
+use clap::Parser;
+
+use super::diagnose::DiagnoseArgs;
+use super::train::TrainArgs;
+use super::CommandError;
+use crate::api;
+
+/// Flags a binding passed that `gbc` does not take.
+#[derive(Debug, thiserror::Error, miette::Diagnostic)]
+#[error("{message}")]
+#[diagnostic(
+    code(gbm::E1006),
+    help("the keywords are the command's flags with `_` for `-`: see `gbc {command} --help`")
+)]
+pub struct KeywordError {
+    /// What the flag parser said.
+    pub message: String,
+    /// The command whose flags they are.
+    pub command: &'static str,
+}
+
+#[derive(Parser)]
+#[command(name = "gbc", no_binary_name = true)]
+struct Train {
+    #[command(flatten)]
+    args: TrainArgs,
+}
+
+#[derive(Parser)]
+#[command(name = "gbc", no_binary_name = true)]
+struct Diagnose {
+    #[command(flatten)]
+    args: DiagnoseArgs,
+}
+
+/// What `flags` mean to a command: parsed after a placeholder model and data file, which
+/// the binding gives as objects instead.
+fn parse<P: Parser>(flags: &[String], command: &'static str) -> Result<P, CommandError> {
+    let argv = ["<model>", "<data>"].into_iter().map(String::from);
+    P::try_parse_from(argv.chain(flags.iter().cloned())).map_err(|error| {
+        let message = error.render().to_string();
+        let message = message.lines().next().unwrap_or_default();
+        let message = message.trim_start_matches("error: ").to_string();
+        CommandError::user(KeywordError { message, command })
+    })
+}
+
+/// The training run `gbc train`'s `flags` ask for, and its run directory: `resumed`, the
+/// stopped run it continues, else `-o DIR` or a new `runs/<model>-<time>`, checked as the
+/// CLI checks it.
+pub fn train_spec(
+    flags: &[String],
+    model: &api::Model,
+    resumed: Option<&Path>,
+) -> Result<(api::TrainSpec, PathBuf), CommandError> {
+    let Train { mut args } = parse(flags, "train")?;
+    args.model = (model.path.clone()).or_else(|| Some(PathBuf::from(model.stem())));
+    args.data.clear();
+    let spec = super::train::spec_of(&args)?;
+    let directory = match resumed {
+        Some(directory) => directory.to_path_buf(),
+        None => super::train::run_directory(&args)?,
+    };
+    Ok((api::TrainSpec { data: None, ..spec }, directory))
+}
+
+/// The diagnosis `gbc diagnose`'s `flags` ask for.
+pub fn diagnose_spec(flags: &[String]) -> Result<api::DiagnoseSpec, CommandError> {
+    let Diagnose { args } = parse(flags, "diagnose")?;
+    super::diagnose::spec_of(&args)
+}
