@@ -112,8 +112,9 @@ fn the_mechanism_scores_as_gbc_train_fits_it_and_as_its_exact_free_run() {
         .collect();
     let exact = errors.iter().sum::<f64>() / errors.len() as f64;
     assert_eq!(ours.cells, errors.len());
+    // Within the free run's step control (1e-3 of each state's scale per step).
     assert!(
-        (ours.overall - exact).abs() < 1e-4 * exact,
+        (ours.overall - exact).abs() < 1e-3 * exact,
         "{} against {exact}",
         ours.overall
     );
