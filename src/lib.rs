@@ -14,6 +14,7 @@ pub mod ast;
 pub mod backend;
 pub mod check;
 pub mod cli;
+pub mod compare;
 pub mod data;
 pub mod diagnose;
 pub mod diagnostics;

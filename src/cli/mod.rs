@@ -7,6 +7,7 @@
 mod bench;
 pub mod binding;
 mod check;
+mod compare;
 mod compile;
 mod completions;
 mod data;
@@ -95,6 +96,9 @@ pub enum Command {
     Predict(predict::PredictArgs),
     /// Diagnose the gap between a mechanistic model and data: where, which effect, how much.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Compare a grey box with its fitted mechanism and the naive forecast on held-out
+    /// experiments (seeds, table, verdict, report).
+    Compare(Box<compare::CompareArgs>),
     /// Export a trained model's one-step map (ONNX) for other runtimes.
     Export(export::ExportArgs),
     /// Train models over a grid of training sizes and seeds, with results and figures.
@@ -124,6 +128,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
         Command::Train(args) => train::run(args),
         Command::Predict(args) => predict::run(args),
         Command::Diagnose(args) => diagnose::run(args),
+        Command::Compare(args) => compare::run(args),
         Command::Experiment(args) => experiment::run(args),
         Command::Export(args) => export::run(args),
         Command::Demo(args) => demo::run(args),

@@ -87,7 +87,19 @@ pub fn execute(
 }
 
 /// Calls `work(0..count)` on `jobs` threads, each taking the next item in order; the first
-/// failure stops the queue (items under way finish) and is returned.
+/// failure stops the queue (items under way finish) and is returned ([`run_jobs`] with the
+/// study's failure type).
+pub(super) fn run_queue(
+    jobs: usize,
+    count: usize,
+    work: &(dyn Fn(usize) -> Result<(), ExperimentFailure> + Sync),
+) -> Result<(), ExperimentFailure> {
+    run_jobs(jobs, count, work, ExperimentFailure::Internal)
+}
+
+/// Calls `work(0..count)` on `jobs` threads, each taking the next item in order; the first
+/// failure stops the queue (items under way finish) and is returned; `unstarted` makes the
+/// failure of a thread that cannot start.
 ///
 /// Each job is a plain thread that runs its items on a rayon pool of one thread of its own:
 /// dfdx's matrix products use the current rayon pool, so every training stays
@@ -95,11 +107,12 @@ pub fn execute(
 /// waiting for another pool runs queued tasks of its own pool meanwhile, so it would take
 /// up a sibling job's whole loop nested inside its wait and hold its own loop until that
 /// one had drained the queue, leaving one job doing all the work.
-pub(super) fn run_queue(
+pub(crate) fn run_jobs<E: Send>(
     jobs: usize,
     count: usize,
-    work: &(dyn Fn(usize) -> Result<(), ExperimentFailure> + Sync),
-) -> Result<(), ExperimentFailure> {
+    work: &(dyn Fn(usize) -> Result<(), E> + Sync),
+    unstarted: fn(String) -> E,
+) -> Result<(), E> {
     let jobs = jobs.clamp(1, count.max(1));
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
@@ -128,8 +141,7 @@ pub(super) fn run_queue(
                 .spawn_scoped(scope, job);
             if let Err(error) = started {
                 stop.store(true, Ordering::Relaxed);
-                let message = format!("cannot start a job thread: {error}");
-                lock(&failures).push(ExperimentFailure::Internal(message));
+                lock(&failures).push(unstarted(format!("cannot start a job thread: {error}")));
                 break;
             }
         }

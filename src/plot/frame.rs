@@ -182,7 +182,9 @@ pub(super) fn write_legend(
     (x, right): (f64, f64),
 ) -> std::fmt::Result {
     let mut y = MARGIN_TOP + 10.0;
-    for entry in entries {
+    // A series without a name is drawn but not keyed (the faint replicates beside one that
+    // is).
+    for entry in entries.iter().filter(|e| !e.name.is_empty()) {
         let color = entry.color;
         let dash = if entry.style == Style::Dashed {
             r#" stroke-dasharray="5,3""#

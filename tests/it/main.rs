@@ -3,6 +3,7 @@
 mod artifacts;
 mod authoring;
 mod cli;
+mod compare;
 mod diagnose;
 mod editor;
 mod format;

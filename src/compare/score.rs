@@ -1,0 +1,307 @@
+//! From runs to scores: the grey box's median error over seeds with its min–max range and
+//! its diverged free runs, the mechanism's and the naive forecast's error, and the verdict
+//! (`docs/compare.md`): the grey box is *better* than the mechanism when its worst seed
+//! beats it, *worse* when its best seed loses to it, and *tied within its replicate spread*
+//! otherwise.
+
+use crate::train::ErrorSet;
+
+use super::{ExperimentScore, MemberRun, SplitResult};
+
+/// One model's error on one held-out experiment (or over all), reduced over its runs.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Score {
+    /// The median over the runs that scored (one run: its error; none: NaN). Infinite when
+    /// at least half the runs diverged.
+    #[serde(with = "crate::json")]
+    pub error: f64,
+    /// The smallest and largest error over those runs.
+    #[serde(with = "crate::json")]
+    pub range: (f64, f64),
+    /// Per state, the median over the runs of its NMSE.
+    #[serde(with = "crate::json")]
+    pub per_state: Vec<(String, f64)>,
+    /// The runs that scored.
+    pub runs: usize,
+    /// The runs that failed to train or scored no cell.
+    pub failed: usize,
+    /// Each free run that left the physical range: which run, where and why.
+    pub diverged: Vec<String>,
+}
+
+impl Score {
+    /// The score of `runs` (label, error or none), per state over `states`.
+    pub fn of(runs: &[(String, Option<&ErrorSet>)], states: &[String]) -> Score {
+        let scored: Vec<(&String, &ErrorSet)> = (runs.iter())
+            .filter_map(|(label, set)| set.map(|s| (label, s)))
+            .collect();
+        let overall: Vec<f64> = scored.iter().map(|(_, s)| s.overall).collect();
+        let median = |values: &[f64]| crate::numeric::median(values).unwrap_or(f64::NAN);
+        let per_state = (states.iter())
+            .filter_map(|name| {
+                let values: Vec<f64> = (scored.iter())
+                    .filter_map(|(_, s)| s.per_state.iter().find(|(n, _)| n == name))
+                    .map(|(_, v)| *v)
+                    .collect();
+                (!values.is_empty()).then(|| (name.clone(), median(&values)))
+            })
+            .collect();
+        let lowest = overall.iter().copied().fold(f64::NAN, f64::min);
+        let highest = overall.iter().copied().fold(f64::NAN, f64::max);
+        Score {
+            error: median(&overall),
+            range: (lowest, highest),
+            per_state,
+            runs: scored.len(),
+            failed: runs.len() - scored.len(),
+            diverged: (scored.iter())
+                .filter_map(|(label, s)| {
+                    let divergence = s.divergence.as_ref()?;
+                    Some(format!("{label}: {divergence}"))
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Where the grey box stands against the fitted mechanism.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Standing {
+    /// Every seed's error below the mechanism's.
+    Better,
+    /// Every seed's error above the mechanism's.
+    Worse,
+    /// The mechanism's error inside the grey box's min–max range.
+    Tied,
+    /// No grey-box run, or no mechanism error, to compare.
+    Undecided,
+}
+
+/// The grey box against the mechanism and the naive forecast.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Verdict {
+    /// Against the mechanism, within the grey box's replicate spread.
+    pub standing: Standing,
+    /// The mechanism's error over the grey box's median (above 1: the grey box is lower).
+    #[serde(with = "crate::json")]
+    pub ratio_to_mechanism: f64,
+    /// The naive forecast's error over the grey box's median.
+    #[serde(with = "crate::json")]
+    pub ratio_to_naive: f64,
+    /// The verdict in one sentence.
+    pub sentence: String,
+}
+
+impl Verdict {
+    /// The verdict of `grey_box` against `mechanism` and `naive`.
+    pub fn of(grey_box: &Score, mechanism: &Score, naive: &Score) -> Verdict {
+        let (low, high) = grey_box.range;
+        let standing = if grey_box.runs == 0 || mechanism.runs == 0 || mechanism.error.is_nan() {
+            Standing::Undecided
+        } else if high < mechanism.error {
+            Standing::Better
+        } else if low > mechanism.error {
+            Standing::Worse
+        } else {
+            Standing::Tied
+        };
+        let ratio_to_mechanism = mechanism.error / grey_box.error;
+        let ratio_to_naive = naive.error / grey_box.error;
+        let sentence = sentence(standing, grey_box, (mechanism, naive));
+        Verdict {
+            standing,
+            ratio_to_mechanism,
+            ratio_to_naive,
+            sentence,
+        }
+    }
+}
+
+/// The verdict in words.
+fn sentence(standing: Standing, grey_box: &Score, (mechanism, naive): (&Score, &Score)) -> String {
+    let spread = if grey_box.runs > 1 {
+        format!(
+            "median error {} ({}–{} over {} seeds)",
+            number(grey_box.error),
+            number(grey_box.range.0),
+            number(grey_box.range.1),
+            grey_box.runs
+        )
+    } else {
+        format!("error {}", number(grey_box.error))
+    };
+    let against = format!("against the fitted mechanism's {}", number(mechanism.error));
+    let head = match standing {
+        Standing::Better => format!(
+            "The grey box beats its fitted mechanism on every seed: {spread} {against}, {} lower",
+            times(mechanism.error / grey_box.error)
+        ),
+        Standing::Worse => format!(
+            "The grey box loses to its fitted mechanism on every seed: {spread} {against}, {} \
+             higher",
+            times(grey_box.error / mechanism.error)
+        ),
+        Standing::Tied => format!(
+            "The grey box ties with its fitted mechanism within its replicate spread: {spread} \
+             {against}"
+        ),
+        Standing::Undecided => {
+            return format!(
+                "Undecided: {} grey-box runs and {} mechanism runs scored.",
+                grey_box.runs, mechanism.runs
+            )
+        }
+    };
+    let against_naive = if naive.error < grey_box.error {
+        format!(
+            "the naive forecast ({}) is {} lower still",
+            number(naive.error),
+            times(grey_box.error / naive.error)
+        )
+    } else {
+        format!(
+            "{} below the naive forecast ({})",
+            times(naive.error / grey_box.error),
+            number(naive.error)
+        )
+    };
+    let diverged = match grey_box.diverged.len() {
+        0 => "no free run diverged".to_string(),
+        n => format!("{n} of {} free runs diverged", grey_box.runs),
+    };
+    format!("{head}; {against_naive}; {diverged}.")
+}
+
+/// A ratio as `1.27x` (`infx`, `nanx` for the others).
+pub fn times(ratio: f64) -> String {
+    if ratio.is_finite() {
+        format!("{ratio:.2}x")
+    } else {
+        format!("{}x", number(ratio))
+    }
+}
+
+/// An error with four significant digits: `0.3902`, `4.981e-3`, `inf`.
+pub fn number(value: f64) -> String {
+    if !value.is_finite() {
+        return crate::json::name_of(value).to_string();
+    }
+    if value == 0.0 {
+        return "0".into();
+    }
+    let magnitude = value.abs();
+    if (0.01..1e4).contains(&magnitude) {
+        let decimals = (3 - magnitude.log10().floor() as i32).clamp(0, 5) as usize;
+        format!("{value:.decimals$}")
+    } else {
+        format!("{value:.3e}")
+    }
+}
+
+/// The scores of each held-out experiment of a split.
+pub fn split_scores<'s>(split: &'s SplitResult, states: &[String]) -> Vec<ExperimentScore> {
+    (split.held_out.iter().enumerate())
+        .map(|(index, name)| {
+            let on = |run: &'s MemberRun| error_on(run, index);
+            let grey: Vec<(String, Option<&ErrorSet>)> = (split.grey_box.iter())
+                .map(|run| (format!("seed {}", run.seed), on(run)))
+                .collect();
+            let mechanism = vec![("mechanism".to_string(), on(&split.mechanism))];
+            let naive = vec![(
+                "naive".to_string(),
+                split.naive.get(index).and_then(|h| h.error.as_ref()),
+            )];
+            scored(name, (&grey, &mechanism, &naive), states)
+        })
+        .collect()
+}
+
+/// The scores over every held-out experiment of every split: each run's errors averaged
+/// over the experiments (a seed's over every split), then reduced as per experiment.
+pub fn overall(splits: &[SplitResult], seeds: &[u64], states: &[String]) -> ExperimentScore {
+    let grey: Vec<(String, Option<ErrorSet>)> = (seeds.iter())
+        .map(|&seed| {
+            let runs: Option<Vec<&MemberRun>> = (splits.iter())
+                .map(|split| split.grey_box.iter().find(|r| r.seed == seed))
+                .collect();
+            (
+                format!("seed {seed}"),
+                runs.and_then(|r| averaged(&r, states)),
+            )
+        })
+        .collect();
+    let mechanisms: Vec<&MemberRun> = splits.iter().map(|s| &s.mechanism).collect();
+    let mechanism = vec![("mechanism".to_string(), averaged(&mechanisms, states))];
+    let naive_sets: Vec<Option<&ErrorSet>> = (splits.iter())
+        .flat_map(|s| s.naive.iter().map(|h| h.error.as_ref()))
+        .collect();
+    let naive = vec![("naive".to_string(), mean_set(&naive_sets, states))];
+    let (grey, mechanism, naive) = (borrowed(&grey), borrowed(&mechanism), borrowed(&naive));
+    scored("overall", (&grey, &mechanism, &naive), states)
+}
+
+/// A run's error on held-out experiment `index`.
+fn error_on(run: &MemberRun, index: usize) -> Option<&ErrorSet> {
+    run.held_out.get(index).and_then(|h| h.error.as_ref())
+}
+
+/// The mean error set of `runs` over all their held-out experiments.
+fn averaged(runs: &[&MemberRun], states: &[String]) -> Option<ErrorSet> {
+    let sets: Vec<Option<&ErrorSet>> = (runs.iter())
+        .flat_map(|run| run.held_out.iter().map(|h| h.error.as_ref()))
+        .collect();
+    if runs.iter().any(|r| r.failed.is_some()) {
+        return None;
+    }
+    mean_set(&sets, states)
+}
+
+/// Labelled sets by reference.
+fn borrowed(runs: &[(String, Option<ErrorSet>)]) -> Vec<(String, Option<&ErrorSet>)> {
+    runs.iter().map(|(l, s)| (l.clone(), s.as_ref())).collect()
+}
+
+type Runs<'a> = [(String, Option<&'a ErrorSet>)];
+
+fn scored(
+    experiment: &str,
+    (grey, mechanism, naive): (&Runs, &Runs, &Runs),
+    states: &[String],
+) -> ExperimentScore {
+    let grey_box = Score::of(grey, states);
+    let mechanism = Score::of(mechanism, states);
+    let naive = Score::of(naive, states);
+    let verdict = Verdict::of(&grey_box, &mechanism, &naive);
+    ExperimentScore {
+        experiment: experiment.to_string(),
+        mechanism,
+        grey_box,
+        naive,
+        verdict,
+    }
+}
+
+/// The mean of error sets over experiments (per state over those that score it); `None`
+/// when any experiment has none.
+fn mean_set(sets: &[Option<&ErrorSet>], states: &[String]) -> Option<ErrorSet> {
+    let sets: Vec<&ErrorSet> = sets.iter().copied().collect::<Option<_>>()?;
+    let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
+    let overall: Vec<f64> = sets.iter().map(|s| s.overall).collect();
+    let per_state = (states.iter())
+        .filter_map(|name| {
+            let values: Vec<f64> = (sets.iter())
+                .filter_map(|s| s.per_state.iter().find(|(n, _)| n == name))
+                .map(|(_, v)| *v)
+                .collect();
+            (!values.is_empty()).then(|| (name.clone(), mean(&values)))
+        })
+        .collect();
+    Some(ErrorSet {
+        per_state,
+        overall: (!overall.is_empty()).then(|| mean(&overall))?,
+        rows: sets.iter().map(|s| s.rows).sum(),
+        cells: sets.iter().map(|s| s.cells).sum(),
+        divergence: sets.iter().find_map(|s| s.divergence.clone()),
+    })
+}
