@@ -24,9 +24,12 @@ use super::{
 use crate::ir::{self, Dynamics};
 use crate::numeric::{Adam, AdamState, Update};
 
-/// Scale of the last layer's initial weights relative to Glorot's: small, so that a model
-/// starts as its priors (spec section 3).
-pub const INIT_LAST_LAYER: f64 = 1e-2;
+/// Scale of the last layer's initial weights relative to Glorot's: zero, so that every
+/// closure output starts at exactly its value at network output 0 (its prior, or 0 without
+/// one; `docs/training.md`, "Starting from the mechanism"). The hidden layers start at
+/// Glorot's scale; the first step's gradient reaches the last layer through their
+/// activations and the rest through it.
+pub const INIT_LAST_LAYER: f64 = 0.0;
 
 /// The trainable grey-box network in element type `E`.
 pub struct GreyBox<E: Element> {
@@ -102,11 +105,13 @@ where
                 let prefix = format!("closure.{}.layer{layer}", closure.name);
                 names.push(format!("{prefix}.weight"));
                 shapes.push(vec![fan_in, fan_out]);
-                weights.push(
+                weights.push(if limit == 0.0 {
+                    vec![E::ZERO; fan_in * fan_out]
+                } else {
                     (0..fan_in * fan_out)
                         .map(|_| E::from_double(rng.gen_range(-limit..=limit)))
-                        .collect(),
-                );
+                        .collect()
+                });
                 names.push(format!("{prefix}.bias"));
                 shapes.push(vec![fan_out]);
                 weights.push(vec![E::ZERO; fan_out]);

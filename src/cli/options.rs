@@ -4,7 +4,7 @@
 //! user typed.
 
 use crate::backend::Precision;
-use crate::train::{Engine, Settings, TrainError};
+use crate::train::{Engine, Settings, TowardMechanism, TrainError};
 
 use super::CommandError;
 
@@ -30,6 +30,9 @@ pub struct TrainingFlags {
     /// What runs the training steps (`gbc bench`: both when left out).
     #[arg(long, value_enum, help = with_default("What runs the training steps: the fastest that runs the model, the graph backend, or the hand-fused step (`gbc bench`: graph and fused when left out)", Settings::default().engine.name()))]
     pub engine: Option<Engine>,
+    /// Strength of the pull toward the mechanism, or `auto`.
+    #[arg(long, value_name = "STRENGTH", help = with_default("Strength of the pull of the closures' last layers toward zero (the mechanism) and of trained params toward their start, relative to the normalised MSE loss; `auto` picks it by leave-one-experiment-out cross-validation over the training experiments", Settings::default().toward_mechanism))]
+    pub toward_mechanism: Option<TowardMechanism>,
 }
 
 /// A flag's help line with the default taken from [`Settings`].
@@ -46,6 +49,7 @@ impl TrainingFlags {
         settings.precision = self.precision.unwrap_or(settings.precision);
         settings.substeps = self.substeps.unwrap_or(settings.substeps);
         settings.engine = self.engine.unwrap_or(settings.engine);
+        settings.toward_mechanism = (self.toward_mechanism).unwrap_or(settings.toward_mechanism);
     }
 
     /// The default settings with the flags applied, checked; a bad value names its flag.
@@ -76,6 +80,7 @@ impl TrainingFlags {
             "batch_size" => self.batch.is_some(),
             "learning_rate" => self.lr.is_some(),
             "substeps" => self.substeps.is_some(),
+            "toward_mechanism" => self.toward_mechanism.is_some(),
             _ => false,
         }
     }

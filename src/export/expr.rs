@@ -110,9 +110,14 @@ impl<'m> Physics<'m> {
         let scale = self.scales[closure][output];
         let net = Value::Column(graph.column(&stage.nets[closure], output));
         let value = match &spec.prior {
+            _ if matches!(spec.constraint, Constraint::Bounds(..)) => {
+                let prior = (spec.prior.as_ref())
+                    .map(|prior| (self.expr(graph, stage, &prior.expr), prior.kind));
+                bounded(graph, prior, &net, spec.constraint, scale)
+            }
             None => {
                 let plain = graph.binary("Mul", &Value::Const(scale), &net);
-                constrain_output(graph, &plain, spec.constraint, scale)
+                constrain(graph, &plain, spec.constraint, scale)
             }
             Some(prior) => {
                 let p = self.expr(graph, stage, &prior.expr);
@@ -192,7 +197,7 @@ fn with_prior(
         (PriorKind::Mul, false) => {
             let factor = graph.binary("Add", &Value::Const(1.0), net);
             let combined = graph.binary("Mul", p, &factor);
-            constrain_output(graph, &combined, constraint, scale)
+            constrain(graph, &combined, constraint, scale)
         }
         (PriorKind::Add, positive) => {
             let correction = graph.binary("Mul", &Value::Const(scale), net);
@@ -200,28 +205,42 @@ fn with_prior(
             if positive {
                 graph.binary("Max", &combined, &zero)
             } else {
-                constrain_output(graph, &combined, constraint, scale)
+                constrain(graph, &combined, constraint, scale)
             }
         }
     }
 }
 
-/// An output's constraint map: `s softplus(o / s)` for `positive`, and for `in [lo, hi]`
-/// `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))`.
-fn constrain_output(
+/// An output `in [lo, hi]` as the physics program computes it
+/// (`backend::program::outputs`): `lo + (hi - lo) sigmoid(ln((q - lo) / (hi - q)) + 4 c /
+/// (hi - lo))`, `q` the prior (or 0) clamped short of the ends, `c` the correction (`s n`,
+/// or `p n` under `*=`).
+fn bounded(
     graph: &mut Builder,
-    combined: &Value,
+    prior: Option<(Value, PriorKind)>,
+    net: &Value,
     constraint: Constraint,
     scale: f64,
 ) -> Value {
-    match constraint {
-        Constraint::Bounds(lo, hi) => {
-            let centred = graph.binary("Add", combined, &Value::Const(-(lo + hi) / 2.0));
-            let argument = graph.binary("Mul", &Value::Const(4.0 / (hi - lo)), &centred);
-            constrain(graph, &argument, constraint, 1.0)
-        }
-        other => constrain(graph, combined, other, scale),
-    }
+    let Constraint::Bounds(lo, hi) = constraint else {
+        return Value::Const(f64::NAN);
+    };
+    let (start, factor) = match prior {
+        Some((p, PriorKind::Mul)) => (p.clone(), p),
+        Some((p, PriorKind::Add)) => (p, Value::Const(scale)),
+        None => (Value::Const(0.0), Value::Const(scale)),
+    };
+    let correction = graph.binary("Mul", &factor, net);
+    let margin = (hi - lo) * crate::backend::program::outputs::BOUNDED_MARGIN;
+    let below_top = graph.binary("Min", &start, &Value::Const(hi - margin));
+    let q = graph.binary("Max", &below_top, &Value::Const(lo + margin));
+    let above = graph.binary("Sub", &q, &Value::Const(lo));
+    let under = graph.binary("Sub", &Value::Const(hi), &q);
+    let odds = graph.binary("Div", &above, &under);
+    let centre = unary(graph, Func::Log, &odds);
+    let moved = graph.binary("Mul", &Value::Const(4.0 / (hi - lo)), &correction);
+    let argument = graph.binary("Add", &centre, &moved);
+    constrain(graph, &argument, constraint, 1.0)
 }
 
 /// `scale * softplus(raw / scale)` for `positive`, `lo + (hi - lo) sigmoid(raw)` for

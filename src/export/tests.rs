@@ -300,3 +300,27 @@ fn weights_that_are_not_finite_in_the_element_type_are_refused() {
         Some("gbm::E1101")
     );
 }
+
+/// An output `in [lo, hi]` with an additive prior (`backend::program::outputs`: the prior
+/// clamped short of the ends, moved through a sigmoid) exports as the network computes it.
+#[test]
+fn a_bounded_output_exports_as_gbc_predicts_online() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let source = std::fs::read_to_string(root.join(CHEMOSTAT.0)).unwrap();
+    let bounded = source
+        .replace(
+            "outputs r [mol/L/s] ~ 1e-3",
+            "outputs r [mol/L/s] ~ 1e-3 in [-0.004, 0.001]",
+        )
+        .replace(
+            "network hidden [20, 20, 20] softplus",
+            "network hidden [20, 20, 20] softplus\n  prior r += -0.05 * S",
+        );
+    assert_ne!(bounded, source);
+    let path = std::env::temp_dir().join(format!("gbc-export-bounded-{}.gbm", std::process::id()));
+    std::fs::write(&path, bounded).unwrap();
+    let file = path.display().to_string();
+    let error = matches_online_prediction((&file, CHEMOSTAT.1, CHEMOSTAT.2), Precision::F64, 1e-11);
+    let _ = std::fs::remove_file(&path);
+    eprintln!("bounded chemostat, f64: largest relative error {error:e}");
+}

@@ -16,7 +16,14 @@ impl Model {
                 .and_then(|o| o.prior.as_ref())
                 .map_or(Expr::Num(0.0), |prior| prior.expr.clone())
         };
-        let replace = |expr: &Expr| without_closures(expr, &stand_in);
+        self.with_closure_outputs_as(&stand_in)
+    }
+
+    /// This model without closures, each closure output replaced by `stand_in(closure,
+    /// output)` (an expression free of closure outputs) in every balance, `let` and
+    /// `output`; effects dropped. [`Model::mechanism`] is the stand-in of priors or zero.
+    pub fn with_closure_outputs_as(&self, stand_in: &dyn Fn(usize, usize) -> Expr) -> Model {
+        let replace = |expr: &Expr| without_closures(expr, stand_in);
         let mut mechanism = self.clone();
         mechanism.closures.clear();
         mechanism.effects.clear();

@@ -99,6 +99,10 @@ pub struct RunInfo {
     /// learning rate ([`super::recovery`]); warnings, the run went on.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub recoveries: Vec<super::Recovery>,
+    /// The pull toward the mechanism (its strength, how `auto` chose it) and how far each
+    /// closure output and param moved from the mechanism.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub toward_mechanism: Option<super::toward::MechanismDistance>,
 }
 
 /// The status of a run saved before [`RunInfo::status`] was recorded.
@@ -278,6 +282,7 @@ pub fn run_info(
             finished()
         },
         recoveries: report.recoveries.clone(),
+        toward_mechanism: report.toward_mechanism.clone(),
     }
 }
 

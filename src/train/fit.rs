@@ -23,6 +23,7 @@ use super::pairs::stage_fractions;
 use super::recovery::{self, Recovery};
 use super::split::Training;
 use super::step::{Optimiser, Step, StepBatch};
+use super::toward::Penalty;
 use super::validation::{refresh, Course};
 use super::windows::{rollout_batch_into, shooting_starts};
 use super::{
@@ -56,6 +57,14 @@ impl Fit<'_> {
         }
     }
 
+    /// The pull toward the mechanism at the run's fixed strength (`auto` was resolved
+    /// before the epochs), the params toward their initial values.
+    fn penalty(&self, network: &Network) -> Penalty {
+        let strength = (self.options.toward_mechanism.strength()).unwrap_or(0.0);
+        let start = crate::backend::initial_raw_params(self.model);
+        Penalty::new(self.model, &network.weights(), strength, &start)
+    }
+
     /// Runs every epoch (from a checkpoint's, and until `safety` stops it); returns the
     /// mean training loss of each, the engine that ran them ([`Engine::Graph`] or
     /// [`Engine::Fused`]) and, under [`super::RunControl::keep_last_finite`], where training
@@ -79,7 +88,8 @@ impl Fit<'_> {
         let first = safety.resume(network, training, &mut rng, &mut losses)?;
         let mut engines = Engines {
             fused: options.engine.fused_step(self.model, self.setup)?,
-            optimiser: Optimiser::from_network(network, options.precision)?,
+            optimiser: Optimiser::from_network(network, options.precision)?
+                .with_penalty(self.penalty(network)),
             network,
             windows: RolloutBatch::default(),
             scale: 1.0,

@@ -24,6 +24,7 @@ pub fn flag_of(field: &str) -> Option<&'static str> {
         "ramp_share" => "--ramp",
         "windows_per_batch" => "--windows",
         "cv" => "--cv",
+        "toward_mechanism" => "--toward-mechanism",
         _ => return None,
     })
 }

@@ -59,6 +59,9 @@ mod tests_outputs;
 mod tests_recipe;
 #[cfg(test)]
 mod tests_records;
+#[cfg(test)]
+mod tests_start;
+pub mod toward;
 mod validation;
 pub mod warnings;
 pub mod windows;
@@ -82,6 +85,7 @@ pub use recovery::Recovery;
 pub use run::{train_run, train_with, EVALUATING, TRAINING, VALIDATING};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
+pub use toward::{StrengthChoice, TowardMechanism};
 pub use warnings::{DropCause, DroppedPairs, Warning};
 
 /// Epochs between refreshes of the model's fill of unknown stretches.
@@ -114,6 +118,8 @@ pub struct TrainOptions {
     pub history: History,
     /// Loss weight of each named measured state (others weigh 1).
     pub column_weights: Vec<(String, f64)>,
+    /// Strength of the pull toward the mechanism ([`toward`]).
+    pub toward_mechanism: TowardMechanism,
 }
 
 impl Default for TrainOptions {
@@ -139,6 +145,7 @@ impl TrainOptions {
             dt: None,
             history: History::Held,
             column_weights: Vec::new(),
+            toward_mechanism: settings.toward_mechanism,
         }
     }
 
@@ -151,6 +158,7 @@ impl TrainOptions {
             precision: self.precision,
             substeps: self.substeps,
             engine: self.engine,
+            toward_mechanism: self.toward_mechanism,
         }
     }
 }
@@ -209,6 +217,9 @@ pub enum Event<'a> {
         /// Online error, if any free run scores it.
         online: Option<f64>,
     },
+    /// `--toward-mechanism auto`: a fold of a candidate strength starts, a candidate is
+    /// scored, or the strength is chosen ([`toward::choose`]).
+    Strength(toward::ChoiceEvent<'a>),
     /// Early stopping ended training before the planned epochs.
     EarlyStop {
         /// The last epoch run.
@@ -319,6 +330,9 @@ pub struct TrainReport {
     /// Each time training went back to its last finite epoch and continued
     /// ([`RunControl::recoveries`]).
     pub recoveries: Vec<Recovery>,
+    /// The pull toward the mechanism and how far the grey box moved from it (none for a
+    /// model without closures; [`toward`]).
+    pub toward_mechanism: Option<toward::MechanismDistance>,
 }
 
 /// A trained network with everything needed to reuse it.

@@ -17,6 +17,7 @@ use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
 use super::stepping;
+use super::toward::{self, MechanismDistance, StrengthChoice, TowardMechanism};
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
@@ -49,6 +50,24 @@ pub fn train_run(
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
     let started = std::time::Instant::now();
+    // `--toward-mechanism auto`: the strength is chosen by cross-validation over the
+    // training experiments first, then the run trains at it.
+    let (choice, chosen);
+    let options = match options.toward_mechanism {
+        TowardMechanism::Auto => {
+            let found = toward::choose(model, data, (options, recipe), on_event)?;
+            chosen = TrainOptions {
+                toward_mechanism: TowardMechanism::Strength(found.chosen),
+                ..options.clone()
+            };
+            choice = Some(found);
+            &chosen
+        }
+        TowardMechanism::Strength(_) => {
+            choice = None;
+            options
+        }
+    };
     let mut run = prepare(model, data, options, recipe, on_event)?;
     // On a sparse record the one-step warm-up reaches few cells: it shrinks in proportion.
     let sparse = Recipe {
@@ -94,7 +113,8 @@ pub fn train_run(
         on_event(Event::Recovered(&recovery));
         fitted.recoveries.push(recovery);
     }
-    Ok(run.report(options, recipe, (initial, evaluation), fitted))
+    let distance = run.distance(options, choice, &evaluation.estimates)?;
+    Ok(run.report(options, recipe, (initial, evaluation), (fitted, distance)))
 }
 
 /// The phase that fits a model without closures, or a grey box's mechanism ([`mechanism`]).
@@ -405,13 +425,48 @@ impl Run<'_> {
         })
     }
 
+    /// How far the trained grey box is from its mechanism: each closure output over every
+    /// knot of the training tracks, each param from its start (none without closures).
+    fn distance(
+        &mut self,
+        options: &TrainOptions,
+        choice: Option<StrengthChoice>,
+        estimates: &[super::ParamEstimate],
+    ) -> Result<Option<MechanismDistance>, TrainError> {
+        if self.model.closures.is_empty() {
+            return Ok(None);
+        }
+        let knots: Vec<(usize, usize)> = (self.training.tracks.iter().enumerate())
+            .flat_map(|(t, track)| (0..track.times.len()).map(move |k| (t, k)))
+            .collect();
+        let table = super::pairs::PairTable::build(
+            &self.model,
+            &self.training.tracks,
+            &knots,
+            &self.training.hidden,
+            &self.fractions,
+        );
+        let batch = table.batch(&(0..knots.len()).collect::<Vec<_>>());
+        let outputs = toward::output_distances(&mut self.network, &self.model, &batch)?;
+        let values: Vec<(String, f64)> = (self.model.params.iter())
+            .zip(self.network.param_values())
+            .map(|(p, v)| (p.name.clone(), v))
+            .collect();
+        Ok(Some(MechanismDistance {
+            strength: options.toward_mechanism.strength().unwrap_or(0.0),
+            choice,
+            outputs,
+            params: toward::param_distances(&self.model, &values, estimates),
+        }))
+    }
+
     /// The trained network and its report.
     fn report(
         self,
         options: &TrainOptions,
         recipe: &Recipe,
         (initial, evaluation): (Metrics, Evaluation),
-        fitted: Fitted,
+        (fitted, distance): (Fitted, Option<MechanismDistance>),
     ) -> Trained {
         let metrics = Metrics {
             initial_offline: initial.offline,
@@ -441,6 +496,7 @@ impl Run<'_> {
             engine: fitted.engine,
             diverged: fitted.diverged,
             recoveries: fitted.recoveries,
+            toward_mechanism: distance,
         };
         Trained {
             network: self.network,

@@ -9,6 +9,7 @@
 
 use crate::backend::Precision;
 
+use super::toward::TowardMechanism;
 use super::Engine;
 
 /// The training settings shared by every command, with their defaults.
@@ -28,6 +29,9 @@ pub struct Settings {
     pub substeps: usize,
     /// What runs the training steps.
     pub engine: Engine,
+    /// Strength of the pull toward the mechanism (`--toward-mechanism`; a number or
+    /// `"auto"`, [`super::toward`]).
+    pub toward_mechanism: TowardMechanism,
 }
 
 impl Default for Settings {
@@ -40,9 +44,14 @@ impl Default for Settings {
             precision: Precision::F32,
             substeps: 1,
             engine: Engine::Auto,
+            toward_mechanism: TowardMechanism::Strength(DEFAULT_TOWARD_MECHANISM),
         }
     }
 }
+
+/// The default strength of the pull toward the mechanism (`docs/training.md`, "Starting
+/// from the mechanism", where it was measured).
+pub const DEFAULT_TOWARD_MECHANISM: f64 = 0.0;
 
 /// A setting with a value it cannot take.
 #[derive(Debug, Clone, PartialEq)]
@@ -75,6 +84,10 @@ impl Settings {
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
             let found = self.learning_rate.to_string();
             return bad("learning_rate", "a positive learning rate", found);
+        }
+        if !self.toward_mechanism.is_valid() {
+            let found = self.toward_mechanism.to_string();
+            return bad("toward_mechanism", "a finite strength >= 0, or auto", found);
         }
         Ok(())
     }

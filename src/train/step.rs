@@ -17,6 +17,8 @@ use crate::backend::{BackendError, Network, Precision, StepSettings};
 use crate::fused::FusedNetwork;
 use crate::numeric::{Adam, Real, Update};
 
+use super::toward::Penalty;
+
 /// An engine: the loss of a batch and its gradient at given weights.
 pub trait Step {
     /// The loss of `batch` at the flat `weights`, its flat gradient written into
@@ -70,6 +72,9 @@ pub struct Optimiser {
     params: Option<Range<usize>>,
     /// The length of each of the network's tensors, in order (for Adam's state per tensor).
     lengths: Vec<usize>,
+    /// The pull toward the mechanism, added to every step's loss and gradient (none: no
+    /// pull).
+    penalty: Option<Penalty>,
 }
 
 #[derive(Clone)]
@@ -97,7 +102,15 @@ impl Optimiser {
             buffers: (Vec::new(), Vec::new()),
             params,
             lengths,
+            penalty: None,
         }
+    }
+
+    /// Adds `penalty` to the loss and gradient of every step from now on
+    /// ([`super::toward`]); an inactive one is dropped.
+    pub fn with_penalty(mut self, penalty: Penalty) -> Self {
+        self.penalty = penalty.is_active().then_some(penalty);
+        self
     }
 
     /// Starts from `network`'s weights and Adam state (a resumed run's moments).
@@ -136,8 +149,9 @@ impl Optimiser {
         }
     }
 
-    /// One step on `batch`: the engine's gradient at the current weights, clipped, then
-    /// Adam with the params at their own learning rate; the loss before it.
+    /// One step on `batch`: the engine's gradient at the current weights, with the pull
+    /// toward the mechanism's where there is one, clipped, then Adam with the params at
+    /// their own learning rate; the loss (with the pull's penalty) before it.
     pub fn step(
         &mut self,
         engine: &mut dyn Step,
@@ -146,7 +160,10 @@ impl Optimiser {
     ) -> Result<f64, BackendError> {
         let (mut flat, mut gradient) = std::mem::take(&mut self.buffers);
         self.weights_into(&mut flat);
-        let loss = engine.loss_and_gradient(&flat, batch, &mut gradient);
+        let mut loss = engine.loss_and_gradient(&flat, batch, &mut gradient);
+        if let (Ok(value), Some(penalty)) = (loss.as_mut(), &self.penalty) {
+            *value += penalty.add(&flat, &mut gradient);
+        }
         if loss.is_ok() {
             match &mut self.state {
                 State::Single(weights, adam) => {

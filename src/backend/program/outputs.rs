@@ -11,8 +11,19 @@
 //!   prior;
 //! - `prior o += p`: `o = max(p + s n, 0)`, the additive form clipped at zero.
 //!
-//! Without a prior a `positive` output is `s softplus(n)`; a bounded output, and an
-//! unconstrained one, is the plain form of spec section 3 through its constraint's map.
+//! An output `in [lo, hi]` starts at its prior (0 without one) clamped into the range
+//! kept `(hi - lo) / 16` inside its ends, `q`: `o = lo + (hi - lo) sigmoid(z_q + 4 c / (hi
+//! - lo))` with `z_q = ln((q - lo) / (hi - q))` (so `o = q` exactly at `n = 0`) and `c` the
+//! correction of the plain form (`s n`, or `p n` under `*=`), which has unit slope where
+//! `q` is the middle of the range. The margin keeps the start's slope at least a quarter
+//! of that: a prior on an end of the range cannot be started at exactly, since an end is
+//! where the map's slope vanishes.
+//!
+//! Every output is thus exactly its prior (or 0) at `n = 0`, clamped into its range, except
+//! a `positive` output without a prior, `s softplus(n)`, which starts at `s ln 2`: 0 is its
+//! floor, and a non-negative map that is smooth and 0 at `n = 0` has slope 0 there, so a
+//! network whose last layer starts at zero (as every one does) would receive no gradient.
+//! An unconstrained output is the plain form of spec section 3.
 
 use super::{Binary, Compiler, Unary};
 
@@ -21,6 +32,9 @@ use super::{Binary, Compiler, Unary};
 pub const JOIN: f64 = 0.875;
 /// The factor at the join, and the tail's decay length in `n`.
 pub const TAIL: f64 = 1.0 - JOIN;
+/// How far inside each end of its range an output `in [lo, hi]` starts at most, as a
+/// share of `hi - lo` (module documentation).
+pub const BOUNDED_MARGIN: f64 = 1.0 / 16.0;
 use crate::backend::BackendError;
 use crate::ir::{ClosureOutput, Constraint, PriorKind};
 
@@ -81,10 +95,13 @@ impl Compiler<'_> {
         scale: f64,
     ) -> Result<usize, BackendError> {
         let positive = matches!(spec.constraint, Constraint::Positive);
+        if let Constraint::Bounds(lo, hi) = spec.constraint {
+            return self.bounded_output(spec, net, scale, (lo, hi));
+        }
         let Some(prior) = &spec.prior else {
             let s = self.constant(scale);
             let plain = self.binary(Binary::Mul, s, net);
-            return Ok(self.constrain_output(plain, spec.constraint, scale));
+            return Ok(self.constrain(plain, spec.constraint, scale));
         };
         let p = self.expr(&prior.expr)?;
         let zero = self.constant(0.0);
@@ -98,7 +115,7 @@ impl Compiler<'_> {
                 let one = self.constant(1.0);
                 let factor = self.binary(Binary::Add, one, net);
                 let combined = self.binary(Binary::Mul, p, factor);
-                self.constrain_output(combined, spec.constraint, scale)
+                self.constrain(combined, spec.constraint, scale)
             }
             (PriorKind::Add, positive) => {
                 let s = self.constant(scale);
@@ -107,7 +124,7 @@ impl Compiler<'_> {
                 if positive {
                     self.binary(Binary::Max, combined, zero)
                 } else {
-                    self.constrain_output(combined, spec.constraint, scale)
+                    self.constrain(combined, spec.constraint, scale)
                 }
             }
         })
@@ -130,18 +147,43 @@ impl Compiler<'_> {
         self.binary(Binary::Add, upper, tail)
     }
 
-    /// An output's constraint map: `s softplus(o / s)` for `positive`, and for `in [lo, hi]`
-    /// `lo + (hi - lo) sigmoid(4 (o - mid) / (hi - lo))` (unit slope at the middle).
-    fn constrain_output(&mut self, combined: usize, constraint: Constraint, scale: f64) -> usize {
-        match constraint {
-            Constraint::Bounds(lo, hi) => {
-                let middle = self.constant(-(lo + hi) / 2.0);
-                let centred = self.binary(Binary::Add, combined, middle);
-                let slope = self.constant(4.0 / (hi - lo));
-                let argument = self.binary(Binary::Mul, slope, centred);
-                self.constrain(argument, constraint, 1.0)
+    /// An output `in [lo, hi]` (module documentation): its start `q` (the prior, or 0,
+    /// clamped into the range short of its ends) moved by the correction through a sigmoid.
+    fn bounded_output(
+        &mut self,
+        spec: &ClosureOutput,
+        net: usize,
+        scale: f64,
+        (lo, hi): (f64, f64),
+    ) -> Result<usize, BackendError> {
+        let (start, correction) = match &spec.prior {
+            Some(prior) => {
+                let p = self.expr(&prior.expr)?;
+                let factor = match prior.kind {
+                    PriorKind::Mul => p,
+                    PriorKind::Add => self.constant(scale),
+                };
+                (p, self.binary(Binary::Mul, factor, net))
             }
-            other => self.constrain(combined, other, scale),
-        }
+            None => {
+                let s = self.constant(scale);
+                (self.constant(0.0), self.binary(Binary::Mul, s, net))
+            }
+        };
+        let margin = (hi - lo) * BOUNDED_MARGIN;
+        let top = self.constant(hi - margin);
+        let bottom = self.constant(lo + margin);
+        let below_top = self.binary(Binary::Min, start, top);
+        let q = self.binary(Binary::Max, below_top, bottom);
+        let low = self.constant(lo);
+        let high = self.constant(hi);
+        let above = self.binary(Binary::Sub, q, low);
+        let under = self.binary(Binary::Sub, high, q);
+        let odds = self.binary(Binary::Div, above, under);
+        let centre = self.unary(Unary::Log, odds);
+        let slope = self.constant(4.0 / (hi - lo));
+        let moved = self.binary(Binary::Mul, slope, correction);
+        let argument = self.binary(Binary::Add, centre, moved);
+        Ok(self.constrain(argument, Constraint::Bounds(lo, hi), 1.0))
     }
 }

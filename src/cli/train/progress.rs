@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use crate::cli::progress::{Announce, Count, Reporter};
 use crate::train::checkpoint::EpochRow;
+use crate::train::toward::ChoiceEvent;
 use crate::train::{self, ErrorSet, Event};
 
 /// The progress and warnings on stderr, and the training log.
@@ -129,6 +130,7 @@ impl Progress {
                     (row.offline, row.online) = (offline, online);
                 }
             }
+            Event::Strength(choice) => self.strength(&choice),
             Event::EarlyStop {
                 epoch,
                 best_epoch,
@@ -141,6 +143,44 @@ impl Progress {
                 ));
             }
         }
+    }
+
+    /// `--toward-mechanism auto`, as it goes: each fold, each candidate's errors, the choice.
+    fn strength(&mut self, event: &ChoiceEvent) {
+        let line = match event {
+            ChoiceEvent::Fold {
+                index,
+                count,
+                strength,
+                fold,
+                folds,
+            } => format!(
+                "toward the mechanism: strength {strength} ({}/{count}), fold {}/{folds}",
+                index + 1,
+                fold + 1
+            ),
+            ChoiceEvent::Scored(candidate) => {
+                let folds: Vec<String> = (candidate.folds.iter())
+                    .map(|(name, error)| match error {
+                        Some(e) => format!("{name} {e:.4}"),
+                        None => format!("{name} -"),
+                    })
+                    .collect();
+                let pooled = candidate
+                    .pooled_online
+                    .map_or("-".into(), |e| format!("{e:.4}"));
+                format!(
+                    "toward the mechanism: strength {}: online error {pooled} ({})",
+                    candidate.strength,
+                    folds.join(", ")
+                )
+            }
+            ChoiceEvent::Chosen(strength) => format!(
+                "toward the mechanism: strength {strength} chosen (lowest pooled online error \
+                 over the folds); training on every training experiment"
+            ),
+        };
+        self.reporter.println(&line);
     }
 
     /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,

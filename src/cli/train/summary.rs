@@ -65,6 +65,9 @@ pub(super) fn summary(
     }
     print_initial_states(&mut out, report);
     print_params(&mut out, trained);
+    if let Some(distance) = &report.toward_mechanism {
+        print_distance(&mut out, distance);
+    }
     if let Some(directory) = run {
         line!(out, "run written to {}", directory.display());
     }
@@ -191,6 +194,63 @@ fn print_params(out: &mut String, trained: &Trained) {
             estimate.value,
             estimate.std_error,
             100.0 * estimate.relative_error
+        );
+    }
+}
+
+/// The pull toward the mechanism (and `auto`'s table) and how far the grey box moved.
+fn print_distance(out: &mut String, distance: &train::toward::MechanismDistance) {
+    if let Some(choice) = &distance.choice {
+        line!(
+            out,
+            "toward the mechanism, chosen by cross-validation over the training experiments \
+             (held-out online error per fold, pooled):"
+        );
+        for candidate in &choice.candidates {
+            let folds: Vec<String> = (candidate.folds.iter())
+                .map(|(name, e)| format!("{name} {}", e.map_or("-".into(), error)))
+                .collect();
+            let pooled = candidate.pooled_online.map_or("-".into(), error);
+            let mark = if candidate.strength == choice.chosen {
+                "  <- chosen"
+            } else {
+                ""
+            };
+            line!(
+                out,
+                "  strength {:<8} {pooled} ({}){mark}",
+                candidate.strength,
+                folds.join(", ")
+            );
+        }
+    }
+    line!(
+        out,
+        "distance from the mechanism (strength {}; outputs over {} training points: *= RMS of \
+         the factor - 1, += RMS of the correction over the prior's, none RMS of the output):",
+        distance.strength,
+        distance.outputs.first().map_or(0, |o| o.points)
+    );
+    for output in &distance.outputs {
+        line!(
+            out,
+            "  {:<24} {:>4} {:.3e} (RMS change {:.3e})",
+            output.name,
+            output.prior,
+            output.moved,
+            output.rms_change
+        );
+    }
+    for param in &distance.params {
+        let errors = param
+            .standard_errors
+            .map_or(String::new(), |e| format!(", {e:+.2} standard errors"));
+        line!(
+            out,
+            "  {} {:.6} -> {:.6}{errors}",
+            param.name,
+            param.start,
+            param.value
         );
     }
 }
