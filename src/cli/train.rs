@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod cv;
+mod ensemble;
 mod progress;
 mod safety;
 mod summary;
@@ -200,6 +201,35 @@ pub struct TrainArgs {
     /// The loss of epoch E reads NaN on its first T tries, `E:T` (tests of E0415).
     #[arg(long, value_name = "E:T", hide = true, value_parser = parse_poison)]
     pub poison_epoch: Option<(usize, usize)>,
+    /// Train an ensemble of N members (member k with seed --seed + k - 1), saved under
+    /// DIR/members/, and calibrate their prediction band on the training experiments
+    /// (DIR/ensemble.json; see docs/uncertainty.md).
+    #[arg(
+        long,
+        value_name = "N",
+        conflicts_with_all = ["cv", "resume", "early_stop", "checkpoint_every", "stop_after_epochs"]
+    )]
+    pub ensemble: Option<usize>,
+    /// What each member of --ensemble trains on: a bootstrap of whole training experiments
+    /// (the experiments it did not draw calibrate the band), or every experiment (the band
+    /// is then not calibrated and not written).
+    #[arg(long, value_enum, requires = "ensemble")]
+    pub resample: Option<ResampleArg>,
+    /// Trainings run at once (default: the number of cores).
+    #[arg(short, long, value_name = "N", requires = "ensemble")]
+    pub jobs: Option<usize>,
+    /// The level of the prediction band reported and drawn (--ensemble).
+    #[arg(long, value_name = "LEVEL", default_value_t = crate::ensemble::DEFAULT_LEVEL)]
+    pub band: f64,
+}
+
+/// What the members of an ensemble train on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ResampleArg {
+    /// A bootstrap of whole training experiments per member (the default).
+    Experiments,
+    /// Every training experiment, the members differing by seed alone.
+    None,
 }
 
 /// Recoveries from a non-finite epoch by default (`--recoveries`).
@@ -252,6 +282,22 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         );
     }
     let recipe = recipe_of(args);
+    if let Some(members) = args.ensemble {
+        let directory = run_directory(args)?;
+        let data = TrainingData {
+            train: &train_records,
+            validation: &validation,
+            part,
+        };
+        let source = (&model_file, source.as_str());
+        return ensemble::run(
+            args,
+            (&model, source),
+            &data,
+            (&options, &recipe),
+            (members, &directory),
+        );
+    }
     let directory = match &checkpoint {
         Some(_) => args.output.clone().unwrap_or_default(),
         None => run_directory(args)?,

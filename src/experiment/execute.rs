@@ -100,6 +100,18 @@ pub(super) fn run_queue(
     count: usize,
     work: &(dyn Fn(usize) -> Result<(), ExperimentFailure> + Sync),
 ) -> Result<(), ExperimentFailure> {
+    run_queue_of(jobs, count, work, ExperimentFailure::Internal)
+}
+
+/// [`run_queue`] for any error type: `cannot_start` makes the error of a job thread that
+/// could not be started (the ensemble's members train on the same queue,
+/// `crate::ensemble`).
+pub(crate) fn run_queue_of<E: Send>(
+    jobs: usize,
+    count: usize,
+    work: &(dyn Fn(usize) -> Result<(), E> + Sync),
+    cannot_start: fn(String) -> E,
+) -> Result<(), E> {
     let jobs = jobs.clamp(1, count.max(1));
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
@@ -129,7 +141,7 @@ pub(super) fn run_queue(
             if let Err(error) = started {
                 stop.store(true, Ordering::Relaxed);
                 let message = format!("cannot start a job thread: {error}");
-                lock(&failures).push(ExperimentFailure::Internal(message));
+                lock(&failures).push(cannot_start(message));
                 break;
             }
         }
