@@ -69,6 +69,10 @@ pub enum EnsembleError {
     #[error(transparent)]
     #[diagnostic(transparent)]
     Train(#[from] TrainError),
+    /// A what-if run cannot start.
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    WhatIf(#[from] crate::train::predict::whatif::WhatIfError),
     /// An invariant broke.
     #[error(transparent)]
     #[diagnostic(transparent)]

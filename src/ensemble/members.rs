@@ -286,7 +286,10 @@ fn train_member(
             let table = predict_in_range(model, &trained.network, &trained.setup, record, how);
             table.map_or_else(
                 |_| Run::none(record, model.states.len()),
-                |table| Run::of_table(&table, record, model.states.len()),
+                |mut table| {
+                    table.cut_at_divergence();
+                    Run::of_table(&table, record, model.states.len())
+                },
             )
         })
         .collect();

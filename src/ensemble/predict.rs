@@ -20,6 +20,7 @@ use crate::ir;
 use crate::numeric::median;
 use crate::record::Record;
 use crate::train::artifacts;
+use crate::train::predict::whatif::{what_if, WhatIf};
 use crate::train::predict::{predict_in_range, Mode, PredictionTable};
 use crate::train::{History, PhysicalRange};
 
@@ -37,6 +38,8 @@ pub struct Loaded {
     pub members: Vec<PathBuf>,
     /// How the model differs from the one trained, outside its structure (for stderr).
     pub notes: Vec<String>,
+    /// The first used member's sampling step (what-if runs default to it).
+    pub step: f64,
 }
 
 /// Reads the ensemble in `directory` for `model` (file text `source`): `ensemble.json`, and
@@ -55,16 +58,21 @@ pub fn load(model: &ir::Model, source: &str, directory: &Path) -> Result<Loaded,
         return Err(bad("expected used members, found none".into()));
     }
     let mut notes = Vec::new();
+    let mut step = f64::NAN;
     for member in &members {
         let restored = artifacts::restore_with_notes(model, source, member)?;
         if notes.is_empty() {
             notes = restored.notes;
+        }
+        if step.is_nan() {
+            step = restored.setup.step;
         }
     }
     Ok(Loaded {
         info,
         members,
         notes,
+        step,
     })
 }
 
@@ -105,6 +113,51 @@ pub fn member_tables(
     Ok(slots.into_inner().unwrap_or_else(|p| p.into_inner()))
 }
 
+/// A what-if run of every used member (`gbc simulate --weights DIR`, members on `jobs`
+/// threads), combined into the median and, at `level`, the band of each measured state.
+pub fn what_if_band(
+    model: &ir::Model,
+    (source, loaded): (&str, &Loaded),
+    what: &WhatIf,
+    (level, jobs): (Option<f64>, usize),
+) -> Result<BandTable, EnsembleError> {
+    let slots: Mutex<Vec<Option<PredictionTable>>> = Mutex::new(vec![None; loaded.members.len()]);
+    let work = |member: usize| -> Result<(), EnsembleError> {
+        let restored = artifacts::restore_with_notes(model, source, &loaded.members[member])?;
+        let range = PhysicalRange::of_run(&restored.info);
+        let network = (&restored.network, &restored.setup);
+        let mut table = what_if(model, network, what, range.as_ref())?;
+        table.cut_at_divergence();
+        slots.lock().unwrap_or_else(|p| p.into_inner())[member] = Some(table);
+        Ok(())
+    };
+    run_queue_of(
+        jobs,
+        loaded.members.len(),
+        &work,
+        EnsembleError::cannot_start,
+    )?;
+    let tables: Vec<PredictionTable> = (slots.into_inner())
+        .unwrap_or_else(|p| p.into_inner())
+        .into_iter()
+        .flatten()
+        .collect();
+    let times = (tables.iter())
+        .filter_map(|t| t.columns.first())
+        .max_by_key(|c| c.len())
+        .cloned()
+        .unwrap_or_default();
+    let record = Record {
+        name: "what-if".into(),
+        source: "what-if".into(),
+        inputs: vec![Vec::new(); model.inputs.len()],
+        states: vec![vec![None; times.len()]; model.states.len()],
+        observables: Vec::new(),
+        times,
+    };
+    predict_table(model, &loaded.info, (&record, &tables), level)
+}
+
 /// The ensemble's prediction along one experiment.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BandTable {
@@ -138,6 +191,10 @@ pub fn predict_table(
         .into());
     }
     let states = model.states.len();
+    let state_columns: Vec<usize> = (model.states.iter())
+        .map(|s| header.iter().position(|h| *h == s.name))
+        .collect::<Option<_>>()
+        .ok_or_else(|| Bug::new("the ensemble's prediction", "a state without its column"))?;
     let noise = &info.band.noise;
     let factors: Vec<Option<f64>> = (0..states)
         .map(|s| level.and_then(|l| info.calibration.factor(s, l)))
@@ -165,7 +222,7 @@ pub fn predict_table(
             let Some(factor) = factors[state] else {
                 continue;
             };
-            let draws: Vec<(f64, f64)> = (living.iter().map(|v| v[state + 1]))
+            let draws: Vec<(f64, f64)> = (living.iter().map(|v| v[state_columns[state]]))
                 .map(|p| (p, noise[state].sigma(p)))
                 .collect();
             let (l, h) = BaseBand::of(&draws).map_or((f64::NAN, f64::NAN), |b| b.stretched(factor));

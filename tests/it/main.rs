@@ -5,6 +5,7 @@ mod authoring;
 mod cli;
 mod diagnose;
 mod editor;
+mod ensemble;
 mod format;
 mod golden;
 mod lsp;
