@@ -19,6 +19,7 @@ pub mod data;
 pub mod diagnose;
 pub mod diagnostics;
 pub mod driver;
+pub mod ensemble;
 pub mod error;
 pub mod eval;
 pub mod experiment;

@@ -17,6 +17,8 @@ use super::train::{read_source, train_error};
 use super::{CommandError, CommandResult};
 use crate::train::{artifacts, predict, PhysicalRange};
 
+mod ensemble;
+
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeArg {
@@ -55,6 +57,14 @@ pub struct PredictArgs {
     /// How data columns are named.
     #[command(flatten)]
     pub columns: ColumnArgs,
+    /// The level of the prediction band of an ensemble run (`gbc train --ensemble N`): each
+    /// measured state gets `X_lo` and `X_hi` columns (online mode), and its coverage of the
+    /// data's measured cells is printed.
+    #[arg(long, value_name = "LEVEL", default_value_t = crate::ensemble::DEFAULT_LEVEL)]
+    pub band: f64,
+    /// Members of an ensemble run predicting at once (default: the number of cores).
+    #[arg(short, long, value_name = "N")]
+    pub jobs: Option<usize>,
 }
 
 /// Predicts and writes the table.
@@ -64,14 +74,13 @@ pub fn run(args: &PredictArgs) -> CommandResult {
     crate::io::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
+    if crate::ensemble::is_ensemble(&args.weights) {
+        return ensemble::run(args, &model, &source);
+    }
     let (network, setup, info) =
         artifacts::restore(&model, &source, &args.weights).map_err(train_error)?;
     let records = load_records(&model, &args.data, &args.columns)?;
-    let mode = match args.mode {
-        ModeArg::Offline => predict::Mode::Offline,
-        ModeArg::Online => predict::Mode::Online,
-        ModeArg::OnlineTrainedStep => predict::Mode::OnlineTrainedStep,
-    };
+    let mode = mode_of(args.mode);
     let range = PhysicalRange::of_run(&info);
     let mut header = Vec::new();
     let mut columns: Vec<Vec<f64>> = Vec::new();
@@ -106,4 +115,13 @@ pub fn run(args: &PredictArgs) -> CommandResult {
     crate::data::write_table(&args.output, labels, &header, &columns)
         .map_err(CommandError::user)?;
     Ok(())
+}
+
+/// The library's mode of a `--mode`.
+fn mode_of(mode: ModeArg) -> predict::Mode {
+    match mode {
+        ModeArg::Offline => predict::Mode::Offline,
+        ModeArg::Online => predict::Mode::Online,
+        ModeArg::OnlineTrainedStep => predict::Mode::OnlineTrainedStep,
+    }
 }

@@ -49,6 +49,9 @@ pub struct SimulateArgs {
     /// A trained run (`gbc train -o DIR`): free-run the trained model (a what-if run).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["params", "noise", "warmup"])]
     pub weights: Option<PathBuf>,
+    /// With --weights of an ensemble run: the level of the prediction band (`X_lo`, `X_hi`).
+    #[arg(long, value_name = "LEVEL", default_value_t = crate::ensemble::DEFAULT_LEVEL)]
+    pub band: f64,
     /// With --weights: measured data before the start (its rows up to --t-start are the
     /// history the embedding reads; its row at --t-start is the initial state).
     #[arg(long, value_name = "FILE", requires = "weights")]

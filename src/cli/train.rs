@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod cv;
+mod ensemble;
 mod progress;
 mod safety;
 mod summary;
@@ -197,6 +198,35 @@ pub struct TrainArgs {
     /// The loss of epoch E reads NaN on its first T tries, `E:T` (tests of E0415).
     #[arg(long, value_name = "E:T", hide = true, value_parser = parse_poison)]
     pub poison_epoch: Option<(usize, usize)>,
+    /// Train an ensemble of N members (member k with seed --seed + k - 1), saved under
+    /// DIR/members/, and calibrate their prediction band on the training experiments
+    /// (DIR/ensemble.json; see docs/uncertainty.md).
+    #[arg(
+        long,
+        value_name = "N",
+        conflicts_with_all = ["cv", "resume", "early_stop", "checkpoint_every", "stop_after_epochs"]
+    )]
+    pub ensemble: Option<usize>,
+    /// What each member of --ensemble trains on: a bootstrap of whole training experiments
+    /// (the experiments it did not draw calibrate the band), or every experiment (the band
+    /// is then not calibrated and not written).
+    #[arg(long, value_enum, requires = "ensemble")]
+    pub resample: Option<ResampleArg>,
+    /// Trainings run at once (default: the number of cores).
+    #[arg(short, long, value_name = "N", requires = "ensemble")]
+    pub jobs: Option<usize>,
+    /// The level of the prediction band reported and drawn (--ensemble).
+    #[arg(long, value_name = "LEVEL", default_value_t = crate::ensemble::DEFAULT_LEVEL)]
+    pub band: f64,
+}
+
+/// What the members of an ensemble train on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ResampleArg {
+    /// A bootstrap of whole training experiments per member (the default).
+    Experiments,
+    /// Every training experiment, the members differing by seed alone.
+    None,
 }
 
 pub use crate::train::recovery::DEFAULT_RECOVERIES;
@@ -234,6 +264,26 @@ pub fn run(args: &TrainArgs) -> CommandResult {
         eprintln!(
             "warning: `gbc train --warmup` is deprecated: use --warmup-share (a share of the \
              epochs; `gbc simulate --warmup` is a time)"
+        );
+    }
+    if let Some(members) = args.ensemble {
+        let directory = run_directory(args)?;
+        let split = crate::api::split(records, val, &spec.validation)?;
+        if let Some(note) = &split.note {
+            eprintln!("{note}");
+        }
+        let data = train::TrainingData {
+            train: &split.train,
+            validation: &split.validation,
+            part: split.part,
+        };
+        let source = (&model_file, model.source.as_str());
+        return ensemble::run(
+            args,
+            (model.ir(), source),
+            &data,
+            (&spec.options, &spec.recipe),
+            (members, &directory),
         );
     }
     let directory = match &checkpoint {

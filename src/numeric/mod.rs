@@ -35,5 +35,5 @@ pub use linalg::{dot, solve_spd, Cholesky, NormalEquations};
 pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Settings};
 pub use lu::{Complex, Lu};
 pub use real::Real;
-pub use stats::{mean_std, median, order_statistic, root_mean_square};
+pub use stats::{mean_std, median, normal_cdf, order_statistic, root_mean_square};
 pub use times::{grid_step, time_tolerance, uniform_step, OffGrid};

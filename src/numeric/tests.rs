@@ -181,3 +181,33 @@ fn gauss_newton_system_is_jt_j_and_jt_r() {
     assert_eq!(normal, vec![35.0, 44.0, 44.0, 56.0]);
     assert_eq!(gradient, vec![-4.0, -4.0]);
 }
+
+#[test]
+fn normal_cdf_matches_the_integrated_density() {
+    // Simpson's rule on the density from -12 (where the mass left out is below 1e-32).
+    let density = |x: f64| (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    for x in [-4.0, -1.6448536, -0.3, 0.0, 0.7, 1.2815516, 2.5, 5.0] {
+        let steps = 20_000;
+        let h = (x + 12.0) / steps as f64;
+        let simpson: f64 = (0..=steps)
+            .map(|k| {
+                let weight = match k {
+                    0 => 1.0,
+                    k if k == steps => 1.0,
+                    k if k % 2 == 1 => 4.0,
+                    _ => 2.0,
+                };
+                weight * density(-12.0 + k as f64 * h)
+            })
+            .sum::<f64>()
+            * h
+            / 3.0;
+        let phi = super::normal_cdf(x);
+        assert!(
+            (phi - simpson).abs() <= 1.2e-7 * simpson.min(1.0 - simpson).max(1e-300) + 1e-15,
+            "Phi({x}) = {phi}, integrated {simpson}"
+        );
+    }
+    assert!(super::normal_cdf(f64::NAN).is_nan());
+    assert_eq!(super::normal_cdf(-40.0), 0.0);
+}

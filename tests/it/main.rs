@@ -6,6 +6,7 @@ mod cli;
 mod compare;
 mod diagnose;
 mod editor;
+mod ensemble;
 mod format;
 mod golden;
 mod lsp;

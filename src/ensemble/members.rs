@@ -1,0 +1,435 @@
+//! Training the members of an ensemble in parallel, and what comes of them: the noise of
+//! each state, the band's calibration, its coverage of the held-out experiments and the
+//! errors, written to `ensemble.json`.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use super::calibrate::{self, MemberRuns};
+use super::noise::{self, StateNoise};
+use super::{
+    resample, BandRule, EnsembleError, EnsembleInfo, MemberInfo, Resample, Run, ENSEMBLE_FILE,
+    MEMBERS_DIR, RULE,
+};
+use crate::experiment::execute::run_jobs;
+use crate::ir;
+use crate::record::{Normalisation, Record};
+use crate::train::predict::{predict_in_range, Mode};
+use crate::train::{
+    artifacts, train_run, Event, Part, PhysicalRange, Recipe, RunControl, TrainError, TrainOptions,
+    TrainingData,
+};
+
+/// How many members, on what, on how many threads, and the level reported.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Members to train (at least 2).
+    pub members: usize,
+    /// What each member trains on.
+    pub resample: Resample,
+    /// Members trained at once.
+    pub jobs: usize,
+    /// The band level the coverage is counted at.
+    pub level: f64,
+}
+
+/// Where the ensemble is written and what its runs record.
+#[derive(Debug, Clone)]
+pub struct Keep<'a> {
+    /// The run directory (`ensemble.json`, `members/`).
+    pub directory: PathBuf,
+    /// The model file as given, and its text.
+    pub model: (&'a str, &'a str),
+    /// The data files, in words.
+    pub data: &'a str,
+    /// Recoveries from a non-finite epoch per member.
+    pub recoveries: usize,
+}
+
+/// What a member is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MemberEvent<'a> {
+    /// A member starts training.
+    Started {
+        /// 1-based.
+        member: usize,
+        /// Members in all.
+        members: usize,
+        /// Its seed.
+        seed: u64,
+        /// The experiments it drew.
+        trained_on: &'a [String],
+    },
+    /// A member enters a phase: [`crate::train::Event::Phase`]'s, or [`RUNNING_FREE`].
+    Phase {
+        /// 1-based.
+        member: usize,
+        /// The phase, in words.
+        phase: &'static str,
+    },
+    /// A member finished an epoch.
+    Epoch {
+        /// 1-based.
+        member: usize,
+        /// 1-based epoch.
+        epoch: usize,
+        /// Epochs planned.
+        epochs: usize,
+    },
+    /// A member is done (trained, saved and run free along every experiment, or failed).
+    Finished {
+        /// 1-based.
+        member: usize,
+        /// `finished`, `diverged: ...`, `failed: ...`.
+        status: &'a str,
+        /// Wall-clock seconds.
+        seconds: f64,
+    },
+}
+
+/// A trained ensemble: its description (written to `ensemble.json`) and the free runs of
+/// the members it uses.
+#[derive(Debug, Clone)]
+pub struct Trained {
+    /// What `ensemble.json` holds.
+    pub info: EnsembleInfo,
+    /// The used members' free runs: the training experiments, then the held-out ones.
+    pub members: Vec<MemberRuns>,
+}
+
+/// The phase after training: the member runs free along every experiment.
+pub const RUNNING_FREE: &str = "running free along every experiment";
+
+/// One member's outcome.
+struct Outcome {
+    info: MemberInfo,
+    runs: Vec<Run>,
+}
+
+/// Trains the ensemble of `plan` on `data` (members in parallel), calibrates its band on
+/// the training experiments, counts its coverage of the held-out ones and writes every
+/// member's run and `ensemble.json` under `keep.directory`.
+pub fn train_ensemble(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+    plan: &Plan,
+    keep: &Keep,
+    on_event: &(dyn Fn(MemberEvent) + Sync),
+) -> Result<Trained, EnsembleError> {
+    check_plan(plan, data)?;
+    let slots: Mutex<Vec<Option<Outcome>>> = Mutex::new((0..plan.members).map(|_| None).collect());
+    let work = |member: usize| -> Result<(), EnsembleError> {
+        let outcome = train_member(
+            model,
+            data,
+            (options, recipe),
+            (plan, member),
+            keep,
+            on_event,
+        )?;
+        let status = outcome.info.status.clone();
+        on_event(MemberEvent::Finished {
+            member: member + 1,
+            status: &status,
+            seconds: outcome.info.seconds,
+        });
+        lock(&slots)[member] = Some(outcome);
+        Ok(())
+    };
+    run_jobs(plan.jobs, plan.members, &work, EnsembleError::cannot_start)?;
+    let outcomes: Vec<Outcome> = (slots.into_inner())
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+        .into_iter()
+        .flatten()
+        .collect();
+    let trained = assemble(model, data, (options, plan, keep), outcomes);
+    write_info(&keep.directory, &trained.info)?;
+    let used = trained.members.len();
+    if used < 2 {
+        let why = (trained.info.members.iter())
+            .find(|m| !m.used)
+            .map_or("none finished".into(), |m| {
+                format!("member {}: {}", m.index, m.status)
+            });
+        return Err(EnsembleError::MembersFailed {
+            finished: used,
+            members: plan.members,
+            why,
+        });
+    }
+    Ok(trained)
+}
+
+/// Refuses fewer than two members, and resampling where whole experiments cannot be.
+fn check_plan(plan: &Plan, data: &TrainingData) -> Result<(), EnsembleError> {
+    if plan.members < 2 {
+        return Err(EnsembleError::TooFewMembers {
+            found: plan.members,
+        });
+    }
+    super::error::check_level(plan.level)?;
+    if plan.resample == Resample::Experiments {
+        let whole = matches!(data.part, Part::All);
+        if !whole || data.train.len() < 2 {
+            return Err(EnsembleError::CannotResample {
+                expected: "at least two whole training experiments".into(),
+                found: if whole {
+                    format!("{} training experiment", data.train.len())
+                } else {
+                    "experiments split by rows (--val-fraction, --train-points)".into()
+                },
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Trains member `member` (0-based) on its draws, saves its run and runs it free along
+/// every experiment. A member whose training fails is an outcome with that status; an I/O
+/// or network failure is an error.
+fn train_member(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+    (plan, member): (&Plan, usize),
+    keep: &Keep,
+    on_event: &(dyn Fn(MemberEvent) + Sync),
+) -> Result<Outcome, EnsembleError> {
+    let started = Instant::now();
+    let seed = options.seed.wrapping_add(member as u64);
+    let draws = resample::draws(plan.resample, data.train.len(), seed);
+    let bag = drawn_records(data.train, &draws);
+    let names = |indices: &[usize]| -> Vec<String> {
+        (indices.iter())
+            .map(|&i| data.train[i].name.clone())
+            .collect()
+    };
+    let mut info = MemberInfo {
+        index: member + 1,
+        seed,
+        run: member_directory(member),
+        trained_on: names(&draws),
+        out_of_bag: names(&resample::out_of_bag(&draws, data.train.len())),
+        status: "finished".into(),
+        used: false,
+        validation_error: None,
+        seconds: 0.0,
+    };
+    on_event(MemberEvent::Started {
+        member: member + 1,
+        members: plan.members,
+        seed,
+        trained_on: &info.trained_on,
+    });
+    let member_options = TrainOptions {
+        seed,
+        ..options.clone()
+    };
+    let member_data = TrainingData {
+        train: &bag,
+        ..*data
+    };
+    let control = RunControl {
+        keep_last_finite: true,
+        recoveries: keep.recoveries,
+        ..RunControl::default()
+    };
+    let mut forward = |event: Event| match event {
+        Event::Epoch { epoch, .. } => on_event(MemberEvent::Epoch {
+            member: member + 1,
+            epoch,
+            epochs: options.epochs,
+        }),
+        Event::Phase(phase) => on_event(MemberEvent::Phase {
+            member: member + 1,
+            phase,
+        }),
+        _ => {}
+    };
+    let outcome = train_run(
+        model,
+        &member_data,
+        (&member_options, recipe),
+        &control,
+        &mut forward,
+    );
+    let trained = match outcome {
+        Ok(trained) => trained,
+        Err(error @ (TrainError::Io(_) | TrainError::Backend(_))) => return Err(error.into()),
+        Err(error) => {
+            info.status = format!("failed: {error}");
+            info.seconds = started.elapsed().as_secs_f64();
+            return Ok(Outcome {
+                info,
+                runs: Vec::new(),
+            });
+        }
+    };
+    let run_info = artifacts::run_info(model, keep.model, keep.data, &member_options, &trained);
+    artifacts::save(&keep.directory.join(&info.run), &run_info, &trained.network)?;
+    if let Some(diverged) = &trained.report.diverged {
+        info.status = format!("diverged: epoch {}, {}", diverged.epoch, diverged.what);
+    }
+    let range = PhysicalRange::new(
+        &trained.setup.normalisation,
+        trained.report.recipe.range_factor,
+    );
+    on_event(MemberEvent::Phase {
+        member: member + 1,
+        phase: RUNNING_FREE,
+    });
+    let how = (Mode::Online, options.history, range.as_ref());
+    let runs = (data.train.iter().chain(data.validation))
+        .map(|record| {
+            let table = predict_in_range(model, &trained.network, &trained.setup, record, how);
+            table.map_or_else(
+                |_| Run::none(record, model.states.len()),
+                |mut table| {
+                    table.cut_at_divergence();
+                    Run::of_table(&table, record, model.states.len())
+                },
+            )
+        })
+        .collect();
+    info.used = trained.report.diverged.is_none();
+    info.seconds = started.elapsed().as_secs_f64();
+    Ok(Outcome { info, runs })
+}
+
+/// The records of `draws`, in draw order; a repeated experiment is renamed `NAME (draw K)`.
+pub fn drawn_records(records: &[Record], draws: &[usize]) -> Vec<Record> {
+    let mut seen = vec![0usize; records.len()];
+    (draws.iter())
+        .map(|&index| {
+            seen[index] += 1;
+            let mut record = records[index].clone();
+            if seen[index] > 1 {
+                record.name = format!("{} (draw {})", record.name, seen[index]);
+            }
+            record
+        })
+        .collect()
+}
+
+/// Member `member`'s (0-based) run directory, relative to the ensemble's.
+pub fn member_directory(member: usize) -> String {
+    format!("{MEMBERS_DIR}/member-{:02}", member + 1)
+}
+
+/// The ensemble from its members' outcomes: noise, calibration, coverage and errors.
+fn assemble(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, plan, keep): (&TrainOptions, &Plan, &Keep),
+    outcomes: Vec<Outcome>,
+) -> Trained {
+    let states: Vec<String> = model.states.iter().map(|s| s.name.clone()).collect();
+    let train_count = data.train.len();
+    let members: Vec<MemberRuns> = (outcomes.iter())
+        .filter(|o| o.info.used)
+        .map(|o| MemberRuns {
+            index: o.info.index,
+            out_of_bag: (0..train_count)
+                .filter(|&e| o.info.out_of_bag.contains(&data.train[e].name))
+                .collect(),
+            runs: o.runs.clone(),
+        })
+        .collect();
+    let noise = state_noise(model, data.train, &members);
+    let calibration = calibrate::calibrate(&states, data.train, &members, &noise);
+    let held: Vec<(&Record, Vec<&Run>)> = (data.validation.iter().enumerate())
+        .map(|(v, record)| {
+            let runs = members.iter().filter_map(|m| m.runs.get(train_count + v));
+            (record, runs.collect())
+        })
+        .collect();
+    let coverage = calibrate::coverage(&held, (&noise, &calibration), plan.level);
+    let parts: Vec<crate::record::Part> = (data.train.iter()).map(|r| (r, 0..r.len())).collect();
+    let std = Normalisation::over(&parts, states.len(), model.inputs.len()).state_std;
+    let errors = (!held.is_empty()).then(|| calibrate::errors(&held, &states, &std));
+    let mut member_infos: Vec<MemberInfo> = outcomes.iter().map(|o| o.info.clone()).collect();
+    if let Some(errors) = &errors {
+        for (info, error) in member_infos
+            .iter_mut()
+            .filter(|m| m.used)
+            .zip(&errors.members)
+        {
+            info.validation_error = Some(*error);
+        }
+    }
+    let info = EnsembleInfo {
+        gbc_version: env!("CARGO_PKG_VERSION").to_string(),
+        model: keep.model.0.to_string(),
+        data: keep.data.to_string(),
+        seed: options.seed,
+        resample: plan.resample,
+        training_experiments: data.train.iter().map(|r| r.name.clone()).collect(),
+        validation_experiments: data.validation.iter().map(|r| r.name.clone()).collect(),
+        members: member_infos,
+        band: BandRule {
+            rule: RULE.into(),
+            base_level: super::band::BASE_LEVEL,
+            noise,
+        },
+        calibration,
+        coverage,
+        errors,
+    };
+    Trained { info, members }
+}
+
+/// Each measured state's noise: declared, else estimated from the used members' free-run
+/// residuals on the training experiments they drew.
+fn state_noise(model: &ir::Model, training: &[Record], members: &[MemberRuns]) -> Vec<StateNoise> {
+    (0..model.states.len())
+        .map(|state| {
+            noise::declared(model, state).unwrap_or_else(|| {
+                let mut pairs = Vec::new();
+                for member in members {
+                    for (index, record) in training.iter().enumerate() {
+                        if member.out_of_bag.contains(&index) {
+                            continue;
+                        }
+                        let Some(run) = member.runs.get(index) else {
+                            continue;
+                        };
+                        pairs.extend(residuals(record, run, state));
+                    }
+                }
+                noise::estimated(&model.states[state].name, &pairs)
+            })
+        })
+        .collect()
+}
+
+/// `(prediction, measured - prediction)` at the measured cells of `state` after the run's
+/// start where it predicted.
+fn residuals(record: &Record, run: &Run, state: usize) -> Vec<(f64, f64)> {
+    (record.states[state].iter().enumerate())
+        .skip(run.start + 1)
+        .filter_map(|(row, cell)| {
+            let predicted = run.states[state][row];
+            cell.filter(|_| predicted.is_finite())
+                .map(|measured| (predicted, measured - predicted))
+        })
+        .collect()
+}
+
+/// Writes `ensemble.json` into `directory`.
+pub fn write_info(directory: &Path, info: &EnsembleInfo) -> Result<(), EnsembleError> {
+    let path = directory.join(ENSEMBLE_FILE);
+    let json = serde_json::to_string_pretty(info).map_err(|error| EnsembleError::BadEnsemble {
+        path: path.display().to_string(),
+        reason: error.to_string(),
+    })?;
+    crate::io::write_atomic(&path, json.as_bytes()).map_err(TrainError::from)?;
+    Ok(())
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
