@@ -12,12 +12,12 @@
 //! - `prior o += p`: `o = max(p + s n, 0)`, the additive form clipped at zero.
 //!
 //! An output `in [lo, hi]` starts at its prior (0 without one) clamped into the range
-//! kept `(hi - lo) / 16` inside its ends, `q`: `o = lo + (hi - lo) sigmoid(z_q + 4 c / (hi
-//! - lo))` with `z_q = ln((q - lo) / (hi - q))` (so `o = q` exactly at `n = 0`) and `c` the
-//! correction of the plain form (`s n`, or `p n` under `*=`), which has unit slope where
-//! `q` is the middle of the range. The margin keeps the start's slope at least a quarter
-//! of that: a prior on an end of the range cannot be started at exactly, since an end is
-//! where the map's slope vanishes.
+//! kept `w / 16` inside its ends (`w = hi - lo`), `q`: the output is
+//! `lo + w sigmoid(z_q + 4 c / w)` with `z_q = ln((q - lo) / (hi - q))`, so that it is `q`
+//! exactly at `n = 0`, and `c` the correction of the plain form (`s n`, or `p n` under
+//! `*=`), which has unit slope where `q` is the middle of the range. The margin keeps the
+//! start's slope at least a quarter of that: a prior on an end of the range cannot be
+//! started at exactly, since an end is where the map's slope vanishes.
 //!
 //! Every output is thus exactly its prior (or 0) at `n = 0`, clamped into its range, except
 //! a `positive` output without a prior, `s softplus(n)`, which starts at `s ln 2`: 0 is its
