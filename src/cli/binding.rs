@@ -39,8 +39,9 @@ struct Diagnose {
     args: DiagnoseArgs,
 }
 
-/// What `flags` mean to a command: parsed after a placeholder model and data file, which
-/// the binding gives as objects instead.
+/// What `flags` mean to a command. The command line's two positional arguments (model and
+/// data file) are given as the names `<model>` and `<data>`: the binding passes the model
+/// and the data as objects, and `train_spec` replaces both before anything reads them.
 fn parse<P: Parser>(flags: &[String], command: &'static str) -> Result<P, CommandError> {
     let argv = ["<model>", "<data>"].into_iter().map(String::from);
     P::try_parse_from(argv.chain(flags.iter().cloned())).map_err(|error| {
