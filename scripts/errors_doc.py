@@ -49,6 +49,7 @@ DESCRIPTIONS = {
     "E0131": ("lowering", "`let`s nested more than 256 levels deep."),
     "E0132": ("lowering", "Inlining `let`s produced an expression of more than two million nodes."),
     "E0133": ("lowering", "A prior depends on a closure output through `let`s."),
+    "E0136": ("lowering", "A term of the balance of a `nonnegative` state uses a closure output and is not provably `>= 0` where the state is zero, for any value of the network's raw outputs (docs/language.md, \"Non-negative states\"): a learned consumption that does not vanish with its substrate. The label is on the term as written (in the balance, a `let` it names, or an effect's patch); the help shows the rewrite that passes: a rate times its substrate (`- k * S * X` with `outputs k ... positive`), or a `*=` prior that vanishes at zero. Terms without a closure output are not judged. With effects applied the message names them; `gbc check` tries each effect alone."),
     "E0134": ("command line", "A `--noise NAME=LEVEL` spec (`gbc simulate`, `gbc diagnose`) names something that is not a measured state or an output of the model; the message says what the name is, the help lists the measured quantities with a \"did you mean\". Tested in tests/it/noise.rs."),
     "E0135": ("command line", "Two `--noise` specs for one quantity, or two bare levels (`--noise 1% --noise 2%`). Tested in tests/it/noise.rs."),
 }

@@ -200,6 +200,9 @@ pub struct Binding {
     pub unit: Option<SUnit>,
     /// Its value or initial value, if written.
     pub value: Option<SExpr>,
+    /// `nonnegative` (states and hidden states only): where it is written. A learned term
+    /// may not drive the state below zero (checked after lowering, [`crate::ir::nonnegative`]).
+    pub nonnegative: Option<Span>,
 }
 
 /// An actuator: `u in [0, 1]`.

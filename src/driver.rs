@@ -81,10 +81,23 @@ pub fn check(name: &str, source: &str) -> Result<check::Checked, Vec<Report>> {
     })
 }
 
-/// Parses, checks and lowers `source` with the named effects applied.
+/// Parses, checks and lowers `source` with the named effects applied. Without effects,
+/// each effect is also applied alone to check that it adds no learned term a `nonnegative`
+/// state cannot take (E0136).
 pub fn compile(name: &str, source: &str, effects: &[&str]) -> Result<Compiled, Vec<Report>> {
     let checked = check(name, source)?;
-    let model = ir::lower(&checked, effects).map_err(|e| vec![with_source(name, source, e)])?;
+    let reports = |errors: Vec<ir::LowerError>| -> Vec<Report> {
+        (errors.into_iter())
+            .map(|error| with_source(name, source, error))
+            .collect()
+    };
+    let model = ir::lower_reporting(&checked, effects).map_err(reports)?;
+    if effects.is_empty() {
+        let violations = ir::effect_violations(&checked);
+        if !violations.is_empty() {
+            return Err(reports(violations));
+        }
+    }
     Ok(Compiled { checked, model })
 }
 

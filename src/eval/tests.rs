@@ -12,6 +12,7 @@ fn state(name: &str) -> State {
     State {
         name: name.to_string(),
         init: None,
+        nonnegative: false,
     }
 }
 

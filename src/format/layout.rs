@@ -434,6 +434,9 @@ fn bindings(
         if unit_after_value {
             text(pieces, unit_text(&binding.unit));
         }
+        if binding.nonnegative.is_some() {
+            text(pieces, " nonnegative");
+        }
     };
     let name = |binding: &ast::Binding| {
         if unit_after_value {

@@ -137,3 +137,16 @@ fn syntax_errors_are_reported_not_formatted() {
         Err(FormatError::Syntax(_))
     ));
 }
+
+#[test]
+fn nonnegative_ends_a_state_entry_after_its_value_and_unit() {
+    check(
+        "model m\nstate S=8 [g/L]   nonnegative,X nonnegative , P\nhidden E=0 nonnegative # e\nder S = -S\n",
+        "model m\nstate S [g/L] = 8 nonnegative, X nonnegative, P\nhidden E = 0 nonnegative # e\nder S = -S\n",
+    );
+    // Aligned on `=` with its neighbours, the keyword after the value.
+    check(
+        "model m\nstate S = 8 nonnegative\nstate Long = 1\n",
+        "model m\nstate S    = 8 nonnegative\nstate Long = 1\n",
+    );
+}

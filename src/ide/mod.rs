@@ -72,6 +72,8 @@ struct Declaration {
     kind: &'static str,
     doc: Option<String>,
     unit: Option<String>,
+    /// A state declared `nonnegative`.
+    nonnegative: bool,
 }
 
 /// Where the name at `offset` is declared.
@@ -101,7 +103,15 @@ pub fn hover(source: &str, offset: usize) -> Option<String> {
     let noise = (declaration.scope == Scope::Model)
         .then(|| noise_of(&model, &name))
         .flatten();
-    let mut text = format!("```gbm\n{} {}\n```", declaration.kind, declaration.name);
+    let sign = if declaration.nonnegative {
+        " nonnegative"
+    } else {
+        ""
+    };
+    let mut text = format!(
+        "```gbm\n{} {}{sign}\n```",
+        declaration.kind, declaration.name
+    );
     for part in [unit, noise, declaration.doc.clone()].into_iter().flatten() {
         text.push_str("\n\n");
         text.push_str(&part);
@@ -169,7 +179,7 @@ fn declarations(model: &ast::Model) -> Vec<Declaration> {
 }
 
 fn item_declarations(item: &ast::Item, scope: Scope, out: &mut Vec<Declaration>) {
-    let mut push = |name: &ast::Ident, kind: &'static str, unit: &Option<ast::SUnit>| {
+    let mut push = |name: &ast::Ident, kind: &'static str, unit: &Option<ast::SUnit>, sign| {
         out.push(Declaration {
             scope,
             name: name.node.clone(),
@@ -177,22 +187,34 @@ fn item_declarations(item: &ast::Item, scope: Scope, out: &mut Vec<Declaration>)
             kind,
             doc: item.doc.clone(),
             unit: unit.as_ref().map(|u| u.node.to_string()),
+            nonnegative: sign,
         })
     };
     match &item.kind {
-        ItemKind::Input(list) => list.iter().for_each(|i| push(&i.name, "input", &i.unit)),
-        ItemKind::State(list) => list.iter().for_each(|b| push(&b.name, "state", &b.unit)),
-        ItemKind::Hidden(list) => list.iter().for_each(|b| push(&b.name, "hidden", &b.unit)),
-        ItemKind::Const(list) => list.iter().for_each(|b| push(&b.name, "const", &b.unit)),
-        ItemKind::Param(list) => list.iter().for_each(|p| push(&p.name, "param", &p.unit)),
-        ItemKind::Let(eq) => push(&eq.name, "let", &eq.unit),
-        ItemKind::Output(eq) => push(&eq.name, "output", &eq.unit),
+        ItemKind::Input(list) => list
+            .iter()
+            .for_each(|i| push(&i.name, "input", &i.unit, false)),
+        ItemKind::State(list) | ItemKind::Hidden(list) => {
+            let kind = match item.kind {
+                ItemKind::State(_) => "state",
+                _ => "hidden",
+            };
+            for b in list {
+                push(&b.name, kind, &b.unit, b.nonnegative.is_some());
+            }
+        }
+        ItemKind::Const(list) => list
+            .iter()
+            .for_each(|b| push(&b.name, "const", &b.unit, false)),
+        ItemKind::Param(list) => list
+            .iter()
+            .for_each(|p| push(&p.name, "param", &p.unit, false)),
+        ItemKind::Let(eq) => push(&eq.name, "let", &eq.unit, false),
+        ItemKind::Output(eq) => push(&eq.name, "output", &eq.unit, false),
         ItemKind::Closure(closure) => {
             for line in &closure.items {
                 if let ast::ClosureItem::Outputs(outputs) = &line.node {
-                    outputs
-                        .iter()
-                        .for_each(|o| push(&o.name, "closure output", &o.unit));
+                    (outputs.iter()).for_each(|o| push(&o.name, "closure output", &o.unit, false));
                 }
             }
         }

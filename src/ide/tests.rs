@@ -92,3 +92,12 @@ fn hover_shows_declared_noise_and_definition_works_from_a_noise_line() {
     assert_eq!(problems[0].code.as_deref(), Some("gbm::E0140"));
     assert_eq!(&hidden[problems[0].span.start..problems[0].span.end], "k");
 }
+
+#[test]
+fn hover_shows_a_nonnegative_state() {
+    let source = "model m\nstate S [g/L] = 8 nonnegative, X\nder S = -S * X\nder X = -X\n";
+    let text = hover(source, offset_of(source, "S", 2)).expect("hover");
+    assert!(text.contains("state S nonnegative"), "{text}");
+    let plain = hover(source, offset_of(source, "X", 1)).expect("hover");
+    assert!(!plain.contains("nonnegative"), "{plain}");
+}

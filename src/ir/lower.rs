@@ -12,6 +12,10 @@ use miette::Diagnostic;
 use std::collections::HashMap;
 use thiserror::Error;
 
+mod terms;
+
+pub use terms::{effect_violations, NegativeLearnedTerm};
+
 /// The most nested definitions (lets through lets, or patches) lowering follows.
 const MAX_DEPTH: usize = 256;
 /// The most expression nodes one inlined expression may have.
@@ -69,12 +73,23 @@ pub enum LowerError {
         #[label("this prior")]
         span: miette::SourceSpan,
     },
+    /// A term of a `nonnegative` state's balance that uses a closure output and is not
+    /// provably `>= 0` where the state is 0 ([`super::nonnegative`]).
+    #[error(transparent)]
+    #[diagnostic(transparent)]
+    NegativeLearnedTerm(Box<NegativeLearnedTerm>),
 }
 
 type Key = (Scope, String);
 
-/// Lowers `checked` with the named effects applied (in the order given).
+/// Lowers `checked` with the named effects applied (in the order given); the first error.
 pub fn lower(checked: &Checked, effects: &[&str]) -> Result<Model, LowerError> {
+    lower_reporting(checked, effects).map_err(|mut errors| errors.swap_remove(0))
+}
+
+/// [`lower`], with every error found: every term of a `nonnegative` state's balance that
+/// is not proven (E0136) is reported, in source order (other errors stop lowering).
+pub fn lower_reporting(checked: &Checked, effects: &[&str]) -> Result<Model, Vec<LowerError>> {
     let effect_decls: Vec<&ast::EffectDecl> =
         crate::check::symbols::effect_items(&checked.ast).collect();
     let mut applied = Vec::new();
@@ -90,15 +105,34 @@ pub fn lower(checked: &Checked, effects: &[&str]) -> Result<Model, LowerError> {
                         names.collect::<Vec<_>>().join(", ")
                     ),
                 };
-                return Err(LowerError::UnknownEffect {
+                return Err(vec![LowerError::UnknownEffect {
                     name: name.to_string(),
                     help,
-                });
+                }]);
             }
         }
     }
     let mut lowerer = Lowerer::new(checked, &effect_decls, &applied);
-    lowerer.build()
+    let model = lowerer.build().map_err(|error| vec![error])?;
+    let mut errors = lowerer.violations;
+    errors.sort_by_key(|error| match error {
+        LowerError::NegativeLearnedTerm(term) => term.span.offset(),
+        _ => 0,
+    });
+    if !effects.is_empty() {
+        let names: Vec<String> = effects.iter().map(|e| format!("`{e}`")).collect();
+        let plural = if names.len() > 1 { "s" } else { "" };
+        for error in &mut errors {
+            if let LowerError::NegativeLearnedTerm(term) = error {
+                term.applied = format!(" (with effect{plural} {} applied)", names.join(", "));
+            }
+        }
+    }
+    if errors.is_empty() {
+        Ok(model)
+    } else {
+        Err(errors)
+    }
 }
 
 /// Items of the model and of the applied effects, each with its scope.
@@ -135,6 +169,10 @@ struct Lowerer<'a> {
     limits: HashMap<Key, usize>,
     depth: usize,
     nodes: usize,
+    /// Where each `nonnegative` state (by name) is declared so.
+    nonnegative: HashMap<String, Span>,
+    /// Terms of `nonnegative` states' balances not proven (E0136).
+    violations: Vec<LowerError>,
 }
 
 impl<'a> Lowerer<'a> {
@@ -150,6 +188,8 @@ impl<'a> Lowerer<'a> {
             limits: HashMap::new(),
             depth: 0,
             nodes: 0,
+            nonnegative: HashMap::new(),
+            violations: Vec::new(),
         };
         lowerer.index();
         lowerer
@@ -352,6 +392,7 @@ impl<'a> Lowerer<'a> {
             }
         }
         model.balances = self.balances(&model, &balance_items, &balance_patches)?;
+        self.violations = self.nonnegative_violations(&model, &balance_items, &balance_patches)?;
         model.effects = self.effects();
         model.units = self.units();
         model.noise = super::noise::lower_noise(&self.checked.noise, &model);
@@ -365,9 +406,13 @@ impl<'a> Lowerer<'a> {
                     Some(value) => Some(self.expr(value, scope)?),
                     None => None,
                 };
+                if let Some(span) = binding.nonnegative {
+                    self.nonnegative.insert(binding.name.node.clone(), span);
+                }
                 Ok(State {
                     name: binding.name.node.clone(),
                     init,
+                    nonnegative: binding.nonnegative.is_some(),
                 })
             })
             .collect()
@@ -584,16 +629,17 @@ fn effect_lines(kind: &ItemKind) -> Vec<String> {
     };
     let bindings = |keyword: &str, list: &[ast::Binding]| -> Vec<String> {
         list.iter()
-            .map(|b| match &b.value {
-                Some(value) => {
-                    format!(
-                        "{keyword} {}{} = {}",
-                        b.name.node,
-                        unit(&b.unit),
-                        value.node
-                    )
-                }
-                None => format!("{keyword} {}{}", b.name.node, unit(&b.unit)),
+            .map(|b| {
+                let value = match &b.value {
+                    Some(value) => format!(" = {}", value.node),
+                    None => String::new(),
+                };
+                let sign = if b.nonnegative.is_some() {
+                    " nonnegative"
+                } else {
+                    ""
+                };
+                format!("{keyword} {}{}{value}{sign}", b.name.node, unit(&b.unit))
             })
             .collect()
     };

@@ -15,9 +15,10 @@ use std::collections::BTreeMap;
 mod lower;
 mod mechanism;
 mod noise;
+pub mod nonnegative;
 mod print;
 
-pub use lower::{lower, uses_closure, LowerError};
+pub use lower::{effect_violations, lower, lower_reporting, uses_closure, LowerError};
 pub use noise::{
     merge_noise, parse_noise_spec, sigma_of, Measured, Noise, NoiseSpec, NoiseSpecError,
 };
@@ -76,6 +77,9 @@ pub struct State {
     pub name: String,
     /// Initial value: a constant expression of consts and params.
     pub init: Option<Expr>,
+    /// Declared `nonnegative`: no learned term of its balance can drive it below zero
+    /// (proved when lowering, [`nonnegative`]); free runs refine a step that crosses zero.
+    pub nonnegative: bool,
 }
 
 /// A known constant.

@@ -148,6 +148,9 @@ fn write_symbols(out: &mut String, model: &Model) -> std::fmt::Result {
             if let Some(init) = &state.init {
                 write!(out, " = {}", expr_text(model, init))?;
             }
+            if state.nonnegative {
+                write!(out, " nonnegative")?;
+            }
             writeln!(out)?;
         }
     }

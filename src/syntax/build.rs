@@ -221,10 +221,14 @@ fn bounds(pair: &Pair<Rule>) -> Result<(SExpr, SExpr)> {
 fn binding(pair: Pair<Rule>) -> Result<Binding> {
     let parts = entry_parts(&pair)?;
     let value = parts.exprs.into_iter().next().map(expr).transpose()?;
+    let nonnegative = (parts.rest.iter())
+        .find(|child| child.as_rule() == Rule::nonnegative)
+        .map(span_of);
     Ok(Binding {
         name: parts.name,
         unit: parts.unit,
         value,
+        nonnegative,
     })
 }
 

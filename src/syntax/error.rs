@@ -184,6 +184,7 @@ fn describe_rule(rule: Rule) -> &'static str {
         Rule::hidden_layers => "`hidden [...]`",
         Rule::bounds => "`in [lo, hi]`",
         Rule::positive => "`positive`",
+        Rule::nonnegative => "`nonnegative`",
         Rule::assign => "`=`",
         Rule::add_assign => "`+=`",
         Rule::mul_assign => "`*=`",
@@ -216,9 +217,24 @@ fn join_alternatives(words: &[&str]) -> String {
 }
 
 fn help_for(expected: &[&str], found: &str) -> String {
-    const KEYWORDS: [&str; 16] = [
-        "model", "time", "input", "state", "hidden", "const", "param", "let", "output", "closure",
-        "der", "next", "effect", "noise", "positive", "in",
+    const KEYWORDS: [&str; 17] = [
+        "model",
+        "time",
+        "input",
+        "state",
+        "hidden",
+        "const",
+        "param",
+        "let",
+        "output",
+        "closure",
+        "der",
+        "next",
+        "effect",
+        "noise",
+        "positive",
+        "nonnegative",
+        "in",
     ];
     let bare = found.trim_matches('`');
     if expected.contains(&"a name") && KEYWORDS.contains(&bare) {

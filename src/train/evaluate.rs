@@ -48,6 +48,10 @@ pub struct PhysicalRange {
     pub lower: Vec<f64>,
     /// Upper bound per measured state.
     pub upper: Vec<f64>,
+    /// Per measured state, the lower bound it gets where the model declares it
+    /// `nonnegative` ([`PhysicalRange::declared`]): `-UNDERSHOOT` times its largest
+    /// magnitude in training, whatever the sign of its measured cells.
+    pub nonnegative_floor: Vec<f64>,
 }
 
 /// How far below zero, as a share of its training maximum, a state never negative in
@@ -69,6 +73,16 @@ impl PhysicalRange {
         if min.is_empty() || min.len() != max.len() {
             return None;
         }
+        let nonnegative_floor = (min.iter().zip(max))
+            .map(|(&lo, &hi)| {
+                let largest = lo.abs().max(hi.abs());
+                if lo <= hi && largest.is_finite() {
+                    -UNDERSHOOT * largest
+                } else {
+                    f64::NEG_INFINITY
+                }
+            })
+            .collect();
         let (lower, upper) = (min.iter().zip(max))
             .map(|(&lo, &hi)| {
                 let largest = lo.abs().max(hi.abs());
@@ -82,7 +96,28 @@ impl PhysicalRange {
                 }
             })
             .unzip();
-        Some(PhysicalRange { lower, upper })
+        Some(PhysicalRange {
+            lower,
+            upper,
+            nonnegative_floor,
+        })
+    }
+
+    /// The range of `model`'s free runs: a state the model declares `nonnegative` gets
+    /// its floor `-UNDERSHOOT * max|x|` even where noisy measurements of it dip below
+    /// zero in training (the model says what the data cannot: that the state itself is
+    /// never negative).
+    pub fn declared(&self, model: &ir::Model) -> PhysicalRange {
+        let mut range = self.clone();
+        for (i, state) in model.states.iter().enumerate() {
+            let floor = self.nonnegative_floor.get(i).copied();
+            if let (true, Some(floor), Some(lower)) =
+                (state.nonnegative, floor, range.lower.get_mut(i))
+            {
+                *lower = lower.max(floor);
+            }
+        }
+        range
     }
 
     /// The range of a saved run: its training data's extremes and its `--range-factor`
@@ -99,6 +134,7 @@ impl PhysicalRange {
         PhysicalRange {
             lower: vec![f64::NEG_INFINITY; states],
             upper: vec![f64::INFINITY; states],
+            nonnegative_floor: vec![f64::NEG_INFINITY; states],
         }
     }
 
@@ -262,7 +298,9 @@ pub fn simulate(
         .map(|s| s.iter().fold(0.0, |m: f64, v| m.max(v.abs())))
         .chain(hidden_start.iter().map(|h| h.abs()))
         .collect();
-    let mut stepper = Stepper::new(&scales);
+    let mut stepper = Stepper::for_model(model, &scales);
+    let declared = range.map(|r| r.declared(model));
+    let range = declared.as_ref();
     let mut trajectory = Trajectory {
         start,
         states: Vec::new(),

@@ -96,6 +96,7 @@ impl ModelBuilder {
         self.model.states.push(ir::State {
             name: name.into(),
             init: None,
+            nonnegative: false,
         });
         self
     }
@@ -107,6 +108,7 @@ impl ModelBuilder {
         self.model.hidden.push(ir::State {
             name: name.into(),
             init: Some(Expr::Num(init)),
+            nonnegative: false,
         });
         self
     }

@@ -54,6 +54,8 @@ mod tests_jitter;
 #[cfg(test)]
 mod tests_mechanism;
 #[cfg(test)]
+mod tests_nonnegative;
+#[cfg(test)]
 mod tests_outputs;
 #[cfg(test)]
 mod tests_recipe;

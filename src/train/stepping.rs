@@ -14,6 +14,14 @@
 //! apart, so this finds the stable step without estimating the Jacobian. A step that needs
 //! more than [`MOST_SUBSTEPS`] keeps the finest result and lets the physical range judge
 //! it.
+//!
+//! A state declared `nonnegative` cannot be driven below zero by a learned term (the
+//! compiler proves it), so a step that takes it from (about) zero or above to below zero
+//! is a discretisation error, not the model: such a step is refined like one whose `m`
+//! and `2m` results disagree, until the state stays above `-TOLERANCE` of its floor
+//! (`1e-6` of its scale). Nothing is clamped: a crossing the finest step still shows (the
+//! model's own, unchecked terms drive the state down) is kept and judged by the physical
+//! range. Training steps are never refined or clamped.
 
 use crate::backend::{BackendError, Batch, Network, Prediction};
 use crate::ir;
@@ -87,6 +95,8 @@ pub struct Stepper {
     substeps: usize,
     /// Per state, the absolute part of its scale.
     floors: Vec<f64>,
+    /// Per state (measured, then hidden), whether it is declared `nonnegative`.
+    nonnegative: Vec<bool>,
     /// The most sub-steps any step needed.
     pub most: usize,
 }
@@ -97,7 +107,18 @@ impl Stepper {
         Stepper {
             substeps: 1,
             floors: scales.iter().map(|s| 1e-3 * s.abs().max(1e-9)).collect(),
+            nonnegative: Vec::new(),
             most: 1,
+        }
+    }
+
+    /// The controller for `model`'s states: a step that takes a `nonnegative` one below
+    /// zero is refined (module documentation).
+    pub fn for_model(model: &ir::Model, scales: &[f64]) -> Self {
+        let states = model.states.iter().chain(&model.hidden);
+        Stepper {
+            nonnegative: states.map(|s| s.nonnegative).collect(),
+            ..Stepper::new(scales)
         }
     }
 
@@ -128,7 +149,9 @@ impl Stepper {
         let mut coarse = step.advance(state, m, &first)?;
         loop {
             let fine = step.advance(state, 2 * m, &first)?;
-            let error = self.error(&coarse.next_states, &fine.next_states);
+            let error = self
+                .error(&coarse.next_states, &fine.next_states)
+                .max(self.crossing(state, &coarse.next_states));
             if error <= 1.0 || 2 * m >= MOST_SUBSTEPS {
                 let kept = if error <= 1.0 { coarse } else { fine };
                 // Never fewer later: a step that agrees at `m` and `2m` may still have
@@ -144,6 +167,25 @@ impl Stepper {
             m *= 2;
             coarse = fine;
         }
+    }
+
+    /// How far a step from `start` to `end` takes a `nonnegative` state below zero, on
+    /// its floor, over [`TOLERANCE`]: above 1 for a crossing to refine; 0 for none, and for
+    /// a state that starts below that (it is judged by the physical range instead).
+    fn crossing(&self, start: &[f64], end: &[f64]) -> f64 {
+        (self.nonnegative.iter().enumerate())
+            .filter(|(_, declared)| **declared)
+            .map(|(i, _)| {
+                let allowed = TOLERANCE * self.floors.get(i).copied().unwrap_or(1e-12);
+                let from = start.get(i).copied().unwrap_or(0.0);
+                let to = end.get(i).copied().unwrap_or(f64::NAN);
+                if from < -allowed || to.is_nan() || to >= 0.0 {
+                    0.0
+                } else {
+                    -to / allowed
+                }
+            })
+            .fold(0.0, f64::max)
     }
 
     /// The largest difference of `a` and `b` on the states' scales, over [`TOLERANCE`];

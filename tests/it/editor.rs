@@ -174,6 +174,11 @@ fn grammar_gives_the_expected_scopes() {
             "positive",
             "keyword.other.gbm",
         ),
+        (
+            "state S [g/L] = 8 nonnegative",
+            "nonnegative",
+            "keyword.other.gbm",
+        ),
         ("closure kinetics {", "kinetics", "entity.name.type.gbm"),
         (
             "  embed delay 5 dim 10",

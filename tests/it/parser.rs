@@ -96,9 +96,24 @@ fn arb_expr() -> impl Strategy<Value = SExpr> {
     })
 }
 
-const KEYWORDS: [&str; 16] = [
-    "model", "time", "input", "state", "hidden", "const", "param", "let", "output", "closure",
-    "der", "next", "effect", "noise", "positive", "in",
+const KEYWORDS: [&str; 17] = [
+    "model",
+    "time",
+    "input",
+    "state",
+    "hidden",
+    "const",
+    "param",
+    "let",
+    "output",
+    "closure",
+    "der",
+    "next",
+    "effect",
+    "noise",
+    "positive",
+    "nonnegative",
+    "in",
 ];
 
 proptest! {
@@ -290,4 +305,47 @@ fn malformed_noise_declarations_say_what_was_expected() {
         let message = expect_error(&source).to_string();
         assert!(message.contains(expected), "{line:?}: {message}");
     }
+}
+
+#[test]
+fn nonnegative_ends_state_and_hidden_entries_only() {
+    use gbc::ast::ItemKind;
+    let source = "model m\nstate S [g/L] = 8 nonnegative, X nonnegative, P = 1 [g/L]\n\
+                  hidden E = 0 [g/L] nonnegative\nder S = -S\nder X = -X\nder P = -P\nder E = -E\n";
+    let model = parse(source).expect("parses");
+    let flags: Vec<(String, Option<&str>)> = (model.items.iter())
+        .filter_map(|item| match &item.kind {
+            ItemKind::State(list) | ItemKind::Hidden(list) => Some(list),
+            _ => None,
+        })
+        .flatten()
+        .map(|b| {
+            let text = b.nonnegative.map(|span| &source[span.start..span.end]);
+            (b.name.node.clone(), text)
+        })
+        .collect();
+    let expected = [
+        ("S", Some("nonnegative")),
+        ("X", Some("nonnegative")),
+        ("P", None),
+        ("E", Some("nonnegative")),
+    ];
+    let expected: Vec<(String, Option<&str>)> =
+        expected.iter().map(|(n, f)| (n.to_string(), *f)).collect();
+    assert_eq!(flags, expected);
+    // Not on consts or params, not before the value, and it is no name.
+    for wrong in [
+        "model m\nconst k = 1 nonnegative\n",
+        "model m\nparam k = 1 nonnegative\n",
+        "model m\nstate S nonnegative = 1\n",
+        "model m\nstate S = 1 nonnegativeX\n",
+    ] {
+        assert!(parse(wrong).is_err(), "{wrong}");
+    }
+    let reserved = expect_error("model m\nstate nonnegative\n").to_string();
+    let help = format!("{:?}", expect_error("model m\nstate nonnegative\n"));
+    assert!(
+        help.contains("reserved word") || reserved.contains("reserved"),
+        "{reserved} {help}"
+    );
 }

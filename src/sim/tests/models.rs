@@ -142,6 +142,7 @@ fn declared(name: &str, init: Option<f64>) -> State {
     State {
         name: name.into(),
         init: init.map(Expr::Num),
+        nonnegative: false,
     }
 }
 

@@ -293,7 +293,8 @@ mod tests {
             &[],
         );
         check(
-            ("mu_B [1/h] ~ 0.2 positive", "mu_B [1/h] ~ 0.2"),
+            // (Dropping `positive` altogether fails the check: `B` is `nonnegative`.)
+            ("mu_B [1/h] ~ 0.2 positive", "mu_B [1/h] ~ 0.2 in [0, 2]"),
             &["closure kinetics outputs"],
             &[],
         );
