@@ -23,7 +23,10 @@ pub fn in_tensors(tensors: &[NamedTensor], params: &[String]) -> Option<String> 
     tensors.iter().find_map(|tensor| {
         let (index, value) = first_non_finite(&tensor.values)?;
         Some(
-            match params.get(index).filter(|_| tensor.name == "params") {
+            match params
+                .get(index)
+                .filter(|_| tensor.name == crate::vocabulary::PARAMS_TENSOR)
+            {
                 Some(param) => format!("param `{param}` = {value}"),
                 None => format!("weight `{}`[{index}] = {value}", tensor.name),
             },

@@ -4,6 +4,10 @@
 
 use crate::numeric::Real;
 
+/// The name of the one tensor that holds a model's params, in declaration order: in the
+/// network's weights, `weights.safetensors`, checkpoints, the fused step and ONNX files.
+pub const PARAMS_TENSOR: &str = "params";
+
 /// A built-in function.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Func {

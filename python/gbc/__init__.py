@@ -25,7 +25,8 @@ from typing import Any, Callable, Iterable, Optional, Sequence, Union
 from . import _gbc
 from ._gbc import GbcError
 
-__all__ = ["Model", "Run", "Diagnosis", "diagnose", "GbcError"]
+__all__ = ["Model", "Run", "Diagnosis", "Comparison", "diagnose", "simulate", "compare",
+           "GbcError"]
 
 
 def _column(values: Any) -> list:
@@ -301,3 +302,63 @@ def diagnose(model: Model, data: Any, *, val: Any = None,
         if bar is not None:
             bar.close()
     return Diagnosis(native)
+
+
+def simulate(model: Model, **keywords: Any):
+    """Simulates ``model`` as ``gbc simulate`` does and returns the record as a DataFrame
+    (the columns of its CSV file). Every keyword is a ``gbc simulate`` flag: ``t_end=200``,
+    ``dt=1``, ``input=["u=steps(hold=5..40, seed=1)"]``, ``noise=["0.01"]``, ``seed=3``,
+    ``init={"X": 0.2}``, ``params="run.json"``, ``weights="runs/mine"`` (a what-if run),
+    ``effect=["decay"]``, ``hidden=True``, ... Notes and warnings (a run that stops at its
+    range) are issued as Python warnings."""
+    import warnings
+
+    import pandas as pd
+
+    header, columns, messages = _gbc.simulate(model._native, _flags(keywords))
+    for message in messages:
+        warnings.warn(message)
+    return pd.DataFrame({name: list(values) for name, values in zip(header, columns)})
+
+
+class Comparison:
+    """A finished comparison: the fields of ``gbc compare --json`` as attributes
+    (``verdict``, ``mechanism``, ``grey_box``, ...) and in :attr:`info`; ``text``; inline
+    HTML in Jupyter."""
+
+    def __init__(self, native: "_gbc.Comparison"):
+        self._native = native
+        self.info: dict = json.loads(native.json())
+
+    def __getattr__(self, name: str) -> Any:
+        info = self.__dict__.get("info", {})
+        if name in info:
+            return info[name]
+        raise AttributeError(f"a comparison has no field {name!r}; its fields: {sorted(info)}")
+
+    @property
+    def text(self) -> str:
+        """The table and verdict ``gbc compare`` prints."""
+        return self._native.text()
+
+    def _repr_html_(self) -> str:
+        return self._native.html()
+
+    def __repr__(self) -> str:
+        return self._native.text()
+
+
+def compare(model: Model, data: Any, *, mechanism: Optional[Model] = None,
+            progress: Union[bool, Callable, None] = None, **keywords: Any) -> Comparison:
+    """Compares the grey box ``model`` with its fitted mechanism (``mechanism``, or the grey
+    box with every closure at its prior) and the naive forecast on ``data``, as
+    ``gbc compare`` does; every other keyword is a ``gbc compare`` flag (``holdout=["B4"]``,
+    ``cv=True``, ``seeds=3``, ``seed=1``, ``epochs=20``, ...)."""
+    callback, bar = _progress(None, "comparing", progress)
+    try:
+        native = _gbc.compare(model._native, _tables(data, "data"), _flags(keywords),
+                              None if mechanism is None else mechanism._native, callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    return Comparison(native)

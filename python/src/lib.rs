@@ -420,14 +420,120 @@ fn diagnose(
     Ok(Diagnosis { inner })
 }
 
+/// Simulates `model` with `gbc simulate`'s `flags` (no `-o`): `(header, columns)` of the
+/// record, and the notes and warnings the command prints.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn simulate(
+    py: Python<'_>,
+    model: &Model,
+    flags: Vec<String>,
+) -> PyResult<(Vec<String>, Vec<Vec<f64>>, Vec<String>)> {
+    let (spec, effects) = binding::simulate_spec(&flags).map_err(|e| command_error(py, e))?;
+    let model = match effects.is_empty() {
+        true => model.inner.clone(),
+        false => model
+            .inner
+            .with_effects(&effects)
+            .map_err(|e| raise(py, e))?,
+    };
+    let mut messages = Vec::new();
+    let outcome = py.allow_threads(|| {
+        api::simulate(&model, &spec, &mut |event| match event {
+            api::SimulateEvent::Note(note) => messages.push(format!("note: {note}")),
+            api::SimulateEvent::Warning(warning) => messages.push(format!("warning: {warning}")),
+            _ => {}
+        })
+    });
+    let simulation = outcome.map_err(|e| raise(py, e))?;
+    Ok((simulation.header, simulation.columns, messages))
+}
+
+/// A finished comparison.
+#[pyclass(module = "gbc._gbc", frozen)]
+struct Comparison {
+    inner: api::CompareResult,
+}
+
+#[pymethods]
+impl Comparison {
+    /// The table and the verdict (what `gbc compare` prints).
+    fn text(&self) -> String {
+        self.inner.text()
+    }
+
+    /// The comparison as JSON text (what `--json` writes).
+    fn json(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.json().map_err(|e| raise(py, e))
+    }
+
+    /// The HTML page (what `--html` writes).
+    fn html(&self) -> String {
+        self.inner.html()
+    }
+}
+
+/// Compares the grey box `model` with its mechanism (`mechanism`, or the grey box with its
+/// closures at their priors) and the naive forecast on `data` (tables), with
+/// `gbc compare`'s `flags`; `callback(event: dict)` hears when each run finishes.
+#[pyfunction]
+#[pyo3(signature = (model, data, flags, mechanism = None, callback = None))]
+fn compare(
+    py: Python<'_>,
+    model: &Model,
+    data: &Bound<'_, PyList>,
+    flags: Vec<String>,
+    mechanism: Option<&Model>,
+    callback: Option<PyObject>,
+) -> PyResult<Comparison> {
+    let grey_box = &model.inner;
+    let spec = binding::compare_spec(&flags).map_err(|e| command_error(py, e))?;
+    let given = mechanism.map(|m| &m.inner);
+    let mechanism_ir = api::mechanism_of(grey_box, given).map_err(|e| raise(py, e))?;
+    let records = records(py, grey_box, data)?;
+    let mechanism_records = match given {
+        Some(model) => self::records(py, model, data)?,
+        None => records.clone(),
+    };
+    let on_event = |event: gbc::compare::Event| {
+        let Some(callback) = &callback else { return };
+        if let gbc::compare::Event::Finished {
+            member, seconds, ..
+        } = event
+        {
+            Python::with_gil(|py| {
+                let dict = PyDict::new(py);
+                let _ = dict.set_item("kind", "done");
+                let _ = dict.set_item("item", member.to_string());
+                let _ = dict.set_item("seconds", seconds);
+                let _ = callback.call1(py, (dict,));
+            });
+        }
+    };
+    let outcome = py.allow_threads(|| {
+        api::compare(
+            (grey_box, &mechanism_ir),
+            (records, mechanism_records),
+            &spec,
+            &mut |_note| {},
+            &on_event,
+        )
+    });
+    let inner = outcome.map_err(|e| raise(py, e))?;
+    Ok(Comparison { inner })
+}
+
 /// The native module.
 #[pymodule]
 fn _gbc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Model>()?;
     m.add_class::<Run>()?;
     m.add_class::<Diagnosis>()?;
+    m.add_class::<Comparison>()?;
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add("GbcError", m.py().get_type::<GbcError>())?;
     Ok(())
 }

@@ -112,3 +112,44 @@ def test_an_interrupt_stops_after_the_epoch_and_keeps_a_checkpoint(tmp_path):
     assert (tmp_path / "run" / "weights.safetensors").read_bytes() == \
         (tmp_path / "whole" / "weights.safetensors").read_bytes()
     assert not (tmp_path / "run" / "checkpoint.json").exists()
+
+
+CHEMOSTAT = ROOT / "models" / "mm_chemostat" / "truth.gbm"
+
+
+def test_simulate_equals_the_cli(tmp_path):
+    flags = ["--t-end", 50, "--dt", 0.5, "--input", "E0=steps(hold=3..6, seed=4)",
+             "--noise", "0.02", "--seed", 5, "--hidden"]
+    cli("simulate", CHEMOSTAT, *flags, "-o", tmp_path / "cli.csv")
+    simulated = gbc.simulate(gbc.Model.from_file(CHEMOSTAT), t_end=50, dt=0.5,
+                             input=["E0=steps(hold=3..6, seed=4)"], noise=["0.02"], seed=5,
+                             hidden=True)
+    written = read(tmp_path / "cli.csv")
+    assert list(simulated.columns) == list(written.columns)
+    assert simulated.shape == written.shape
+    # Times are written rounded to 12 digits; every other column holds the same doubles.
+    assert (simulated.drop(columns="t").to_numpy() ==
+            written.drop(columns="t").to_numpy()).all()
+    assert ((simulated["t"] - written["t"]).abs() < 1e-9).all()
+    with pytest.raises(gbc.GbcError) as caught:
+        gbc.simulate(gbc.Model.from_file(CHEMOSTAT), t_end=5, dt=1)
+    assert caught.value.code == "gbm::E0709"
+
+
+def test_compare_equals_the_cli(tmp_path):
+    greybox = ROOT / "bench" / "training" / "overflow_greybox.gbm"
+    flags = ["--holdout", "B4", "--seeds", 1, "--epochs", 2, "--jobs", 1]
+    cli("compare", greybox, OVERFLOW, *flags, "--json", tmp_path / "c.json")
+    expected = json.loads((tmp_path / "c.json").read_text())
+    result = gbc.compare(gbc.Model.from_file(greybox), {"overflow": read(OVERFLOW)},
+                         holdout=["B4"], seeds=1, epochs=2, jobs=1, progress=False)
+    def timeless(value):
+        # Wall-clock seconds differ from run to run; every other field is the same.
+        if isinstance(value, dict):
+            return {k: timeless(v) for k, v in value.items() if k != "seconds"}
+        if isinstance(value, list):
+            return [timeless(v) for v in value]
+        return value
+
+    assert timeless(result.info) == timeless(expected)
+    assert "<html" in result._repr_html_().lower()

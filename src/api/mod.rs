@@ -10,22 +10,38 @@
 //!   through a callback and cancellation through a flag; it returns a [`Run`] that writes
 //!   itself (weights, `run.json`, report) and predicts.
 //! - [`Run::predict`]: offline or online predictions of a record, as a [`Prediction`].
+//! - [`SimulateSpec`] and [`simulate`]: a model integrated under input programmes (noise,
+//!   ranges, fitted params, initial values), or a what-if run of a trained run, as a
+//!   [`Simulation`] that writes itself as CSV or JSON.
+//! - [`SavedRun`]: a run (or ensemble) read back from its directory, which predicts
+//!   records as [`Predictions`] (`gbc predict`) and exports its one-step map (`gbc export`).
+//! - [`CompareSpec`] and [`compare`]: a grey box against its fitted mechanism and the
+//!   naive forecast, as a [`CompareResult`] (text, JSON, HTML).
+//! - [`experiment`]: studies over training sizes and seeds, run, published and summarised.
 //! - [`DiagnoseSpec`] and [`diagnose`]: the sim-to-real gap of a mechanistic model, as a
 //!   [`Diagnosis`] that renders itself as text, JSON and HTML.
 //!
 //! Every failure is an [`ApiError`]: the diagnostics of the input at fault (code, message,
 //! location, help) or an internal error. Nothing here prints.
 
+mod compare;
 mod data;
 mod diagnose;
 mod error;
+pub mod experiment;
 mod model;
 mod run;
+mod saved;
+mod simulate;
 mod split;
+pub mod summary;
 
+pub use compare::{compare, mechanism_of, CompareResult, CompareSpec};
 pub use data::{Column, Table};
 pub use diagnose::{diagnose, DiagnoseSpec, Diagnosis};
 pub use error::ApiError;
 pub use model::{read_records, Model};
 pub use run::{train, Control, Prediction, Run, TrainSpec, REPORT_FILE};
+pub use saved::{Export, ExportFormat, PredictEvent, PredictSpec, Predictions, SavedRun};
+pub use simulate::{simulate, SimulateError, SimulateEvent, SimulateSpec, Simulation};
 pub use split::{hold_out, split, Split, Validation};

@@ -21,16 +21,34 @@ pub struct Model {
     pub source: String,
     /// The checked and lowered model.
     pub compiled: Compiled,
+    /// The candidate effects applied before lowering (none: the model as written).
+    pub effects: Vec<String>,
 }
 
 impl Model {
     /// Reads and compiles the model file at `path` (every error of the file at once).
     pub fn from_file(path: impl AsRef<Path>) -> Result<Model, ApiError> {
+        Model::from_file_with_effects(path, &[])
+    }
+
+    /// Reads and compiles the model file at `path` with the candidate `effects` applied
+    /// before lowering (`--effect NAME`).
+    pub fn from_file_with_effects(
+        path: impl AsRef<Path>,
+        effects: &[String],
+    ) -> Result<Model, ApiError> {
         let path = path.as_ref();
         let source = driver::read_source(path).map_err(|report| vec![report])?;
-        let mut model = Model::from_text(&source, &path.display().to_string())?;
-        model.path = Some(path.to_path_buf());
-        Ok(model)
+        let origin = path.display().to_string();
+        let names: Vec<&str> = effects.iter().map(String::as_str).collect();
+        let compiled = driver::compile(&origin, &source, &names)?;
+        Ok(Model {
+            origin,
+            path: Some(path.to_path_buf()),
+            source,
+            compiled,
+            effects: effects.to_vec(),
+        })
     }
 
     /// Compiles `text`, named `origin` in diagnostics (e.g. `"<notebook>"`).
@@ -41,6 +59,19 @@ impl Model {
             path: None,
             source: text.to_string(),
             compiled,
+            effects: Vec::new(),
+        })
+    }
+
+    /// The same model with the candidate `effects` applied before lowering, compiled again
+    /// from its text.
+    pub fn with_effects(&self, effects: &[String]) -> Result<Model, ApiError> {
+        let names: Vec<&str> = effects.iter().map(String::as_str).collect();
+        let compiled = driver::compile(&self.origin, &self.source, &names)?;
+        Ok(Model {
+            compiled,
+            effects: effects.to_vec(),
+            ..self.clone()
         })
     }
 

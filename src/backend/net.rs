@@ -120,7 +120,7 @@ where
             closures.push(layout);
         }
         if !model.params.is_empty() {
-            names.push("params".to_string());
+            names.push(crate::vocabulary::PARAMS_TENSOR.to_string());
             shapes.push(vec![model.params.len()]);
             weights.push(model.params.iter().map(raw_initial_value::<E>).collect());
         }
@@ -174,7 +174,7 @@ where
     fn update(&mut self, gradients: Vec<Vec<E>>, settings: &StepSettings) {
         let size: usize = self.weights.iter().map(Vec::len).sum();
         let params = (self.names.last())
-            .filter(|n| *n == "params")
+            .filter(|n| *n == crate::vocabulary::PARAMS_TENSOR)
             .and_then(|_| self.weights.last())
             .map(|p| size - p.len()..size);
         let groups = settings.groups(size, params);
@@ -432,7 +432,7 @@ where
             layers.push(closure_layers);
         }
         let params = (self.names.last())
-            .filter(|name| name.as_str() == "params")
+            .filter(|name| name.as_str() == crate::vocabulary::PARAMS_TENSOR)
             .map(|_| graph.vector(self.weights[self.weights.len() - 1].clone()));
         Tensors { layers, params }
     }

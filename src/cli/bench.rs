@@ -259,11 +259,11 @@ fn time_case(
     args: &BenchArgs,
 ) -> Result<Vec<TrainingRow>, CommandError> {
     let precisions = match args.settings.precision {
-        Some(precision) => vec![precision],
+        Some(precision) => vec![precision.into()],
         None => vec![Precision::F32, Precision::F64],
     };
     let engines = match args.settings.engine {
-        Some(engine) => vec![engine],
+        Some(engine) => vec![engine.into()],
         None => vec![Engine::Graph, Engine::Fused],
     };
     let flags = TrainingFlags {

@@ -1,4 +1,5 @@
-//! The flags of `gbc train` and `gbc diagnose` as the specs of the library API, for a
+//! The flags of `gbc train`, `gbc diagnose`, `gbc simulate` and `gbc compare` as the specs
+//! of the library API, for a
 //! binding whose keywords are these flags (`train_points=300` is `--train-points 300`): the
 //! same names, the same defaults, the same checks, by construction.
 
@@ -6,7 +7,9 @@ use std::path::{Path, PathBuf};
 
 use clap::Parser;
 
+use super::compare::CompareArgs;
 use super::diagnose::DiagnoseArgs;
+use super::simulate::SimulateArgs;
 use super::train::TrainArgs;
 use super::CommandError;
 use crate::api;
@@ -39,11 +42,34 @@ struct Diagnose {
     args: DiagnoseArgs,
 }
 
+#[derive(Parser)]
+#[command(name = "gbc", no_binary_name = true)]
+struct Simulate {
+    #[command(flatten)]
+    args: SimulateArgs,
+}
+
+#[derive(Parser)]
+#[command(name = "gbc", no_binary_name = true)]
+struct Compare {
+    #[command(flatten)]
+    args: CompareArgs,
+}
+
 /// What `flags` mean to a command. The command line's two positional arguments (model and
 /// data file) are given as the names `<model>` and `<data>`: the binding passes the model
 /// and the data as objects, and `train_spec` replaces both before anything reads them.
 fn parse<P: Parser>(flags: &[String], command: &'static str) -> Result<P, CommandError> {
-    let argv = ["<model>", "<data>"].into_iter().map(String::from);
+    parse_with::<P>(&["<model>", "<data>"], flags, command)
+}
+
+/// What `flags` mean to a command after the placeholder arguments `given`.
+fn parse_with<P: Parser>(
+    given: &[&str],
+    flags: &[String],
+    command: &'static str,
+) -> Result<P, CommandError> {
+    let argv = given.iter().map(|text| text.to_string());
     P::try_parse_from(argv.chain(flags.iter().cloned())).map_err(|error| {
         let message = error.render().to_string();
         let message = message.lines().next().unwrap_or_default();
@@ -75,4 +101,17 @@ pub fn train_spec(
 pub fn diagnose_spec(flags: &[String]) -> Result<api::DiagnoseSpec, CommandError> {
     let Diagnose { args } = parse(flags, "diagnose")?;
     super::diagnose::spec_of(&args)
+}
+
+/// The simulation `gbc simulate`'s `flags` ask for (no output file: the caller keeps the
+/// table) and the effects they apply (`--effect`).
+pub fn simulate_spec(flags: &[String]) -> Result<(api::SimulateSpec, Vec<String>), CommandError> {
+    let Simulate { args } = parse_with(&["<model>", "-o", "<output>"], flags, "simulate")?;
+    Ok((args.spec(), args.effects.clone()))
+}
+
+/// The comparison `gbc compare`'s `flags` ask for.
+pub fn compare_spec(flags: &[String]) -> Result<api::CompareSpec, CommandError> {
+    let Compare { args } = parse(flags, "compare")?;
+    super::compare::spec_of(&args)
 }

@@ -8,13 +8,13 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::data::{load_records, ColumnArgs, HistoryArg};
-use super::experiment::default_jobs;
 use super::options::TrainingFlags;
 use super::progress::{Announce, Count, Reporter};
 use super::train::DEFAULT_RECOVERIES;
 use super::{CommandError, CommandResult};
-use crate::compare::{self, CompareError, Event, Options, Splits};
-use crate::train::{Recipe, TrainOptions};
+use crate::api::{self, CompareSpec, Model};
+use crate::compare::{self, Event};
+use crate::train::TrainOptions;
 
 /// Arguments of `gbc compare`.
 #[derive(Debug, clap::Args)]
@@ -76,37 +76,27 @@ pub fn run(args: &CompareArgs) -> CommandResult {
     for output in [&args.json, &args.html].into_iter().flatten() {
         crate::io::ensure_not_input(output, &inputs).map_err(CommandError::user)?;
     }
-    let grey_box = super::load_model(&args.model)?;
-    let mechanism = match &args.mechanism {
-        Some(path) => super::load_model(path)?,
-        None if grey_box.closures.is_empty() => {
-            return Err(CommandError::user(CompareError::NoClosure {
-                model: grey_box.name.clone(),
-            }))
-        }
-        None => {
-            let mut mechanism = grey_box.mechanism();
-            mechanism.name = format!("{} (mechanism)", grey_box.name);
-            mechanism
-        }
-    };
-    let records = load_records(&grey_box, &args.data, &args.columns)?;
+    let grey_box = Model::from_file(&args.model)?;
+    let given = args.mechanism.as_ref().map(Model::from_file).transpose()?;
+    let mechanism = api::mechanism_of(&grey_box, given.as_ref())?;
+    let records = load_records(grey_box.ir(), &args.data, &args.columns)?;
     let mechanism_records = match &args.mechanism {
         Some(_) => load_records(&mechanism, &args.data, &args.columns)?,
         None => records.clone(),
     };
-    let options = options(args, &records)?;
+    let spec = spec_of(args)?;
     let reporter = Reporter::new();
     let finished = AtomicU64::new(0);
-    let outcome = compare::compare(
+    let outcome = api::compare(
         (&grey_box, &mechanism),
-        (&records, &mechanism_records),
-        &options,
+        (records, mechanism_records),
+        &spec,
+        &mut |note| eprintln!("{note}"),
         &|event| report(&reporter, &finished, event),
     );
     reporter.finish();
-    let comparison = outcome.map_err(|e| CommandError::user(flagged(e)))?;
-    let text = compare::render::text(&comparison);
+    let result = outcome?;
+    let text = result.text();
     let to_stdout = (args.json.as_ref()).is_some_and(|p| p.as_os_str() == crate::io::STDOUT);
     if to_stdout {
         eprint!("{text}");
@@ -114,55 +104,30 @@ pub fn run(args: &CompareArgs) -> CommandResult {
         print!("{text}");
     }
     if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(&comparison)
-            .map_err(|e| CommandError::Internal(format!("cannot encode the comparison: {e}")))?;
-        crate::io::write_atomic(path, format!("{json}\n").as_bytes())
-            .map_err(CommandError::user)?;
+        crate::io::write_atomic(path, result.json()?.as_bytes()).map_err(CommandError::user)?;
     }
     if let Some(path) = &args.html {
-        let title = (args.model.file_stem())
-            .map_or(grey_box.name.clone(), |s| s.to_string_lossy().to_string());
-        let page = compare::html::page(&comparison, &records, &title);
-        crate::io::write_atomic(path, page.as_bytes()).map_err(CommandError::user)?;
+        crate::io::write_atomic(path, result.html().as_bytes()).map_err(CommandError::user)?;
     }
     Ok(())
 }
 
-/// The comparison's options from the flags: the split (default: the last experiment,
-/// announced), the seeds, `gbc train`'s settings and recipe.
-fn options(args: &CompareArgs, records: &[crate::record::Record]) -> Result<Options, CommandError> {
-    let splits = if args.cv {
-        Splits::LeaveOneOut
-    } else if args.holdout.is_empty() {
-        let last = records.last().map(|r| r.name.clone()).unwrap_or_default();
-        eprintln!(
-            "holding out experiment `{last}` (the last one; choose with --holdout NAME or --cv)"
-        );
-        Splits::Holdout(vec![last])
-    } else {
-        Splits::Holdout(args.holdout.clone())
-    };
+/// The API's spec of the flags: the split, the seeds, `gbc train`'s settings.
+pub(crate) fn spec_of(args: &CompareArgs) -> Result<CompareSpec, CommandError> {
     let training = TrainOptions {
         dt: args.dt,
         history: args.history.into(),
         ..TrainOptions::with(&args.settings.settings()?)
     };
-    Ok(Options {
-        splits,
-        seeds: (0..args.seeds).map(|k| args.seed + k).collect(),
+    Ok(CompareSpec {
+        holdout: args.holdout.clone(),
+        cv: args.cv,
+        seeds: args.seeds,
+        seed: args.seed,
+        jobs: args.jobs,
         training,
-        recipe: Recipe::default(),
-        jobs: args.jobs.unwrap_or_else(default_jobs),
         recoveries: args.recoveries,
     })
-}
-
-/// A training error whose option is a settings field, renamed to its flag.
-fn flagged(error: CompareError) -> CompareError {
-    match error {
-        CompareError::Train(error) => CompareError::Train(super::options::with_flag(error)),
-        other => other,
-    }
 }
 
 /// Shows the runs on stderr: one stage counting the finished runs, the latest epoch or

@@ -10,19 +10,17 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
-use std::time::Instant;
 
+use crate::api::experiment::{summary_text, StudyRun};
 use crate::cli::options::TrainingFlags;
 use crate::cli::progress::{Announce, Count, Reporter};
 use crate::cli::{CommandError, CommandResult};
-use crate::experiment::merge::{publish, weights_in, Published};
-use crate::experiment::report::{compare, number};
-use crate::experiment::results::summarise;
+use crate::experiment::merge::Published;
 use crate::experiment::study::Training;
 use crate::experiment::study::{parse_model_argument, parse_sizes};
 use crate::experiment::{
-    execute, grid, prepare, DataFiles, ExperimentError, ExperimentFailure, Prepared, Progress,
-    RunResult, RunSpec, Shard, Study, Validation,
+    DataFiles, ExperimentError, ExperimentFailure, Prepared, Progress, RunResult, RunSpec, Shard,
+    Study, Validation,
 };
 
 /// How every run trains (the values of `gbc train --objective`).
@@ -299,10 +297,7 @@ fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandErr
     Ok(())
 }
 
-/// Default number of parallel trainings: the number of cores.
-pub fn default_jobs() -> usize {
-    std::thread::available_parallelism().map_or(1, usize::from)
-}
+pub use crate::experiment::default_jobs;
 
 fn run_study(args: &RunArgs) -> CommandResult {
     let study = study_of(args)?;
@@ -317,24 +312,18 @@ fn run_study(args: &RunArgs) -> CommandResult {
     let out =
         (args.out.clone()).unwrap_or_else(|| PathBuf::from(format!("experiment-{}", study.name)));
     let jobs = args.jobs.unwrap_or_else(default_jobs).max(1);
-    let prepared = prepare(&study).map_err(failure)?;
-    let runs = grid(&study);
-    let selected = shard.select(&runs);
-    let started = Instant::now();
-    let bar = ProgressBar::new(&[(&prepared, &selected, &out)]);
-    let results = execute(&prepared, &selected, &out, jobs, &|p| {
-        bar.observe(&prepared, p)
-    })
-    .map_err(failure);
+    let run = StudyRun::prepare(&study, shard)?;
+    let bar = ProgressBar::new(&[(&run.prepared, &run.selected(), &out)]);
+    let results = run.execute(&out, jobs, &|p| bar.observe(&run.prepared, p));
     bar.finish();
     let results = results?;
-    let seconds = started.elapsed().as_secs_f64();
     if !shard.is_all() {
         println!(
-            "shard {shard}: {} runs finished in {seconds:.1} s ({} reused, {} failed) in {}",
-            results.len(),
-            bar.reused(),
-            results.iter().filter(|r| !r.is_ok()).count(),
+            "shard {shard}: {} runs finished in {:.1} s ({} reused, {} failed) in {}",
+            results.results.len(),
+            results.seconds,
+            results.reused,
+            results.failed(),
             out.display()
         );
         println!(
@@ -343,15 +332,19 @@ fn run_study(args: &RunArgs) -> CommandResult {
         );
         return Ok(());
     }
-    let published = publish(&prepared, &results, &out, &weights_in(&out)).map_err(failure)?;
-    print_summary(&prepared, &results, &published, (seconds, bar.reused()));
+    let published = results.publish(&run)?;
+    let timing = (results.seconds, results.reused);
+    print!(
+        "{}",
+        summary_text(&run.prepared, &results.results, &published, timing)
+    );
     println!("report: {}", out.join("report.html").display());
     Ok(())
 }
 
 fn run_merge(args: &MergeArgs) -> CommandResult {
     let out = args.out.clone().unwrap_or_else(|| args.dirs[0].clone());
-    let merged = crate::experiment::merge(&args.dirs, &out).map_err(failure)?;
+    let merged = crate::api::experiment::merge(&args.dirs, &out)?;
     for path in &merged.unreadable {
         eprintln!(
             "warning: left out `{}`: it does not read as a run result",
@@ -368,55 +361,15 @@ fn run_merge(args: &MergeArgs) -> CommandResult {
     Ok(())
 }
 
-/// Prints the medians per model and size, the grey-box tally and the notes; `timing` is the
-/// wall time and the number of runs reused (zeros leave them out).
+/// Prints the medians per model and size, the grey-box tally and the notes
+/// ([`summary_text`]).
 pub fn print_summary(
     prepared: &Prepared,
     results: &[RunResult],
     published: &Published,
-    (seconds, reused): (f64, usize),
+    timing: (f64, usize),
 ) {
-    let failed = results.iter().filter(|r| !r.is_ok()).count();
-    let timing = match (seconds > 0.0, reused > 0) {
-        (true, true) => format!(" in {seconds:.1} s, {reused} reused from earlier runs"),
-        (true, false) => format!(" in {seconds:.1} s"),
-        _ => String::new(),
-    };
-    println!(
-        "{}: {} runs{timing} ({failed} failed); validation MSE, median over replicates:",
-        prepared.study.name,
-        results.len()
-    );
-    println!(
-        "  {:<20} {:>7} {:>12} {:>12} {:>10}",
-        "model", "points", "offline", "online", "blown up"
-    );
-    for row in summarise(&prepared.study, results) {
-        let median = |s: Option<crate::experiment::results::Spread>| {
-            s.map_or("-".into(), |s| number(s.median))
-        };
-        println!(
-            "  {:<20} {:>7} {:>12} {:>12} {:>10}",
-            row.model,
-            row.size,
-            median(row.offline),
-            median(row.online),
-            format!("{}/{}", row.blown_up, row.ok)
-        );
-    }
-    for c in compare(prepared, results) {
-        println!(
-            "  {} below {}: online at {}/{} sizes, offline at {}/{}",
-            c.grey, c.black, c.online.0, c.online.1, c.offline.0, c.offline.1
-        );
-    }
-    for result in results.iter().filter(|r| !r.is_ok()) {
-        let message = result.error.as_deref().unwrap_or("unknown");
-        println!("  failed {}: {message}", result.id);
-    }
-    for note in &published.notes {
-        println!("  note: {note}");
-    }
+    print!("{}", summary_text(prepared, results, published, timing));
 }
 
 /// One progress report over every pending run of one or more studies, advanced per epoch
@@ -424,7 +377,6 @@ pub fn print_summary(
 pub struct ProgressBar {
     reporter: Reporter,
     finished: AtomicUsize,
-    skipped: AtomicUsize,
     total: usize,
     /// Pair-epochs counted so far, per run id.
     counted: Mutex<HashMap<String, u64>>,
@@ -452,7 +404,6 @@ impl ProgressBar {
         ProgressBar {
             reporter,
             finished: AtomicUsize::new(0),
-            skipped: AtomicUsize::new(0),
             total,
             counted: Mutex::new(HashMap::new()),
         }
@@ -476,14 +427,8 @@ impl ProgressBar {
                 let runs = format!("{finished}/{} runs", self.total);
                 self.reporter.advance(rest, runs);
             }
-            Progress::Skipped(_) => _ = self.skipped.fetch_add(1, Ordering::Relaxed),
-            Progress::Started(_) => {}
+            Progress::Skipped(_) | Progress::Started(_) => {}
         }
-    }
-
-    /// Runs found finished (and reused) so far.
-    pub fn reused(&self) -> usize {
-        self.skipped.load(Ordering::Relaxed)
     }
 
     /// Clears the bar.

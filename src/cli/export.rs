@@ -4,11 +4,9 @@
 
 use std::path::PathBuf;
 
-use crate::backend::Precision;
-
-use super::train::{read_source, train_error};
+use super::options::PrecisionArg;
 use super::{CommandError, CommandResult};
-use crate::train::artifacts;
+use crate::api::{ExportFormat, SavedRun};
 
 /// The file format written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -29,8 +27,8 @@ pub struct ExportArgs {
     #[arg(long, value_enum, default_value_t = FormatArg::Onnx)]
     pub format: FormatArg,
     /// Element type of the exported tensors.
-    #[arg(long, value_enum, default_value_t = Precision::F32)]
-    pub precision: Precision,
+    #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
+    pub precision: PrecisionArg,
     /// The file to write.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -39,62 +37,16 @@ pub struct ExportArgs {
 /// Exports the trained model and describes the file on stderr.
 pub fn run(args: &ExportArgs) -> CommandResult {
     crate::io::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
-    let model = super::load_model(&args.model)?;
-    let source = read_source(&args.model)?;
-    let restored =
-        artifacts::restore_with_notes(&model, &source, &args.weights).map_err(train_error)?;
-    for note in &restored.notes {
+    let model = crate::api::Model::from_file(&args.model)?;
+    let saved = SavedRun::load_single(&model, &args.weights)?;
+    for note in saved.notes() {
         eprintln!("note: {note}");
     }
-    let exported = match args.format {
-        FormatArg::Onnx => {
-            crate::export::onnx(&model, &restored.network, &restored.setup, args.precision)
-        }
-    }
-    .map_err(|error| match error {
-        crate::export::ExportError::Internal(message) => CommandError::Internal(message),
-        not_finite => CommandError::user(not_finite),
-    })?;
-    crate::io::write_atomic(&args.output, &exported.bytes).map_err(CommandError::user)?;
-    let layout = &exported.layout;
-    let columns = |names: &[String]| names.join(", ");
-    eprintln!(
-        "wrote {}: one step of {} ({} RK4 sub-steps) from a window of {} knots",
-        args.output.display(),
-        layout.step,
-        layout.substeps,
-        layout.window
-    );
-    eprintln!(
-        "  state_window [batch, {}, {}]: {}",
-        layout.window,
-        layout.states.len(),
-        columns(&layout.states)
-    );
-    if !layout.inputs.is_empty() {
-        eprintln!(
-            "  input_window [batch, {}, {}]: {}",
-            layout.window,
-            layout.inputs.len(),
-            columns(&layout.inputs)
-        );
-    }
-    if !layout.hidden.is_empty() {
-        eprintln!(
-            "  hidden [batch, {}]: {}",
-            layout.hidden.len(),
-            columns(&layout.hidden)
-        );
-    }
-    eprintln!("  -> next_state [batch, {}]", layout.states.len());
-    for (name, list) in [
-        ("next_hidden", &layout.hidden),
-        ("closure_outputs", &layout.closure_outputs),
-        ("outputs", &layout.outputs),
-    ] {
-        if !list.is_empty() {
-            eprintln!("  -> {name} [batch, {}]: {}", list.len(), columns(list));
-        }
-    }
+    let format = match args.format {
+        FormatArg::Onnx => ExportFormat::Onnx,
+    };
+    let export = saved.export(format, args.precision.into())?;
+    export.write(&args.output)?;
+    eprint!("{}", export.layout_text(&args.output));
     Ok(())
 }

@@ -1,8 +1,9 @@
 //! `gbc init NAME [--template chemostat|bioreactor|batch|fedbatch]`: a new project
 //! directory (see `gbc::init`).
 
+use super::options::TemplateArg;
 use super::{CommandError, CommandResult};
-use crate::init::{project, InitError, Template};
+use crate::init::{project, InitError};
 use std::path::PathBuf;
 
 /// Arguments of `gbc init`.
@@ -11,8 +12,8 @@ pub struct InitArgs {
     /// The new directory; its last part names the model.
     pub name: PathBuf,
     /// What to start from.
-    #[arg(long, value_enum, default_value_t = Template::Chemostat)]
-    pub template: Template,
+    #[arg(long, value_enum, default_value_t = TemplateArg::Chemostat)]
+    pub template: TemplateArg,
 }
 
 /// Writes the project's files, never over existing ones.
@@ -24,7 +25,7 @@ pub fn run(args: &InitArgs) -> CommandResult {
             path: args.name.display().to_string(),
         }));
     }
-    let files = project(&args.name, args.template).map_err(CommandError::user)?;
+    let files = project(&args.name, args.template.into()).map_err(CommandError::user)?;
     for (path, contents) in &files {
         crate::io::write_atomic(path, contents.as_bytes()).map_err(CommandError::user)?;
         println!("created {}", path.display());

@@ -73,8 +73,8 @@ pub type CommandResult = Result<(), CommandError>;
 #[command(name = "gbc", version, about, propagate_version = true)]
 pub struct Cli {
     /// How diagnostics are printed.
-    #[arg(long, global = true, value_enum, default_value_t = MessageFormat::Human)]
-    pub message_format: MessageFormat,
+    #[arg(long, global = true, value_enum, default_value_t = options::MessageFormatArg::Human)]
+    pub message_format: options::MessageFormatArg,
     /// The subcommand.
     #[command(subcommand)]
     pub command: Command,
@@ -122,7 +122,7 @@ pub enum Command {
 /// Runs one parsed command line.
 pub fn dispatch(cli: &Cli) -> CommandResult {
     match &cli.command {
-        Command::Check(args) => check::run(args, cli.message_format),
+        Command::Check(args) => check::run(args, cli.message_format.into()),
         Command::Compile(args) => compile::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Train(args) => train::run(args),
@@ -151,7 +151,7 @@ pub fn main() -> i32 {
             return code;
         }
     };
-    let format = cli.message_format;
+    let format: MessageFormat = cli.message_format.into();
     // Deep but legal models recurse in the front end; a large stack keeps that safe.
     let worker = std::thread::Builder::new()
         .name("gbc".to_string())

@@ -1,7 +1,8 @@
 //! The training flags `gbc train`, `gbc experiment` and `gbc bench` share: one clap struct
 //! over [`Settings`] (whose `Default` is the one default table), and the one mapping from a
 //! setting's field to the flag that sets it, so that a bad value is reported as the flag the
-//! user typed.
+//! user typed. Beside them, the clap mirrors of the library's choices (element type,
+//! engine, template, message format), so that no clap type lives below `cli/`.
 
 use crate::backend::Precision;
 use crate::train::{Engine, Settings, TowardMechanism, TrainError};
@@ -23,13 +24,13 @@ pub struct TrainingFlags {
     pub lr: Option<f64>,
     /// Element type (`gbc bench`: both when left out).
     #[arg(long, value_enum, help = with_default("Element type (`gbc bench`: both when left out)", Settings::default().precision.name()))]
-    pub precision: Option<Precision>,
+    pub precision: Option<PrecisionArg>,
     /// RK4 sub-steps per sample (for stiff balances).
     #[arg(long, value_name = "K", help = with_default("RK4 sub-steps per sample (for stiff balances)", Settings::default().substeps))]
     pub substeps: Option<usize>,
     /// What runs the training steps (`gbc bench`: both when left out).
     #[arg(long, value_enum, help = with_default("What runs the training steps: the fastest that runs the model, the graph backend, or the hand-fused step (`gbc bench`: graph and fused when left out)", Settings::default().engine.name()))]
-    pub engine: Option<Engine>,
+    pub engine: Option<EngineArg>,
     /// Strength of the pull toward the mechanism, or `auto`.
     #[arg(long, value_name = "STRENGTH", help = with_default("Strength of the pull of the closures' last layers toward zero (the mechanism) and of trained params toward their start, relative to the normalised MSE loss; `auto` picks it by leave-one-experiment-out cross-validation over the training experiments", Settings::default().toward_mechanism))]
     pub toward_mechanism: Option<TowardMechanism>,
@@ -46,9 +47,9 @@ impl TrainingFlags {
         settings.epochs = self.epochs.unwrap_or(settings.epochs);
         settings.batch_size = self.batch.unwrap_or(settings.batch_size);
         settings.learning_rate = self.lr.unwrap_or(settings.learning_rate);
-        settings.precision = self.precision.unwrap_or(settings.precision);
+        settings.precision = self.precision.map_or(settings.precision, Precision::from);
         settings.substeps = self.substeps.unwrap_or(settings.substeps);
-        settings.engine = self.engine.unwrap_or(settings.engine);
+        settings.engine = self.engine.map_or(settings.engine, Engine::from);
         settings.toward_mechanism = (self.toward_mechanism).unwrap_or(settings.toward_mechanism);
     }
 
@@ -86,6 +87,78 @@ impl TrainingFlags {
     }
 }
 
+/// Generates a clap mirror of a library enum: the same variants, in order, with the same
+/// help, and the conversion into the library's type.
+macro_rules! mirror {
+    ($(#[$doc:meta])* $name:ident => $library:path { $($(#[$vdoc:meta])* $variant:ident,)* }) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+        pub enum $name {
+            $($(#[$vdoc])* $variant,)*
+        }
+
+        impl From<$name> for $library {
+            fn from(choice: $name) -> Self {
+                match choice {
+                    $($name::$variant => <$library>::$variant,)*
+                }
+            }
+        }
+    };
+}
+
+mirror! {
+    /// `--precision`: the element type the network trains in ([`Precision`]).
+    PrecisionArg => Precision {
+        /// 32-bit floats (faster).
+        F32,
+        /// 64-bit floats.
+        F64,
+    }
+}
+
+mirror! {
+    /// `--engine`: which implementation runs the training steps ([`Engine`]).
+    EngineArg => Engine {
+        /// The fastest engine that runs the model: the hand-fused step where it supports the
+        /// model (no measured outputs), the graph backend otherwise.
+        Auto,
+        /// The graph backend (dfdx) for every epoch.
+        Graph,
+        /// The hand-fused step for every epoch, one-step and rollout: the same results up to
+        /// rounding, several times faster (an error for a model it does not support; the polish
+        /// and the evaluation run on the graph backend).
+        Fused,
+    }
+}
+
+mirror! {
+    /// `gbc init --template`: a starting point ([`crate::init::Template`]).
+    TemplateArg => crate::init::Template {
+        /// A continuous culture on one substrate (dilution rate as input).
+        Chemostat,
+        /// A continuous bioreactor with product formation.
+        Bioreactor,
+        /// A batch culture (no input).
+        Batch,
+        /// A fed-batch culture with a growing volume (feed rate as input).
+        Fedbatch,
+    }
+}
+
+mirror! {
+    /// `--message-format`: how diagnostics are printed
+    /// ([`crate::diagnostics::MessageFormat`]).
+    MessageFormatArg => crate::diagnostics::MessageFormat {
+        /// Source excerpt with labels and help, as compilers print.
+        Human,
+        /// One line each: `file:line:column: error[code]: message`.
+        Short,
+        /// One JSON object per line.
+        Json,
+    }
+}
+
 pub use crate::train::{flag_of, with_flag};
 
 #[cfg(test)]
@@ -105,7 +178,7 @@ mod tests {
         assert!(message.contains("--batch") && !message.contains("batch_size"));
         let flags = TrainingFlags {
             lr: Some(0.01),
-            precision: Some(Precision::F64),
+            precision: Some(PrecisionArg::F64),
             ..TrainingFlags::default()
         };
         let settings = flags.settings().unwrap();

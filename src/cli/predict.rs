@@ -13,11 +13,9 @@ use std::path::PathBuf;
 
 use super::data::{load_records, ColumnArgs, HistoryArg};
 use super::progress::{Announce, Count, Reporter};
-use super::train::{read_source, train_error};
 use super::{CommandError, CommandResult};
-use crate::train::{artifacts, predict, PhysicalRange};
-
-mod ensemble;
+use crate::api::{PredictEvent, PredictSpec, SavedRun};
+use crate::train::predict;
 
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -67,54 +65,52 @@ pub struct PredictArgs {
     pub jobs: Option<usize>,
 }
 
-/// Predicts and writes the table.
+/// Predicts and writes the table (an ensemble's coverage on stdout).
 pub fn run(args: &PredictArgs) -> CommandResult {
     let mut inputs: Vec<&std::path::Path> = vec![&args.model];
     inputs.extend(args.data.iter().map(|p| p.as_path()));
     crate::io::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
-    let model = super::load_model(&args.model)?;
-    let source = read_source(&args.model)?;
-    if crate::ensemble::is_ensemble(&args.weights) {
-        return ensemble::run(args, &model, &source);
+    let model = crate::api::Model::from_file(&args.model)?;
+    let saved = SavedRun::load(&model, &args.weights)?;
+    for note in saved.notes() {
+        eprintln!("note: {note}");
     }
-    let (network, setup, info) =
-        artifacts::restore(&model, &source, &args.weights).map_err(train_error)?;
-    let records = load_records(&model, &args.data, &args.columns)?;
-    let mode = mode_of(args.mode);
-    let range = PhysicalRange::of_run(&info);
-    let mut header = Vec::new();
-    let mut columns: Vec<Vec<f64>> = Vec::new();
-    let mut labels = Vec::new();
+    let records = load_records(model.ir(), &args.data, &args.columns)?;
+    let spec = PredictSpec {
+        mode: mode_of(args.mode),
+        history: args.history.into(),
+        band: args.band,
+        jobs: args.jobs,
+    };
     let reporter = Reporter::new();
-    let count = Count::Items("experiments");
-    reporter.stage("predicting", records.len() as u64, count, Announce::IfSlow);
-    for record in &records {
-        let how = (mode, args.history.into(), range.as_ref());
-        let mut table = predict::predict_in_range(&model, &network, &setup, record, how)
-            .map_err(train_error)?;
-        if let Some(divergence) = &table.divergence {
-            reporter.println(&format!(
-                "warning: {divergence}; the predictions stop before it"
-            ));
-        }
-        table.cut_at_divergence();
-        reporter.advance(1, record.name.clone());
-        let rows = table.columns.first().map_or(0, Vec::len);
-        labels.extend(std::iter::repeat_n(record.name.clone(), rows));
-        if columns.is_empty() {
-            header = table.header;
-            columns = table.columns;
-        } else {
-            for (all, part) in columns.iter_mut().zip(table.columns) {
-                all.extend(part);
-            }
-        }
-    }
+    let predictions = saved.predict(&records, &spec, &|event| show(&reporter, event));
     reporter.finish();
-    let labels = (records.len() > 1).then_some(("experiment", labels.as_slice()));
-    crate::data::write_table(&args.output, labels, &header, &columns)
-        .map_err(CommandError::user)?;
+    let predictions = predictions?;
+    predictions.write_csv(&args.output)?;
+    print!("{}", predictions.coverage_text());
     Ok(())
+}
+
+/// Prints a prediction's event on stderr: notes, warnings, progress.
+fn show(reporter: &Reporter, event: PredictEvent) {
+    match event {
+        PredictEvent::Note(note) => eprintln!("note: {note}"),
+        PredictEvent::Warning(warning) => reporter.println(&format!("warning: {warning}")),
+        PredictEvent::Started { experiments } => reporter.stage(
+            "predicting",
+            experiments as u64,
+            Count::Items("experiments"),
+            Announce::IfSlow,
+        ),
+        PredictEvent::Experiment { name } => reporter.advance(1, name),
+        PredictEvent::Members { members, jobs } => {
+            eprintln!("predicting with {members} members ({jobs} at once)")
+        }
+        PredictEvent::MemberDone { done, members } => {
+            eprintln!("predicting: {done}/{members} members")
+        }
+        PredictEvent::Finished => reporter.finish(),
+    }
 }
 
 /// The library's mode of a `--mode`.

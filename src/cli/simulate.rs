@@ -1,32 +1,17 @@
 //! `gbc simulate MODEL --t-end T --dt H -o OUT.csv`: integrate a model without closures
 //! and write the sampled record as CSV; with `--weights RUN_DIR`, a what-if run of a trained
-//! model ([`whatif`]).
-//!
-//! Columns: `t`, the inputs, the measured states, the hidden states (with `--hidden`), then
-//! the outputs. `--noise SPEC` adds measurement noise ([`noise`]): `--noise 0.01` perturbs
-//! the measured states relatively, `y * (1 + 0.01 N(0, 1))`, `--noise declared` by the
-//! model's `noise` declarations, `--noise X=4%+0.01` one quantity by the combined model;
-//! drawn row by row from a ChaCha8 generator seeded with `--seed`; hidden states and
-//! outputs without noise stay exact. `--init X=V` replaces a state's declared
-//! initial value; `--params FILE` sets the params to those `gbc train` or `gbc diagnose`
-//! fitted ([`params`]); `--effect NAME` applies a candidate effect before lowering.
-
-mod noise;
-mod params;
-mod range;
-mod whatif;
+//! model. The work is [`crate::api::simulate`]: noise (`--noise`), ranges (`--range`),
+//! initial values (`--init`), fitted params (`--params`) and effects (`--effect`) are its
+//! spec's fields; this file parses the flags and prints notes, warnings and progress.
 
 #[cfg(test)]
 mod tests_inputs;
 
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
-use crate::ir::Model;
-use crate::signal::Signal;
-use crate::sim::{SimOptions, Tolerances, Trajectory};
-use miette::Diagnostic;
+use crate::api::{SimulateEvent, SimulateSpec};
+use crate::sim::Tolerances;
 use std::path::{Path, PathBuf};
-use thiserror::Error;
 
 /// Arguments of `gbc simulate`.
 #[derive(Debug, clap::Args)]
@@ -106,7 +91,7 @@ pub struct SimulateArgs {
     /// side): the run stops before the first sample outside them, with a warning saying
     /// where and why. Without it only a value that is not finite ends a run (with
     /// `--weights`, the run's range from its training data applies instead).
-    #[arg(long = "range", value_name = "NAME=LO..HI", value_parser = range::parse_range)]
+    #[arg(long = "range", value_name = "NAME=LO..HI", value_parser = parse_range)]
     pub ranges: Vec<(String, f64, f64)>,
     /// Also write the hidden states (a what-if run, `--weights`, always does).
     #[arg(long)]
@@ -140,75 +125,6 @@ fn parse_method(text: &str) -> Result<crate::sim::Method, String> {
     }
 }
 
-/// A problem with the arguments of `gbc simulate` itself.
-#[derive(Debug, Clone, PartialEq, Error, Diagnostic)]
-pub enum SimulateError {
-    /// An input of the model has no `--input` program.
-    #[error("input `{name}` has no program")]
-    #[diagnostic(
-        code(gbm::E0709),
-        help(
-            "give it one, e.g. `--input {name}=steps(hold=5..40)` or `--input {name}=const(0.5)`"
-        )
-    )]
-    MissingInput {
-        /// The input.
-        name: String,
-    },
-    /// Two `--input` arguments name the same input.
-    #[error("input `{name}` has two programs")]
-    #[diagnostic(code(gbm::E0710), help("keep one `--input {name}=...`"))]
-    DuplicateInput {
-        /// The input.
-        name: String,
-    },
-    /// `--range` names no measured state of the model.
-    #[error("expected a measured state of the model in `--range`, found `{name}`")]
-    #[diagnostic(code(gbm::E0718), help("{states}"))]
-    UnknownRangeState {
-        /// The name given.
-        name: String,
-        /// The measured states, with a suggestion.
-        states: String,
-    },
-    /// `--init` names no state of the model.
-    #[error("expected a state of the model in `--init`, found `{name}`")]
-    #[diagnostic(code(gbm::E0715), help("{states}"))]
-    UnknownInitState {
-        /// The name given.
-        name: String,
-        /// The states, with a suggestion.
-        states: String,
-    },
-    /// The params file cannot be used.
-    #[error("cannot read params from `{path}`: {reason}")]
-    #[diagnostic(
-        code(gbm::E0716),
-        help(
-            "pass the run.json of `gbc train -o DIR` (or its `--json` file) or the file of \
-             `gbc diagnose --json`"
-        )
-    )]
-    BadParams {
-        /// The file.
-        path: String,
-        /// What is wrong.
-        reason: String,
-    },
-    /// The history holds several experiments.
-    #[error("expected one experiment in the history `{path}`, found {found}")]
-    #[diagnostic(
-        code(gbm::E0717),
-        help("pass a file with one experiment, or one without an experiment column")
-    )]
-    SeveralHistories {
-        /// The file.
-        path: String,
-        /// Experiments found.
-        found: usize,
-    },
-}
-
 /// `NAME=VALUE` with a number.
 fn parse_init(argument: &str) -> Result<(String, f64), String> {
     let (name, value) = argument
@@ -224,22 +140,50 @@ fn parse_init(argument: &str) -> Result<(String, f64), String> {
     Ok((name.trim().to_string(), value))
 }
 
-/// The `--init` values in the model's state order (measured, then hidden).
-fn initial_values(model: &Model, init: &[(String, f64)]) -> Result<Vec<Option<f64>>, CommandError> {
-    let names: Vec<&str> = (model.states.iter().chain(&model.hidden))
-        .map(|s| s.name.as_str())
-        .collect();
-    let mut values = vec![None; names.len()];
-    for (name, value) in init {
-        let index = names.iter().position(|n| n == name).ok_or_else(|| {
-            CommandError::user(SimulateError::UnknownInitState {
-                name: name.clone(),
-                states: crate::suggest::did_you_mean(name, &names, "states"),
-            })
-        })?;
-        values[index] = Some(*value);
+/// `NAME=LO..HI` (either side may be left out).
+fn parse_range(argument: &str) -> Result<(String, f64, f64), String> {
+    let expected = || format!("expected NAME=LO..HI (e.g. `S=0..50`), found `{argument}`");
+    let (name, bounds) = argument.split_once('=').ok_or_else(expected)?;
+    let (lo, hi) = bounds.split_once("..").ok_or_else(expected)?;
+    let bound = |text: &str, open: f64| match text.trim() {
+        "" => Ok(open),
+        text => (text.parse::<f64>().ok().filter(|v| !v.is_nan())).ok_or_else(expected),
+    };
+    let (lo, hi) = (bound(lo, f64::NEG_INFINITY)?, bound(hi, f64::INFINITY)?);
+    if lo >= hi {
+        return Err(format!("expected LO below HI in `{argument}`"));
     }
-    Ok(values)
+    Ok((name.trim().to_string(), lo, hi))
+}
+
+impl SimulateArgs {
+    /// The API's spec of these arguments.
+    pub(crate) fn spec(&self) -> SimulateSpec {
+        SimulateSpec {
+            t_end: self.t_end,
+            dt: self.dt,
+            t_start: self.t_start,
+            weights: self.weights.clone(),
+            band: self.band,
+            history: self.history.clone(),
+            columns: self.columns.columns.clone(),
+            init: self.init.clone(),
+            params: self.params.clone(),
+            inputs: self.inputs.clone(),
+            warmup: self.warmup,
+            noise: self.noise.clone(),
+            seed: self.seed,
+            ranges: self.ranges.clone(),
+            hidden: self.hidden,
+            tolerances: Tolerances {
+                rtol: self.rtol,
+                atol: self.atol,
+            },
+            max_steps: self.max_steps,
+            integrator: self.integrator,
+            jobs: None,
+        }
+    }
 }
 
 /// Simulates the model and writes the record.
@@ -248,174 +192,36 @@ pub fn run(args: &SimulateArgs) -> CommandResult {
     inputs.extend(args.history.as_deref());
     inputs.extend(args.params.as_deref());
     crate::io::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
-    let effects: Vec<&str> = args.effects.iter().map(String::as_str).collect();
-    let mut model = crate::driver::compile_file(&args.model, &effects)?.model;
-    if let Some(weights) = &args.weights {
-        return whatif::run(&model, weights, args);
-    }
-    if let Some(path) = &args.params {
-        for note in params::apply(&mut model, path, &effects)? {
-            eprintln!("note: {note}");
-        }
-    }
-    let noise = noise::record_noise(&model, &args.noise)?;
-    let range = range::simulation_range(&model, &args.ranges)?;
-    let t_start = args.t_start.unwrap_or(0.0);
-    let dt = args.dt.ok_or_else(missing_dt)?;
-    let signals = input_signals(&model, args, (t_start, args.t_end, dt))?;
-    let options = SimOptions {
-        t_start,
-        warmup: args.warmup,
-        tolerances: Tolerances {
-            rtol: args.rtol,
-            atol: args.atol,
-        },
-        initial: initial_values(&model, &args.init)?,
-        max_steps: args.max_steps,
-        method: args.integrator,
-        ..SimOptions::new(args.t_end, dt)
-    };
+    let model = crate::api::Model::from_file_with_effects(&args.model, &args.effects)?;
     // The stage starts before the warm-up; its total is known from the first sample on.
     let reporter = Reporter::new();
-    reporter.stage("simulating", 0, Count::Items("samples"), Announce::IfSlow);
-    let mut progress = |done: usize, total: usize| {
-        if done == 1 {
-            reporter.set_total(total as u64);
-        }
-        if done.is_multiple_of(1024) || done == total {
-            reporter.update(done as u64, String::new());
-        }
-    };
-    let simulated = crate::sim::simulate_with_progress(&model, &signals, &options, &mut progress);
-    reporter.finish();
-    let mut trajectory = simulated.map_err(CommandError::user)?;
-    range::stop_outside(&model, &mut trajectory, &range);
-    noise::add_noise(&mut trajectory, &noise, args.seed);
-    let table = csv_table(&model, &trajectory, args.hidden, &args.output)?;
-    crate::io::write_atomic(&args.output, &table).map_err(CommandError::user)?;
+    let simulation =
+        crate::api::simulate(&model, &args.spec(), &mut |event| show(&reporter, event))?;
+    simulation.write_csv(&args.output)?;
     Ok(())
 }
 
-/// `--dt` is needed without `--weights`.
-fn missing_dt() -> CommandError {
-    CommandError::user(crate::sim::SimError::Options(
-        "expected --dt (the sampling step), found none".into(),
-    ))
-}
-
-/// One signal per model input, from the `--input` programs, sampled on the grid
-/// `t_start + k dt` up to `t_end`.
-fn input_signals(
-    model: &Model,
-    args: &SimulateArgs,
-    (t_start, t_end, dt): (f64, f64, f64),
-) -> Result<Vec<Signal>, CommandError> {
-    let mut programs = vec![None; model.inputs.len()];
-    let mut reports = Vec::new();
-    // Inputs whose program was given but is defective: reported once, not also as missing.
-    let mut defective: Vec<&str> = Vec::new();
-    for text in &args.inputs {
-        let parsed = crate::signal::parse_input_argument(text).and_then(|argument| {
-            let input = argument.resolve(&model.inputs)?;
-            Ok((input.name.clone(), argument.program))
-        });
-        match parsed {
-            Ok((name, program)) => {
-                let index = model.inputs.iter().position(|i| i.name == name);
-                if let Some(Some(_)) = index.map(|index| programs[index].replace(program)) {
-                    reports.push(report(SimulateError::DuplicateInput { name }));
-                }
+/// Prints a simulation's event on stderr: notes, warnings, the progress of its samples.
+fn show(reporter: &Reporter, event: SimulateEvent) {
+    match event {
+        SimulateEvent::Note(note) => eprintln!("note: {note}"),
+        SimulateEvent::Warning(warning) => eprintln!("warning: {warning}"),
+        SimulateEvent::Started => {
+            reporter.stage("simulating", 0, Count::Items("samples"), Announce::IfSlow)
+        }
+        SimulateEvent::Samples { done, total } => {
+            if done == 1 {
+                reporter.set_total(total as u64);
             }
-            Err(error) => {
-                defective.extend(text.split_once('=').map(|(name, _)| name.trim()));
-                reports.push(report(error));
+            if done.is_multiple_of(1024) || done == total {
+                reporter.update(done as u64, String::new());
             }
         }
-    }
-    let mut signals = Vec::with_capacity(model.inputs.len());
-    for (input, program) in model.inputs.iter().zip(&programs) {
-        let Some(program) = program else {
-            if defective.contains(&input.name.as_str()) {
-                continue;
-            }
-            reports.push(report(SimulateError::MissingInput {
-                name: input.name.clone(),
-            }));
-            continue;
-        };
-        match program.generate(input, t_start, t_end, dt) {
-            Ok(signal) => signals.push(signal),
-            Err(error) => reports.push(report(error)),
+        SimulateEvent::Finished => reporter.finish(),
+        SimulateEvent::Members { members, jobs } => {
+            eprintln!("running {members} members ({jobs} at once)")
         }
     }
-    if reports.is_empty() {
-        Ok(signals)
-    } else {
-        Err(CommandError::User(reports))
-    }
-}
-
-fn report(diagnostic: impl Diagnostic + Send + Sync + 'static) -> miette::Report {
-    miette::Report::new(diagnostic)
-}
-
-/// The record as CSV text: `t`, inputs, measured states, hidden states (if asked), outputs.
-fn csv_table<'a>(
-    model: &'a Model,
-    trajectory: &'a Trajectory,
-    with_hidden: bool,
-    path: &Path,
-) -> Result<Vec<u8>, CommandError> {
-    let named = |names: Vec<&'a String>, values: &'a [Vec<f64>]| {
-        names.into_iter().zip(values.iter().map(Vec::as_slice))
-    };
-    let mut columns: Vec<(&String, &[f64])> = Vec::new();
-    columns.extend(named(
-        model.inputs.iter().map(|i| &i.name).collect(),
-        &trajectory.inputs,
-    ));
-    columns.extend(named(
-        model.states.iter().map(|s| &s.name).collect(),
-        &trajectory.states,
-    ));
-    if with_hidden {
-        columns.extend(named(
-            model.hidden.iter().map(|s| &s.name).collect(),
-            &trajectory.hidden,
-        ));
-    }
-    columns.extend(named(
-        model.outputs.iter().map(|o| &o.name).collect(),
-        &trajectory.outputs,
-    ));
-    let mut named: Vec<(&str, &[f64])> = vec![("t", &trajectory.times)];
-    named.extend(
-        columns
-            .iter()
-            .map(|(name, values)| (name.as_str(), *values)),
-    );
-    let found = crate::finite::in_table(&named);
-    crate::finite::refuse(path, found, crate::data::NOT_FINITE_HELP).map_err(CommandError::user)?;
-    let header = std::iter::once("t").chain(columns.iter().map(|(name, _)| name.as_str()));
-    let failed = |error: csv::Error| {
-        CommandError::Internal(format!("cannot format `{}`: {error}", path.display()))
-    };
-    let mut writer = csv::Writer::from_writer(Vec::new());
-    writer.write_record(header).map_err(failed)?;
-    for (k, &t) in trajectory.times.iter().enumerate() {
-        let row = std::iter::once(format_time(t))
-            .chain(columns.iter().map(|(_, column)| format!("{:?}", column[k])));
-        writer.write_record(row).map_err(failed)?;
-    }
-    writer.into_inner().map_err(|error| {
-        CommandError::Internal(format!("cannot format `{}`: {error}", path.display()))
-    })
-}
-
-/// A sample time without the rounding noise of `t_start + k dt` (12 significant digits).
-fn format_time(t: f64) -> String {
-    let rounded: f64 = format!("{t:.11e}").parse().unwrap_or(t);
-    format!("{rounded:?}")
 }
 
 #[cfg(test)]
@@ -549,6 +355,11 @@ mod tests {
             "simulate", "m.gbm", "--t-end", "1", "--dt", "1", "-o", "o.csv",
         ];
         let refused = Command::try_parse_from([&negative[..], &["--noise", "-1"]].concat());
+        assert!(parse_range("S=5..1").is_err() && parse_range("S=a..1").is_err());
+        assert_eq!(
+            parse_range(" X = ..2"),
+            Ok(("X".into(), f64::NEG_INFINITY, 2.0))
+        );
         let message = refused.err().map(|e| e.to_string()).unwrap_or_default();
         assert!(
             message.contains("expected a finite noise level >= 0, found `-1`"),
@@ -580,12 +391,5 @@ mod tests {
             "{message}"
         );
         assert!(!output.exists(), "nothing is written");
-    }
-
-    #[test]
-    fn sample_times_print_without_rounding_noise() {
-        assert_eq!(format_time(3.0 * 0.1), "0.3");
-        assert_eq!(format_time(1799.0), "1799.0");
-        assert_eq!(format_time(-2.5e-7), "-2.5e-7");
     }
 }

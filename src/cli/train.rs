@@ -22,10 +22,9 @@ mod cv;
 mod ensemble;
 mod progress;
 mod safety;
-mod summary;
 
+use crate::api::summary::summary;
 use progress::Progress;
-use summary::summary;
 
 use super::data::{ColumnArgs, HistoryArg};
 use super::options::TrainingFlags;
@@ -523,16 +522,6 @@ pub fn recipe_of(args: &TrainArgs) -> Recipe {
             ParamsArg::Train => ParamSource::Train,
         },
     }
-}
-
-/// Reads a model file's text (for its hash).
-pub fn read_source(path: &Path) -> Result<String, CommandError> {
-    std::fs::read_to_string(path).map_err(|error| {
-        train_error(TrainError::Unreadable {
-            path: path.display().to_string(),
-            reason: crate::io::describe(&error),
-        })
-    })
 }
 
 /// Reads a record with the model's inputs and measured states.

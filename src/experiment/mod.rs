@@ -56,3 +56,8 @@ pub fn is_black_box(model: &ir::Model) -> bool {
     model.dynamics == ir::Dynamics::Discrete
         || (!model.balances.is_empty() && model.balances.iter().all(learned))
 }
+
+/// The default number of runs at once (trainings, ensemble members): the number of cores.
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, usize::from)
+}

@@ -80,7 +80,7 @@ pub fn build(graph: &mut Builder, parts: &Parts) {
         current_state
     };
     let raw_params = (parts.weights.iter())
-        .find(|t| t.name == "params")
+        .find(|t| t.name == crate::vocabulary::PARAMS_TENSOR)
         .map(|t| named(graph, t));
     let first_column = graph.column(&start, 0);
     let frame = Frame {

@@ -73,7 +73,7 @@ impl Plan {
             closures.push(plan);
         }
         let params = match template.get(next_tensor) {
-            Some(tensor) if tensor.name == "params" => tensors[next_tensor],
+            Some(tensor) if tensor.name == crate::vocabulary::PARAMS_TENSOR => tensors[next_tensor],
             _ => (start, 0),
         };
         let expected = next_tensor + usize::from(params.1 > 0);

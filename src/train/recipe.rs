@@ -39,17 +39,7 @@ impl Objective {
 }
 
 /// Which implementation runs the training steps (one-step pairs and rollout windows).
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Engine {
     /// The fastest engine that runs the model: the hand-fused step where it supports the

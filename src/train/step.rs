@@ -89,7 +89,7 @@ impl Optimiser {
         let tensors = network.weights();
         let size: usize = tensors.iter().map(|t| t.values.len()).sum();
         let params = (tensors.last())
-            .filter(|t| t.name == "params")
+            .filter(|t| t.name == crate::vocabulary::PARAMS_TENSOR)
             .map(|t| size - t.values.len()..size);
         let flat = tensors.iter().flat_map(|t| t.values.iter().copied());
         let state = match precision {

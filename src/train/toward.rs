@@ -148,7 +148,8 @@ impl Penalty {
             let range = at..at + tensor.values.len();
             if last_names.contains(&tensor.name) {
                 last.push(range.clone());
-            } else if tensor.name == "params" && start.len() == range.len() {
+            } else if tensor.name == crate::vocabulary::PARAMS_TENSOR && start.len() == range.len()
+            {
                 params = Some((range.clone(), start.to_vec()));
             }
             at = range.end;
@@ -388,7 +389,7 @@ mod tests {
         for tensor in &tensors {
             let last = tensor.name.ends_with(".layer2.weight")
                 || tensor.name.ends_with(".layer2.bias")
-                || tensor.name == "params";
+                || tensor.name == crate::vocabulary::PARAMS_TENSOR;
             for i in at..at + tensor.values.len() {
                 let h = 1e-6;
                 let (mut up, mut down) = (moved.clone(), moved.clone());

@@ -3,7 +3,6 @@
 //! the held-out experiments, the median's and the members' errors). The work is
 //! `gbc::ensemble`.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -11,9 +10,8 @@ use std::time::Instant;
 use super::{ResampleArg, TrainArgs};
 use crate::api::REPORT_FILE;
 use crate::cli::{CommandError, CommandResult};
-use crate::ensemble::{self, EnsembleInfo, MemberEvent, Plan, Resample};
+use crate::ensemble::{self, MemberEvent, Plan, Resample};
 use crate::ir::Model;
-use crate::plot::tick_label;
 use crate::train::{Recipe, TrainOptions, TrainingData};
 
 /// Seconds between progress lines of the members' epochs.
@@ -74,7 +72,7 @@ pub(super) fn run(
         })?;
         crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
-    let text = summary(
+    let text = crate::api::summary::ensemble_summary(
         model,
         &trained.info,
         started.elapsed().as_secs_f64(),
@@ -147,153 +145,5 @@ impl MemberProgress {
                 eprintln!("member {member}/{members}: {status} in {seconds:.0} s");
             }
         }
-    }
-}
-
-/// `writeln!` into a `String` (which cannot fail).
-macro_rules! line {
-    ($out:expr, $($arg:tt)*) => {{
-        let _ = writeln!($out, $($arg)*);
-    }};
-}
-
-/// The text printed when the ensemble is done.
-fn summary(model: &Model, info: &EnsembleInfo, seconds: f64, directory: &Path) -> String {
-    let mut out = String::new();
-    let used = info.used().count();
-    line!(
-        out,
-        "trained an ensemble of {used} members of `{}` ({} of {} finished) in {seconds:.1} s, {}",
-        model.name,
-        used,
-        info.members.len(),
-        match info.resample {
-            Resample::Experiments => "each on a bootstrap of whole training experiments",
-            Resample::None => "each on every training experiment",
-        }
-    );
-    for member in &info.members {
-        line!(
-            out,
-            "  member {} (seed {}): trained on {}; {}{}",
-            member.index,
-            member.seed,
-            member.trained_on.join(" "),
-            member.status,
-            member.validation_error.map_or(String::new(), |e| format!(
-                ", held-out error {}",
-                tick_label(e)
-            ))
-        );
-    }
-    band_lines(&mut out, info);
-    coverage_lines(&mut out, info);
-    line!(
-        out,
-        "ensemble written to {} (ensemble.json, members/, report.html)",
-        directory.display()
-    );
-    out
-}
-
-/// The noise and calibration of each state.
-fn band_lines(out: &mut String, info: &EnsembleInfo) {
-    let level = info
-        .coverage
-        .as_ref()
-        .map_or(ensemble::DEFAULT_LEVEL, |c| c.level);
-    let calibration = &info.calibration;
-    if let Some(reason) = &calibration.reason {
-        line!(out, "band: not calibrated ({reason}); none is claimed");
-        return;
-    }
-    let experiments: Vec<String> = (calibration.experiments.iter())
-        .map(|(name, members)| match members.is_empty() {
-            true => format!("{name} (no member left it out)"),
-            false => format!(
-                "{name} (members {})",
-                members
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        })
-        .collect();
-    line!(
-        out,
-        "band calibrated out of bag on {}:",
-        experiments.join(", ")
-    );
-    line!(
-        out,
-        "  {:<12} {:<44} {:>9} {:>10}",
-        "state",
-        "noise",
-        "oob cells",
-        "factor"
-    );
-    for (state, (noise, scores)) in (info.band.noise.iter().zip(&calibration.states)).enumerate() {
-        let factor = calibration
-            .factor(state, level)
-            .map_or("-".into(), tick_label);
-        let cells = if scores.pooled {
-            format!("{} (pooled)", scores.cells)
-        } else {
-            scores.cells.to_string()
-        };
-        line!(
-            out,
-            "  {:<12} {:<44} {:>9} {:>10}",
-            noise.state,
-            noise.describe(),
-            cells,
-            factor
-        );
-    }
-}
-
-/// The coverage of the held-out experiments and the errors.
-fn coverage_lines(out: &mut String, info: &EnsembleInfo) {
-    let Some(coverage) = &info.coverage else {
-        line!(out, "coverage: no held-out measured cell to count");
-        return;
-    };
-    let share = |inside: usize, cells: usize| {
-        format!(
-            "{inside} of {cells} ({:.1} %)",
-            100.0 * inside as f64 / cells.max(1) as f64
-        )
-    };
-    line!(
-        out,
-        "coverage of the {} % band on held-out {}: {} measured cells inside",
-        tick_label(100.0 * coverage.level),
-        coverage.experiments.join(" "),
-        share(coverage.overall.inside, coverage.overall.cells)
-    );
-    for count in &coverage.states {
-        line!(
-            out,
-            "  {:<12} {}",
-            count.state,
-            share(count.inside, count.cells)
-        );
-    }
-    let base = &coverage.uncalibrated;
-    line!(
-        out,
-        "  (not calibrated, the members' spread with the noise at {} %: {})",
-        tick_label(100.0 * info.band.base_level),
-        share(base.inside, base.cells)
-    );
-    if let Some(errors) = &info.errors {
-        let members: Vec<String> = errors.members.iter().map(|e| tick_label(*e)).collect();
-        line!(
-            out,
-            "held-out error of the members' median {} (members: {})",
-            tick_label(errors.median),
-            members.join(", ")
-        );
     }
 }

@@ -1,4 +1,4 @@
-//! `gbc simulate --noise SPEC`: measurement noise added to the simulated record.
+//! Measurement noise added to a simulated record (`gbc simulate --noise SPEC`).
 //!
 //! Without `--noise` the record is exact. With specs, the noise is the model's `noise`
 //! declarations with the specs laid over them (`ir::merge_noise`): `--noise declared` adds
@@ -11,7 +11,7 @@
 //! not, so that a state's draws do not depend on the others' noise), then one per noisy
 //! output. Hidden states and outputs without noise stay exact.
 
-use super::CommandError;
+use crate::api::ApiError;
 use crate::ir::{merge_noise, Measured, Model, Noise, NoiseSpec};
 use crate::sim::Trajectory;
 use rand::SeedableRng;
@@ -20,11 +20,11 @@ use rand_distr::{Distribution, StandardNormal};
 
 /// The noise the specs ask for: none without specs, else the declarations with the specs
 /// laid over them, a bare level covering [`Model::measured`].
-pub fn record_noise(model: &Model, specs: &[NoiseSpec]) -> Result<Vec<Noise>, CommandError> {
+pub fn record_noise(model: &Model, specs: &[NoiseSpec]) -> Result<Vec<Noise>, ApiError> {
     if specs.is_empty() {
         return Ok(Vec::new());
     }
-    merge_noise(model, specs, &model.measured()).map_err(CommandError::user)
+    merge_noise(model, specs, &model.measured()).map_err(ApiError::user)
 }
 
 /// Adds `noise` to the trajectory's measured states and outputs, row by row.

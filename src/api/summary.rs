@@ -1,11 +1,16 @@
-//! The text `gbc train` prints on stdout when a run ends: what trained, the validation
-//! errors per experiment and pooled, where a free run left the physical range, each
-//! experiment's initial state and each param with its standard error.
+//! The texts `gbc train` prints on stdout: when a run ends ([`summary`]: what trained, the
+//! validation errors per experiment and pooled, where a free run left the physical range,
+//! each experiment's initial state and each param with its standard error), and after a
+//! leave-one-experiment-out cross-validation ([`cv_table`]) and after an ensemble
+//! ([`ensemble_summary`]).
 
 use std::fmt::Write as _;
 use std::path::Path;
 
+use crate::ensemble::{self, EnsembleInfo, Resample};
 use crate::ir::Model;
+use crate::plot::tick_label;
+use crate::train::cv::{self, CrossValidation};
 use crate::train::{self, ErrorSet, Trained};
 
 /// `writeln!` into a `String` (which cannot fail).
@@ -17,7 +22,7 @@ macro_rules! line {
 
 /// The summary of `trained` (`seconds` of training; `run`: where the run was written;
 /// `cross_validated`: `--cv` scored it, nothing else validates).
-pub(super) fn summary(
+pub fn summary(
     model: &Model,
     trained: &Trained,
     seconds: f64,
@@ -256,10 +261,243 @@ fn print_distance(out: &mut String, distance: &train::toward::MechanismDistance)
 }
 
 /// An error value for the summary: scientific notation, or `diverged`.
-pub(super) fn error(value: f64) -> String {
+pub fn error(value: f64) -> String {
     if value.is_finite() {
         format!("{value:.4e}")
     } else {
         "diverged".to_string()
+    }
+}
+
+/// The folds as text: per fold and pooled, the online error of each state and overall and
+/// the offline error overall; then the medians, the divergences and the empty folds.
+pub fn cv_table(model: &Model, result: &CrossValidation, directory: &Path) -> String {
+    let mut out = String::new();
+    let states: Vec<&str> = model.states.iter().map(|s| s.name.as_str()).collect();
+    let _ = writeln!(
+        out,
+        "leave-one-experiment-out cross-validation ({} folds; MSE of z-scored states, \
+         online per state):",
+        result.folds.len()
+    );
+    let mut header = format!("  {:<24}", "held out");
+    for state in &states {
+        let _ = write!(header, " {state:>12}");
+    }
+    let _ = writeln!(out, "{header} {:>12} {:>12}", "online", "offline");
+    let row =
+        |out: &mut String, name: &str, online: Option<&ErrorSet>, offline: Option<&ErrorSet>| {
+            let mut line = format!("  {name:<24}");
+            for state in &states {
+                let value = online
+                    .and_then(|s| s.per_state.iter().find(|(n, _)| n == state))
+                    .map_or("-".into(), |(_, e)| error(*e));
+                let _ = write!(line, " {value:>12}");
+            }
+            let overall = |set: Option<&ErrorSet>| set.map_or("-".into(), |s| error(s.overall));
+            let _ = writeln!(
+                out,
+                "{line} {:>12} {:>12}",
+                overall(online),
+                overall(offline)
+            );
+        };
+    for fold in &result.folds {
+        row(
+            &mut out,
+            &fold.held_out,
+            fold.online.as_ref(),
+            fold.offline.as_ref(),
+        );
+    }
+    row(
+        &mut out,
+        "pooled",
+        result.pooled_online.as_ref(),
+        result.pooled_offline.as_ref(),
+    );
+    let median = |value: Option<f64>| value.map_or("-".into(), error);
+    let pad = " ".repeat(13 * states.len());
+    let _ = writeln!(
+        out,
+        "  {:<24}{pad} {:>12} {:>12}",
+        "median",
+        median(result.median_online),
+        median(result.median_offline)
+    );
+    for fold in &result.folds {
+        notes(&mut out, fold);
+    }
+    let _ = writeln!(
+        out,
+        "each fold's run and held-out free run: {}",
+        directory.join(cv::CV_DIR).display()
+    );
+    out
+}
+
+/// A fold's divergences and why it validates nothing, each on a line.
+fn notes(out: &mut String, fold: &cv::Fold) {
+    let name = &fold.held_out;
+    if let Some(divergence) = fold.online.as_ref().and_then(|s| s.divergence.as_ref()) {
+        let _ = writeln!(out, "  fold `{name}`: {divergence}");
+    }
+    if let Some(diverged) = &fold.diverged {
+        let _ = writeln!(
+            out,
+            "  fold `{name}`: training went non-finite in epoch {} ({}): {}; its run keeps \
+             epoch {}",
+            diverged.epoch, diverged.phase, diverged.what, diverged.kept_epoch
+        );
+    }
+    if let Some(why) = &fold.nothing_validates {
+        let _ = writeln!(out, "  fold `{name}` validates nothing: {why}");
+    }
+}
+
+/// The text `gbc train --ensemble N` prints when the ensemble is done: each member, the
+/// band's noise and calibration, its coverage of the held-out experiments, the errors.
+pub fn ensemble_summary(
+    model: &Model,
+    info: &EnsembleInfo,
+    seconds: f64,
+    directory: &Path,
+) -> String {
+    let mut out = String::new();
+    let used = info.used().count();
+    line!(
+        out,
+        "trained an ensemble of {used} members of `{}` ({} of {} finished) in {seconds:.1} s, {}",
+        model.name,
+        used,
+        info.members.len(),
+        match info.resample {
+            Resample::Experiments => "each on a bootstrap of whole training experiments",
+            Resample::None => "each on every training experiment",
+        }
+    );
+    for member in &info.members {
+        line!(
+            out,
+            "  member {} (seed {}): trained on {}; {}{}",
+            member.index,
+            member.seed,
+            member.trained_on.join(" "),
+            member.status,
+            member.validation_error.map_or(String::new(), |e| format!(
+                ", held-out error {}",
+                tick_label(e)
+            ))
+        );
+    }
+    band_lines(&mut out, info);
+    coverage_lines(&mut out, info);
+    line!(
+        out,
+        "ensemble written to {} (ensemble.json, members/, report.html)",
+        directory.display()
+    );
+    out
+}
+
+/// The noise and calibration of each state.
+fn band_lines(out: &mut String, info: &EnsembleInfo) {
+    let level = info
+        .coverage
+        .as_ref()
+        .map_or(ensemble::DEFAULT_LEVEL, |c| c.level);
+    let calibration = &info.calibration;
+    if let Some(reason) = &calibration.reason {
+        line!(out, "band: not calibrated ({reason}); none is claimed");
+        return;
+    }
+    let experiments: Vec<String> = (calibration.experiments.iter())
+        .map(|(name, members)| match members.is_empty() {
+            true => format!("{name} (no member left it out)"),
+            false => format!(
+                "{name} (members {})",
+                members
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })
+        .collect();
+    line!(
+        out,
+        "band calibrated out of bag on {}:",
+        experiments.join(", ")
+    );
+    line!(
+        out,
+        "  {:<12} {:<44} {:>9} {:>10}",
+        "state",
+        "noise",
+        "oob cells",
+        "factor"
+    );
+    for (state, (noise, scores)) in (info.band.noise.iter().zip(&calibration.states)).enumerate() {
+        let factor = calibration
+            .factor(state, level)
+            .map_or("-".into(), tick_label);
+        let cells = if scores.pooled {
+            format!("{} (pooled)", scores.cells)
+        } else {
+            scores.cells.to_string()
+        };
+        line!(
+            out,
+            "  {:<12} {:<44} {:>9} {:>10}",
+            noise.state,
+            noise.describe(),
+            cells,
+            factor
+        );
+    }
+}
+
+/// The coverage of the held-out experiments and the errors.
+fn coverage_lines(out: &mut String, info: &EnsembleInfo) {
+    let Some(coverage) = &info.coverage else {
+        line!(out, "coverage: no held-out measured cell to count");
+        return;
+    };
+    let share = |inside: usize, cells: usize| {
+        format!(
+            "{inside} of {cells} ({:.1} %)",
+            100.0 * inside as f64 / cells.max(1) as f64
+        )
+    };
+    line!(
+        out,
+        "coverage of the {} % band on held-out {}: {} measured cells inside",
+        tick_label(100.0 * coverage.level),
+        coverage.experiments.join(" "),
+        share(coverage.overall.inside, coverage.overall.cells)
+    );
+    for count in &coverage.states {
+        line!(
+            out,
+            "  {:<12} {}",
+            count.state,
+            share(count.inside, count.cells)
+        );
+    }
+    let base = &coverage.uncalibrated;
+    line!(
+        out,
+        "  (not calibrated, the members' spread with the noise at {} %: {})",
+        tick_label(100.0 * info.band.base_level),
+        share(base.inside, base.cells)
+    );
+    if let Some(errors) = &info.errors {
+        let members: Vec<String> = errors.members.iter().map(|e| tick_label(*e)).collect();
+        line!(
+            out,
+            "held-out error of the members' median {} (members: {})",
+            tick_label(errors.median),
+            members.join(", ")
+        );
     }
 }
