@@ -35,6 +35,8 @@ mod saved;
 mod simulate;
 mod split;
 pub mod summary;
+#[cfg(test)]
+mod tests_saved;
 
 pub use compare::{compare, mechanism_of, CompareResult, CompareSpec};
 pub use data::{Column, Table};

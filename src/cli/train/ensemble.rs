@@ -33,7 +33,7 @@ pub(super) fn run(
         },
         jobs: args
             .jobs
-            .unwrap_or_else(crate::cli::experiment::default_jobs)
+            .unwrap_or_else(crate::experiment::default_jobs)
             .max(1),
         level: args.band,
     };

@@ -265,7 +265,7 @@ fn model_with_closures_is_refused() {
 
 fn shipped(file: &str) -> Model {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
-    crate::cli::load_model(&path).unwrap()
+    crate::driver::compile_file(&path, &[]).unwrap().model
 }
 
 #[test]
