@@ -17,6 +17,7 @@
 //!   records as [`Predictions`] (`gbc predict`) and exports its one-step map (`gbc export`).
 //! - [`CompareSpec`] and [`compare`]: a grey box against its fitted mechanism and the
 //!   naive forecast, as a [`CompareResult`] (text, JSON, HTML).
+//! - [`bench`]: how fast the shipped models train and simulate, on this machine.
 //! - [`experiment`]: studies over training sizes and seeds, run, published and summarised.
 //! - [`DiagnoseSpec`] and [`diagnose`]: the sim-to-real gap of a mechanistic model, as a
 //!   [`Diagnosis`] that renders itself as text, JSON and HTML.
@@ -24,6 +25,7 @@
 //! Every failure is an [`ApiError`]: the diagnostics of the input at fault (code, message,
 //! location, help) or an internal error. Nothing here prints.
 
+pub mod bench;
 mod compare;
 mod data;
 mod diagnose;

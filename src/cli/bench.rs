@@ -5,30 +5,24 @@
 //! implementation (`graph`, what `gbc train` runs, and `fused`, the hand-fused step of
 //! `src/fused/`) it prints the median time of one Adam step and of one epoch. It also times
 //! a 3000 h simulation of the bioreactor truth model, the stiff integrations of
-//! `models/stiff/` ([`stiff`]) and, with `--full`, one paper-scale training end to end. `--json FILE` writes every measurement. Run it from the repository
+//! `models/stiff/` and, with `--full`, one paper-scale training end to end. `--json FILE`
+//! writes every measurement. The work is [`crate::api::bench`]. Run it from the repository
 //! root (or pass `--root`); docs/performance.md has the numbers and the peer comparison.
 
-mod stiff;
-
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::PathBuf;
 
 use super::options::TrainingFlags;
-use super::train::{read_data, train_error};
 use super::{CommandError, CommandResult};
+use crate::api::bench::{BenchModel, BenchSpec, Measurement, TrainingRow};
 use crate::backend::Precision;
-use crate::numeric::median;
-use crate::signal::Signal;
-use crate::sim::SimOptions;
-use crate::train::bench::{bench, BenchReport, Engine};
-use crate::train::{Part, Recipe, Settings, TrainOptions, TrainingData};
+use crate::train::bench::Engine;
 
 /// Timed epochs per measurement when `--epochs` is left out.
 const BENCH_EPOCHS: usize = 20;
 
-/// A shipped model `gbc bench` times.
+/// A shipped model `gbc bench` times ([`BenchModel`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum BenchModel {
+pub enum BenchModelArg {
     /// models/bioreactor/gb1.gbm, 1000 pairs.
     Gb1,
     /// models/bioreactor/gb2.gbm, 1000 pairs.
@@ -42,31 +36,14 @@ pub enum BenchModel {
     Lab,
 }
 
-/// The lab data set's experiments (`models/bioreactor/data/lab/`).
-const LAB: [&str; 4] = ["run1.csv", "run2.csv", "run3.csv", "run4.csv"];
-
-impl BenchModel {
-    const ALL: [BenchModel; 5] = [
-        BenchModel::Gb1,
-        BenchModel::Gb2,
-        BenchModel::Blackbox,
-        BenchModel::Chemostat,
-        BenchModel::Lab,
-    ];
-
-    /// Model file, data file and training pairs, relative to the repository root.
-    fn files(self) -> (&'static str, &'static str, usize) {
-        const BIOREACTOR: &str = "models/bioreactor/data/steps.csv";
-        match self {
-            BenchModel::Gb1 => ("models/bioreactor/gb1.gbm", BIOREACTOR, 1000),
-            BenchModel::Gb2 => ("models/bioreactor/gb2.gbm", BIOREACTOR, 1000),
-            BenchModel::Blackbox => ("models/bioreactor/blackbox.gbm", BIOREACTOR, 1000),
-            BenchModel::Chemostat => (
-                "models/mm_chemostat/greybox.gbm",
-                "models/mm_chemostat/data/steps.csv",
-                500,
-            ),
-            BenchModel::Lab => ("models/bioreactor/gb1.gbm", BIOREACTOR, 0),
+impl From<BenchModelArg> for BenchModel {
+    fn from(model: BenchModelArg) -> Self {
+        match model {
+            BenchModelArg::Gb1 => BenchModel::Gb1,
+            BenchModelArg::Gb2 => BenchModel::Gb2,
+            BenchModelArg::Blackbox => BenchModel::Blackbox,
+            BenchModelArg::Chemostat => BenchModel::Chemostat,
+            BenchModelArg::Lab => BenchModel::Lab,
         }
     }
 }
@@ -79,7 +56,7 @@ pub struct BenchArgs {
     pub root: PathBuf,
     /// Time only these models (repeatable; default: all).
     #[arg(long = "model", value_enum, value_name = "MODEL")]
-    pub models: Vec<BenchModel>,
+    pub models: Vec<BenchModelArg>,
     /// Timed epochs (after one warm-up), batch, learning rate, precision and engine (each
     /// left out: both precisions, both engines, 20 epochs), shared with `gbc train`.
     #[command(flatten)]
@@ -99,102 +76,72 @@ pub struct BenchArgs {
     pub json: Option<PathBuf>,
 }
 
-/// One timed model, precision and engine.
-#[derive(Debug, serde::Serialize)]
-struct TrainingRow {
-    model: String,
-    #[serde(flatten)]
-    report: BenchReport,
-}
-
-/// The simulation timing.
-#[derive(Debug, serde::Serialize)]
-struct SimulationRow {
-    model: String,
-    hours: f64,
-    samples: usize,
-    median_seconds: f64,
-}
-
-/// The end-to-end training timing.
-#[derive(Debug, serde::Serialize)]
-struct FullRow {
-    model: String,
-    train_points: usize,
-    epochs: usize,
-    seconds: f64,
-}
-
-/// Everything measured, as written by `--json`.
-#[derive(Debug, serde::Serialize)]
-struct Measurements {
-    cores: usize,
-    training: Vec<TrainingRow>,
-    simulation: Option<SimulationRow>,
-    stiff: Vec<stiff::StiffRow>,
-    full: Option<FullRow>,
-}
-
 /// Runs the benchmarks and prints a table.
 pub fn run(args: &BenchArgs) -> CommandResult {
-    let models = if args.models.is_empty() {
-        BenchModel::ALL.to_vec()
-    } else {
-        args.models.clone()
-    };
-    let mut measurements = Measurements {
-        cores: std::thread::available_parallelism().map_or(1, usize::from),
-        training: Vec::new(),
-        simulation: None,
-        stiff: Vec::new(),
-        full: None,
-    };
     println!(
         "{:<52} {:>6} {:>5} {:>6} {:>9} {:>10}",
         "model", "pairs", "type", "engine", "ms/step", "ms/epoch"
     );
-    for model in models {
-        for row in time_training(&args.root, model, args)? {
-            print_row(&row);
-            measurements.training.push(row);
-        }
+    let spec = spec_of(args)?;
+    let measurements = crate::api::bench::bench(&spec, &mut print_measurement)?;
+    if let Some(path) = &args.json {
+        let json = measurements.json()?;
+        crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
-    if !args.no_simulation {
-        let simulation = time_simulation(&args.root)?;
-        println!(
+    Ok(())
+}
+
+/// The API's spec of the flags: every model, both precisions and both engines unless
+/// named, [`BENCH_EPOCHS`] timed epochs unless `--epochs`.
+fn spec_of(args: &BenchArgs) -> Result<BenchSpec, CommandError> {
+    let flags = TrainingFlags {
+        epochs: Some(args.settings.epochs.unwrap_or(BENCH_EPOCHS)),
+        ..args.settings.clone()
+    };
+    Ok(BenchSpec {
+        root: args.root.clone(),
+        models: match args.models.is_empty() {
+            true => BenchModel::ALL.to_vec(),
+            false => args.models.iter().map(|&m| m.into()).collect(),
+        },
+        settings: flags.settings()?,
+        precisions: match args.settings.precision {
+            Some(precision) => vec![precision.into()],
+            None => vec![Precision::F32, Precision::F64],
+        },
+        engines: match args.settings.engine {
+            Some(engine) => vec![engine.into()],
+            None => vec![Engine::Graph, Engine::Fused],
+        },
+        simulation: !args.no_simulation,
+        full: args.full.then_some(args.full_epochs),
+    })
+}
+
+/// One measurement's line on stdout.
+fn print_measurement(measurement: &Measurement) {
+    match measurement {
+        Measurement::Training(row) => print_row(row),
+        Measurement::Simulation(simulation) => println!(
             "simulation of {} ({} h, {} samples): {:.1} ms",
             simulation.model,
             simulation.hours,
             simulation.samples,
             simulation.median_seconds * 1e3
-        );
-        measurements.simulation = Some(simulation);
-        for row in stiff::time_stiff(&args.root)? {
-            println!(
-                "{}: {:.2} ms ({} runs, {} steps, {} implicit)",
-                row.case,
-                row.median_seconds * 1e3,
-                row.runs,
-                row.accepted,
-                row.implicit
-            );
-            measurements.stiff.push(row);
-        }
-    }
-    if args.full {
-        let full = time_full_training(&args.root, args.full_epochs)?;
-        println!(
+        ),
+        Measurement::Stiff(row) => println!(
+            "{}: {:.2} ms ({} runs, {} steps, {} implicit)",
+            row.case,
+            row.median_seconds * 1e3,
+            row.runs,
+            row.accepted,
+            row.implicit
+        ),
+        Measurement::Full(full) => println!(
             "paper-scale training of {} ({} pairs, {} epochs, validation included): {:.1} s",
             full.model, full.train_points, full.epochs, full.seconds
-        );
-        measurements.full = Some(full);
+        ),
     }
-    if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(&measurements)
-            .map_err(|error| CommandError::Internal(format!("cannot encode results: {error}")))?;
-        crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
-    }
-    Ok(())
 }
 
 fn print_row(row: &TrainingRow) {
@@ -209,145 +156,6 @@ fn print_row(row: &TrainingRow) {
         report.median_step_seconds * 1e3,
         report.median_epoch_seconds * 1e3
     );
-}
-
-/// Every requested precision and engine for one model.
-fn time_training(
-    root: &Path,
-    which: BenchModel,
-    args: &BenchArgs,
-) -> Result<Vec<TrainingRow>, CommandError> {
-    let (model_file, data_file, train_points) = which.files();
-    let model = super::load_model(&root.join(model_file))?;
-    let data = read_data(&model, &root.join(data_file))?;
-    let record = crate::train::record_of(&model, &data).map_err(train_error)?;
-    let mut cases = Vec::new();
-    if which == BenchModel::Lab {
-        let files: Vec<PathBuf> = (LAB.iter())
-            .map(|f| root.join("models/bioreactor/data/lab").join(f))
-            .collect();
-        let lab = super::data::load_records(&model, &files, &Default::default())?;
-        let cells: usize = lab.iter().map(|r| r.measured_cells()).sum();
-        let same = cells.div_ceil(model.states.len().max(1));
-        cases.push((
-            format!("{model_file} lab: 4 experiments, {cells} cells"),
-            lab,
-            None,
-        ));
-        let label = format!("{model_file} uniform: {} cells", same * model.states.len());
-        cases.push((label, vec![record], Some(same)));
-    } else {
-        cases.push((model_file.to_string(), vec![record], Some(train_points)));
-    }
-    let mut rows = Vec::new();
-    for (label, records, points) in &cases {
-        let data = TrainingData {
-            train: records,
-            validation: &[],
-            part: points.map_or(Part::All, |n| Part::FirstPairs(Some(n))),
-        };
-        rows.extend(time_case(label, &model, (&data, *points), args)?);
-    }
-    Ok(rows)
-}
-
-/// Every requested precision and engine for one data set.
-fn time_case(
-    label: &str,
-    model: &crate::ir::Model,
-    (data, train_points): (&TrainingData, Option<usize>),
-    args: &BenchArgs,
-) -> Result<Vec<TrainingRow>, CommandError> {
-    let precisions = match args.settings.precision {
-        Some(precision) => vec![precision.into()],
-        None => vec![Precision::F32, Precision::F64],
-    };
-    let engines = match args.settings.engine {
-        Some(engine) => vec![engine.into()],
-        None => vec![Engine::Graph, Engine::Fused],
-    };
-    let flags = TrainingFlags {
-        epochs: Some(args.settings.epochs.unwrap_or(BENCH_EPOCHS)),
-        ..args.settings.clone()
-    };
-    let settings = flags.settings()?;
-    let mut rows = Vec::new();
-    for &precision in &precisions {
-        for &engine in &engines {
-            let options = TrainOptions {
-                train_points,
-                ..TrainOptions::with(&Settings {
-                    precision,
-                    engine,
-                    ..settings
-                })
-            };
-            let report = bench(model, data, &options).map_err(train_error)?;
-            rows.push(TrainingRow {
-                model: label.to_string(),
-                report,
-            });
-        }
-    }
-    Ok(rows)
-}
-
-/// 3000 h of the bioreactor truth model under random light steps, median of three runs.
-fn time_simulation(root: &Path) -> Result<SimulationRow, CommandError> {
-    let file = "models/bioreactor/truth.gbm";
-    let model = super::load_model(&root.join(file))?;
-    let (hours, dt) = (2999.0, 1.0);
-    let program =
-        crate::signal::parse_program("steps(hold=5..40, seed=1)").map_err(CommandError::user)?;
-    let signals = (model.inputs.iter())
-        .map(|input| program.generate(input, 0.0, hours, dt))
-        .collect::<Result<Vec<Signal>, _>>()
-        .map_err(CommandError::user)?;
-    let options = SimOptions::new(hours, dt);
-    let mut seconds = Vec::new();
-    let mut samples = 0;
-    for _ in 0..3 {
-        let started = Instant::now();
-        let trajectory =
-            crate::sim::simulate(&model, &signals, &options).map_err(CommandError::user)?;
-        seconds.push(started.elapsed().as_secs_f64());
-        samples = trajectory.times.len();
-    }
-    Ok(SimulationRow {
-        model: file.to_string(),
-        hours: hours + dt,
-        samples,
-        median_seconds: median(&seconds).unwrap_or(f64::NAN),
-    })
-}
-
-/// One paper-scale training of GB2 as `gbc train` runs it.
-fn time_full_training(root: &Path, epochs: usize) -> Result<FullRow, CommandError> {
-    let (model_file, data_file, train_points) = BenchModel::Gb2.files();
-    let model = super::load_model(&root.join(model_file))?;
-    let data = read_data(&model, &root.join(data_file))?;
-    let record = crate::train::record_of(&model, &data).map_err(train_error)?;
-    let options = TrainOptions {
-        epochs,
-        train_points: Some(train_points),
-        online_horizon: Some(200.0),
-        engine: Engine::Graph,
-        ..TrainOptions::default()
-    };
-    let started = Instant::now();
-    let data = TrainingData {
-        train: std::slice::from_ref(&record),
-        validation: &[],
-        part: Part::FirstPairs(Some(train_points)),
-    };
-    crate::train::train_with(&model, &data, &options, &Recipe::paper(), &mut |_| {})
-        .map_err(train_error)?;
-    Ok(FullRow {
-        model: model_file.to_string(),
-        train_points,
-        epochs,
-        seconds: started.elapsed().as_secs_f64(),
-    })
 }
 
 #[cfg(test)]
@@ -372,7 +180,7 @@ mod tests {
         let json = std::env::temp_dir().join(format!("gbc-bench-{}.json", std::process::id()));
         let args = BenchArgs {
             root: root(),
-            models: vec![BenchModel::Chemostat],
+            models: vec![BenchModelArg::Chemostat],
             settings: TrainingFlags {
                 epochs: Some(1),
                 ..TrainingFlags::default()

@@ -29,8 +29,6 @@ use progress::Progress;
 use super::data::{ColumnArgs, HistoryArg};
 use super::options::TrainingFlags;
 use super::{CommandError, CommandResult};
-use crate::data::MinRows;
-use crate::ir::Model;
 use crate::train::recipe::{
     DEFAULT_HORIZON, DEFAULT_RAMP_SHARE, DEFAULT_RANGE_FACTOR, DEFAULT_WARMUP_SHARE,
 };
@@ -522,15 +520,6 @@ pub fn recipe_of(args: &TrainArgs) -> Recipe {
             ParamsArg::Train => ParamSource::Train,
         },
     }
-}
-
-/// Reads a record with the model's inputs and measured states.
-pub fn read_data(model: &Model, path: &Path) -> Result<crate::data::Dataset, CommandError> {
-    let required: Vec<&str> = (model.inputs.iter().map(|i| i.name.as_str()))
-        .chain(model.states.iter().map(|s| s.name.as_str()))
-        .collect();
-    crate::data::read(path, &required, MinRows::new(2, "one step needs two rows"))
-        .map_err(CommandError::user)
 }
 
 /// A training or prediction error as a command error.

@@ -8,7 +8,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use super::super::CommandError;
+use super::ApiError;
 use crate::ir::Model;
 use crate::numeric::median;
 use crate::signal::Signal;
@@ -18,7 +18,7 @@ use crate::sim::{SimOptions, Stats};
 const REPEATS: usize = 5;
 
 /// One timed case.
-#[derive(Debug, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize)]
 pub struct StiffRow {
     /// What is integrated.
     pub case: String,
@@ -40,8 +40,8 @@ struct Job {
 }
 
 /// Times every case.
-pub fn time_stiff(root: &Path) -> Result<Vec<StiffRow>, CommandError> {
-    let robertson = super::super::load_model(&root.join("models/stiff/robertson.gbm"))?;
+pub fn time_stiff(root: &Path) -> Result<Vec<StiffRow>, ApiError> {
+    let robertson = super::load_model(&root.join("models/stiff/robertson.gbm"))?;
     let options = SimOptions::new(4e5, 4e4);
     let mut rows = vec![time_case(
         "robertson to 4e5 s",
@@ -51,7 +51,7 @@ pub fn time_stiff(root: &Path) -> Result<Vec<StiffRow>, CommandError> {
             options,
         }],
     )?];
-    let fedbatch = super::super::load_model(&root.join("models/stiff/fedbatch.gbm"))?;
+    let fedbatch = super::load_model(&root.join("models/stiff/fedbatch.gbm"))?;
     let data = root.join("models/stiff/data/fedbatch.csv");
     let declared = batches(&fedbatch, &data)?;
     rows.push(time_case(
@@ -72,16 +72,15 @@ pub fn time_stiff(root: &Path) -> Result<Vec<StiffRow>, CommandError> {
 
 /// One simulation per experiment of the record at `data`: from its first row to its last,
 /// sampled every 0.05 h (the record's clock), inputs held from each row.
-fn batches(model: &Model, data: &Path) -> Result<Vec<Job>, CommandError> {
-    let columns = super::super::data::ColumnArgs::default();
-    let records = super::super::data::load_records(model, &[data.to_path_buf()], &columns)?;
+fn batches(model: &Model, data: &Path) -> Result<Vec<Job>, ApiError> {
+    let records = crate::api::read_records(model, &[data.to_path_buf()], &[])?;
     records
         .iter()
         .map(|record| {
             let signals = (record.inputs.iter())
                 .map(|column| Signal::new(record.times.clone(), column.clone()))
                 .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| CommandError::Internal(e.to_string()))?;
+                .map_err(|e| ApiError::Internal(e.to_string()))?;
             let (first, last) = (record.times[0], record.times[record.len() - 1]);
             let options = SimOptions {
                 t_start: first,
@@ -98,7 +97,7 @@ fn batches(model: &Model, data: &Path) -> Result<Vec<Job>, CommandError> {
 }
 
 /// The median time of all `jobs` together over [`REPEATS`] repetitions.
-fn time_case(case: &str, jobs: &[Job]) -> Result<StiffRow, CommandError> {
+fn time_case(case: &str, jobs: &[Job]) -> Result<StiffRow, ApiError> {
     let mut seconds = Vec::with_capacity(REPEATS);
     let mut stats = Stats::default();
     for _ in 0..REPEATS {
@@ -106,7 +105,7 @@ fn time_case(case: &str, jobs: &[Job]) -> Result<StiffRow, CommandError> {
         let started = Instant::now();
         for job in jobs {
             let run = crate::sim::simulate(&job.model, &job.signals, &job.options)
-                .map_err(CommandError::user)?;
+                .map_err(ApiError::user)?;
             stats.add(&run.stats);
         }
         seconds.push(started.elapsed().as_secs_f64());
