@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use super::fixtures::{random_batch, rk4_reference, setup};
 use crate::backend::{Network, Precision};
-use crate::ir::{self, Constraint, Expr};
+use crate::ir::{self, Expr};
 use crate::sim::{ModelSystem, OdeSystem};
 
 /// Every shipped model file with a closure: models/, bench/ and the `gbc init` templates.
