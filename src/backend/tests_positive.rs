@@ -1,5 +1,6 @@
-//! `positive` closure outputs under a prior (`backend::program::outputs`): the prior exactly
-//! at `n = 0`, no floor where the prior vanishes, and gradients against central differences.
+//! `positive` closure outputs (`backend::program::outputs`): the prior exactly at `n = 0`
+//! (0 without one), no floor where the prior vanishes, and gradients against central
+//! differences (from above at the kink of an output without a prior).
 
 use super::program::{Program, ProgramInputs};
 use crate::ir;
@@ -60,8 +61,8 @@ fn at_zero_network_output_a_positive_output_is_its_prior_exactly() {
     assert_eq!(found[3], monod(0.3));
     assert_eq!(found[1], 0.3 * 0.8 - 0.1);
     assert_eq!(found[4], 0.3 * 0.8 - 0.1);
-    // Without a prior a positive output is s softplus(n): s ln 2 at n = 0.
-    assert!((found[2] - 0.5 * 2.0_f64.ln()).abs() < 1e-15);
+    // Without a prior a positive output is s |n|: 0 at n = 0.
+    assert_eq!(found[2], 0.0);
     let single = outputs::<f32>(&program, &rows);
     assert_eq!(single[0], 0.0);
     assert_eq!(single[3], 0.5_f32 * 0.3_f32 / (0.1_f32 + 0.3_f32));
@@ -93,6 +94,8 @@ fn a_positive_output_vanishes_with_its_prior_and_is_never_negative() {
                 "r, u = {u}, n = {n}"
             );
         }
+        // c: 0.5 |n|, 0 at the start.
+        assert_eq!(found[2], (0.5 * n).abs(), "c, n = {n}");
         assert!(found.iter().all(|&o| o >= 0.0));
     }
 }
@@ -130,7 +133,14 @@ fn positive_outputs_have_the_gradient_of_central_differences() {
                 moved[row].2[k] += d;
                 objective(&moved)
             };
-            let numeric = (shifted(h) - shifted(-h)) / (2.0 * h);
+            // c = max(0.5 n, -0.5 n) at its kink n = 0 passes the gradient of 0.5 n (the
+            // tie rule that lets a rate starting at 0 grow): the difference from above.
+            let at_kink = k == 2 && rows[row].2[k] == 0.0;
+            let numeric = if at_kink {
+                (shifted(h) - shifted(0.0)) / h
+            } else {
+                (shifted(h) - shifted(-h)) / (2.0 * h)
+            };
             let found = gradients.nets[0][row * 3 + k];
             // At the join the two pieces of g meet with equal slopes but not curvatures: the
             // central difference is off by about 2 h (the tail's curvature 8 over 4) there

@@ -63,6 +63,10 @@ pub struct Options {
 pub enum Member {
     /// The fitted mechanism.
     Mechanism,
+    /// The grey box before training (its network at zero, its params from the mechanism
+    /// fit): the mechanism run through the grey box's own free run, which measures the
+    /// numerical resolution of the comparison.
+    Untrained,
     /// The grey box trained with this seed.
     GreyBox(u64),
 }
@@ -71,6 +75,7 @@ impl std::fmt::Display for Member {
     fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Member::Mechanism => write!(formatter, "the mechanism"),
+            Member::Untrained => write!(formatter, "the grey box untrained"),
             Member::GreyBox(seed) => write!(formatter, "the grey box, seed {seed}"),
         }
     }
@@ -140,6 +145,9 @@ pub struct SplitResult {
     pub training: Vec<String>,
     /// The fitted mechanism's run.
     pub mechanism: MemberRun,
+    /// The grey box before training, run as the trained ones are (`Member::Untrained`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub untrained: Option<MemberRun>,
     /// The grey box's runs, one per seed.
     pub grey_box: Vec<MemberRun>,
     /// The naive forecast of each held-out experiment.
@@ -200,6 +208,9 @@ pub struct ExperimentScore {
     pub experiment: String,
     /// The fitted mechanism's.
     pub mechanism: Score,
+    /// The untrained grey box's (the mechanism through the grey box's free run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub untrained: Option<Score>,
     /// The grey box's: median over seeds, with the range.
     pub grey_box: Score,
     /// The naive forecast's.

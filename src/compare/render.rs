@@ -68,6 +68,9 @@ fn table(out: &mut String, score: &ExperimentScore, states: &[String]) {
     }
     let _ = writeln!(out);
     row(out, "mechanism (fitted)", &score.mechanism, states);
+    if let Some(untrained) = &score.untrained {
+        row(out, "grey box untrained", untrained, states);
+    }
     row(out, "grey box (median)", &score.grey_box, states);
     let grey = &score.grey_box;
     if grey.runs > 1 {

@@ -30,7 +30,8 @@ pub fn compare(
 ) -> Result<Comparison, CompareError> {
     check(grey_box, mechanism, options)?;
     let splits = held_out_indices(records, &options.splits)?;
-    let members: Vec<Member> = std::iter::once(Member::Mechanism)
+    let members: Vec<Member> = [Member::Mechanism, Member::Untrained]
+        .into_iter()
         .chain(options.seeds.iter().map(|&s| Member::GreyBox(s)))
         .collect();
     let items: Vec<(usize, Member)> = (0..splits.len())
@@ -48,7 +49,7 @@ pub fn compare(
         let (split, member) = items[item];
         let (model, bound) = match member {
             Member::Mechanism => (mechanism, mechanism_records),
-            Member::GreyBox(_) => (grey_box, records),
+            Member::Untrained | Member::GreyBox(_) => (grey_box, records),
         };
         let held_out = &names[split][..];
         let parts = parted(bound, &splits[split]);
@@ -232,13 +233,23 @@ fn run_member(
     on_epoch: &mut dyn FnMut(usize),
 ) -> Result<(MemberRun, Normalisation), TrainError> {
     let seed = match member {
-        Member::Mechanism => options.seeds.first().copied().unwrap_or(0),
+        Member::Mechanism | Member::Untrained => options.seeds.first().copied().unwrap_or(0),
         Member::GreyBox(seed) => seed,
     };
+    let untrained = member == Member::Untrained;
     let training = TrainOptions {
         seed,
+        epochs: if untrained {
+            0
+        } else {
+            options.training.epochs
+        },
         ..options.training.clone()
     };
+    let mut recipe = options.recipe.clone();
+    if untrained {
+        recipe.polish = Some(false);
+    }
     let data = TrainingData {
         train,
         validation: held,
@@ -249,17 +260,11 @@ fn run_member(
         recoveries: options.recoveries,
         ..RunControl::default()
     };
-    let trained = train::train_run(
-        model,
-        &data,
-        (&training, &options.recipe),
-        &control,
-        &mut |event| {
-            if let train::Event::Epoch { epoch, .. } = event {
-                on_epoch(epoch)
-            }
-        },
-    )?;
+    let trained = train::train_run(model, &data, (&training, &recipe), &control, &mut |event| {
+        if let train::Event::Epoch { epoch, .. } = event {
+            on_epoch(epoch)
+        }
+    })?;
     let held_out = (held.iter().enumerate())
         .map(|(index, record)| held_out_run(model, &trained, (index, record), options))
         .collect();
@@ -319,9 +324,10 @@ fn mean_error(run: &MemberRun) -> Option<f64> {
     (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
 }
 
-/// One split's result from its items' outcomes (the mechanism first, then each seed): the
-/// mechanism must have run; the grey box needs one seed that trained (else the first
-/// seed's failure is the error).
+/// One split's result from its items' outcomes (the mechanism first, the untrained grey box,
+/// then each seed): the mechanism must have run; the grey box needs one seed that trained
+/// (else the first seed's failure is the error); an untrained grey box that failed is left
+/// out (the verdict then has no numerical resolution).
 fn assemble(
     records: &[Record],
     held: &[usize],
@@ -331,6 +337,8 @@ fn assemble(
     let missing = || CompareError::from(bug("a run left no result".into()));
     let mut outcomes = outcomes.into_iter();
     let (mechanism, normalisation) = outcomes.next().flatten().ok_or_else(missing)??;
+    let untrained = outcomes.next().flatten().ok_or_else(missing)?;
+    let untrained = untrained.ok().map(|(run, _)| run);
     let mut grey_box = Vec::with_capacity(options.seeds.len());
     let mut first_failure = None;
     for &seed in &options.seeds {
@@ -365,6 +373,7 @@ fn assemble(
         held_out: held_records.iter().map(|r| r.name.clone()).collect(),
         training: train.iter().map(|r| r.name.clone()).collect(),
         mechanism,
+        untrained,
         grey_box,
         naive: naive_runs,
         scores: Vec::new(),

@@ -2,11 +2,33 @@
 //! its diverged free runs, the mechanism's and the naive forecast's error, and the verdict
 //! (`docs/compare.md`): the grey box is *better* than the mechanism when its worst seed
 //! beats it, *worse* when its best seed loses to it, and *tied within its replicate spread*
-//! otherwise.
+//! otherwise, each by more than the comparison's numerical resolution: how far the
+//! untrained grey box (the mechanism itself, run through the grey box's free run, in its
+//! precision and steps) scores from the mechanism run by the exact integrator.
 
 use crate::train::ErrorSet;
 
 use super::{ExperimentScore, MemberRun, SplitResult};
+
+/// How close (relative) the untrained grey box's params must be to the mechanism's for it
+/// to be the mechanism: the training precision's rounding (`f32` by default).
+const SAME_PARAMS: f64 = 1e-5;
+
+impl SplitResult {
+    /// Whether the untrained grey box is the fitted mechanism (the same params, within the
+    /// training precision), so that its distance from the mechanism's error is numerical.
+    /// On a dense record the grey box's params come from the balances or Adam instead.
+    pub fn untrained_is_mechanism(&self) -> bool {
+        let Some(untrained) = &self.untrained else {
+            return false;
+        };
+        let fitted = &self.mechanism.params;
+        untrained.params.len() == fitted.len()
+            && (untrained.params.iter().zip(fitted)).all(|((a, x), (b, y))| {
+                a == b && (x - y).abs() <= SAME_PARAMS * x.abs().max(y.abs())
+            })
+    }
+}
 
 /// One model's error on one held-out experiment (or over all), reduced over its runs.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -68,11 +90,12 @@ impl Score {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Standing {
-    /// Every seed's error below the mechanism's.
+    /// Every seed's error below the mechanism's, by more than the resolution.
     Better,
-    /// Every seed's error above the mechanism's.
+    /// Every seed's error above the mechanism's, by more than the resolution.
     Worse,
-    /// The mechanism's error inside the grey box's min–max range.
+    /// The mechanism's error inside the grey box's min–max range widened by the
+    /// resolution.
     Tied,
     /// No grey-box run, or no mechanism error, to compare.
     Undecided,
@@ -89,37 +112,55 @@ pub struct Verdict {
     /// The naive forecast's error over the grey box's median.
     #[serde(with = "crate::json")]
     pub ratio_to_naive: f64,
+    /// The numerical resolution: the untrained grey box's error minus the mechanism's, in
+    /// absolute value (0 without an untrained run).
+    #[serde(default, with = "crate::json")]
+    pub resolution: f64,
     /// The verdict in one sentence.
     pub sentence: String,
 }
 
 impl Verdict {
-    /// The verdict of `grey_box` against `mechanism` and `naive`.
-    pub fn of(grey_box: &Score, mechanism: &Score, naive: &Score) -> Verdict {
+    /// The verdict of `grey_box` against `mechanism` and `naive`, within the resolution
+    /// that `untrained` (the untrained grey box's score) measures.
+    pub fn of(
+        grey_box: &Score,
+        (mechanism, untrained): (&Score, Option<&Score>),
+        naive: &Score,
+    ) -> Verdict {
+        let resolution = (untrained.map(|u| (u.error - mechanism.error).abs()))
+            .filter(|r| r.is_finite())
+            .unwrap_or(0.0);
         let (low, high) = grey_box.range;
         let standing = if grey_box.runs == 0 || mechanism.runs == 0 || mechanism.error.is_nan() {
             Standing::Undecided
-        } else if high < mechanism.error {
+        } else if high < mechanism.error - resolution {
             Standing::Better
-        } else if low > mechanism.error {
+        } else if low > mechanism.error + resolution {
             Standing::Worse
         } else {
             Standing::Tied
         };
         let ratio_to_mechanism = mechanism.error / grey_box.error;
         let ratio_to_naive = naive.error / grey_box.error;
-        let sentence = sentence(standing, grey_box, (mechanism, naive));
+        let sentence = sentence(standing, grey_box, (mechanism, naive), resolution);
         Verdict {
             standing,
             ratio_to_mechanism,
             ratio_to_naive,
+            resolution,
             sentence,
         }
     }
 }
 
 /// The verdict in words.
-fn sentence(standing: Standing, grey_box: &Score, (mechanism, naive): (&Score, &Score)) -> String {
+fn sentence(
+    standing: Standing,
+    grey_box: &Score,
+    (mechanism, naive): (&Score, &Score),
+    resolution: f64,
+) -> String {
     let spread = if grey_box.runs > 1 {
         format!(
             "median error {} ({}–{} over {} seeds)",
@@ -143,8 +184,9 @@ fn sentence(standing: Standing, grey_box: &Score, (mechanism, naive): (&Score, &
             times(grey_box.error / mechanism.error)
         ),
         Standing::Tied => format!(
-            "The grey box ties with its fitted mechanism within its replicate spread: {spread} \
-             {against}"
+            "The grey box ties with its fitted mechanism within its replicate spread and the \
+             numerical resolution ({}): {spread} {against}",
+            number(resolution)
         ),
         Standing::Undecided => {
             return format!(
@@ -208,11 +250,19 @@ pub fn split_scores<'s>(split: &'s SplitResult, states: &[String]) -> Vec<Experi
                 .map(|run| (format!("seed {}", run.seed), on(run)))
                 .collect();
             let mechanism = vec![("mechanism".to_string(), on(&split.mechanism))];
+            let untrained: Vec<(String, Option<&ErrorSet>)> = (split.untrained.iter())
+                .map(|run| ("untrained".to_string(), on(run)))
+                .collect();
+            let resolves = split.untrained_is_mechanism();
             let naive = vec![(
                 "naive".to_string(),
                 split.naive.get(index).and_then(|h| h.error.as_ref()),
             )];
-            scored(name, (&grey, &mechanism, &naive), states)
+            scored(
+                name,
+                (&grey, (&mechanism, &untrained, resolves), &naive),
+                states,
+            )
         })
         .collect()
 }
@@ -233,12 +283,23 @@ pub fn overall(splits: &[SplitResult], seeds: &[u64], states: &[String]) -> Expe
         .collect();
     let mechanisms: Vec<&MemberRun> = splits.iter().map(|s| &s.mechanism).collect();
     let mechanism = vec![("mechanism".to_string(), averaged(&mechanisms, states))];
+    let untrained_runs: Option<Vec<&MemberRun>> =
+        splits.iter().map(|s| s.untrained.as_ref()).collect();
+    let untrained: Vec<(String, Option<ErrorSet>)> = (untrained_runs.iter())
+        .map(|runs| ("untrained".to_string(), averaged(runs, states)))
+        .collect();
     let naive_sets: Vec<Option<&ErrorSet>> = (splits.iter())
         .flat_map(|s| s.naive.iter().map(|h| h.error.as_ref()))
         .collect();
     let naive = vec![("naive".to_string(), mean_set(&naive_sets, states))];
     let (grey, mechanism, naive) = (borrowed(&grey), borrowed(&mechanism), borrowed(&naive));
-    scored("overall", (&grey, &mechanism, &naive), states)
+    let untrained = borrowed(&untrained);
+    let resolves = splits.iter().all(SplitResult::untrained_is_mechanism);
+    scored(
+        "overall",
+        (&grey, (&mechanism, &untrained, resolves), &naive),
+        states,
+    )
 }
 
 /// A run's error on held-out experiment `index`.
@@ -264,18 +325,25 @@ fn borrowed(runs: &[(String, Option<ErrorSet>)]) -> Vec<(String, Option<&ErrorSe
 
 type Runs<'a> = [(String, Option<&'a ErrorSet>)];
 
+/// The scores of one experiment (or of all); `untrained` may be empty, and measures the
+/// resolution where it `resolves` (its params are the mechanism's).
 fn scored(
     experiment: &str,
-    (grey, mechanism, naive): (&Runs, &Runs, &Runs),
+    (grey, (mechanism, untrained, resolves), naive): (&Runs, (&Runs, &Runs, bool), &Runs),
     states: &[String],
 ) -> ExperimentScore {
     let grey_box = Score::of(grey, states);
     let mechanism = Score::of(mechanism, states);
+    let untrained = (!untrained.is_empty())
+        .then(|| Score::of(untrained, states))
+        .filter(|score| score.runs > 0);
     let naive = Score::of(naive, states);
-    let verdict = Verdict::of(&grey_box, &mechanism, &naive);
+    let resolution = untrained.as_ref().filter(|_| resolves);
+    let verdict = Verdict::of(&grey_box, (&mechanism, resolution), &naive);
     ExperimentScore {
         experiment: experiment.to_string(),
         mechanism,
+        untrained,
         grey_box,
         naive,
         verdict,

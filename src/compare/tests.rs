@@ -118,14 +118,21 @@ fn the_mechanism_scores_as_gbc_train_fits_it_and_as_its_exact_free_run() {
         "{} against {exact}",
         ours.overall
     );
+    // On this dense record the grey box's k comes from its balances, not the mechanism
+    // fit: the untrained grey box is not the mechanism and measures no resolution.
+    let untrained = split.untrained.as_ref().unwrap();
+    assert_ne!(untrained.params[0].1, k);
+    assert!(!split.untrained_is_mechanism());
+    let score = &split.scores[0];
+    assert_eq!(score.verdict.resolution, 0.0);
+    let resolution = 0.0;
     // Two seeds trained and scored on the same cells; the verdict follows their range.
     assert_eq!(split.grey_box.len(), 2);
-    let score = &split.scores[0];
     assert_eq!(score.grey_box.runs, 2);
     let (low, high) = score.grey_box.range;
-    let expected = if high < ours.overall {
+    let expected = if high < ours.overall - resolution {
         Standing::Better
-    } else if low > ours.overall {
+    } else if low > ours.overall + resolution {
         Standing::Worse
     } else {
         Standing::Tied
@@ -142,7 +149,12 @@ fn the_mechanism_scores_as_gbc_train_fits_it_and_as_its_exact_free_run() {
     assert_eq!(serde_json::to_string(&back).unwrap(), json);
     // The text and the report name every model.
     let text = render::text(&comparison);
-    for row in ["mechanism (fitted)", "grey box (median)", "naive forecast"] {
+    for row in [
+        "mechanism (fitted)",
+        "grey box untrained",
+        "grey box (median)",
+        "naive forecast",
+    ] {
         assert!(text.contains(row), "{text}");
     }
     let page = html::page(&comparison, &all, "decay");
@@ -263,7 +275,7 @@ fn verdicts_follow_the_replicate_range() {
     };
     let mechanism = score(1.0, (1.0, 1.0), 1);
     let naive = score(2.0, (2.0, 2.0), 1);
-    let verdict = |grey: Score| Verdict::of(&grey, &mechanism, &naive);
+    let verdict = |grey: Score| Verdict::of(&grey, (&mechanism, None), &naive);
     let better = verdict(score(0.5, (0.4, 0.9), 3));
     assert_eq!(better.standing, Standing::Better);
     assert_eq!(
@@ -281,4 +293,52 @@ fn verdicts_follow_the_replicate_range() {
         verdict(score(f64::NAN, (f64::NAN, f64::NAN), 0)).standing,
         Standing::Undecided
     );
+    // Within the numerical resolution (the untrained grey box 2 % off the mechanism) a
+    // grey box 1 % above on every seed ties; 3 % above loses.
+    let untrained = score(1.02, (1.02, 1.02), 1);
+    let resolved = |grey: Score| Verdict::of(&grey, (&mechanism, Some(&untrained)), &naive);
+    let close = resolved(score(1.01, (1.005, 1.015), 3));
+    assert_eq!(close.standing, Standing::Tied, "{}", close.sentence);
+    assert!((close.resolution - 0.02).abs() < 1e-12);
+    assert_eq!(
+        resolved(score(1.03, (1.025, 1.04), 3)).standing,
+        Standing::Worse
+    );
+    assert_eq!(
+        resolved(score(0.97, (0.96, 0.975), 3)).standing,
+        Standing::Better
+    );
+}
+
+#[test]
+fn the_untrained_grey_box_is_the_mechanism_only_at_its_params() {
+    let run = |params: Vec<(String, f64)>| MemberRun {
+        seed: 1,
+        seconds: 0.0,
+        failed: None,
+        training_diverged: None,
+        params,
+        held_out: Vec::new(),
+    };
+    let fitted = vec![("k".to_string(), 0.3), ("K".to_string(), 1.7)];
+    let mut split = SplitResult {
+        held_out: vec!["e3".into()],
+        training: vec!["e1".into(), "e2".into()],
+        mechanism: run(fitted.clone()),
+        untrained: None,
+        grey_box: Vec::new(),
+        naive: Vec::new(),
+        scores: Vec::new(),
+    };
+    assert!(!split.untrained_is_mechanism(), "no untrained run");
+    // The fitted params through f32, as the grey box trains them: the mechanism.
+    let rounded = (fitted.iter())
+        .map(|(n, v)| (n.clone(), *v as f32 as f64))
+        .collect();
+    split.untrained = Some(run(rounded));
+    assert!(split.untrained_is_mechanism());
+    split.untrained = Some(run(vec![("k".into(), 0.3), ("K".into(), 1.71)]));
+    assert!(!split.untrained_is_mechanism());
+    split.untrained = Some(run(vec![("k".into(), 0.3)]));
+    assert!(!split.untrained_is_mechanism());
 }

@@ -117,7 +117,14 @@ impl<'m> Physics<'m> {
             }
             None => {
                 let plain = graph.binary("Mul", &Value::Const(scale), &net);
-                constrain(graph, &plain, spec.constraint, scale)
+                match spec.constraint {
+                    // `max(s n, -s n)`: 0 at the start (`backend::program::outputs`).
+                    Constraint::Positive => {
+                        let mirrored = graph.binary("Sub", &Value::Const(0.0), &plain);
+                        graph.binary("Max", &plain, &mirrored)
+                    }
+                    _ => constrain(graph, &plain, spec.constraint, scale),
+                }
             }
             Some(prior) => {
                 let p = self.expr(graph, stage, &prior.expr);

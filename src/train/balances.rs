@@ -121,6 +121,25 @@ pub fn estimate(
     Ok(problem.and_then(|p| p.fit(model)))
 }
 
+/// Where each free raw output of a row starts, in the program's order: 0 (the prior, or 0
+/// without one), except a `positive` output without a prior, `s |n|`, which starts at
+/// `n = 1` (its magnitude): at its kink `n = 0` the central differences of the Jacobian
+/// are 0 and the fit would never move it.
+fn free_output_start(model: &ir::Model) -> Vec<f64> {
+    (model.closures.iter())
+        .flat_map(|closure| closure.outputs.iter())
+        .map(|output| {
+            let kinked =
+                output.prior.is_none() && matches!(output.constraint, ir::Constraint::Positive);
+            if kinked {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 /// The data of the fit.
 struct Problem {
     program: Program,
@@ -338,7 +357,10 @@ impl Problem {
     fn fit(&self, model: &ir::Model) -> Option<BalanceFit> {
         let (p, m, k) = (model.params.len(), self.outputs_per_row(), self.measured);
         let mut start = initial_raw_params(model);
-        start.resize(p + self.rows * m, 0.0);
+        let row_start = free_output_start(model);
+        for _ in 0..self.rows {
+            start.extend_from_slice(&row_start);
+        }
         let mut unknowns = Unknowns {
             problem: self,
             params: p,

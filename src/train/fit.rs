@@ -310,11 +310,15 @@ impl Fit<'_> {
         on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
-        let longest = (self.trainings.iter())
+        // Every training track must hold a window: a horizon longer than a track left it
+        // out of every epoch (a record of short batches then trained on its few one-step
+        // pairs alone), so the rollout is capped at the shortest track.
+        let shortest = (self.trainings.iter())
             .map(|t| t.knots.len())
-            .max()
+            .filter(|&knots| knots > 0)
+            .min()
             .unwrap_or(0);
-        let horizon = horizon.min(longest.max(1));
+        let horizon = horizon.min(shortest.max(1));
         let phase = rng.gen_range(0..horizon);
         let mut starts = Vec::new();
         for (index, training_part) in self.trainings.iter().enumerate() {

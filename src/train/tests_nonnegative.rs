@@ -31,18 +31,20 @@ der S = F * (S_F - S) - k * S * X
 ";
 
 /// [`MODEL`] with the uptake `k X` under a Monod prior that vanishes at `S = 0` (it passes
-/// the check too).
+/// the check too); its growth rate is `0.5 softplus(n)`, written out (the form a
+/// `positive` output without a prior had before issue 25, which these seeds were drawn
+/// for).
 const MONOD: &str = "model fed_batch
 input F in [0, 0.2]
 state X nonnegative, S nonnegative
 const S_F = 5
 closure kinetics {
-  outputs mu ~ 0.5 positive, k ~ 20 positive
+  outputs mu ~ 0.5, k ~ 20 positive
   observe X, S, F
   network hidden [8, 8] tanh
   prior k *= 20 * S / (0.002 + S)
 }
-der X = (mu - F) * X - 0.5 * X * X
+der X = (0.5 * softplus(mu / 0.5) - F) * X - 0.5 * X * X
 der S = F * (S_F - S) - k * X
 ";
 

@@ -355,13 +355,15 @@ fn cleared<T>(lists: &mut Vec<Vec<T>>, count: usize) {
 
 /// Window starts for one pass of multiple shooting over the knots `first..first + pairs`
 /// of a track: consecutive non-overlapping windows of `steps` steps from `first + phase`,
-/// each ending inside that range.
+/// each ending inside that range. The phase is taken modulo the window and modulo the
+/// room the range leaves (`pairs - steps + 1` starts), so every range at least one window
+/// long holds a window whatever the phase.
 pub fn shooting_starts(first: usize, pairs: usize, steps: usize, phase: usize) -> Vec<usize> {
     let steps = steps.max(1);
     if pairs < steps {
         return Vec::new();
     }
-    let phase = phase % steps;
+    let phase = phase % steps.min(pairs - steps + 1);
     (0..)
         .map(|window| first + phase + window * steps)
         .take_while(|start| start + steps <= first + pairs)
@@ -583,5 +585,12 @@ mod tests {
         assert_eq!(shooting_starts(3, 10, 4, 6), vec![5, 9]);
         assert_eq!(shooting_starts(0, 3, 4, 0), Vec::<usize>::new());
         assert_eq!(shooting_starts(0, 5, 1, 0), vec![0, 1, 2, 3, 4]);
+        // A range barely longer than the window holds one window at every phase.
+        for phase in 0..8 {
+            let starts = shooting_starts(0, 10, 8, phase);
+            assert_eq!(starts.len(), 1, "phase {phase}");
+            assert!(starts[0] + 8 <= 10);
+        }
+        assert_eq!(shooting_starts(0, 8, 8, 5), vec![0]);
     }
 }

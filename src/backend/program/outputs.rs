@@ -19,11 +19,19 @@
 //! start's slope at least a quarter of that: a prior on an end of the range cannot be
 //! started at exactly, since an end is where the map's slope vanishes.
 //!
-//! Every output is thus exactly its prior (or 0) at `n = 0`, clamped into its range, except
-//! a `positive` output without a prior, `s softplus(n)`, which starts at `s ln 2`: 0 is its
-//! floor, and a non-negative map that is smooth and 0 at `n = 0` has slope 0 there, so a
-//! network whose last layer starts at zero (as every one does) would receive no gradient.
-//! An unconstrained output is the plain form of spec section 3.
+//! A `positive` output without a prior is `s |n|`, computed as `max(s n, -s n)`: 0 at
+//! `n = 0`, its mechanism's value. A non-negative map that is smooth and 0 at `n = 0` has
+//! slope 0 there, so a network whose last layer starts at zero (as every one does) would
+//! receive no gradient; the kink does not have that problem, because `max` passes the
+//! gradient to its first argument at the tie (`Binary::Max`). Unlike `max(s n, 0)` it never
+//! stops passing gradients: a clipped output whose first steps ask for less is 0 for every
+//! sample and no later data can raise it again (a dead unit; the overflow grey box's
+//! acetate secretion died so in its first epoch). Where the data ask for none, `n` hovers
+//! about 0 within the optimiser's step. (Before issue 25 it was `s softplus(n)`, which
+//! starts at `s ln 2`.)
+//!
+//! Every output is thus exactly its prior (or 0) at `n = 0`, clamped into its range. An
+//! unconstrained output is the plain form of spec section 3.
 
 use super::{Binary, Compiler, Unary};
 
@@ -101,6 +109,12 @@ impl Compiler<'_> {
         let Some(prior) = &spec.prior else {
             let s = self.constant(scale);
             let plain = self.binary(Binary::Mul, s, net);
+            if positive {
+                // `max(s n, -s n) = s |n|`: 0 at `n = 0`, the gradient of `s n` at the tie.
+                let zero = self.constant(0.0);
+                let mirrored = self.binary(Binary::Sub, zero, plain);
+                return Ok(self.binary(Binary::Max, plain, mirrored));
+            }
             return Ok(self.constrain(plain, spec.constraint, scale));
         };
         let p = self.expr(&prior.expr)?;

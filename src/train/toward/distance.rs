@@ -1,7 +1,6 @@
 //! How far a trained grey box moved from its mechanism: each closure output against its
-//! value at network output 0 (its prior at the trained params, or 0 without one; `s ln 2`
-//! for a `positive` output without a prior) over the training points, and each param from
-//! its start.
+//! value at network output 0 (its prior at the trained params, or 0 without one) over the
+//! training points, and each param from its start.
 
 use crate::backend::{BackendError, Batch, Network};
 use crate::ir::{self, PriorKind};
