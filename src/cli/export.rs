@@ -41,6 +41,9 @@ pub fn run(args: &ExportArgs) -> CommandResult {
     crate::io::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
     let model = super::load_model(&args.model)?;
     let source = read_source(&args.model)?;
+    if crate::ensemble::is_ensemble(&args.weights) {
+        return ensemble(args, &model, &source);
+    }
     let restored =
         artifacts::restore_with_notes(&model, &source, &args.weights).map_err(train_error)?;
     for note in &restored.notes {
@@ -96,5 +99,39 @@ pub fn run(args: &ExportArgs) -> CommandResult {
             eprintln!("  -> {name} [batch, {}]: {}", list.len(), columns(list));
         }
     }
+    Ok(())
+}
+
+/// An ensemble run: every used member's map and the band's facts (`gbc::export::ensemble`).
+fn ensemble(args: &ExportArgs, model: &crate::ir::Model, source: &str) -> CommandResult {
+    let exported =
+        crate::export::ensemble::export(model, source, &args.weights, args.precision, &args.output)
+            .map_err(CommandError::user)?;
+    for (path, _) in &exported.members {
+        crate::io::ensure_not_input(path, &[&args.model]).map_err(CommandError::user)?;
+    }
+    exported.write().map_err(CommandError::user)?;
+    for (path, member) in &exported.members {
+        let layout = &member.layout;
+        eprintln!(
+            "wrote {}: one step of {} ({} RK4 sub-steps) from a window of {} knots",
+            path.display(),
+            layout.step,
+            layout.substeps,
+            layout.window
+        );
+    }
+    let band = &exported.band;
+    eprintln!(
+        "wrote {}: {} members, the noise, floor and calibrated factors of each state{}",
+        exported.band_path.display(),
+        band.members.len(),
+        if band.calibrated {
+            ""
+        } else {
+            " (not calibrated: the median alone)"
+        }
+    );
+    eprintln!("  the tensors of each are a single run's export's; the band's recipe: docs/export.md, \"Ensembles\"");
     Ok(())
 }
