@@ -419,4 +419,19 @@ impl Network {
     pub fn param_values(&self) -> Vec<f64> {
         dispatch!(self, net => net.param_values())
     }
+
+    /// RK4 sub-steps per call (1 for `next` models).
+    pub fn substeps(&self) -> usize {
+        dispatch!(self, net => net.substeps())
+    }
+
+    /// The same network taking `substeps` RK4 sub-steps per call (weights copied, a fresh
+    /// optimiser).
+    pub fn with_substeps(&self, substeps: usize) -> Network {
+        let inner = match &self.inner {
+            Inner::Single(net) => Inner::Single(net.with_substeps(substeps)),
+            Inner::Double(net) => Inner::Double(net.with_substeps(substeps)),
+        };
+        Network { inner }
+    }
 }

@@ -146,6 +146,33 @@ where
         })
     }
 
+    /// RK4 sub-steps per call.
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+
+    /// The same network (program, weights, normalisation) taking `substeps` RK4 sub-steps
+    /// per call, with a fresh optimiser: what a free run's step control calls once per
+    /// sub-step of its own.
+    pub fn with_substeps(&self, substeps: usize) -> Self {
+        GreyBox {
+            device: Cpu::default(),
+            program: Arc::clone(&self.program),
+            balances: Arc::clone(&self.balances),
+            observables: Arc::clone(&self.observables),
+            observable_inverse_std: self.observable_inverse_std.clone(),
+            closures: self.closures.clone(),
+            dynamics: self.dynamics,
+            step: self.step,
+            substeps: substeps.max(1),
+            inverse_std: self.inverse_std.clone(),
+            names: self.names.clone(),
+            shapes: self.shapes.clone(),
+            weights: self.weights.clone(),
+            adam: Adam::new(self.weights.iter().map(Vec::len).sum()),
+        }
+    }
+
     /// One Adam step on a one-step batch; returns the loss before it.
     pub fn train_step(
         &mut self,

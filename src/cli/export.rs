@@ -38,6 +38,9 @@ pub struct ExportArgs {
 pub fn run(args: &ExportArgs) -> CommandResult {
     crate::io::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
     let model = crate::api::Model::from_file(&args.model)?;
+    if crate::ensemble::is_ensemble(&args.weights) {
+        return ensemble(args, &model);
+    }
     let saved = SavedRun::load_single(&model, &args.weights)?;
     for note in saved.notes() {
         eprintln!("note: {note}");
@@ -48,5 +51,41 @@ pub fn run(args: &ExportArgs) -> CommandResult {
     let export = saved.export(format, args.precision.into())?;
     export.write(&args.output)?;
     eprint!("{}", export.layout_text(&args.output));
+    Ok(())
+}
+
+/// An ensemble run: every used member's map and the band's facts (`gbc::export::ensemble`).
+fn ensemble(args: &ExportArgs, model: &crate::api::Model) -> CommandResult {
+    let (ir, source) = (model.ir(), &model.source);
+    let precision = args.precision.into();
+    let exported =
+        crate::export::ensemble::export(ir, source, &args.weights, precision, &args.output)
+            .map_err(CommandError::user)?;
+    for (path, _) in &exported.members {
+        crate::io::ensure_not_input(path, &[&args.model]).map_err(CommandError::user)?;
+    }
+    exported.write().map_err(CommandError::user)?;
+    for (path, member) in &exported.members {
+        let layout = &member.layout;
+        eprintln!(
+            "wrote {}: one step of {} ({} RK4 sub-steps) from a window of {} knots",
+            path.display(),
+            layout.step,
+            layout.substeps,
+            layout.window
+        );
+    }
+    let band = &exported.band;
+    eprintln!(
+        "wrote {}: {} members, the noise, floor and calibrated factors of each state{}",
+        exported.band_path.display(),
+        band.members.len(),
+        if band.calibrated {
+            ""
+        } else {
+            " (not calibrated: the median alone)"
+        }
+    );
+    eprintln!("  the tensors of each are a single run's export's; the band's recipe: docs/export.md, \"Ensembles\"");
     Ok(())
 }

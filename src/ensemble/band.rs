@@ -11,6 +11,14 @@
 //! of the calibration cells fall inside ([`calibrated_factor`], split-conformal): a cell's
 //! *score* is how many base half-widths it lies from `m` on its side ([`BaseBand::score`]),
 //! and `c_L` is the `ceil((n + 1) L)`-th smallest of the `n` calibration scores.
+//!
+//! A state declared `nonnegative` has a *floor* (0): its measurement is the Gaussian draw
+//! censored there (a draw below reads as the floor, [`crate::ensemble::noise`]), so every
+//! quantile of `F` is the uncensored one raised to the floor, a measured value is scored
+//! and counted as the censored reading `max(y, floor)`, and the stretched band is cut at
+//! the floor ([`BaseBand::stretched`]). Cutting changes no cell's inside or outside: the
+//! censored reading is never below the floor. So the calibration is the same
+//! split-conformal quantile, of the censored readings' scores.
 
 use crate::numeric::{median, normal_cdf};
 
@@ -30,29 +38,42 @@ pub struct BaseBand {
     pub below: f64,
     /// `F^-1((1 + BASE_LEVEL) / 2) - median`, never negative.
     pub above: f64,
+    /// The floor of a state declared `nonnegative` (0), where the measurement is censored;
+    /// `-inf` for none.
+    pub floor: f64,
 }
 
 impl BaseBand {
     /// The base band of the mixture of `draws`; `None` without a finite draw.
     pub fn of(draws: &[Draw]) -> Option<BaseBand> {
+        Self::floored(draws, None)
+    }
+
+    /// The base band of the mixture of `draws` with each measurement censored at `floor`
+    /// (none: not censored): both quantiles raised to the floor; `None` without a finite
+    /// draw.
+    pub fn floored(draws: &[Draw], floor: Option<f64>) -> Option<BaseBand> {
+        let floor = floor.unwrap_or(f64::NEG_INFINITY);
         let finite: Vec<Draw> = (draws.iter().copied())
             .filter(|(p, s)| p.is_finite() && s.is_finite() && *s >= 0.0)
             .collect();
         let predictions: Vec<f64> = finite.iter().map(|d| d.0).collect();
         let median = median(&predictions)?;
         let tail = (1.0 - BASE_LEVEL) / 2.0;
-        let lower = mixture_quantile(&finite, tail)?;
-        let upper = mixture_quantile(&finite, 1.0 - tail)?;
+        let lower = mixture_quantile(&finite, tail)?.max(floor);
+        let upper = mixture_quantile(&finite, 1.0 - tail)?.max(floor);
         Some(BaseBand {
             median,
             below: (median - lower).max(0.0),
             above: (upper - median).max(0.0),
+            floor,
         })
     }
 
-    /// How many base half-widths `measured` lies from the median, on its side (0 at the
-    /// median; infinite off a side of zero width).
+    /// How many base half-widths the reading of `measured` (censored at the floor) lies
+    /// from the median, on its side (0 at the median; infinite off a side of zero width).
     pub fn score(&self, measured: f64) -> f64 {
+        let measured = measured.max(self.floor);
         let (distance, width) = if measured >= self.median {
             (measured - self.median, self.above)
         } else {
@@ -67,12 +88,18 @@ impl BaseBand {
         }
     }
 
-    /// The band with both half-widths stretched by `factor`: `(lo, hi)`.
+    /// The band with both half-widths stretched by `factor`, cut at the floor: `(lo, hi)`.
     pub fn stretched(&self, factor: f64) -> (f64, f64) {
         (
-            self.median - factor * self.below,
-            self.median + factor * self.above,
+            (self.median - factor * self.below).max(self.floor),
+            (self.median + factor * self.above).max(self.floor),
         )
+    }
+
+    /// Whether the band stretched by `factor` holds the reading of `measured` (censored at
+    /// the floor).
+    pub fn covers(&self, factor: f64, measured: f64) -> bool {
+        inside(self.stretched(factor), measured.max(self.floor))
     }
 }
 

@@ -12,7 +12,7 @@
 //! **Coverage** ([`count`]) is the share of an experiment's measured cells after the start
 //! inside the band of every member at a level; a cell no member reached counts as outside.
 
-use super::band::{calibrated_factor, inside, BaseBand, Draw};
+use super::band::{calibrated_factor, BaseBand};
 use super::noise::StateNoise;
 use super::Run;
 use crate::numeric::median;
@@ -148,16 +148,12 @@ pub fn cells(record: &Record, runs: &[&Run], noise: &[StateNoise]) -> Vec<Cell> 
     for (state, column) in record.states.iter().enumerate().take(noise.len()) {
         for (row, cell) in column.iter().enumerate().skip(start + 1) {
             let Some(measured) = *cell else { continue };
-            let draws: Vec<Draw> = (runs.iter())
-                .filter_map(|r| r.states.get(state).map(|v| v[row]))
-                .filter(|p| p.is_finite())
-                .map(|p| (p, noise[state].sigma(p)))
-                .collect();
+            let predictions = (runs.iter()).filter_map(|r| r.states.get(state).map(|v| v[row]));
             found.push(Cell {
                 state,
                 row,
                 measured,
-                base: BaseBand::of(&draws),
+                base: noise[state].base_band(predictions),
             });
         }
     }
@@ -240,14 +236,14 @@ pub fn count(
     for cell in cells(record, runs, noise) {
         let band = cell.base.as_ref();
         base.cells += 1;
-        base.inside += usize::from(band.is_some_and(|b| inside(b.stretched(1.0), cell.measured)));
+        base.inside += usize::from(band.is_some_and(|b| b.covers(1.0, cell.measured)));
         let Some(factor) = calibration.factor(cell.state, level) else {
             continue;
         };
         let count = &mut counts[cell.state];
         count.cells += 1;
         match band {
-            Some(b) => count.inside += usize::from(inside(b.stretched(factor), cell.measured)),
+            Some(b) => count.inside += usize::from(b.covers(factor, cell.measured)),
             None => count.unreached += 1,
         }
     }

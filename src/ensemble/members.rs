@@ -385,21 +385,23 @@ fn assemble(
 fn state_noise(model: &ir::Model, training: &[Record], members: &[MemberRuns]) -> Vec<StateNoise> {
     (0..model.states.len())
         .map(|state| {
-            noise::declared(model, state).unwrap_or_else(|| {
-                let mut pairs = Vec::new();
-                for member in members {
-                    for (index, record) in training.iter().enumerate() {
-                        if member.out_of_bag.contains(&index) {
-                            continue;
+            noise::declared(model, state)
+                .unwrap_or_else(|| {
+                    let mut pairs = Vec::new();
+                    for member in members {
+                        for (index, record) in training.iter().enumerate() {
+                            if member.out_of_bag.contains(&index) {
+                                continue;
+                            }
+                            let Some(run) = member.runs.get(index) else {
+                                continue;
+                            };
+                            pairs.extend(residuals(record, run, state));
                         }
-                        let Some(run) = member.runs.get(index) else {
-                            continue;
-                        };
-                        pairs.extend(residuals(record, run, state));
                     }
-                }
-                noise::estimated(&model.states[state].name, &pairs)
-            })
+                    noise::estimated(&model.states[state].name, &pairs)
+                })
+                .with_floor_of(model, state)
         })
         .collect()
 }

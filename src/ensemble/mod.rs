@@ -28,6 +28,8 @@ pub mod predict;
 pub mod resample;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_floor;
 
 pub use calibrate::{Calibration, CellCount, Coverage, ErrorSummary, StateScores};
 pub use error::{check_level, EnsembleError};

@@ -6,6 +6,7 @@
 //! model error together) and sets the band's shape over time; its overall scale is what
 //! the calibration corrects ([`super::calibrate`]).
 
+use super::band::{BaseBand, Draw};
 use crate::ir::{self, Measured};
 
 /// The noise of one measured state.
@@ -21,6 +22,11 @@ pub struct StateNoise {
     pub relative: f64,
     /// Where it comes from.
     pub source: NoiseSource,
+    /// The floor a measurement is censored at (0 for a state declared `nonnegative`: a
+    /// Gaussian draw below reads as 0); absent for none (and in ensembles trained before
+    /// floors, whose scores were computed without one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor: Option<f64>,
 }
 
 /// Where a state's noise comes from.
@@ -42,19 +48,41 @@ impl StateNoise {
         self.absolute.hypot(self.relative * value)
     }
 
-    /// In words: `declared 4 % + 0.01`, `estimated 2.1 % + 0.003 from 212 residuals`.
+    /// In words: `declared 4 % + 0.01`, `estimated 2.1 % + 0.003 from 212 residuals`, with
+    /// `, censored at 0` for a floor.
     pub fn describe(&self) -> String {
         let level = format!(
             "{} % + {}",
             crate::plot::tick_label(100.0 * self.relative),
             crate::plot::tick_label(self.absolute)
         );
+        let censored = (self.floor).map_or(String::new(), |f| {
+            format!(", censored at {}", crate::plot::tick_label(f))
+        });
         match self.source {
-            NoiseSource::Declared => format!("declared {level}"),
+            NoiseSource::Declared => format!("declared {level}{censored}"),
             NoiseSource::Estimated { residuals } => {
-                format!("estimated {level} from {residuals} residuals")
+                format!("estimated {level} from {residuals} residuals{censored}")
             }
         }
+    }
+
+    /// The base band of the members' `predictions` of a cell (non-finite ones left out),
+    /// each with this noise and floor ([`BaseBand::floored`]).
+    pub fn base_band(&self, predictions: impl Iterator<Item = f64>) -> Option<BaseBand> {
+        let draws: Vec<Draw> = (predictions.filter(|p| p.is_finite()))
+            .map(|p| (p, self.sigma(p)))
+            .collect();
+        BaseBand::floored(&draws, self.floor)
+    }
+
+    /// This noise with the floor of `model`'s measured state `state`: 0 where it is
+    /// declared `nonnegative`.
+    pub fn with_floor_of(mut self, model: &ir::Model, state: usize) -> Self {
+        self.floor = (model.states.get(state))
+            .is_some_and(|s| s.nonnegative)
+            .then_some(0.0);
+        self
     }
 }
 
@@ -66,6 +94,7 @@ pub fn declared(model: &ir::Model, state: usize) -> Option<StateNoise> {
         absolute: noise.absolute,
         relative: noise.relative,
         source: NoiseSource::Declared,
+        floor: None,
     })
 }
 
@@ -83,6 +112,7 @@ pub fn estimated(state: &str, pairs: &[(f64, f64)]) -> StateNoise {
         source: NoiseSource::Estimated {
             residuals: finite.len(),
         },
+        floor: None,
     }
 }
 

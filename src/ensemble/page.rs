@@ -209,18 +209,15 @@ fn experiment_figures(
         let factor = info.calibration.factor(state, level);
         let (mut median, mut band) = (Vec::new(), Vec::new());
         for row in 0..record.len() {
-            let draws: Vec<(f64, f64)> = (runs.iter().map(|r| r.states[state][row]))
-                .filter(|p| p.is_finite())
-                .map(|p| (p, info.band.noise[state].sigma(p)))
-                .collect();
-            if let Some(base) = super::band::BaseBand::of(&draws) {
+            let predictions = runs.iter().map(|r| r.states[state][row]);
+            if let Some(base) = info.band.noise[state].base_band(predictions) {
                 median.push((record.times[row], base.median));
                 band.push(factor.map_or((f64::NAN, f64::NAN), |f| base.stretched(f)));
             }
         }
         let mut series = Series::line("members' median", median).colored(MEDIAN);
         if factor.is_some() {
-            series = series.with_band(band);
+            series = series.with_named_band(band, &band_name(level));
         }
         let chart = Chart::new(
             &format!("{title}: {} ({role}) — {name}", record.name),
@@ -252,15 +249,17 @@ fn caption(
     let all = cells(record, runs, &info.band.noise);
     let mine: Vec<_> = all.iter().filter(|c| c.state == state).collect();
     let inside = (mine.iter())
-        .filter(|c| {
-            c.base
-                .is_some_and(|b| super::band::inside(b.stretched(factor), c.measured))
-        })
+        .filter(|c| c.base.is_some_and(|b| b.covers(factor, c.measured)))
         .count();
     format!(
         "{inside} of {} measured cells after the start inside the band.",
         mine.len()
     )
+}
+
+/// The band's legend entry: `90 % band` at level 0.9.
+pub fn band_name(level: f64) -> String {
+    format!("{} % band", tick_label(100.0 * level))
 }
 
 /// A share as a percentage with one decimal (`–` for none).

@@ -11,7 +11,6 @@
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use super::band::BaseBand;
 use super::calibrate::{count, CellCount};
 use super::{row_at, EnsembleError, EnsembleInfo, Run, ENSEMBLE_FILE};
 use crate::error::Bug;
@@ -222,10 +221,9 @@ pub fn predict_table(
             let Some(factor) = factors[state] else {
                 continue;
             };
-            let draws: Vec<(f64, f64)> = (living.iter().map(|v| v[state_columns[state]]))
-                .map(|p| (p, noise[state].sigma(p)))
-                .collect();
-            let (l, h) = BaseBand::of(&draws).map_or((f64::NAN, f64::NAN), |b| b.stretched(factor));
+            let predictions = living.iter().map(|v| v[state_columns[state]]);
+            let (l, h) = (noise[state].base_band(predictions))
+                .map_or((f64::NAN, f64::NAN), |b| b.stretched(factor));
             lo.push(l);
             hi.push(h);
         }

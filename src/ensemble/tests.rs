@@ -68,6 +68,7 @@ fn a_score_counts_half_widths_on_its_side_and_stretching_multiplies_them() {
         median: 10.0,
         below: 2.0,
         above: 4.0,
+        floor: f64::NEG_INFINITY,
     };
     assert_eq!(band.score(13.0), 0.75);
     assert_eq!(band.score(7.0), 1.5);
@@ -79,6 +80,7 @@ fn a_score_counts_half_widths_on_its_side_and_stretching_multiplies_them() {
         median: 1.0,
         below: 0.0,
         above: 0.0,
+        floor: f64::NEG_INFINITY,
     };
     assert_eq!(flat.score(1.5), f64::INFINITY);
 }
@@ -154,6 +156,7 @@ fn unit_noise() -> Vec<StateNoise> {
         absolute: 1.0,
         relative: 0.0,
         source: NoiseSource::Declared,
+        floor: None,
     }]
 }
 

@@ -13,7 +13,9 @@
 //! - [`expr`]: the physics, one translation of [`ir::Expr`] into nodes.
 //! - [`window`]: the window-to-embedding matrices, from the training code's own reads.
 //! - [`step`]: the stages, networks and RK4 combination.
+//! - [`ensemble`]: an ensemble run's members and the band's facts beside them.
 
+pub mod ensemble;
 pub mod expr;
 pub mod graph;
 pub mod onnx;
@@ -276,3 +278,5 @@ fn hidden_initial(model: &ir::Model) -> String {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_ensemble;

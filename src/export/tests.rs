@@ -42,7 +42,7 @@ fn trained(model: &ir::Model, record: &Record, precision: Precision) -> Trained 
 }
 
 /// tract, kept in its own namespace (its prelude has an `onnx` of its own).
-mod runtime {
+pub(super) mod runtime {
     use super::Exported;
     use crate::backend::Precision;
     use tract_onnx::prelude::*;
@@ -104,7 +104,11 @@ mod runtime {
 /// record, held before its first row), feeding it its own predictions; returns the states
 /// after each step and the closure outputs at each start. Values pass through the export's
 /// element type on the way in.
-fn free_run(exported: &Exported, record: &Record, start: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+pub(super) fn free_run(
+    exported: &Exported,
+    record: &Record,
+    start: usize,
+) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
     let plan = runtime::runnable(exported);
     let w = exported.layout.window;
     let clamp = |k: isize| k.max(0) as usize;

@@ -204,7 +204,7 @@ fn normal_cdf_matches_the_integrated_density() {
             / 3.0;
         let phi = super::normal_cdf(x);
         assert!(
-            (phi - simpson).abs() <= 1.2e-7 * simpson.min(1.0 - simpson).max(1e-300) + 1e-15,
+            (phi - simpson).abs() <= 1e-12 * simpson.min(1.0 - simpson).max(1e-300) + 1e-15,
             "Phi({x}) = {phi}, integrated {simpson}"
         );
     }

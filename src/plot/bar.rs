@@ -76,6 +76,7 @@ impl BarChart {
                 color: PALETTE[g % PALETTE.len()],
                 style: Style::Line,
                 radius: MARKER_RADIUS,
+                shaded: false,
             })
             .collect();
         let _ = write_legend(&mut svg, &entries, (right + LEGEND_GAP, width - 4.0));

@@ -145,6 +145,8 @@ pub(super) struct Entry<'a> {
     pub style: Style,
     /// Marker radius (markers only).
     pub radius: f64,
+    /// A band's entry: its sample is a shaded box, not the series' line or marker.
+    pub shaded: bool,
 }
 
 /// `name` broken at spaces into lines of at most [`LEGEND_CHARS`] characters (a longer
@@ -191,7 +193,14 @@ pub(super) fn write_legend(
         } else {
             ""
         };
-        if entry.style != Style::Markers {
+        if entry.shaded {
+            writeln!(
+                svg,
+                r#"<rect x="{x}" y="{}" width="20" height="10" fill="{color}" fill-opacity="{}"/>"#,
+                y - 9.0,
+                super::line::BAND_OPACITY
+            )?;
+        } else if entry.style != Style::Markers {
             writeln!(
                 svg,
                 r#"<line x1="{x}" y1="{0}" x2="{1}" y2="{0}" stroke="{color}" stroke-width="2"{dash}/>"#,
@@ -199,7 +208,7 @@ pub(super) fn write_legend(
                 x + 20.0,
             )?;
         }
-        if matches!(entry.style, Style::Markers | Style::LineMarkers) {
+        if !entry.shaded && matches!(entry.style, Style::Markers | Style::LineMarkers) {
             writeln!(
                 svg,
                 r#"<circle cx="{}" cy="{}" r="{}" fill="{color}"/>"#,

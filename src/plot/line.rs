@@ -33,6 +33,9 @@ impl Style {
     }
 }
 
+/// Opacity of a band's shading (and of its legend sample).
+pub const BAND_OPACITY: f64 = 0.18;
+
 /// Radius of markers unless a series says otherwise, in pixels.
 pub const MARKER_RADIUS: f64 = 3.0;
 
@@ -45,6 +48,8 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// A shaded band around the series (same length as `points`), e.g. replicate spread.
     pub band: Option<Vec<(f64, f64)>>,
+    /// The band's legend text (empty: the band is not keyed).
+    pub band_name: String,
     /// How it is drawn.
     pub style: Style,
     /// Colour, or `None` for the palette.
@@ -60,6 +65,7 @@ impl Series {
             name: name.to_string(),
             points,
             band: None,
+            band_name: String::new(),
             style: Style::Line,
             color: None,
             radius: MARKER_RADIUS,
@@ -73,6 +79,13 @@ impl Series {
     /// The same series with a band.
     pub fn with_band(mut self, band: Vec<(f64, f64)>) -> Self {
         self.band = Some(band);
+        self
+    }
+    /// The same series with a band keyed in the legend as `name` (a shaded sample after
+    /// the series' own entry).
+    pub fn with_named_band(mut self, band: Vec<(f64, f64)>, name: &str) -> Self {
+        self.band = Some(band);
+        self.band_name = name.to_string();
         self
     }
     /// The same series in a given colour.
@@ -176,7 +189,8 @@ impl Chart {
         let xs = (self.series.iter())
             .flat_map(|s| s.points.iter().map(|p| p.0))
             .chain(self.marks.iter().map(|m| m.x));
-        let names = (self.series.iter().map(|s| s.name.as_str()))
+        let names = (self.series.iter())
+            .flat_map(|s| [s.name.as_str(), s.band_name.as_str()])
             .chain(self.marks.iter().map(|m| m.name.as_str()));
         // The legend sits right of the plot, never over the data.
         let right = width - MARGIN_RIGHT - legend_width(names);
@@ -207,17 +221,22 @@ impl Chart {
                 mark.style.dash()
             );
         }
-        let series = (self.series.iter().enumerate()).map(|(index, series)| Entry {
-            name: &series.name,
-            color: self.color(index),
-            style: series.style,
-            radius: series.radius,
+        let series = (self.series.iter().enumerate()).flat_map(|(index, series)| {
+            let entry = |name, shaded| Entry {
+                name,
+                color: self.color(index),
+                style: series.style,
+                radius: series.radius,
+                shaded,
+            };
+            [entry(&series.name, false), entry(&series.band_name, true)]
         });
         let marks = self.marks.iter().map(|mark| Entry {
             name: &mark.name,
             color: &mark.color,
             style: mark.style,
             radius: MARKER_RADIUS,
+            shaded: false,
         });
         let entries: Vec<Entry> = series.chain(marks).collect();
         let _ = write_legend(&mut svg, &entries, (right + LEGEND_GAP, width - 4.0));
@@ -243,7 +262,7 @@ fn write_series(
         let lower = (edges.iter().rev()).map(|(px, lo, _)| pixel_pair(x, y, *px, *lo));
         writeln!(
             svg,
-            r#"<polygon points="{}" fill="{color}" fill-opacity="0.18" stroke="none"/>"#,
+            r#"<polygon points="{}" fill="{color}" fill-opacity="{BAND_OPACITY}" stroke="none"/>"#,
             upper.chain(lower).collect::<Vec<_>>().join(" ")
         )?;
     }

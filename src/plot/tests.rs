@@ -353,3 +353,52 @@ fn bands_run_along_the_upper_edge_and_back_along_the_lower() {
         "the upper edge is drawn higher"
     );
 }
+
+/// A named band gets its own legend entry, a shaded box right of the plot after its
+/// series' line; an unnamed one gets none.
+#[test]
+fn a_named_band_is_keyed_by_a_shaded_box_in_the_legend() {
+    let points = vec![(0.0, 2.0), (1.0, 2.0)];
+    let band = vec![(1.0, 3.0), (1.0, 3.0)];
+    let named = Series::line("median", points.clone()).with_named_band(band.clone(), "90 % band");
+    let svg = Chart::new("", "", "").with(named).to_svg(500.0, 300.0);
+    let label = (svg.lines())
+        .position(|l| l.contains(">90 % band<"))
+        .unwrap_or_else(|| panic!("no band entry in {svg}"));
+    let sample = svg.lines().nth(label - 1).unwrap_or_default();
+    assert!(
+        sample.starts_with("<rect") && sample.contains("fill-opacity"),
+        "{sample}"
+    );
+    let x = |line: &str| -> f64 {
+        let at = line.find(" x=\"").map_or(line.len(), |i| i + 4);
+        line[at..]
+            .split('"')
+            .next()
+            .unwrap_or("")
+            .parse()
+            .unwrap_or(f64::NAN)
+    };
+    let polygon = svg
+        .lines()
+        .find(|l| l.starts_with("<polygon"))
+        .unwrap_or_default();
+    let rightmost = (polygon.split('"').nth(1).unwrap_or_default().split(' '))
+        .filter_map(|p| p.split_once(',').and_then(|(a, _)| a.parse::<f64>().ok()))
+        .fold(f64::MIN, f64::max);
+    assert!(
+        x(sample) > rightmost,
+        "the sample {sample} stands right of the band"
+    );
+    let median = svg.lines().position(|l| l.contains(">median<")).unwrap();
+    assert!(median < label, "the band's entry follows its series'");
+    let plain = Series::line("median", points).with_band(band);
+    let svg = Chart::new("", "", "").with(plain).to_svg(500.0, 300.0);
+    let samples = (svg.lines()).filter(|l| l.starts_with("<rect") && l.contains("fill-opacity"));
+    assert_eq!(samples.count(), 0, "no sample for an unnamed band");
+    assert_eq!(
+        svg.matches("fill-opacity").count(),
+        1,
+        "the band itself only"
+    );
+}

@@ -298,7 +298,12 @@ pub fn simulate(
         .map(|s| s.iter().fold(0.0, |m: f64, v| m.max(v.abs())))
         .chain(hidden_start.iter().map(|h| h.abs()))
         .collect();
-    let mut stepper = Stepper::for_model(model, &scales);
+    let split = split_network(network, model, stepping);
+    let (stepped, step_fractions, first) = match &split {
+        Some((single, fractions, trained)) => (single, &fractions[..], *trained),
+        None => (network, fractions, 1),
+    };
+    let mut stepper = Stepper::for_model(model, &scales).starting_at(first);
     let declared = range.map(|r| r.declared(model));
     let range = declared.as_ref();
     let mut trajectory = Trajectory {
@@ -322,7 +327,7 @@ pub fn simulate(
             Stepping::Controlled => {
                 let place = (track, &history);
                 stepper
-                    .step((network, model), place, (knot, &state), fractions)?
+                    .step((stepped, model), place, (knot, &state), step_fractions)?
                     .0
             }
         };
@@ -355,6 +360,24 @@ pub fn simulate(
     }
     trajectory.substeps = stepper.most;
     Ok(trajectory)
+}
+
+/// What step control steps a network trained with `K > 1` sub-steps by: a one-sub-step
+/// copy of it, its stage fractions, and `K` to start from (`super::stepping`); `None` where
+/// the network steps itself (fixed steps, `next` models, `K = 1`).
+fn split_network(
+    network: &Network,
+    model: &ir::Model,
+    stepping: Stepping,
+) -> Option<(Network, Vec<f64>, usize)> {
+    let trained = network.substeps();
+    let split = stepping == Stepping::Controlled
+        && model.dynamics == ir::Dynamics::Continuous
+        && trained > 1;
+    split.then(|| {
+        let fractions = super::pairs::stage_fractions(model.dynamics, 1);
+        (network.with_substeps(1), fractions, trained)
+    })
 }
 
 /// The one-step batch of knot `knot` of `track` (its history `history`) from `state`.

@@ -63,6 +63,8 @@ mod tests_recipe;
 mod tests_records;
 #[cfg(test)]
 mod tests_start;
+#[cfg(test)]
+mod tests_substeps;
 pub mod toward;
 mod validation;
 pub mod warnings;

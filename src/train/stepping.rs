@@ -4,9 +4,14 @@
 //! `--substeps` the network was trained with.
 //!
 //! The control is step doubling: the step from a knot is taken in `m` and in `2m` sub-steps
-//! (each the network's own RK4 step of `h / m`, its stages reading the delay embedding at
-//! their own fractions of the step); where the two differ by more than [`TOLERANCE`] of the
-//! state's scale, `m` doubles, up to [`MOST_SUBSTEPS`]. The result of the `m` that sufficed
+//! (each one RK4 step of `h / m`, its stages reading the delay embedding at their own
+//! fractions of the step); where the two differ by more than [`TOLERANCE`] of the state's
+//! scale, `m` doubles, up to [`MOST_SUBSTEPS`] sub-steps of the step in all. A network
+//! trained with `K` sub-steps per step is called once per sub-step as a one-sub-step copy
+//! of itself ([`crate::backend::Network::with_substeps`]), and the control starts at
+//! `m = K`: its trained step, the same arithmetic (and [`MOST_SUBSTEPS`] bounds the
+//! sub-steps of a step, not multiples of `K`: a member trained with 1024 sub-steps took
+//! up to 1024 x 4096 per knot before, and its free runs ran for hours). The result of the `m` that sufficed
 //! is kept, so where the step the model was trained with is stable and accurate the run is
 //! exactly the trained model's (and its ONNX export's) step; the next knot starts from that
 //! `m`; it never falls back to fewer within a run (below). The tolerance guards
@@ -110,6 +115,14 @@ impl Stepper {
             nonnegative: Vec::new(),
             most: 1,
         }
+    }
+
+    /// The same controller trying `substeps` first (a network trained with `K` sub-steps
+    /// per step starts at `K`: its trained step).
+    pub fn starting_at(mut self, substeps: usize) -> Self {
+        self.substeps = substeps.max(1);
+        self.most = self.substeps;
+        self
     }
 
     /// The controller for `model`'s states: a step that takes a `nonnegative` one below
