@@ -100,7 +100,8 @@ fn score_table(scores: &[&ExperimentScore]) -> String {
     html
 }
 
-/// Per-state errors of the three models on one experiment.
+/// Per-state errors of the three models on one experiment (and of the untrained grey box,
+/// whose distance from the mechanism is the verdict's numerical resolution).
 fn state_table(score: &ExperimentScore, states: &[String]) -> String {
     let mut html = String::from("<table><tr><th>NMSE</th>");
     for state in states {
@@ -120,6 +121,9 @@ fn state_table(score: &ExperimentScore, states: &[String]) -> String {
         let _ = writeln!(html, "<td>{}</td></tr>", number(score.error));
     };
     row(&mut html, "mechanism", &score.mechanism);
+    if let Some(untrained) = &score.untrained {
+        row(&mut html, "grey box untrained", untrained);
+    }
     row(&mut html, "grey box (median)", &score.grey_box);
     row(&mut html, "naive", &score.naive);
     html.push_str("</table>\n");

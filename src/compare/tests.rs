@@ -159,6 +159,10 @@ fn the_mechanism_scores_as_gbc_train_fits_it_and_as_its_exact_free_run() {
     }
     let page = html::page(&comparison, &all, "decay");
     assert!(page.contains("<svg") && page.contains("naive forecast"));
+    assert!(
+        page.contains("<td>grey box untrained</td>"),
+        "the untrained row"
+    );
 }
 
 #[test]
