@@ -262,12 +262,13 @@ class Report:
             file.write(self.html)
 
 
-class Diagnosis:
-    """A finished diagnosis: the fields of ``gbc diagnose --json`` as attributes
-    (``credited``, ``gap_before``, ``states``, ...) and in :attr:`info`; ``text``; inline
-    HTML in Jupyter."""
+class _Report:
+    """A finished report read from the native object: the fields of its ``--json`` as
+    attributes and in :attr:`info`; ``text``; inline HTML in Jupyter."""
 
-    def __init__(self, native: "_gbc.Diagnosis"):
+    _kind = "report"
+
+    def __init__(self, native: Any):
         self._native = native
         self.info: dict = json.loads(native.json())
 
@@ -275,11 +276,11 @@ class Diagnosis:
         info = self.__dict__.get("info", {})
         if name in info:
             return info[name]
-        raise AttributeError(f"a diagnosis has no field {name!r}; its fields: {sorted(info)}")
+        raise AttributeError(f"a {self._kind} has no field {name!r}; its fields: {sorted(info)}")
 
     @property
     def text(self) -> str:
-        """The text report ``gbc diagnose`` prints."""
+        """The text the command prints."""
         return self._native.text()
 
     def _repr_html_(self) -> str:
@@ -287,6 +288,14 @@ class Diagnosis:
 
     def __repr__(self) -> str:
         return self._native.text()
+
+
+class Diagnosis(_Report):
+    """A finished diagnosis: the fields of ``gbc diagnose --json`` as attributes
+    (``credited``, ``gap_before``, ``states``, ...) and in :attr:`info`; ``text`` (the text
+    report ``gbc diagnose`` prints); inline HTML in Jupyter."""
+
+    _kind = "diagnosis"
 
 
 def diagnose(model: Model, data: Any, *, val: Any = None,
@@ -321,31 +330,12 @@ def simulate(model: Model, **keywords: Any):
     return pd.DataFrame({name: list(values) for name, values in zip(header, columns)})
 
 
-class Comparison:
+class Comparison(_Report):
     """A finished comparison: the fields of ``gbc compare --json`` as attributes
-    (``verdict``, ``mechanism``, ``grey_box``, ...) and in :attr:`info`; ``text``; inline
-    HTML in Jupyter."""
+    (``verdict``, ``mechanism``, ``grey_box``, ...) and in :attr:`info`; ``text`` (the table
+    and verdict ``gbc compare`` prints); inline HTML in Jupyter."""
 
-    def __init__(self, native: "_gbc.Comparison"):
-        self._native = native
-        self.info: dict = json.loads(native.json())
-
-    def __getattr__(self, name: str) -> Any:
-        info = self.__dict__.get("info", {})
-        if name in info:
-            return info[name]
-        raise AttributeError(f"a comparison has no field {name!r}; its fields: {sorted(info)}")
-
-    @property
-    def text(self) -> str:
-        """The table and verdict ``gbc compare`` prints."""
-        return self._native.text()
-
-    def _repr_html_(self) -> str:
-        return self._native.html()
-
-    def __repr__(self) -> str:
-        return self._native.text()
+    _kind = "comparison"
 
 
 def compare(model: Model, data: Any, *, mechanism: Optional[Model] = None,
