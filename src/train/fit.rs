@@ -103,10 +103,9 @@ impl Fit<'_> {
         let fill = fill_schedule(training);
         let mut epoch = first;
         while epoch <= options.epochs {
-            let horizon = self
-                .recipe
-                .horizon_at(epoch, options.epochs)
-                .min(engines.cap);
+            let horizon = (self.recipe.horizon_at(epoch, options.epochs))
+                .min(engines.cap)
+                .min(self.longest_window());
             self.refresh_before(epoch, &mut engines, training, (&fractions, fill))?;
             let how = ((epoch, horizon), fractions.as_slice());
             let mut checked =
@@ -301,6 +300,19 @@ impl Fit<'_> {
         Ok(total / order.len().max(1) as f64)
     }
 
+    /// The longest rollout window every training track holds: a horizon longer than a
+    /// track left it out of every epoch (a record of short batches then trained on its few
+    /// one-step pairs alone), so the rollout is capped at the shortest track (and the
+    /// progress, the log and the report say the horizon that ran).
+    fn longest_window(&self) -> usize {
+        (self.trainings.iter())
+            .map(|t| t.knots.len())
+            .filter(|&knots| knots > 0)
+            .min()
+            .unwrap_or(1)
+            .max(1)
+    }
+
     fn rollout_epoch(
         &self,
         engines: &mut Engines,
@@ -310,15 +322,7 @@ impl Fit<'_> {
         on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
-        // Every training track must hold a window: a horizon longer than a track left it
-        // out of every epoch (a record of short batches then trained on its few one-step
-        // pairs alone), so the rollout is capped at the shortest track.
-        let shortest = (self.trainings.iter())
-            .map(|t| t.knots.len())
-            .filter(|&knots| knots > 0)
-            .min()
-            .unwrap_or(0);
-        let horizon = horizon.min(shortest.max(1));
+        let horizon = horizon.min(self.longest_window());
         let phase = rng.gen_range(0..horizon);
         let mut starts = Vec::new();
         for (index, training_part) in self.trainings.iter().enumerate() {
