@@ -63,7 +63,8 @@ fn parse<P: Parser>(flags: &[String], command: &'static str) -> Result<P, Comman
     parse_with::<P>(&["<model>", "<data>"], flags, command)
 }
 
-/// What `flags` mean to a command after the placeholder arguments `given`.
+/// What `flags` mean to a command after the positional arguments `given` (the names that
+/// stand for the objects the binding passes).
 fn parse_with<P: Parser>(
     given: &[&str],
     flags: &[String],

@@ -75,6 +75,42 @@ pub fn load(model: &ir::Model, source: &str, directory: &Path) -> Result<Loaded,
     })
 }
 
+/// What is done with one restored member and its physical range.
+type MemberWork<'a, T> =
+    dyn Fn(&artifacts::Restored, Option<PhysicalRange>) -> Result<T, EnsembleError> + Sync + 'a;
+
+/// `each(restored, range)` for every used member (members on `jobs` threads), in member
+/// order; `on_member(k)` hears when member `k` (0-based among the used) is done.
+fn for_each_member<T: Send>(
+    model: &ir::Model,
+    (source, loaded): (&str, &Loaded),
+    jobs: usize,
+    each: &MemberWork<'_, T>,
+    on_member: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<T>, EnsembleError> {
+    let slots: Mutex<Vec<Option<T>>> =
+        Mutex::new((0..loaded.members.len()).map(|_| None).collect());
+    let work = |member: usize| -> Result<(), EnsembleError> {
+        let restored = artifacts::restore_with_notes(model, source, &loaded.members[member])?;
+        let range = PhysicalRange::of_run(&restored.info);
+        let result = each(&restored, range)?;
+        slots.lock().unwrap_or_else(|p| p.into_inner())[member] = Some(result);
+        on_member(member);
+        Ok(())
+    };
+    run_jobs(
+        jobs,
+        loaded.members.len(),
+        &work,
+        EnsembleError::cannot_start,
+    )?;
+    Ok((slots.into_inner())
+        .unwrap_or_else(|p| p.into_inner())
+        .into_iter()
+        .flatten()
+        .collect())
+}
+
 /// Every used member's predictions along each of `records` (`[member][record]`), members on
 /// `jobs` threads; each table as the member's own prediction, cut where its free run left
 /// the physical range. `on_member(k)` hears when member `k` (0-based among the used) is
@@ -86,11 +122,7 @@ pub fn member_tables(
     (mode, history, jobs): (Mode, History, usize),
     on_member: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<Vec<PredictionTable>>, EnsembleError> {
-    let slots: Mutex<Vec<Vec<PredictionTable>>> =
-        Mutex::new(vec![Vec::new(); loaded.members.len()]);
-    let work = |member: usize| -> Result<(), EnsembleError> {
-        let restored = artifacts::restore_with_notes(model, source, &loaded.members[member])?;
-        let range = PhysicalRange::of_run(&restored.info);
+    let each = |restored: &artifacts::Restored, range: Option<PhysicalRange>| {
         let mut tables = Vec::with_capacity(records.len());
         for record in records {
             let how = (mode, history, range.as_ref());
@@ -99,17 +131,9 @@ pub fn member_tables(
             table.cut_at_divergence();
             tables.push(table);
         }
-        slots.lock().unwrap_or_else(|p| p.into_inner())[member] = tables;
-        on_member(member);
-        Ok(())
+        Ok(tables)
     };
-    run_jobs(
-        jobs,
-        loaded.members.len(),
-        &work,
-        EnsembleError::cannot_start,
-    )?;
-    Ok(slots.into_inner().unwrap_or_else(|p| p.into_inner()))
+    for_each_member(model, (source, loaded), jobs, &each, on_member)
 }
 
 /// A what-if run of every used member (`gbc simulate --weights DIR`, members on `jobs`
@@ -120,27 +144,13 @@ pub fn what_if_band(
     what: &WhatIf,
     (level, jobs): (Option<f64>, usize),
 ) -> Result<BandTable, EnsembleError> {
-    let slots: Mutex<Vec<Option<PredictionTable>>> = Mutex::new(vec![None; loaded.members.len()]);
-    let work = |member: usize| -> Result<(), EnsembleError> {
-        let restored = artifacts::restore_with_notes(model, source, &loaded.members[member])?;
-        let range = PhysicalRange::of_run(&restored.info);
+    let each = |restored: &artifacts::Restored, range: Option<PhysicalRange>| {
         let network = (&restored.network, &restored.setup);
         let mut table = what_if(model, network, what, range.as_ref())?;
         table.cut_at_divergence();
-        slots.lock().unwrap_or_else(|p| p.into_inner())[member] = Some(table);
-        Ok(())
+        Ok(table)
     };
-    run_jobs(
-        jobs,
-        loaded.members.len(),
-        &work,
-        EnsembleError::cannot_start,
-    )?;
-    let tables: Vec<PredictionTable> = (slots.into_inner())
-        .unwrap_or_else(|p| p.into_inner())
-        .into_iter()
-        .flatten()
-        .collect();
+    let tables = for_each_member(model, (source, loaded), jobs, &each, &|_| {})?;
     let times = (tables.iter())
         .filter_map(|t| t.columns.first())
         .max_by_key(|c| c.len())
