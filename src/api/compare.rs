@@ -27,6 +27,9 @@ pub struct CompareSpec {
     pub training: TrainOptions,
     /// Recoveries from a non-finite epoch per training.
     pub recoveries: usize,
+    /// The budget of a sparse record (`None` where the epochs or the learning rate were
+    /// given: [`crate::train::recipe::SparseBudget`]).
+    pub sparse_budget: Option<crate::train::SparseBudget>,
 }
 
 impl Default for CompareSpec {
@@ -39,6 +42,7 @@ impl Default for CompareSpec {
             jobs: None,
             training: TrainOptions::with(&crate::train::Settings::default()),
             recoveries: crate::train::recovery::DEFAULT_RECOVERIES,
+            sparse_budget: Some(crate::train::recipe::SPARSE_BUDGET),
         }
     }
 }
@@ -95,7 +99,10 @@ pub fn compare(
         splits,
         seeds: (0..spec.seeds).map(|k| spec.seed + k).collect(),
         training: spec.training.clone(),
-        recipe: Recipe::default(),
+        recipe: Recipe {
+            sparse_budget: spec.sparse_budget,
+            ..Recipe::default()
+        },
         jobs: spec.jobs.unwrap_or_else(crate::experiment::default_jobs),
         recoveries: spec.recoveries,
     };

@@ -129,6 +129,7 @@ pub fn train(
         keep_last_finite: true,
         recoveries: spec.recoveries,
         poison: control.poison,
+        ..RunControl::default()
     };
     let data = TrainingData {
         train: &split.train,

@@ -203,31 +203,59 @@ fn print_params(out: &mut String, trained: &Trained) {
     }
 }
 
+/// `auto`'s stop: the folds' held-out errors at the mechanism, the best stop, the chosen
+/// one and the last epoch.
+fn print_choice(out: &mut String, choice: &train::StopChoice) {
+    line!(
+        out,
+        "toward the mechanism, the stop chosen by cross-validation over the training \
+         experiments ({} folds, {:.0} s; held-out online error per fold, and their mean):",
+        choice.held_out.len(),
+        choice.seconds
+    );
+    let mut shown: Vec<(usize, &str)> = vec![(0, "the mechanism")];
+    shown.push((
+        choice.chosen,
+        "chosen (within one standard error of the best)",
+    ));
+    shown.push((choice.best, "best"));
+    if let Some(last) = choice.candidates.last() {
+        shown.push((last.epoch, "last"));
+    }
+    let mut seen = Vec::new();
+    for (epoch, what) in shown {
+        if seen.contains(&epoch) {
+            continue;
+        }
+        seen.push(epoch);
+        let Some(candidate) = choice.at(epoch) else {
+            continue;
+        };
+        let folds: Vec<String> = (choice.held_out.iter().zip(&candidate.errors))
+            .map(|(name, e)| format!("{name} {}", e.map_or("-".into(), error)))
+            .collect();
+        let mean = candidate.mean.map_or("-".into(), error);
+        line!(
+            out,
+            "  epoch {epoch:<5} {mean} ({}) {what}",
+            folds.join(", ")
+        );
+    }
+    for (name, why) in &choice.failed {
+        line!(out, "  fold without {name}: nothing scored ({why})");
+    }
+}
+
 /// The pull toward the mechanism (and `auto`'s table) and how far the grey box moved.
 fn print_distance(out: &mut String, distance: &train::toward::MechanismDistance) {
     if let Some(choice) = &distance.choice {
+        print_choice(out, choice);
+    }
+    if let Some(why) = &distance.unchosen {
         line!(
             out,
-            "toward the mechanism, chosen by cross-validation over the training experiments \
-             (held-out online error per fold, pooled):"
+            "toward the mechanism: auto trained every epoch without a pull ({why})"
         );
-        for candidate in &choice.candidates {
-            let folds: Vec<String> = (candidate.folds.iter())
-                .map(|(name, e)| format!("{name} {}", e.map_or("-".into(), error)))
-                .collect();
-            let pooled = candidate.pooled_online.map_or("-".into(), error);
-            let mark = if candidate.strength == choice.chosen {
-                "  <- chosen"
-            } else {
-                ""
-            };
-            line!(
-                out,
-                "  strength {:<8} {pooled} ({}){mark}",
-                candidate.strength,
-                folds.join(", ")
-            );
-        }
     }
     line!(
         out,

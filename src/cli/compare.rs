@@ -127,6 +127,8 @@ pub(crate) fn spec_of(args: &CompareArgs) -> Result<CompareSpec, CommandError> {
         jobs: args.jobs,
         training,
         recoveries: args.recoveries,
+        sparse_budget: (!args.settings.gives_budget())
+            .then_some(crate::train::recipe::SPARSE_BUDGET),
     })
 }
 

@@ -32,7 +32,7 @@ pub struct TrainingFlags {
     #[arg(long, value_enum, help = with_default("What runs the training steps: the fastest that runs the model, the graph backend, or the hand-fused step (`gbc bench`: graph and fused when left out)", Settings::default().engine.name()))]
     pub engine: Option<EngineArg>,
     /// Strength of the pull toward the mechanism, or `auto`.
-    #[arg(long, value_name = "STRENGTH", help = with_default("Strength of the pull of the closures' last layers toward zero (the mechanism) and of trained params toward their start, relative to the normalised MSE loss; `auto` picks it by leave-one-experiment-out cross-validation over the training experiments", Settings::default().toward_mechanism))]
+    #[arg(long, value_name = "STRENGTH", help = with_default("Strength of the pull of the closures' last layers toward zero (the mechanism) and of trained params toward their start, relative to the normalised MSE loss; `auto` pulls by early stopping instead: the epochs are cut where leave-one-experiment-out cross-validation over the training experiments says (0: the mechanism itself); without two whole training experiments it trains every epoch without a pull", Settings::default().toward_mechanism))]
     pub toward_mechanism: Option<TowardMechanism>,
 }
 
@@ -73,6 +73,12 @@ impl TrainingFlags {
             })),
             _ => Ok(()),
         }
+    }
+
+    /// Whether `--epochs` or `--lr` was given: a sparse record then trains with them, not
+    /// with its own budget ([`crate::train::recipe::SparseBudget`]).
+    pub fn gives_budget(&self) -> bool {
+        self.epochs.is_some() || self.lr.is_some()
     }
 
     /// Whether the flag of `field` was given.

@@ -519,6 +519,7 @@ pub fn recipe_of(args: &TrainArgs) -> Recipe {
             ParamsArg::Balances => ParamSource::Balances,
             ParamsArg::Train => ParamSource::Train,
         },
+        sparse_budget: (!args.settings.gives_budget()).then_some(train::recipe::SPARSE_BUDGET),
     }
 }
 

@@ -48,6 +48,13 @@ pub struct RunControl {
     /// Stop when the validation loss has not improved for this many epochs; the weights of
     /// the best epoch are kept.
     pub early_stop: Option<usize>,
+    /// Validate after every `N`th epoch and after the last (the errors go to the log and
+    /// to [`Event::Validation`]) without early stopping; `--early-stop` validates every
+    /// epoch anyway.
+    pub validate_every: Option<usize>,
+    /// End training after this epoch, keeping its weights (the rollout schedule stays that
+    /// of all the epochs): `--toward-mechanism auto`'s chosen stop ([`super::toward`]).
+    pub last_epoch: Option<usize>,
     /// A checkpoint to continue from.
     pub resume: Option<Checkpoint>,
     /// What the caller keeps with each checkpoint (the CLI: its command line).
@@ -321,7 +328,8 @@ impl<'a> Safety<'a> {
             early,
             count_from: 1,
             best_weights: Vec::new(),
-            validate: validate.filter(|_| control.early_stop.is_some()),
+            validate: validate
+                .filter(|_| control.early_stop.is_some() || control.validate_every.is_some()),
             poisoned: 0,
         }
     }
@@ -399,7 +407,14 @@ impl<'a> Safety<'a> {
             offline: None,
             online: None,
         };
-        if let Some(validate) = self.validate.as_mut() {
+        let last = self
+            .control
+            .last_epoch
+            .map_or(self.epochs, |l| l.min(self.epochs));
+        let due_now = self.early.is_some()
+            || epoch >= last
+            || (self.control.validate_every).is_some_and(|n| epoch.is_multiple_of(n.max(1)));
+        if let Some(validate) = self.validate.as_mut().filter(|_| due_now) {
             let (offline, online) = validate(end.network()?)?;
             (row.offline, row.online) = (offline, online);
             on_event(Event::Validation {
@@ -435,9 +450,10 @@ impl<'a> Safety<'a> {
                 directory: self.directory(),
             });
         }
-        let stop = (self.early.as_ref()).is_some_and(|e| e.exhausted(epoch));
+        let early_stop = (self.early.as_ref()).is_some_and(|e| e.exhausted(epoch));
+        let stop = early_stop || control.last_epoch.is_some_and(|l| epoch >= l);
         if let Some((best_epoch, best_loss)) = self.early.as_ref().and_then(|e| e.best) {
-            if stop && epoch < self.epochs {
+            if early_stop && epoch < self.epochs {
                 on_event(Event::EarlyStop {
                     epoch,
                     best_epoch,

@@ -84,12 +84,12 @@ pub use evaluate::{Divergence, ErrorSet, PhysicalRange};
 pub use flags::{flag_of, with_flag};
 pub use initial::{InitialState, Origin};
 pub use polish::{ParamEstimate, PolishSummary};
-pub use recipe::{Engine, Objective, ParamSource, Recipe};
+pub use recipe::{Engine, Objective, ParamSource, Recipe, SparseBudget};
 pub use recovery::Recovery;
 pub use run::{train_run, train_with, EVALUATING, TRAINING, VALIDATING};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
-pub use toward::{StrengthChoice, TowardMechanism};
+pub use toward::{StopChoice, TowardMechanism};
 pub use warnings::{DropCause, DroppedPairs, Warning};
 
 /// Epochs between refreshes of the model's fill of unknown stretches.
@@ -190,6 +190,9 @@ pub enum Event<'a> {
     /// Before the first epoch: the model's free runs over the training knots need this
     /// many sub-steps per step, and training takes them ([`stepping::training_substeps`]).
     Substeps(usize),
+    /// Before anything trains: the record is sparse, and the run takes this budget
+    /// ([`recipe::SparseBudget`]) for the epochs and learning rate left at their defaults.
+    Budget(recipe::SparseBudget),
     /// A phase of the run starts: "validating the untrained network", "training" (the
     /// epochs), "evaluating the trained network" (initial states, polish, validation).
     Phase(&'static str),

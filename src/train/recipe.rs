@@ -141,7 +141,32 @@ pub struct Recipe {
     /// Where the params come from (`Auto`: from the balances where they determine them).
     #[serde(default)]
     pub params: ParamSource,
+    /// The budget a sparse record trains with when the epochs and the learning rate are
+    /// at their defaults ([`SparseBudget`]); `None`: always the options' own (the command
+    /// line clears it when `--epochs` or `--lr` is given, even at the default value).
+    #[serde(default)]
+    pub sparse_budget: Option<SparseBudget>,
 }
+
+/// The training budget of a sparse record. Its rollout epoch holds a few windows (one per
+/// batch of off-line assays), so one Adam step, where a dense record's holds tens: the
+/// 100 epochs at 1e-3 that train a dense record move a sparse one's network by about a
+/// hundredth of what it needs (`docs/training.md`, "Sparse records"). Where a sparse run
+/// does not need the steps, `--toward-mechanism auto` stops it early.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SparseBudget {
+    /// Epochs.
+    pub epochs: usize,
+    /// Adam learning rate of the network.
+    #[serde(with = "crate::json")]
+    pub learning_rate: f64,
+}
+
+/// The default [`SparseBudget`].
+pub const SPARSE_BUDGET: SparseBudget = SparseBudget {
+    epochs: 400,
+    learning_rate: 1e-2,
+};
 
 impl Default for Recipe {
     fn default() -> Self {
@@ -156,6 +181,7 @@ impl Default for Recipe {
             polish: None,
             range_factor: DEFAULT_RANGE_FACTOR,
             params: ParamSource::Auto,
+            sparse_budget: Some(SPARSE_BUDGET),
         }
     }
 }
@@ -167,6 +193,7 @@ impl Recipe {
             objective: Objective::OneStep,
             polish: Some(false),
             params: ParamSource::Train,
+            sparse_budget: None,
             ..Recipe::default()
         }
     }

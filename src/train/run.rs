@@ -16,8 +16,9 @@ use super::fit::Fitted;
 use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
+use super::recipe::SparseBudget;
 use super::stepping;
-use super::toward::{self, MechanismDistance, StrengthChoice, TowardMechanism};
+use super::toward::{self, MechanismDistance, StopChoice, TowardMechanism};
 use super::validation::{refresh, validate, Course};
 use super::{
     analysis, check_options, check_trainable, column_weights, fit, hidden_initial_values, initial,
@@ -50,24 +51,9 @@ pub fn train_run(
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
     let started = std::time::Instant::now();
-    // `--toward-mechanism auto`: the strength is chosen by cross-validation over the
-    // training experiments first, then the run trains at it.
-    let (choice, chosen);
-    let options = match options.toward_mechanism {
-        TowardMechanism::Auto => {
-            let found = toward::choose(model, data, (options, recipe), on_event)?;
-            chosen = TrainOptions {
-                toward_mechanism: TowardMechanism::Strength(found.chosen),
-                ..options.clone()
-            };
-            choice = Some(found);
-            &chosen
-        }
-        TowardMechanism::Strength(_) => {
-            choice = None;
-            options
-        }
-    };
+    let resolved = resolve(model, data, (options, recipe), control, on_event)?;
+    let (options, recipe, control) = (&resolved.options, &resolved.recipe, &resolved.control);
+    let choice = (resolved.choice, resolved.unchosen);
     let mut run = prepare(model, data, options, recipe, on_event)?;
     // On a sparse record the one-step warm-up reaches few cells: it shrinks in proportion.
     let sparse = Recipe {
@@ -115,6 +101,86 @@ pub fn train_run(
     }
     let distance = run.distance(options, choice, &evaluation.estimates)?;
     Ok(run.report(options, recipe, (initial, evaluation), (fitted, distance)))
+}
+
+/// A run's options, recipe and control once the defaults that depend on the data are
+/// settled: a sparse record's budget, and where `--toward-mechanism auto` stops.
+struct Resolved {
+    options: TrainOptions,
+    recipe: Recipe,
+    control: RunControl,
+    choice: Option<StopChoice>,
+    unchosen: Option<String>,
+}
+
+/// Settles the sparse budget ([`Recipe::sparse_budget`], told as [`Event::Budget`]) and
+/// `auto`: the folds choose the stop ([`toward::choose`]); the run then trains without a
+/// pull and ends there (a stop at 0 is the mechanism itself: no epoch, no polish).
+fn resolve(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+    control: &RunControl,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<Resolved, TrainError> {
+    let mut options = options.clone();
+    if let Some(budget) = sparse_budget(model, data, (&options, recipe))? {
+        (options.epochs, options.learning_rate) = (budget.epochs, budget.learning_rate);
+        on_event(Event::Budget(budget));
+    }
+    let mut resolved = Resolved {
+        options,
+        recipe: recipe.clone(),
+        control: control.clone(),
+        choice: None,
+        unchosen: None,
+    };
+    if resolved.options.toward_mechanism != TowardMechanism::Auto {
+        return Ok(resolved);
+    }
+    let how = (&resolved.options, recipe);
+    let found = toward::choose(model, data, how, control, on_event)?;
+    resolved.options.toward_mechanism = TowardMechanism::Strength(0.0);
+    match found {
+        Ok(choice) if choice.chosen == 0 => {
+            resolved.options.epochs = 0;
+            resolved.recipe.polish = Some(false);
+            resolved.choice = Some(choice);
+        }
+        Ok(choice) => {
+            resolved.control.last_epoch = Some(choice.chosen);
+            resolved.choice = Some(choice);
+        }
+        Err(why) => resolved.unchosen = Some(why),
+    }
+    Ok(resolved)
+}
+
+/// The budget of `recipe` where the record is sparse (one-step pairs reach under
+/// [`DENSE_SHARE`] of the cells the windows reach), the model has closures to train by the
+/// multi-step objective, and the epochs and learning rate are the defaults of
+/// [`super::Settings`] (a caller who set either keeps both).
+fn sparse_budget(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+) -> Result<Option<SparseBudget>, TrainError> {
+    let Some(budget) = recipe.sparse_budget else {
+        return Ok(None);
+    };
+    let defaults = super::Settings::default();
+    let at_defaults =
+        (options.epochs, options.learning_rate) == (defaults.epochs, defaults.learning_rate);
+    if !at_defaults || model.closures.is_empty() || recipe.objective != Objective::MultiStep {
+        return Ok(None);
+    }
+    let data = TrainingData {
+        part: (options.train_points).map_or(data.part, |n| Part::FirstPairs(Some(n))),
+        ..*data
+    };
+    let layout = Layout::new(model, &data, options)?;
+    let coverage = Coverage::of(model, (&layout.tracks, &layout.trainings), &layout.pairs);
+    Ok((coverage.one_step_share() < DENSE_SHARE).then_some(budget))
 }
 
 /// The phase that fits a model without closures, or a grey box's mechanism ([`mechanism`]).
@@ -430,7 +496,7 @@ impl Run<'_> {
     fn distance(
         &mut self,
         options: &TrainOptions,
-        choice: Option<StrengthChoice>,
+        (choice, unchosen): (Option<StopChoice>, Option<String>),
         estimates: &[super::ParamEstimate],
     ) -> Result<Option<MechanismDistance>, TrainError> {
         if self.model.closures.is_empty() {
@@ -455,6 +521,7 @@ impl Run<'_> {
         Ok(Some(MechanismDistance {
             strength: options.toward_mechanism.strength().unwrap_or(0.0),
             choice,
+            unchosen,
             outputs,
             params: toward::param_distances(&self.model, &values, estimates),
         }))

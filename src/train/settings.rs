@@ -44,14 +44,10 @@ impl Default for Settings {
             precision: Precision::F32,
             substeps: 1,
             engine: Engine::Auto,
-            toward_mechanism: TowardMechanism::Strength(DEFAULT_TOWARD_MECHANISM),
+            toward_mechanism: TowardMechanism::Auto,
         }
     }
 }
-
-/// The default strength of the pull toward the mechanism (`docs/training.md`, "Starting
-/// from the mechanism", where it was measured).
-pub const DEFAULT_TOWARD_MECHANISM: f64 = 0.0;
 
 /// A setting with a value it cannot take.
 #[derive(Debug, Clone, PartialEq)]

@@ -157,6 +157,7 @@ fn a_grey_box_on_a_sparse_record_starts_from_its_fitted_mechanism() {
     let options = TrainOptions {
         epochs: 1,
         seed: 1,
+        toward_mechanism: super::TowardMechanism::Strength(0.0),
         ..TrainOptions::default()
     };
     let plain = train_with(

@@ -151,16 +151,18 @@ fn chemostat_experiments() -> (ir::Model, Vec<crate::record::Record>, crate::rec
     (model, records, held)
 }
 
-/// `auto` scores every candidate by leave-one-out over the training experiments alone
-/// (never the held-out one), picks the lowest pooled online error, trains at it and
-/// reports the table; with one training experiment it is refused, saying why.
+/// `auto` trains one fold per training experiment (never the held-out one), scores each
+/// stop by the folds' held-out online errors from the mechanism (epoch 0) on, and the run
+/// ends at the stop chosen: no later than the best, and within one standard error of it;
+/// at 0 the run is its mechanism. With one training experiment it trains every epoch
+/// without a pull, saying why.
 #[test]
-fn auto_chooses_the_strength_by_cross_validation_over_the_training_experiments() {
-    use super::toward::{ChoiceEvent, AUTO_GRID};
+fn auto_chooses_the_stop_by_cross_validation_over_the_training_experiments() {
+    use super::toward::ChoiceEvent;
     use super::{train_with, Event, Part, Recipe, TowardMechanism, TrainOptions, TrainingData};
     let (model, train, held) = chemostat_experiments();
     let options = TrainOptions {
-        epochs: 2,
+        epochs: 6,
         seed: 3,
         toward_mechanism: TowardMechanism::Auto,
         ..TrainOptions::default()
@@ -170,37 +172,42 @@ fn auto_chooses_the_strength_by_cross_validation_over_the_training_experiments()
         validation: std::slice::from_ref(&held),
         part: Part::All,
     };
-    let (mut folds, mut chosen) = (Vec::new(), None);
+    let (mut done, mut chosen) = (Vec::new(), None);
     let mut listen = |event: Event| match event {
-        Event::Strength(ChoiceEvent::Fold { index, fold, .. }) => folds.push((index, fold)),
-        Event::Strength(ChoiceEvent::Chosen(strength)) => chosen = Some(strength),
+        Event::Strength(ChoiceEvent::FoldDone { held_out, .. }) => done.push(held_out.to_string()),
+        Event::Strength(ChoiceEvent::Chosen(choice)) => chosen = Some(choice.chosen),
         _ => {}
     };
     let trained = train_with(&model, &data, &options, &Recipe::paper(), &mut listen).unwrap();
-    assert_eq!(folds.len(), AUTO_GRID.len() * train.len());
-    let report = trained.report.toward_mechanism.unwrap();
-    let choice = report.choice.unwrap();
-    assert_eq!(choice.candidates.len(), AUTO_GRID.len());
-    for candidate in &choice.candidates {
-        let names: Vec<&str> = candidate.folds.iter().map(|(n, _)| n.as_str()).collect();
-        assert_eq!(names, vec!["run1", "run2", "run3"]);
+    done.sort();
+    assert_eq!(done, vec!["run1", "run2", "run3"]);
+    let report = trained.report.toward_mechanism.as_ref().unwrap();
+    let choice = report.choice.as_ref().unwrap();
+    assert_eq!(choice.held_out, vec!["run1", "run2", "run3"]);
+    let epochs: Vec<usize> = choice.candidates.iter().map(|c| c.epoch).collect();
+    assert_eq!(epochs, (0..=6).collect::<Vec<_>>());
+    // The best has the lowest mean, recomputed from the folds' errors; the choice is no
+    // later than it and no worse than one standard error of the paired differences.
+    let mean = |epoch: usize| {
+        let c = choice.at(epoch).unwrap();
+        c.errors.iter().map(|e| e.unwrap()).sum::<f64>() / c.errors.len() as f64
+    };
+    assert!(epochs.iter().all(|&e| mean(choice.best) <= mean(e)));
+    assert!(choice.chosen <= choice.best);
+    assert_eq!((chosen, report.strength), (Some(choice.chosen), 0.0));
+    assert_eq!(trained.report.losses.len(), choice.chosen);
+    if choice.chosen == 0 {
+        assert!(report.outputs.iter().all(|o| o.moved == 0.0));
     }
-    // The lowest pooled error, the stronger pull on a tie, recomputed here.
-    let mut best = (f64::INFINITY, 0.0);
-    for candidate in &choice.candidates {
-        let error = candidate.pooled_online.unwrap();
-        if error <= best.0 {
-            best = (error, candidate.strength);
-        }
-    }
-    assert_eq!(choice.chosen, best.1);
-    assert_eq!((chosen, report.strength), (Some(best.1), best.1));
     let alone = TrainingData {
         train: &train[..1],
         ..data
     };
-    let refused = train_with(&model, &alone, &options, &Recipe::paper(), &mut |_| {});
-    assert!(matches!(refused, Err(super::TrainError::BadOption { .. })));
+    let trained = train_with(&model, &alone, &options, &Recipe::paper(), &mut |_| {}).unwrap();
+    let report = trained.report.toward_mechanism.unwrap();
+    assert!(report.choice.is_none());
+    assert!(report.unchosen.unwrap().contains("1 training experiment"));
+    assert_eq!(trained.report.losses.len(), 6);
 }
 
 /// A strong pull keeps the last layer nearer zero, and the outputs nearer the mechanism,

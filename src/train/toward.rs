@@ -15,17 +15,22 @@
 //! for a good one), so `λ = 1e-2` charges a last layer whose weights have an RMS of 0.3 as
 //! much as a mean squared error of `4.5e-4`.
 //!
-//! `auto` chooses `λ` from [`AUTO_GRID`] by leave-one-experiment-out cross-validation over
-//! the training experiments ([`choose`]).
+//! `auto` (the default) pulls by early stopping instead: training starts at the mechanism
+//! and ends after the number of epochs that leave-one-experiment-out cross-validation over
+//! the training experiments chose, 0 (the mechanism itself) when no training beats it on
+//! the experiments it did not see ([`choice`], `docs/training.md`, "Starting from the
+//! mechanism"). Early stopping from a start is the classic implicit form of the pull toward
+//! it (Bishop 1995); it costs one training per fold, where a grid of strengths costs one
+//! per fold and strength.
 
 use std::ops::Range;
 
 use crate::backend::NamedTensor;
 use crate::ir;
 
-use super::{cv, Event, Recipe, TrainError, TrainOptions, TrainingData};
-
+mod choice;
 mod distance;
+pub use choice::{choose, Candidate, ChoiceEvent, StopChoice};
 pub use distance::{output_distances, param_distances, OutputDistance, ParamDistance};
 
 /// What a run reports of its distance from the mechanism (`run.json` under
@@ -35,9 +40,12 @@ pub struct MechanismDistance {
     /// The strength trained with.
     #[serde(with = "crate::json")]
     pub strength: f64,
-    /// How `auto` chose it (absent for a fixed strength).
+    /// How `auto` chose where training stops (absent for a fixed strength).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub choice: Option<StrengthChoice>,
+    pub choice: Option<StopChoice>,
+    /// Why `auto` chose nothing and trained without a pull (one training experiment, say).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unchosen: Option<String>,
     /// Each closure output's distance from its value at network output 0, over the
     /// training points.
     pub outputs: Vec<OutputDistance>,
@@ -50,12 +58,10 @@ pub struct MechanismDistance {
 pub enum TowardMechanism {
     /// A fixed strength `λ >= 0` (0: no pull).
     Strength(f64),
-    /// Chosen from [`AUTO_GRID`] by cross-validation over the training experiments.
+    /// Early stopping from the mechanism, the stop chosen by cross-validation over the
+    /// training experiments ([`choose`]); no pull where it cannot be chosen.
     Auto,
 }
-
-/// The strengths `auto` chooses among: none and four decades.
-pub const AUTO_GRID: [f64; 5] = [0.0, 1e-3, 1e-2, 1e-1, 1.0];
 
 impl TowardMechanism {
     /// The fixed strength (`None` for `auto`).
@@ -194,134 +200,6 @@ impl Penalty {
     }
 }
 
-/// One candidate strength of `auto`: its folds' held-out online errors.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Candidate {
-    /// The strength.
-    #[serde(with = "crate::json")]
-    pub strength: f64,
-    /// Each fold: the held-out experiment and its online error (`None`: nothing scored,
-    /// or the fold failed).
-    pub folds: Vec<(String, Option<f64>)>,
-    /// The online errors pooled over the folds (each weighted by its cells; infinite
-    /// where a free run diverged): what the choice compares.
-    #[serde(with = "crate::json")]
-    pub pooled_online: Option<f64>,
-}
-
-/// How `auto` chose its strength.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct StrengthChoice {
-    /// Every candidate, in [`AUTO_GRID`] order.
-    pub candidates: Vec<Candidate>,
-    /// The strength chosen: the lowest pooled online error (the stronger pull on a tie).
-    #[serde(with = "crate::json")]
-    pub chosen: f64,
-}
-
-/// What `auto` tells as it goes ([`Event::Strength`]).
-#[derive(Debug, Clone, PartialEq)]
-pub enum ChoiceEvent<'a> {
-    /// Fold `fold` of `folds` (0-based) of candidate `index` of `count`, strength
-    /// `strength`, starts.
-    Fold {
-        /// 0-based candidate.
-        index: usize,
-        /// Candidates in all.
-        count: usize,
-        /// Its strength.
-        strength: f64,
-        /// 0-based fold.
-        fold: usize,
-        /// Folds in all.
-        folds: usize,
-    },
-    /// A candidate's folds are done.
-    Scored(&'a Candidate),
-    /// The strength chosen.
-    Chosen(f64),
-}
-
-/// Chooses the strength of `auto` by leave-one-experiment-out cross-validation over the
-/// training experiments of `data` (never its validation experiments), each candidate of
-/// [`AUTO_GRID`] scored by its folds' pooled online error. Needs at least two whole
-/// training experiments. The folds train silently; `on_event` hears of each fold and
-/// each candidate's result ([`Event::Strength`]).
-pub fn choose(
-    model: &ir::Model,
-    data: &TrainingData,
-    (options, recipe): (&TrainOptions, &Recipe),
-    on_event: &mut dyn FnMut(Event),
-) -> Result<StrengthChoice, TrainError> {
-    if data.train.len() < 2 || options.train_points.is_some() {
-        return Err(TrainError::BadOption {
-            option: "toward_mechanism".into(),
-            expected: "a fixed strength (such as 0.01), or `auto` with at least two whole \
-                       training experiments (each fold of its cross-validation trains on \
-                       the others)"
-                .into(),
-            found: format!(
-                "auto with {} training experiment(s){}",
-                data.train.len(),
-                if options.train_points.is_some() {
-                    " cut to --train-points"
-                } else {
-                    ""
-                }
-            ),
-        });
-    }
-    let count = AUTO_GRID.len();
-    let mut candidates = Vec::with_capacity(count);
-    for (index, &strength) in AUTO_GRID.iter().enumerate() {
-        let fixed = TrainOptions {
-            toward_mechanism: TowardMechanism::Strength(strength),
-            ..options.clone()
-        };
-        let mut on_fold = |fold: usize, folds: usize| {
-            on_event(Event::Strength(ChoiceEvent::Fold {
-                index,
-                count,
-                strength,
-                fold,
-                folds,
-            }));
-        };
-        let mut quiet = |_: Event| {};
-        let listeners: cv::Listeners = (&mut on_fold, &mut quiet);
-        let result = cv::cross_validate(model, data.train, (&fixed, recipe), None, listeners)?;
-        let candidate = Candidate {
-            strength,
-            folds: (result.folds.iter())
-                .map(|f| (f.held_out.clone(), f.online.as_ref().map(|e| e.overall)))
-                .collect(),
-            pooled_online: result.pooled_online.map(|e| e.overall),
-        };
-        on_event(Event::Strength(ChoiceEvent::Scored(&candidate)));
-        candidates.push(candidate);
-    }
-    let chosen = best(&candidates);
-    on_event(Event::Strength(ChoiceEvent::Chosen(chosen)));
-    Ok(StrengthChoice { candidates, chosen })
-}
-
-/// The strength with the lowest pooled online error; the stronger on a tie; 0 when none
-/// scored.
-fn best(candidates: &[Candidate]) -> f64 {
-    let score = |c: &Candidate| {
-        c.pooled_online
-            .filter(|e| !e.is_nan())
-            .unwrap_or(f64::INFINITY)
-    };
-    (candidates.iter().rev())
-        .fold(None::<&Candidate>, |kept, c| match kept {
-            Some(k) if score(k) <= score(c) => Some(k),
-            _ => Some(c),
-        })
-        .filter(|c| score(c).is_finite())
-        .map_or(0.0, |c| c.strength)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -341,27 +219,6 @@ mod tests {
             );
         }
         assert!(serde_json::from_str::<TowardMechanism>("\"strong\"").is_err());
-    }
-
-    fn candidate(strength: f64, pooled: Option<f64>) -> Candidate {
-        Candidate {
-            strength,
-            folds: Vec::new(),
-            pooled_online: pooled,
-        }
-    }
-
-    #[test]
-    fn the_lowest_error_wins_and_a_tie_goes_to_the_stronger_pull() {
-        let scored = [
-            candidate(0.0, Some(0.3)),
-            candidate(0.01, Some(0.2)),
-            candidate(0.1, Some(0.2)),
-            candidate(1.0, Some(f64::INFINITY)),
-        ];
-        assert_eq!(best(&scored), 0.1);
-        let none = [candidate(0.0, None), candidate(1.0, Some(f64::NAN))];
-        assert_eq!(best(&none), 0.0);
     }
 
     /// The penalty's gradient is the derivative of its value (central differences), it

@@ -9,6 +9,9 @@ use crate::train::checkpoint::EpochRow;
 use crate::train::toward::ChoiceEvent;
 use crate::train::{self, ErrorSet, Event};
 
+/// The stage of `--toward-mechanism auto`'s folds.
+const CHOOSING: &str = "choosing the stop";
+
 /// The progress and warnings on stderr, and the training log.
 #[derive(Default)]
 pub(super) struct Progress {
@@ -25,6 +28,10 @@ pub(super) struct Progress {
     /// Whether the run has no epochs (a model without closures, fitted by free runs, or
     /// `--epochs 0`).
     fitted_only: bool,
+    /// The epochs the run takes, once settled (a sparse record's budget, `auto`'s stop).
+    epochs: Option<usize>,
+    /// `auto`'s folds: their count, epochs each, and each one's last epoch.
+    folds: Option<(usize, usize, Vec<usize>)>,
 }
 
 impl Progress {
@@ -77,6 +84,14 @@ impl Progress {
                     ));
                 }
             }
+            Event::Budget(budget) => {
+                self.epochs = Some(budget.epochs);
+                self.reporter.println(&format!(
+                    "note: a sparse record takes one Adam step per epoch: training {} epochs \
+                     at learning rate {} (as --epochs {} --lr {} would)",
+                    budget.epochs, budget.learning_rate, budget.epochs, budget.learning_rate
+                ));
+            }
             Event::Substeps(substeps) => self.reporter.println(&format!(
                 "note: the model turns stiff along the training records: training takes \
                  {substeps} RK4 sub-steps per step (as --substeps {substeps} would)"
@@ -84,6 +99,7 @@ impl Progress {
             Event::Phase(train::TRAINING) if self.fitted_only => {}
             Event::Phase(train::TRAINING) => {
                 let count = Count::Items("epochs");
+                let epochs = self.epochs.unwrap_or(epochs);
                 self.reporter
                     .stage(train::TRAINING, epochs as u64, count, Announce::Now);
                 self.reporter.update(self.rows.len() as u64, String::new());
@@ -145,42 +161,57 @@ impl Progress {
         }
     }
 
-    /// `--toward-mechanism auto`, as it goes: each fold, each candidate's errors, the choice.
+    /// `--toward-mechanism auto`, as it goes: the folds' epochs as one stage, each fold's
+    /// end, the stop chosen.
     fn strength(&mut self, event: &ChoiceEvent) {
-        let line = match event {
-            ChoiceEvent::Fold {
-                index,
-                count,
-                strength,
-                fold,
-                folds,
-            } => format!(
-                "toward the mechanism: strength {strength} ({}/{count}), fold {}/{folds}",
-                index + 1,
-                fold + 1
-            ),
-            ChoiceEvent::Scored(candidate) => {
-                let folds: Vec<String> = (candidate.folds.iter())
-                    .map(|(name, error)| match error {
-                        Some(e) => format!("{name} {e:.4}"),
-                        None => format!("{name} -"),
-                    })
-                    .collect();
-                let pooled = candidate
-                    .pooled_online
-                    .map_or("-".into(), |e| format!("{e:.4}"));
-                format!(
-                    "toward the mechanism: strength {}: online error {pooled} ({})",
-                    candidate.strength,
-                    folds.join(", ")
-                )
+        match *event {
+            ChoiceEvent::Started { folds, epochs } => {
+                self.folds = Some((folds, epochs, vec![0; folds]));
+                self.reporter.println(&format!(
+                    "toward the mechanism: {folds} folds (each training experiment held out \
+                     once) choose where training stops"
+                ));
+                let total = (folds * epochs) as u64;
+                let count = Count::Items("fold epochs");
+                self.reporter.stage(CHOOSING, total, count, Announce::Now);
             }
-            ChoiceEvent::Chosen(strength) => format!(
-                "toward the mechanism: strength {strength} chosen (lowest pooled online error \
-                 over the folds); training on every training experiment"
-            ),
-        };
-        self.reporter.println(&line);
+            ChoiceEvent::Epoch { fold, epoch } => {
+                if let Some((_, _, done)) = self.folds.as_mut() {
+                    done[fold] = epoch;
+                    let sum: usize = done.iter().sum();
+                    self.reporter
+                        .update(sum as u64, format!("fold {}", fold + 1));
+                }
+            }
+            ChoiceEvent::FoldDone { fold, held_out } => {
+                if let Some((folds, _, _)) = self.folds {
+                    self.reporter.println(&format!(
+                        "toward the mechanism: fold {}/{folds} (without {held_out}) done",
+                        fold + 1
+                    ));
+                }
+            }
+            ChoiceEvent::Chosen(choice) => {
+                self.reporter.finish();
+                let error = |epoch| {
+                    (choice.at(epoch).and_then(|c| c.mean))
+                        .map_or("-".into(), |e| format!("{e:.4}"))
+                };
+                let stop = match choice.chosen {
+                    0 => "0 epochs: the grey box stays its mechanism".to_string(),
+                    e => format!("after epoch {e} of {}", choice.epochs),
+                };
+                self.reporter.println(&format!(
+                    "toward the mechanism: stopping {stop} (held-out online error, mean over \
+                     the folds: mechanism {}, best {} at epoch {}, chosen {})",
+                    error(0),
+                    error(choice.best),
+                    choice.best,
+                    error(choice.chosen)
+                ));
+                self.epochs = Some(choice.chosen);
+            }
+        }
     }
 
     /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,
