@@ -41,7 +41,7 @@ mod sensitivity;
 mod simulate;
 mod split;
 mod symbolic;
-mod uncertainty;
+pub mod uncertainty;
 
 pub use error::DiagnoseError;
 pub use report::*;

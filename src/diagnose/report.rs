@@ -187,7 +187,7 @@ pub struct Regime {
     pub highest: bool,
 }
 
-pub use crate::train::polish::ParamEstimate;
+pub use super::uncertainty::ParamEstimate;
 
 /// How a fit went: params with uncertainty, the direction the data leave free, criteria.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]

@@ -13,12 +13,36 @@
 //! errors measure how sharply the data pin the fit, not confidence intervals.
 
 use super::fit::{slope, thetas, values, Objective};
-use super::report::{FitSummary, ParamEstimate};
+use super::report::FitSummary;
 use crate::ir::Constraint;
 use crate::numeric::linalg::gauss_newton_system;
 use crate::numeric::lm::standard_errors;
 use crate::numeric::symmetric_eigen;
-pub use crate::train::polish::IDENTIFIABILITY_LIMIT;
+
+/// Relative standard error above which a param counts as poorly identified (in `gbc
+/// diagnose` and in training's polish and balance fit).
+pub const IDENTIFIABILITY_LIMIT: f64 = 0.05;
+
+/// A fitted param with its uncertainty: what training's polish and balance fit report,
+/// and what `diagnose` reports of its fits.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ParamEstimate {
+    /// Param name (in `diagnose`, `X@experiment` for a fitted initial value).
+    pub name: String,
+    /// Fitted value.
+    #[serde(with = "crate::json")]
+    pub value: f64,
+    /// Linearised standard error (infinite when the data do not determine it).
+    #[serde(with = "crate::json")]
+    pub std_error: f64,
+    /// `std_error / |value|`.
+    #[serde(with = "crate::json")]
+    pub relative_error: f64,
+    /// Whether `relative_error` is below [`IDENTIFIABILITY_LIMIT`] (runs written before
+    /// the name was shared with `diagnose` call it `well_identified`).
+    #[serde(alias = "well_identified")]
+    pub identified: bool,
+}
 
 /// Components of the free direction below this (of the largest) are left out.
 const SMALL_COMPONENT: f64 = 0.05;

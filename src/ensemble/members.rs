@@ -77,6 +77,21 @@ pub enum MemberEvent<'a> {
         /// Epochs planned.
         epochs: usize,
     },
+    /// `--toward-mechanism auto`'s folds, once for every member: `done` of `total` fold
+    /// epochs ([`crate::train::settle`]).
+    Choosing {
+        /// Fold epochs done.
+        done: usize,
+        /// Fold epochs in all.
+        total: usize,
+    },
+    /// The stop every member ends at (0: each member is the mechanism).
+    Chosen {
+        /// The chosen epoch.
+        stop: usize,
+        /// Epochs asked for.
+        epochs: usize,
+    },
     /// A member is done (trained, saved and run free along every experiment, or failed).
     Finished {
         /// 1-based.
@@ -119,12 +134,17 @@ pub fn train_ensemble(
     on_event: &(dyn Fn(MemberEvent) + Sync),
 ) -> Result<Trained, EnsembleError> {
     check_plan(plan, data)?;
+    // The stop is chosen once, on the training experiments themselves: a member's bag may
+    // draw one experiment twice, and no fold of it could hold that one out.
+    let settled = settle_once(model, data, (options, recipe), on_event)?;
+    let (options, recipe) = (&settled.options, &settled.recipe);
+    let last_epoch = settled.last_epoch;
     let slots: Mutex<Vec<Option<Outcome>>> = Mutex::new((0..plan.members).map(|_| None).collect());
     let work = |member: usize| -> Result<(), EnsembleError> {
         let outcome = train_member(
             model,
             data,
-            (options, recipe),
+            (options, recipe, last_epoch),
             (plan, member),
             keep,
             on_event,
@@ -162,6 +182,45 @@ pub fn train_ensemble(
     Ok(trained)
 }
 
+/// [`crate::train::settle`] for every member, its folds' progress told as
+/// [`MemberEvent::Choosing`].
+fn settle_once(
+    model: &ir::Model,
+    data: &TrainingData,
+    how: (&TrainOptions, &Recipe),
+    on_event: &(dyn Fn(MemberEvent) + Sync),
+) -> Result<crate::train::Settled, EnsembleError> {
+    use crate::train::toward::ChoiceEvent;
+    let mut folds: Vec<usize> = Vec::new();
+    let mut per_fold = 0;
+    let mut listen = |event: Event| match event {
+        Event::Strength(ChoiceEvent::Started { folds: n, epochs }) => {
+            (folds, per_fold) = (vec![0; n], epochs);
+        }
+        Event::Strength(ChoiceEvent::Epoch { fold, epoch }) => {
+            folds[fold] = epoch;
+            let done = folds.iter().sum();
+            on_event(MemberEvent::Choosing {
+                done,
+                total: per_fold * folds.len(),
+            });
+        }
+        Event::Strength(ChoiceEvent::Chosen(choice)) => on_event(MemberEvent::Chosen {
+            stop: choice.chosen,
+            epochs: choice.epochs,
+        }),
+        _ => {}
+    };
+    let control = RunControl::default();
+    Ok(crate::train::settle(
+        model,
+        data,
+        how,
+        &control,
+        &mut listen,
+    )?)
+}
+
 /// Refuses fewer than two members, and resampling where whole experiments cannot be.
 fn check_plan(plan: &Plan, data: &TrainingData) -> Result<(), EnsembleError> {
     if plan.members < 2 {
@@ -192,7 +251,7 @@ fn check_plan(plan: &Plan, data: &TrainingData) -> Result<(), EnsembleError> {
 fn train_member(
     model: &ir::Model,
     data: &TrainingData,
-    (options, recipe): (&TrainOptions, &Recipe),
+    (options, recipe, last_epoch): (&TrainOptions, &Recipe, Option<usize>),
     (plan, member): (&Plan, usize),
     keep: &Keep,
     on_event: &(dyn Fn(MemberEvent) + Sync),
@@ -234,6 +293,7 @@ fn train_member(
     let control = RunControl {
         keep_last_finite: true,
         recoveries: keep.recoveries,
+        last_epoch,
         ..RunControl::default()
     };
     let mut forward = |event: Event| match event {

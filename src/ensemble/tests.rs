@@ -341,15 +341,33 @@ fn an_ensemble_trains_saves_and_predicts_a_band_around_its_median() {
         seed: 5,
         ..TrainOptions::default()
     };
+    // `auto` (the default) chooses the stop once; every member ends there.
+    let heard = std::sync::Mutex::new((None, vec![0; plan.members]));
+    let listen = |event: MemberEvent| {
+        let mut heard = heard.lock().unwrap();
+        match event {
+            MemberEvent::Chosen { stop, .. } => heard.0 = Some(stop),
+            MemberEvent::Epoch { member, epoch, .. } => {
+                heard.1[member - 1] = heard.1[member - 1].max(epoch);
+            }
+            _ => {}
+        }
+    };
     let trained = train_ensemble(
         &model,
         &data,
         (&options, &Recipe::paper()),
         &plan,
         &keep,
-        &|_| {},
+        &listen,
     )
     .unwrap();
+    let (stop, last_epochs) = heard.into_inner().unwrap();
+    let stop = stop.expect("auto chose a stop");
+    assert!(
+        last_epochs.iter().all(|&e| e == stop),
+        "{stop} {last_epochs:?}"
+    );
     let info = &trained.info;
     let names = ["run1", "run2", "run3"];
     for member in &info.members {

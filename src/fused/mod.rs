@@ -25,7 +25,7 @@
 //! precisions, for every shipped model and both objectives); it starts from the same
 //! weights as [`crate::backend::Network::build`] and reads and writes the same
 //! [`NamedTensor`] lists, so training runs it under the one optimiser of
-//! [`crate::train::step`] (`--engine fused`, and `auto` wherever it supports the model: all
+//! training's step interface (`--engine fused`, and `auto` wherever it supports the model: all
 //! but measured outputs). Its own Adam step ([`FusedNetwork::train_step_with`], with
 //! [`StepSettings`] and [`AdamState`] as the graph backend's) serves `gbc bench`.
 //!

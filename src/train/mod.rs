@@ -86,7 +86,7 @@ pub use initial::{InitialState, Origin};
 pub use polish::{ParamEstimate, PolishSummary};
 pub use recipe::{Engine, Objective, ParamSource, Recipe, SparseBudget};
 pub use recovery::Recovery;
-pub use run::{train_run, train_with, EVALUATING, TRAINING, VALIDATING};
+pub use run::{settle, train_run, train_with, Settled, EVALUATING, TRAINING, VALIDATING};
 pub use settings::{BadSetting, Settings};
 pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
 pub use toward::{StopChoice, TowardMechanism};

@@ -24,11 +24,11 @@ use crate::ir;
 use crate::numeric::lm::{self, central_difference, difference_step, standard_errors};
 use crate::numeric::{Damping, GaussNewton, Settings};
 
+pub use crate::diagnose::uncertainty::{ParamEstimate, IDENTIFIABILITY_LIMIT};
+
 use super::pairs::PairTable;
 use super::TrainError;
 
-/// Relative standard error above which a param counts as poorly identified.
-pub const IDENTIFIABILITY_LIMIT: f64 = 0.05;
 /// Most Levenberg-Marquardt trial steps of the polish.
 const MAX_ITERATIONS: usize = 30;
 /// The polish's damping schedule: from `1e-3`, divided by 3 on success and multiplied by 4
@@ -48,27 +48,6 @@ const DAMPING: Damping = Damping {
 };
 /// Pairs per prediction batch.
 const CHUNK: usize = 512;
-
-/// A fitted param with its uncertainty: what training's polish and balance fit report,
-/// and what `diagnose` reports of its fits.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ParamEstimate {
-    /// Param name (in `diagnose`, `X@experiment` for a fitted initial value).
-    pub name: String,
-    /// Fitted value.
-    #[serde(with = "crate::json")]
-    pub value: f64,
-    /// Linearised standard error (infinite when the data do not determine it).
-    #[serde(with = "crate::json")]
-    pub std_error: f64,
-    /// `std_error / |value|`.
-    #[serde(with = "crate::json")]
-    pub relative_error: f64,
-    /// Whether `relative_error` is below [`IDENTIFIABILITY_LIMIT`] (runs written before
-    /// the name was shared with `diagnose` call it `well_identified`).
-    #[serde(alias = "well_identified")]
-    pub identified: bool,
-}
 
 /// What the polish did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -51,8 +51,12 @@ pub fn train_run(
     on_event: &mut dyn FnMut(Event),
 ) -> Result<Trained, TrainError> {
     let started = std::time::Instant::now();
-    let resolved = resolve(model, data, (options, recipe), control, on_event)?;
-    let (options, recipe, control) = (&resolved.options, &resolved.recipe, &resolved.control);
+    let resolved = settle(model, data, (options, recipe), control, on_event)?;
+    let control = RunControl {
+        last_epoch: resolved.last_epoch.or(control.last_epoch),
+        ..control.clone()
+    };
+    let (options, recipe, control) = (&resolved.options, &resolved.recipe, &control);
     let choice = (resolved.choice, resolved.unchosen);
     let mut run = prepare(model, data, options, recipe, on_event)?;
     // On a sparse record the one-step warm-up reaches few cells: it shrinks in proportion.
@@ -103,35 +107,42 @@ pub fn train_run(
     Ok(run.report(options, recipe, (initial, evaluation), (fitted, distance)))
 }
 
-/// A run's options, recipe and control once the defaults that depend on the data are
-/// settled: a sparse record's budget, and where `--toward-mechanism auto` stops.
-struct Resolved {
-    options: TrainOptions,
-    recipe: Recipe,
-    control: RunControl,
-    choice: Option<StopChoice>,
-    unchosen: Option<String>,
+/// A run's options and recipe once the defaults that depend on the data are settled: a
+/// sparse record's budget, and where `--toward-mechanism auto` stops.
+pub struct Settled {
+    /// The options to train with (the budget applied, the strength fixed: 0 after `auto`).
+    pub options: TrainOptions,
+    /// The recipe (no polish where `auto` stopped at 0).
+    pub recipe: Recipe,
+    /// The last epoch `auto` chose ([`RunControl::last_epoch`]; none at 0, where the
+    /// options run no epoch).
+    pub last_epoch: Option<usize>,
+    /// How `auto` chose.
+    pub choice: Option<StopChoice>,
+    /// Why `auto` could not choose.
+    pub unchosen: Option<String>,
 }
 
 /// Settles the sparse budget ([`Recipe::sparse_budget`], told as [`Event::Budget`]) and
 /// `auto`: the folds choose the stop ([`toward::choose`]); the run then trains without a
-/// pull and ends there (a stop at 0 is the mechanism itself: no epoch, no polish).
-fn resolve(
+/// pull and ends there (a stop at 0 is the mechanism itself: no epoch, no polish). An
+/// ensemble settles once for all its members.
+pub fn settle(
     model: &ir::Model,
     data: &TrainingData,
     (options, recipe): (&TrainOptions, &Recipe),
     control: &RunControl,
     on_event: &mut dyn FnMut(Event),
-) -> Result<Resolved, TrainError> {
+) -> Result<Settled, TrainError> {
     let mut options = options.clone();
     if let Some(budget) = sparse_budget(model, data, (&options, recipe))? {
         (options.epochs, options.learning_rate) = (budget.epochs, budget.learning_rate);
         on_event(Event::Budget(budget));
     }
-    let mut resolved = Resolved {
+    let mut resolved = Settled {
         options,
         recipe: recipe.clone(),
-        control: control.clone(),
+        last_epoch: None,
         choice: None,
         unchosen: None,
     };
@@ -148,7 +159,7 @@ fn resolve(
             resolved.choice = Some(choice);
         }
         Ok(choice) => {
-            resolved.control.last_epoch = Some(choice.chosen);
+            resolved.last_epoch = Some(choice.chosen);
             resolved.choice = Some(choice);
         }
         Err(why) => resolved.unchosen = Some(why),

@@ -136,6 +136,21 @@ impl MemberProgress {
                     eprintln!("training: {}", running.join(", "));
                 }
             }
+            MemberEvent::Choosing { done, total } => {
+                if state.0.elapsed().as_secs_f64() >= HEARTBEAT {
+                    state.0 = Instant::now();
+                    eprintln!(
+                        "toward the mechanism: choosing the stop for every member, \
+                         {done}/{total} fold epochs"
+                    );
+                }
+            }
+            MemberEvent::Chosen { stop: 0, .. } => eprintln!(
+                "toward the mechanism: stopping at 0 epochs: every member is the mechanism"
+            ),
+            MemberEvent::Chosen { stop, epochs } => {
+                eprintln!("toward the mechanism: every member stops after epoch {stop} of {epochs}")
+            }
             MemberEvent::Finished {
                 member,
                 status,
