@@ -8,8 +8,8 @@
 
 use std::path::Path;
 
-use crate::backend::NamedTensor;
 use crate::io::IoError;
+use crate::numeric::NamedTensor;
 
 /// The first value of `values` that is not finite: its index and the value.
 pub fn first_non_finite(values: &[f64]) -> Option<(usize, f64)> {

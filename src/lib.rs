@@ -11,7 +11,6 @@
 
 pub mod api;
 pub mod ast;
-pub mod backend;
 pub mod check;
 pub mod cli;
 pub mod compare;
@@ -19,6 +18,7 @@ pub mod data;
 pub mod diagnose;
 pub mod diagnostics;
 pub mod driver;
+pub mod engine;
 pub mod ensemble;
 pub mod error;
 pub mod eval;
@@ -27,7 +27,6 @@ pub mod explain;
 pub mod export;
 pub mod finite;
 pub mod format;
-pub mod fused;
 pub mod ide;
 pub mod init;
 pub mod io;

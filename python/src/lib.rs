@@ -343,8 +343,8 @@ impl Run {
     #[pyo3(signature = (path, precision = "f32"))]
     fn export_onnx(&self, py: Python<'_>, path: PathBuf, precision: &str) -> PyResult<()> {
         let precision = match precision {
-            "f32" => gbc::backend::Precision::F32,
-            "f64" => gbc::backend::Precision::F64,
+            "f32" => gbc::engine::graph::Precision::F32,
+            "f64" => gbc::engine::graph::Precision::F64,
             other => {
                 return Err(PyValueError::new_err(format!(
                     "expected precision `f32` or `f64`, found `{other}`"

@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::ApiError;
-use crate::backend::Precision;
 use crate::data::MinRows;
+use crate::engine::graph::Precision;
 use crate::numeric::median;
 use crate::signal::Signal;
 use crate::sim::SimOptions;

@@ -234,7 +234,10 @@ impl Run {
     }
 
     /// The one-step map as an ONNX file's bytes (`gbc export`).
-    pub fn export_onnx(&self, precision: crate::backend::Precision) -> Result<Vec<u8>, ApiError> {
+    pub fn export_onnx(
+        &self,
+        precision: crate::engine::graph::Precision,
+    ) -> Result<Vec<u8>, ApiError> {
         let (network, setup) = (&self.trained.network, &self.trained.setup);
         crate::export::onnx(self.model.ir(), network, setup, precision)
             .map(|exported| exported.bytes)

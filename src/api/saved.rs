@@ -15,7 +15,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::{ApiError, Model};
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 use crate::ensemble::{self, CellCount, Loaded};
 use crate::record::Record;
 use crate::train::artifacts::{self, Restored};

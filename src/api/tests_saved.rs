@@ -38,7 +38,7 @@ fn a_saved_run_predicts_and_exports_as_the_run_it_was() {
         assert_eq!(found.columns, expected[0].columns, "{mode:?}");
         assert_eq!(found.experiments.len(), found.columns[0].len());
     }
-    let precision = crate::backend::Precision::F32;
+    let precision = crate::engine::graph::Precision::F32;
     let export = saved.export(ExportFormat::Onnx, precision).unwrap();
     assert_eq!(export.0.bytes, run.export_onnx(precision).unwrap());
     let layout = export.layout_text(std::path::Path::new("m.onnx"));

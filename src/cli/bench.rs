@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use super::options::TrainingFlags;
 use super::{CommandError, CommandResult};
 use crate::api::bench::{BenchModel, BenchSpec, Measurement, TrainingRow};
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 use crate::train::bench::Engine;
 
 /// Timed epochs per measurement when `--epochs` is left out.

@@ -4,7 +4,7 @@
 //! user typed. Beside them, the clap mirrors of the library's choices (element type,
 //! engine, template, message format), so that no clap type lives below `cli/`.
 
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 use crate::train::{Engine, Settings, TowardMechanism, TrainError};
 
 use super::CommandError;
@@ -201,7 +201,7 @@ mod tests {
 
     #[test]
     fn a_bug_from_any_stage_is_an_internal_error_and_bad_input_is_not() {
-        let bug = crate::backend::BackendError::internal("rows differ");
+        let bug = crate::engine::graph::BackendError::internal("rows differ");
         assert!(
             matches!(CommandError::user(TrainError::from(bug)), CommandError::Internal(m) if m.contains("rows differ"))
         );

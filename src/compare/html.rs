@@ -38,13 +38,29 @@ pub fn page(comparison: &Comparison, records: &[Record], title: &str) -> String 
          mean at the same time since their start). Each is run free from the held-out \
          experiment's first row and scored on its measured cells after it: the error is the mean \
          over states of each state's NMSE (<code>docs/error-measure.md</code>). The grey box is \
-         trained once per seed ({}), {} epochs each, with <code>gbc train</code>'s defaults.</p>",
+         trained once per seed ({}) with <code>gbc train</code>'s defaults (a sparse record's budget, \
+         the stop that cross-validation over the training experiments chooses: epochs trained \
+         per seed {}).</p>",
         escape(&comparison.grey_box),
         escape(&comparison.mechanism),
         comparison.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", "),
-        comparison.epochs,
+        escape(&epochs_trained(comparison)),
     );
     html_page(&format!("{title}: comparison"), &intro, &sections)
+}
+
+/// The grey box's epochs trained, per split and seed: "B4: seed 1 280, seed 2 300".
+fn epochs_trained(comparison: &Comparison) -> String {
+    let splits: Vec<String> = (comparison.splits.iter())
+        .map(|split| {
+            let runs: Vec<String> = (split.grey_box.iter())
+                .filter(|r| r.failed.is_none())
+                .map(|r| format!("seed {} {}", r.seed, r.epochs))
+                .collect();
+            format!("{}: {}", split.held_out.join(", "), runs.join(", "))
+        })
+        .collect();
+    splits.join("; ")
 }
 
 /// The verdict over every held-out experiment and its table.

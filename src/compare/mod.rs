@@ -174,6 +174,10 @@ pub struct MemberRun {
     /// Its params after training (fitted, for the mechanism).
     #[serde(with = "crate::json")]
     pub params: Vec<(String, f64)>,
+    /// The epochs it trained (a sparse record's budget and `--toward-mechanism auto`'s
+    /// stop decide them; 0: the mechanism itself).
+    #[serde(default)]
+    pub epochs: usize,
     /// Its free run on each held-out experiment.
     pub held_out: Vec<HeldOutRun>,
 }

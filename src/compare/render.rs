@@ -15,14 +15,13 @@ pub fn text(comparison: &Comparison) -> String {
         writeln!(
         out,
         "grey box `{}` against its mechanism `{}` (fitted by free runs) and the naive forecast; \
-         {} seed{} ({}), {} epochs each; errors: mean over states of each state's NMSE on the \
+         {} seed{} ({}), gbc train's defaults (epochs trained below); errors: mean over states of each state's NMSE on the \
          held-out experiments' measured cells (docs/error-measure.md)",
         comparison.grey_box,
         comparison.mechanism,
         seeds.len(),
         if seeds.len() == 1 { "" } else { "s" },
         seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", "),
-        comparison.epochs,
     );
     for split in &comparison.splits {
         let _ = writeln!(
@@ -37,6 +36,13 @@ pub fn text(comparison: &Comparison) -> String {
         }
         for score in &split.scores {
             table(&mut out, score, &comparison.states);
+        }
+        let trained: Vec<String> = (split.grey_box.iter())
+            .filter(|r| r.failed.is_none())
+            .map(|r| format!("seed {} {}", r.seed, r.epochs))
+            .collect();
+        if !trained.is_empty() {
+            let _ = writeln!(out, "  grey box epochs trained: {}", trained.join(", "));
         }
     }
     if comparison

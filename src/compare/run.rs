@@ -279,6 +279,7 @@ fn run_member(
             )
         }),
         params: trained.report.params.clone(),
+        epochs: trained.report.losses.len(),
         held_out,
     };
     Ok((run, trained.setup.normalisation.clone()))
@@ -351,6 +352,7 @@ fn assemble(
                     failed: Some(error.to_string()),
                     training_diverged: None,
                     params: Vec::new(),
+                    epochs: 0,
                     held_out: Vec::new(),
                 });
                 first_failure.get_or_insert(error);

@@ -322,6 +322,7 @@ fn the_untrained_grey_box_is_the_mechanism_only_at_its_params() {
         failed: None,
         training_diverged: None,
         params,
+        epochs: 0,
         held_out: Vec::new(),
     };
     let fitted = vec![("k".to_string(), 0.3), ("K".to_string(), 1.7)];

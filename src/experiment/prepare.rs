@@ -12,9 +12,9 @@ use super::results::{Fingerprint, StudyRecord};
 use super::set::{self, SetSplit};
 use super::{ExperimentError, ExperimentFailure, Study, Validation};
 use crate::data::{Column, Dataset, MinRows};
+use crate::engine::pairs::first_pair_row;
 use crate::ir;
 use crate::numeric::mean_std;
-use crate::train::pairs::first_pair_row;
 use crate::train::{self, TrainOptions};
 
 /// A model of a study, compiled, with its validation record.

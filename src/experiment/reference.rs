@@ -1,8 +1,8 @@
 //! What trained models are compared with: free-run errors on a record, and the truth
 //! model's rates along a record (the true values of the closures, paper Fig. 3d).
 
-use crate::backend::{Network, Setup};
 use crate::data::Dataset;
+use crate::engine::graph::{Network, Setup};
 use crate::ir;
 use crate::numeric::mean_std;
 use crate::signal::Signal;

@@ -252,7 +252,10 @@ fn study_files_name_bad_settings_by_their_field() {
     let defaults = crate::train::Settings::default();
     assert_eq!(study.settings.batch_size, defaults.batch_size);
     assert_eq!(study.settings.learning_rate, defaults.learning_rate);
-    assert_eq!(study.settings.precision, crate::backend::Precision::F64);
+    assert_eq!(
+        study.settings.precision,
+        crate::engine::graph::Precision::F64
+    );
     value["batch"] = serde_json::json!(10);
     match Study::parse("study.json", &serde_json::to_string(&value).unwrap()) {
         Err(ExperimentError::BadStudy { reason, .. }) => {

@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 use crate::ensemble::{self, Coverage, EnsembleError, StateNoise};
 use crate::ir;
 use crate::train::artifacts;

@@ -190,7 +190,7 @@ fn with_prior(
     let positive = matches!(constraint, Constraint::Positive);
     match (kind, positive) {
         (PriorKind::Mul, true) => {
-            use crate::backend::program::outputs::{JOIN, TAIL};
+            use crate::engine::program::outputs::{JOIN, TAIL};
             let clipped = graph.binary("Max", p, &zero);
             let shifted = graph.binary("Add", net, &Value::Const(JOIN));
             let upper = graph.binary("Max", &shifted, &zero);
@@ -238,7 +238,7 @@ fn bounded(
         None => (Value::Const(0.0), Value::Const(scale)),
     };
     let correction = graph.binary("Mul", &factor, net);
-    let margin = (hi - lo) * crate::backend::program::outputs::BOUNDED_MARGIN;
+    let margin = (hi - lo) * crate::engine::program::outputs::BOUNDED_MARGIN;
     let below_top = graph.binary("Min", &start, &Value::Const(hi - margin));
     let q = graph.binary("Max", &below_top, &Value::Const(lo + margin));
     let above = graph.binary("Sub", &q, &Value::Const(lo));

@@ -6,7 +6,7 @@
 use std::collections::HashMap;
 
 use super::onnx::{self, AttributeProto, NodeProto, TensorProto};
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 
 /// A value of the graph: a constant known at export time, or a named tensor.
 #[derive(Debug, Clone, PartialEq)]

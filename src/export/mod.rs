@@ -24,7 +24,7 @@ pub mod window;
 
 use prost::Message;
 
-use crate::backend::{Network, Precision, Setup};
+use crate::engine::graph::{Network, Precision, Setup};
 use crate::ir;
 
 /// What an exported file holds, for the user: window length, step and the names of the
@@ -148,11 +148,11 @@ pub fn onnx(
 /// Refuses weights that are not finite once cast to `precision`.
 fn check_finite(
     model: &ir::Model,
-    weights: &[crate::backend::NamedTensor],
+    weights: &[crate::engine::graph::NamedTensor],
     precision: Precision,
 ) -> Result<(), ExportError> {
-    let cast: Vec<crate::backend::NamedTensor> = (weights.iter())
-        .map(|tensor| crate::backend::NamedTensor {
+    let cast: Vec<crate::engine::graph::NamedTensor> = (weights.iter())
+        .map(|tensor| crate::engine::graph::NamedTensor {
             values: (tensor.values.iter())
                 .map(|&v| match precision {
                     Precision::F32 => f64::from(v as f32),

@@ -9,7 +9,7 @@
 use super::expr::{Physics, Stage};
 use super::graph::Builder;
 use super::window::WindowMap;
-use crate::backend::{NamedTensor, Setup};
+use crate::engine::graph::{NamedTensor, Setup};
 use crate::ir::{self, Activation, Var};
 
 /// Graph input: the measured states at the window's knots.

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use super::*;
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 use crate::record::Record;
 use crate::train::predict::{predict_in_range, Mode};
 use crate::train::{self, History, Part, Recipe, TrainOptions, Trained, TrainingData};
@@ -44,7 +44,7 @@ fn trained(model: &ir::Model, record: &Record, precision: Precision) -> Trained 
 /// tract, kept in its own namespace (its prelude has an `onnx` of its own).
 pub(super) mod runtime {
     use super::Exported;
-    use crate::backend::Precision;
+    use crate::engine::graph::Precision;
     use tract_onnx::prelude::*;
 
     /// A loaded, optimised model.
@@ -278,7 +278,7 @@ fn weights_that_are_not_finite_in_the_element_type_are_refused() {
         120,
     );
     let setup = crate::train::fixtures::setup(&model, Precision::F64, 1);
-    let mut network = crate::backend::Network::build(&model, &setup).unwrap();
+    let mut network = crate::engine::graph::Network::build(&model, &setup).unwrap();
     let mut weights = network.weights();
     weights[0].values[3] = 1e39;
     network.set_weights(&weights).unwrap();

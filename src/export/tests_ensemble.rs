@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::tests::free_run;
 use super::Exported;
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 use crate::ensemble::{self, Keep, Plan, Resample};
 use crate::record::Record;
 use crate::train::predict::{Mode, PredictionTable};

@@ -4,7 +4,7 @@
 //! closure at stage fraction `f` of the step from knot `k` reads each observed variable at
 //! `t_k + f h - lag * delay`: states by linear interpolation between knots, inputs held
 //! (the end of the step sees the value held over it), exactly as in training
-//! ([`crate::train::pairs::embedding_row`]). Those reads are linear in the values at the
+//! ([`crate::engine::pairs::embedding_row`]). Those reads are linear in the values at the
 //! knots, so each is a constant matrix applied to the window: found here by running the
 //! training code itself on unit impulses along a uniform track, never re-derived.
 //!
@@ -12,10 +12,10 @@
 //! `W - 1` the current one), the input window `[W, U]` likewise, then the stage state
 //! `[S + H]` (a lag-0 state column is the RK4 stage estimate, not the window).
 
-use crate::backend::Setup;
+use crate::engine::graph::Setup;
+use crate::engine::pairs::{embedding_row, stage_fractions};
 use crate::ir::{self, Var};
 use crate::record::Track;
-use crate::train::pairs::{embedding_row, stage_fractions};
 
 /// One nonzero read: `(variable, knot, embedding column, coefficient)`.
 type Read = (Var, usize, usize, f64);

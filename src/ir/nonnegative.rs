@@ -307,7 +307,7 @@ impl Analysis<'_> {
         }
     }
 
-    /// A closure output for any raw network output `n` (`src/backend/program/outputs.rs`).
+    /// A closure output for any raw network output `n` (`src/engine/program/outputs.rs`).
     fn output(&self, spec: &ClosureOutput) -> Signs {
         // A magnitude left out is chosen from the data, and is positive.
         let scale = Signs::of(spec.scale.unwrap_or(1.0));

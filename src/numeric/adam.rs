@@ -1,6 +1,6 @@
 //! Adam (Kingma & Ba 2015) with per-group learning rates and global-norm gradient
 //! clipping, on one flat vector of weights: the one optimiser of training. Both engines (the
-//! dfdx graph in `crate::backend`, the hand-fused step in `crate::fused`) call it; neither
+//! dfdx graph in `crate::engine::graph`, the hand-fused step in `crate::engine::fused`) call it; neither
 //! keeps constants, bias correction or clipping of its own.
 
 use std::ops::Range;

@@ -20,6 +20,7 @@ pub mod lu;
 pub mod real;
 pub mod rounding;
 pub mod stats;
+pub mod tensor;
 pub mod times;
 
 #[cfg(test)]
@@ -36,4 +37,5 @@ pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Se
 pub use lu::{Complex, Lu};
 pub use real::Real;
 pub use stats::{mean_std, median, normal_cdf, order_statistic, root_mean_square};
+pub use tensor::NamedTensor;
 pub use times::{grid_step, time_tolerance, uniform_step, OffGrid};

@@ -388,3 +388,23 @@ pub fn hold(values: &[f64], position: f64, left_limit: bool) -> f64 {
     };
     values[index.clamp(0.0, last) as usize]
 }
+
+/// The grid of `model` with longest step `max_step`: each measured state's gap limit is the
+/// shortest delay of the closures that look back at it (the longest step when none does).
+pub fn grid_for(model: &crate::ir::Model, max_step: f64) -> GridOptions {
+    let gap_limits = (0..model.states.len())
+        .map(|index| {
+            (model.closures.iter())
+                .filter(|c| c.embedding.dim > 1)
+                .filter(|c| c.embedding.observe.contains(&crate::ir::Var::State(index)))
+                .map(|c| c.embedding.delay)
+                .fold(f64::INFINITY, f64::min)
+        })
+        .map(|limit| if limit.is_finite() { limit } else { max_step })
+        .collect();
+    GridOptions {
+        max_step,
+        gap_limits,
+        subdivide: model.dynamics == crate::ir::Dynamics::Continuous,
+    }
+}

@@ -30,14 +30,14 @@
 
 use std::fmt;
 
-use crate::backend::program::{Program, ProgramInputs};
-use crate::backend::{initial_raw_params, BackendError};
+use crate::engine::graph::{initial_raw_params, BackendError};
+use crate::engine::program::{Program, ProgramInputs};
 use crate::ir::{self, Dynamics, PriorKind, Var};
 use crate::numeric::order_statistic;
 
 use crate::record::Track;
 
-use super::pairs::PairAt;
+use crate::engine::pairs::PairAt;
 
 /// The RK4 stability limit of `h * lambda` on the negative real axis.
 pub const RK4_STABILITY_LIMIT: f64 = 2.785;

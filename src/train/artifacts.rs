@@ -15,7 +15,7 @@ pub use structure::{compare, differences, fingerprint, structure, Change, Struct
 
 use sha2::{Digest, Sha256};
 
-use crate::backend::{NamedTensor, Network, Normalisation, Precision, Setup};
+use crate::engine::graph::{NamedTensor, Network, Normalisation, Precision, Setup};
 use crate::ir;
 
 use super::{

@@ -37,16 +37,16 @@
 
 use std::convert::Infallible;
 
-use crate::backend::program::{Program, ProgramInputs};
-use crate::backend::{initial_raw_params, BackendError};
+use crate::engine::graph::{initial_raw_params, BackendError};
+use crate::engine::program::{Program, ProgramInputs};
 use crate::ir::{self, Dynamics};
 use crate::numeric::lm::{self, central_difference, difference_step};
 use crate::numeric::{mean_std, Settings};
 
 use crate::record::Track;
 
-use super::pairs::PairAt;
 use super::polish::{ParamEstimate, IDENTIFIABILITY_LIMIT};
+use crate::engine::pairs::PairAt;
 
 mod elimination;
 

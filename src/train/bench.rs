@@ -14,14 +14,14 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{Network, Precision, Setup, StepSettings};
+use crate::engine::graph::{Network, Precision, Setup, StepSettings};
 use crate::ir;
 
-use super::pairs::stage_fractions;
 use super::prepare::Layout;
-use super::step::{Optimiser, Step, StepBatch};
 use super::validation::{refresh, Course};
 use super::{analysis, hidden_initial_values, Part, TrainError, TrainOptions, TrainingData};
+use crate::engine::pairs::stage_fractions;
+use crate::engine::step::{Optimiser, Step, StepBatch};
 
 pub use super::Engine;
 

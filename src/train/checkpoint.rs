@@ -22,7 +22,7 @@ use std::time::Instant;
 
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{AdamState, NamedTensor, Network};
+use crate::engine::graph::{AdamState, NamedTensor, Network};
 
 use super::artifacts::{read_tensors, write_tensors};
 use super::fit::EpochEnd;

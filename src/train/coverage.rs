@@ -8,8 +8,8 @@
 //! is then shortened in proportion to the share of cells the pairs reach
 //! ([`Coverage::warmup_share`]), so the windows, which reach every cell, train longer.
 
-use super::pairs::PairAt;
 use super::split::Training;
+use crate::engine::pairs::PairAt;
 use crate::ir;
 use crate::record::Track;
 

@@ -3,7 +3,7 @@
 use miette::Diagnostic;
 use thiserror::Error;
 
-use crate::backend::BackendError;
+use crate::engine::graph::BackendError;
 use crate::io::IoError;
 
 /// A training or prediction failure.

@@ -8,13 +8,13 @@
 
 use std::fmt;
 
-use crate::backend::{BackendError, Batch, Network, Normalisation};
+use crate::engine::graph::{BackendError, Batch, Network, Normalisation};
 use crate::ir;
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Track;
 
-use super::pairs::{embedding_row, PairTable};
 use super::stepping::{Stepper, Stepping};
+use crate::engine::pairs::{embedding_row, PairTable};
 
 /// Rows per prediction batch when evaluating many pairs at once.
 const EVALUATION_CHUNK: usize = 512;
@@ -375,7 +375,7 @@ fn split_network(
         && model.dynamics == ir::Dynamics::Continuous
         && trained > 1;
     split.then(|| {
-        let fractions = super::pairs::stage_fractions(model.dynamics, 1);
+        let fractions = crate::engine::pairs::stage_fractions(model.dynamics, 1);
         (network.with_substeps(1), fractions, trained)
     })
 }

@@ -14,22 +14,22 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::backend::{AdamState, BackendError, NamedTensor, Network, Setup, StepSettings};
-use crate::fused::FusedNetwork;
+use crate::engine::fused::FusedNetwork;
+use crate::engine::graph::{AdamState, BackendError, NamedTensor, Network, Setup, StepSettings};
 use crate::ir;
 
 use super::checkpoint::Safety;
-use super::pairs::stage_fractions;
 use super::recovery::{self, Recovery};
 use super::split::Training;
-use super::step::{Optimiser, Step, StepBatch};
 use super::toward::Penalty;
 use super::validation::{refresh, Course};
-use super::windows::{rollout_batch_into, shooting_starts};
 use super::{
     Engine, EpochDivergence, Event, Objective, Recipe, TrainError, TrainOptions, FILL_REFRESH,
 };
-use crate::backend::RolloutBatch;
+use crate::engine::graph::RolloutBatch;
+use crate::engine::pairs::stage_fractions;
+use crate::engine::step::{Optimiser, Step, StepBatch};
+use crate::engine::windows::{rollout_batch_into, shooting_starts};
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -61,7 +61,7 @@ impl Fit<'_> {
     /// before the epochs), the params toward their initial values.
     fn penalty(&self, network: &Network) -> Penalty {
         let strength = (self.options.toward_mechanism.strength()).unwrap_or(0.0);
-        let start = crate::backend::initial_raw_params(self.model);
+        let start = crate::engine::graph::initial_raw_params(self.model);
         Penalty::new(self.model, &network.weights(), strength, &start)
     }
 
@@ -518,12 +518,12 @@ impl Engines<'_> {
 
 /// Why an epoch stopped.
 enum EpochFailure {
-    Backend(crate::backend::BackendError),
+    Backend(crate::engine::graph::BackendError),
     NotFinite(f64),
 }
 
-impl From<crate::backend::BackendError> for EpochFailure {
-    fn from(error: crate::backend::BackendError) -> Self {
+impl From<crate::engine::graph::BackendError> for EpochFailure {
+    fn from(error: crate::engine::graph::BackendError) -> Self {
         EpochFailure::Backend(error)
     }
 }

@@ -92,10 +92,10 @@ pub fn constant_value(model: &ir::Model, expr: &ir::Expr) -> f64 {
 /// run from the first knot (measured states reset to the data where known, the fitted ones
 /// free) up to each fitted state's first measured cell. Updates the tracks and `initial`.
 pub(super) fn fit_initial_states(
-    network: &crate::backend::Network,
+    network: &crate::engine::graph::Network,
     model: &ir::Model,
     (course, fractions): (&mut super::validation::Course, &[f64]),
-    normalisation: &crate::backend::Normalisation,
+    normalisation: &crate::engine::graph::Normalisation,
     (initial, hidden_init): (&mut [InitialState], &[f64]),
 ) -> Result<(), TrainError> {
     use super::evaluate::{simulate, Feed};

@@ -36,7 +36,6 @@ mod flags;
 pub mod initial;
 pub mod mechanism;
 pub mod page;
-pub mod pairs;
 pub mod polish;
 pub mod predict;
 pub(crate) mod prepare;
@@ -45,7 +44,6 @@ pub mod recovery;
 mod run;
 pub mod settings;
 pub mod split;
-pub mod step;
 pub mod stepping;
 #[cfg(test)]
 mod tests;
@@ -65,15 +63,16 @@ mod tests_records;
 mod tests_start;
 #[cfg(test)]
 mod tests_substeps;
+#[cfg(test)]
+mod tests_windows;
 pub mod toward;
 mod validation;
 pub mod warnings;
-pub mod windows;
 
 #[cfg(test)]
 pub(crate) mod fixtures;
 
-use crate::backend::{Network, Precision, Setup};
+use crate::engine::graph::{Network, Precision, Setup};
 use crate::ir;
 
 pub use analysis::StiffnessWarning;

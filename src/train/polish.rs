@@ -19,15 +19,15 @@
 //!   error more than noise and are correlated in time, so the error is a measure of how
 //!   sharply the data pin the param given the network, not a confidence interval.
 
-use crate::backend::{NamedTensor, Network, Precision, Setup};
+use crate::engine::graph::{NamedTensor, Network, Precision, Setup};
 use crate::ir;
 use crate::numeric::lm::{self, central_difference, difference_step, standard_errors};
 use crate::numeric::{Damping, GaussNewton, Settings};
 
 pub use crate::diagnose::uncertainty::{ParamEstimate, IDENTIFIABILITY_LIMIT};
 
-use super::pairs::PairTable;
 use super::TrainError;
+use crate::engine::pairs::PairTable;
 
 /// Most Levenberg-Marquardt trial steps of the polish.
 const MAX_ITERATIONS: usize = 30;

@@ -13,18 +13,18 @@
 //! data ([`PhysicalRange`]): the table keeps every row, the offending state at its row and
 //! `NaN` everywhere after it, and [`PredictionTable::divergence`] says where and why.
 
-use crate::backend::{Network, Setup};
+use crate::engine::graph::{Network, Setup};
 use crate::ir;
 use crate::record::{Record, Track};
 
 use super::evaluate::{run_in, simulate, Divergence, Feed, PhysicalRange};
 use super::initial::initial_state;
-use super::pairs::stage_fractions;
 use super::prepare::grid_for;
 use super::recipe::DEFAULT_RANGE_FACTOR;
 use super::split::{window_start, History};
 use super::stepping::Stepping;
 use super::{hidden_initial_values, TrainError};
+use crate::engine::pairs::stage_fractions;
 
 pub mod whatif;
 

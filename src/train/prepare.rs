@@ -2,17 +2,17 @@
 //! each experiment's initial state, the tracks, what trains and how validation is scored,
 //! and the normalisation over the training part's measured cells.
 
-use crate::ir::{self, Dynamics, Var};
+use crate::ir::{self, Dynamics};
 use crate::record::{GridOptions, Normalisation, Part as Rows, Record, Track};
 
 use super::initial::{initial_state, InitialState};
-use super::pairs::{stage_fractions, PairAt};
 use super::split::{
     known_intervals, split_training, training_pairs, whole_experiments, Scoring, Training,
     TrainingData,
 };
 use super::warnings::{dropped_pairs, DroppedPairs};
 use super::{History, TrainError, TrainOptions};
+use crate::engine::pairs::{stage_fractions, PairAt};
 
 /// Everything the data fix before training.
 pub struct Layout {
@@ -157,25 +157,7 @@ fn grid_options(
     Ok(grid_for(model, max_step))
 }
 
-/// The grid of `model` with longest step `max_step`: each measured state's gap limit is the
-/// shortest delay of the closures that look back at it (the longest step when none does).
-pub fn grid_for(model: &ir::Model, max_step: f64) -> GridOptions {
-    let gap_limits = (0..model.states.len())
-        .map(|index| {
-            (model.closures.iter())
-                .filter(|c| c.embedding.dim > 1)
-                .filter(|c| c.embedding.observe.contains(&Var::State(index)))
-                .map(|c| c.embedding.delay)
-                .fold(f64::INFINITY, f64::min)
-        })
-        .map(|limit| if limit.is_finite() { limit } else { max_step })
-        .collect();
-    GridOptions {
-        max_step,
-        gap_limits,
-        subdivide: model.dynamics == Dynamics::Continuous,
-    }
-}
+pub use crate::record::grid::grid_for;
 
 /// The median spacing of the measured column with the most cells per unit time, over the
 /// experiments (the median row spacing when no state is measured twice).

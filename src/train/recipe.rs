@@ -6,7 +6,7 @@
 //! one-step pairs as in the paper; then each epoch cuts the training pairs into
 //! consecutive windows of `K` steps (multiple shooting: every window starts from the
 //! data, the phase of the cut drawn anew each epoch) and minimises the mean squared
-//! normalised error of the free runs over every window ([`super::windows`]), gradients
+//! normalised error of the free runs over every window ([`crate::engine::windows`]), gradients
 //! through the whole rollout. `K` grows linearly from 2 to `horizon` over the next
 //! `ramp_share` of the epochs (the curriculum) and stays there. An epoch predicts each
 //! training pair once whatever `K` is, so an epoch costs about as much as a one-step one
@@ -70,13 +70,14 @@ impl Engine {
     pub fn fused_step(
         self,
         model: &ir::Model,
-        setup: &crate::backend::Setup,
-    ) -> Result<Option<crate::fused::FusedNetwork>, crate::backend::BackendError> {
-        use crate::backend::BackendError;
+        setup: &crate::engine::graph::Setup,
+    ) -> Result<Option<crate::engine::fused::FusedNetwork>, crate::engine::graph::BackendError>
+    {
+        use crate::engine::graph::BackendError;
         match self {
             Engine::Graph => Ok(None),
-            Engine::Fused => crate::fused::FusedNetwork::build(model, setup).map(Some),
-            Engine::Auto => match crate::fused::FusedNetwork::build(model, setup) {
+            Engine::Fused => crate::engine::fused::FusedNetwork::build(model, setup).map(Some),
+            Engine::Auto => match crate::engine::fused::FusedNetwork::build(model, setup) {
                 Ok(fused) => Ok(Some(fused)),
                 Err(BackendError::Unsupported { .. }) => Ok(None),
                 Err(error) => Err(error),

@@ -6,14 +6,13 @@
 
 use std::borrow::Cow;
 
-use crate::backend::{Network, Setup};
+use crate::engine::graph::{Network, Setup};
 use crate::ir;
 
 use super::balances::{self, BalanceFit};
 use super::checkpoint::{RunControl, Safety};
 use super::coverage::{Coverage, DENSE_SHARE};
 use super::fit::Fitted;
-use super::pairs::stage_fractions;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
 use super::recipe::SparseBudget;
@@ -27,6 +26,7 @@ use super::{
     Warning,
 };
 use crate::diagnose::mechanism::MechanismFit;
+use crate::engine::pairs::stage_fractions;
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
 /// params from the balances), fit, evaluate, report.
@@ -516,7 +516,7 @@ impl Run<'_> {
         let knots: Vec<(usize, usize)> = (self.training.tracks.iter().enumerate())
             .flat_map(|(t, track)| (0..track.times.len()).map(move |k| (t, k)))
             .collect();
-        let table = super::pairs::PairTable::build(
+        let table = crate::engine::pairs::PairTable::build(
             &self.model,
             &self.training.tracks,
             &knots,

@@ -7,7 +7,7 @@
 //! checks its own flags before they reach a [`Settings`], so a bad value is reported as
 //! what the user wrote.
 
-use crate::backend::Precision;
+use crate::engine::graph::Precision;
 
 use super::toward::TowardMechanism;
 use super::Engine;

@@ -21,8 +21,8 @@ use std::ops::Range;
 use crate::ir;
 use crate::record::{Record, Track};
 
-use super::pairs::{has_target, measured_history, PairAt};
 use super::TrainError;
+use crate::engine::pairs::{has_target, measured_history, PairAt};
 
 /// Share of the pairs that train under [`Part::FirstPairs`] without a count, when nothing
 /// else validates.

@@ -8,7 +8,7 @@
 //! fractions of the step); where the two differ by more than [`TOLERANCE`] of the state's
 //! scale, `m` doubles, up to [`MOST_SUBSTEPS`] sub-steps of the step in all. A network
 //! trained with `K` sub-steps per step is called once per sub-step as a one-sub-step copy
-//! of itself ([`crate::backend::Network::with_substeps`]), and the control starts at
+//! of itself ([`crate::engine::graph::Network::with_substeps`]), and the control starts at
 //! `m = K`: its trained step, the same arithmetic (and [`MOST_SUBSTEPS`] bounds the
 //! sub-steps of a step, not multiples of `K`: a member trained with 1024 sub-steps took
 //! up to 1024 x 4096 per knot before, and its free runs ran for hours). The result of the `m` that sufficed
@@ -28,13 +28,13 @@
 //! model's own, unchecked terms drive the state down) is kept and judged by the physical
 //! range. Training steps are never refined or clamped.
 
-use crate::backend::{BackendError, Batch, Network, Prediction};
+use crate::engine::graph::{BackendError, Batch, Network, Prediction};
 use crate::ir;
 use crate::record::Track;
 
 use super::evaluate::{simulate, Feed};
-use super::pairs::embedding_row;
 use super::split::Training;
+use crate::engine::pairs::embedding_row;
 
 /// Most sub-steps training takes by itself (beyond, the stiffness warning asks the user).
 pub const MOST_TRAINING_SUBSTEPS: usize = 1024;

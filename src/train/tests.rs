@@ -2,11 +2,11 @@
 
 use super::evaluate::{online_error, simulate, Feed};
 use super::fixtures::{chemostat, normalise, options, record, track, train_one};
-use super::pairs::{stage_fractions, PairTable};
 use super::stepping::Stepping;
 use super::*;
-use crate::backend::Network;
 use crate::data::Dataset;
+use crate::engine::graph::Network;
+use crate::engine::pairs::{stage_fractions, PairTable};
 
 #[test]
 fn short_training_on_chemostat_data_cuts_the_validation_error() {
@@ -307,7 +307,7 @@ fn offline_predictions_are_one_step_and_online_ones_a_free_run() {
         table(predict::Mode::Online).unwrap(),
     );
     assert_eq!(offline.header, vec!["t", "S", "r"]);
-    let first = pairs::first_pair_row(&model, 1.0);
+    let first = crate::engine::pairs::first_pair_row(&model, 1.0);
     assert_eq!(offline.columns[0][0], first as f64);
     let measured = data.column("S").unwrap();
     // Both start from the data; offline row k + 1 is the step from the true state at k.

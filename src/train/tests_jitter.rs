@@ -4,9 +4,9 @@
 //! that do not train are counted and reported.
 
 use super::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
-use super::pairs::{stage_fractions, PairTable};
 use super::prepare::Layout;
 use super::*;
+use crate::engine::pairs::{stage_fractions, PairTable};
 use crate::ir::Activation;
 use crate::record::Record;
 

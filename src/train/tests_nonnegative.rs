@@ -8,9 +8,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::evaluate::{simulate, Feed, PhysicalRange, UNDERSHOOT};
-use super::pairs::stage_fractions;
 use super::stepping::{Stepping, TOLERANCE};
-use crate::backend::{Network, Precision, Setup};
+use crate::engine::graph::{Network, Precision, Setup};
+use crate::engine::pairs::stage_fractions;
 use crate::ir;
 use crate::record::{Normalisation, Record, Track};
 

@@ -401,7 +401,7 @@ fn yields_from_the_balances_are_held_through_training() {
     for engine in [Engine::Graph, Engine::Fused] {
         let options = TrainOptions {
             engine,
-            precision: crate::backend::Precision::F64,
+            precision: crate::engine::graph::Precision::F64,
             ..options(4, 200)
         };
         let trained = train_one(&model, &data, None, &options, &recipe).unwrap();

@@ -266,7 +266,7 @@ fn an_unmeasured_initial_state_is_fitted_per_experiment() {
     };
     let options = TrainOptions {
         train_points: None,
-        precision: crate::backend::Precision::F64,
+        precision: crate::engine::graph::Precision::F64,
         ..options(0, 1)
     };
     let recipe = Recipe {

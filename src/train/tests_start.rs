@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use super::fixtures::{random_batch, rk4_reference, setup};
-use crate::backend::{Network, Precision};
+use crate::engine::graph::{Network, Precision};
 use crate::ir::{self, Expr};
 use crate::sim::{ModelSystem, OdeSystem};
 

@@ -4,9 +4,9 @@
 
 use super::evaluate::{simulate, Feed, Trajectory};
 use super::fixtures::{chemostat, normalise, record, track};
-use super::pairs::stage_fractions;
 use super::stepping::{Stepping, MOST_SUBSTEPS};
-use crate::backend::{Network, Precision, Setup};
+use crate::engine::graph::{Network, Precision, Setup};
+use crate::engine::pairs::stage_fractions;
 
 /// The exact chemostat law (no closure to train) with `substeps` RK4 sub-steps per step,
 /// run free along the stiff record (1 h steps, eigenvalues near -10 per hour) with

@@ -3,16 +3,16 @@
 //! errors per scored experiment and pooled.
 
 use super::stepping::Stepping;
-use crate::backend::{Network, Setup};
+use crate::engine::graph::{Network, Setup};
 use crate::ir;
 use crate::record::Track;
 
 use super::evaluate::{
     offline_error, online_error, run_in, simulate, ErrorSum, Feed, PhysicalRange,
 };
-use super::pairs::{stage_fractions, PairAt, PairTable};
 use super::split::Scoring;
 use super::{ErrorSet, TrainError, TrainOptions, ValidationErrors};
+use crate::engine::pairs::{stage_fractions, PairAt, PairTable};
 
 /// Tracks with their hidden-state estimates and a table of pairs.
 pub(super) struct Course {

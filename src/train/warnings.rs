@@ -9,8 +9,8 @@ use crate::ir;
 use crate::record::Track;
 
 use super::analysis::StiffnessWarning;
-use super::pairs::has_target;
 use super::split::Training;
+use crate::engine::pairs::has_target;
 
 /// A warning of a training run. In `run.json` each is the object of its kind (untagged, so
 /// that runs saved before dropped pairs were reported read back).

@@ -19,7 +19,7 @@ use miette::Diagnostic;
 use thiserror::Error;
 
 use super::{predict_on_track, track_of, Mode, PredictionTable, Start};
-use crate::backend::{Network, Setup};
+use crate::engine::graph::{Network, Setup};
 use crate::ir;
 use crate::record::Record;
 use crate::signal::Signal;

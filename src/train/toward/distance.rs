@@ -2,7 +2,7 @@
 //! value at network output 0 (its prior at the trained params, or 0 without one) over the
 //! training points, and each param from its start.
 
-use crate::backend::{BackendError, Batch, Network};
+use crate::engine::graph::{BackendError, Batch, Network};
 use crate::ir::{self, PriorKind};
 
 use super::super::ParamEstimate;

@@ -1,7 +1,7 @@
 //! What-if runs against online predictions and against one step built by hand.
 
 use super::*;
-use crate::backend::{Batch, Precision};
+use crate::engine::graph::{Batch, Precision};
 use crate::train::fixtures::{chemostat, options, record, train_one};
 use crate::train::predict::{predict_in_range, Mode};
 use crate::train::{History, Recipe, TrainOptions, Trained};

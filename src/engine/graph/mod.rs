@@ -24,11 +24,9 @@
 //! Params are trained unconstrained: `positive` through softplus (initialised at the
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
 
-mod elementwise;
-mod graph;
+mod tape;
 pub mod layout;
 mod net;
-pub mod program;
 
 #[cfg(test)]
 mod tests;
@@ -255,16 +253,7 @@ pub struct Prediction {
     pub observed: Vec<f64>,
 }
 
-/// A named array of trainable values (network weights, raw params).
-#[derive(Debug, Clone, PartialEq)]
-pub struct NamedTensor {
-    /// Name, e.g. `closure.r.layer0.weight` or `params`.
-    pub name: String,
-    /// Dimensions.
-    pub shape: Vec<usize>,
-    /// Row-major values.
-    pub values: Vec<f64>,
-}
+pub use crate::numeric::NamedTensor;
 
 /// Why the network could not be built or run.
 #[derive(Debug, thiserror::Error, miette::Diagnostic)]

@@ -1,5 +1,5 @@
 //! The hand-fused training engine (performance study, issue 8; rollouts, issue 15): the
-//! same losses and gradients as [`crate::backend::Network`], one-step pairs and rollout
+//! same losses and gradients as [`crate::engine::graph::Network`], one-step pairs and rollout
 //! windows, written as plain loops over buffers that live from step to step instead of a
 //! recorded dfdx graph.
 //!
@@ -23,13 +23,13 @@
 //!
 //! Its losses and gradients agree with the graph backend's to rounding (tested in both
 //! precisions, for every shipped model and both objectives); it starts from the same
-//! weights as [`crate::backend::Network::build`] and reads and writes the same
+//! weights as [`crate::engine::graph::Network::build`] and reads and writes the same
 //! [`NamedTensor`] lists, so training runs it under the one optimiser of
 //! training's step interface (`--engine fused`, and `auto` wherever it supports the model: all
 //! but measured outputs). Its own Adam step ([`FusedNetwork::train_step_with`], with
 //! [`StepSettings`] and [`AdamState`] as the graph backend's) serves `gbc bench`.
 //!
-//! [`Program`]: crate::backend::program::Program
+//! [`Program`]: crate::engine::program::Program
 //! [`dense::multiply_add`]: dense::Gemm::multiply_add
 
 pub mod activation;
@@ -45,7 +45,7 @@ mod tests;
 #[cfg(test)]
 mod tests_rollout;
 
-use crate::backend::{
+use crate::engine::graph::{
     dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, RolloutBatch, Setup,
     StepBatch, StepSettings,
 };

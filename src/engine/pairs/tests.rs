@@ -1,7 +1,7 @@
 use super::*;
+use crate::engine::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
 use crate::ir::Activation;
 use crate::record::{GridOptions, Record};
-use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
 
 /// A closure observing a state and an input with a delay of 3 time units.
 fn model() -> ir::Model {

@@ -12,12 +12,12 @@
 
 use std::ops::Range;
 
-pub use crate::backend::StepBatch;
-use crate::backend::{BackendError, Network, Precision, StepSettings};
-use crate::fused::FusedNetwork;
+use crate::engine::fused::FusedNetwork;
+pub use crate::engine::graph::StepBatch;
+use crate::engine::graph::{BackendError, Network, Precision, StepSettings};
 use crate::numeric::{Adam, Real, Update};
 
-use super::toward::Penalty;
+use super::penalty::Penalty;
 
 /// An engine: the loss of a batch and its gradient at given weights.
 pub trait Step {
@@ -107,7 +107,7 @@ impl Optimiser {
     }
 
     /// Adds `penalty` to the loss and gradient of every step from now on
-    /// ([`super::toward`]); an inactive one is dropped.
+    /// (`crate::train::toward`); an inactive one is dropped.
     pub fn with_penalty(mut self, penalty: Penalty) -> Self {
         self.penalty = penalty.is_active().then_some(penalty);
         self
@@ -198,8 +198,8 @@ fn update<E: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::fixtures::{kitchen_sink, random_batch, setup};
     use crate::ir::Activation;
-    use crate::train::fixtures::{kitchen_sink, random_batch, setup};
 
     fn settings() -> StepSettings {
         StepSettings {

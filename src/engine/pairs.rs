@@ -20,7 +20,7 @@
 //! the record and every state it reads (the start state included) is known from data there:
 //! the one-step objective and the offline error use only such pairs.
 
-use crate::backend::Batch;
+use crate::engine::graph::Batch;
 use crate::ir::{self, Var};
 use crate::record::grid::{hold, interpolate, Track};
 

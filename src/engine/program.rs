@@ -16,7 +16,7 @@ use super::elementwise::{
     binary, binary_column, binary_column_reverse, binary_derivatives, unary, unary_column,
     unary_column_reverse, unary_derivative, Binary, Operands, Unary,
 };
-use super::BackendError;
+use super::graph::BackendError;
 use crate::ir::{self, BinOp, Constraint, Func, Var};
 use crate::numeric::Real;
 

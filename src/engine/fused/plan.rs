@@ -3,8 +3,8 @@
 //! estimate. Built once from the model and the [`Setup`], the same way the graph backend
 //! builds its network, so the two read the same [`NamedTensor`] lists.
 
-use crate::backend::layout::{closure_layout, ClosureLayout};
-use crate::backend::{BackendError, NamedTensor, Setup};
+use crate::engine::graph::layout::{closure_layout, ClosureLayout};
+use crate::engine::graph::{BackendError, NamedTensor, Setup};
 use crate::ir::{self, Activation};
 
 /// One closure network's place in the step.
@@ -53,7 +53,7 @@ pub struct Plan {
 
 impl Plan {
     /// Lays out `model`'s tensors in the order of `template` (the graph backend's
-    /// [`crate::backend::Network::weights`]), checking that the two agree.
+    /// [`crate::engine::graph::Network::weights`]), checking that the two agree.
     pub fn build(
         model: &ir::Model,
         setup: &Setup,

@@ -21,7 +21,7 @@
 //! the adjoint of its end state into that of its start state, accumulating the weight and
 //! param gradients.
 
-use crate::backend::{BackendError, Batch, Feedback, RolloutBatch};
+use crate::engine::graph::{BackendError, Batch, Feedback, RolloutBatch};
 
 use super::activation::Lane;
 use super::dense::View;

@@ -20,8 +20,8 @@ use dfdx::tensor::{
 };
 use dfdx::tensor_ops::{Backward, BroadcastTo, Device, TryAdd, TryMatMul, TryMul};
 
-use super::program::{Program, ProgramInputs};
 use super::BackendError;
+use crate::engine::program::{Program, ProgramInputs};
 use crate::ir::Activation;
 use crate::numeric::Real;
 

@@ -8,9 +8,9 @@ use std::sync::Arc;
 use dfdx::tensor::Cpu;
 use dfdx::tensor_ops::Device;
 
-use super::graph::{Element, EmbedColumns, EmbedEntry, GradientBuffer, Graph, Matrix};
-use super::program::state_index;
+use super::tape::{Element, EmbedColumns, EmbedEntry, GradientBuffer, Graph, Matrix};
 use super::{BackendError, Batch, RolloutBatch, Setup};
+use crate::engine::program::state_index;
 use crate::ir::{self, Activation, Constraint, Var};
 use crate::numeric::real::{inverse_softplus, logit, Real};
 
@@ -226,7 +226,7 @@ pub struct Frame<'a> {
     /// Every closure's layout.
     pub closures: &'a [ClosureLayout],
     /// The physics program's shape.
-    pub shape: &'a super::program::ProgramShape,
+    pub shape: &'a crate::engine::program::ProgramShape,
     /// Measured states (target columns).
     pub measured: usize,
     /// Measured outputs (observable columns).

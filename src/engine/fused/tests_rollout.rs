@@ -7,13 +7,13 @@
 
 use super::tests::{random_weights, shipped_track, SHIPPED};
 use super::*;
-use crate::backend::{Feedback, Normalisation};
+use crate::engine::fixtures::{kitchen_sink, ClosureSpec, ModelBuilder, OutputSpec};
+use crate::engine::graph::{Feedback, Normalisation};
+use crate::engine::pairs::stage_fractions;
+use crate::engine::step::{Optimiser, StepBatch};
+use crate::engine::windows::rollout_batch;
 use crate::ir::{Activation, Constraint};
 use crate::record::{GridOptions, Record, Track};
-use crate::train::fixtures::{kitchen_sink, ClosureSpec, ModelBuilder, OutputSpec};
-use crate::train::pairs::stage_fractions;
-use crate::train::step::{Optimiser, StepBatch};
-use crate::train::windows::rollout_batch;
 
 /// Loss and every gradient entry of the fused rollout against the graph backend's at
 /// `weights` (each entry against the largest of its tensor, to `tolerance`); returns the
@@ -355,7 +355,7 @@ fn a_multi_step_run_on_the_fused_engine_follows_the_graph_engine() {
     let mut fused = FusedNetwork::build(&model, &setup).unwrap();
     let mut on_graph = Optimiser::new(&graph, Precision::F64);
     let mut on_fused = Optimiser::new(&graph, Precision::F64);
-    let pairs = crate::train::fixtures::random_batch(&model, &setup, 6, 1);
+    let pairs = crate::engine::fixtures::random_batch(&model, &setup, 6, 1);
     for steps in [1, 1, 2, 3, 5, 7, 7] {
         let windows = fixture_batch(&model, 1, steps);
         let batch = match steps {

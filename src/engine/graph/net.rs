@@ -10,17 +10,17 @@ use dfdx::tensor_ops::Device;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::graph::{
+use super::tape::{
     gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix, Scalar, Vector,
 };
 use super::layout::{
     check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout, Frame,
     Prepared, PreparedStep,
 };
-use super::program::Program;
 use super::{
     BackendError, Batch, NamedTensor, Network, Prediction, RolloutBatch, Setup, StepSettings,
 };
+use crate::engine::program::Program;
 use crate::ir::{self, Dynamics};
 use crate::numeric::{Adam, AdamState, Update};
 
@@ -430,13 +430,15 @@ where
         let net_slices: Vec<&[E]> = nets.iter().map(Vec::as_slice).collect();
         let states = vec![E::ZERO; self.program.shape().states];
         let inputs = vec![E::ZERO; self.program.shape().inputs];
-        let values = self.program.forward(&super::program::ProgramInputs {
-            rows: 1,
-            states: &states,
-            inputs: &inputs,
-            params: &raw,
-            nets: &net_slices,
-        });
+        let values = self
+            .program
+            .forward(&crate::engine::program::ProgramInputs {
+                rows: 1,
+                states: &states,
+                inputs: &inputs,
+                params: &raw,
+                nets: &net_slices,
+            });
         (self
             .program
             .read(&values, 1, &self.program.param_values)
@@ -651,7 +653,7 @@ where
 
 impl Network {
     /// Adam's step count and moments, per tensor of [`Network::weights`] (to hand training
-    /// over to [`crate::fused::FusedNetwork`] and back).
+    /// over to [`crate::engine::fused::FusedNetwork`] and back).
     pub fn adam_state(&self) -> AdamState {
         match &self.inner {
             super::Inner::Single(net) => net.adam_state(),

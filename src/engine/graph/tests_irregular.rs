@@ -3,8 +3,8 @@
 //! batches, against the definition of the weighted loss, and by finite differences.
 
 use super::*;
+use crate::engine::fixtures::{kitchen_sink, random_batch};
 use crate::ir::Activation;
-use crate::train::fixtures::{kitchen_sink, random_batch};
 
 fn setup(step: f64, substeps: usize) -> Setup {
     Setup {

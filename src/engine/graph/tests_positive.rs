@@ -2,7 +2,7 @@
 //! (0 without one), no floor where the prior vanishes, and gradients against central
 //! differences (from above at the kink of an output without a prior).
 
-use super::program::{Program, ProgramInputs};
+use crate::engine::program::{Program, ProgramInputs};
 use crate::ir;
 use crate::numeric::Real;
 

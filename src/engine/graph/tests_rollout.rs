@@ -3,11 +3,11 @@
 //! rates and gradient clipping.
 
 use super::*;
+use crate::engine::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
+use crate::engine::pairs::stage_fractions;
+use crate::engine::windows::rollout_batch;
 use crate::ir::{Activation, Constraint};
 use crate::record::{GridOptions, Record, Track};
-use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
-use crate::train::pairs::stage_fractions;
-use crate::train::windows::rollout_batch;
 
 /// Two states, a bounded param, a delay of 1.5 samples (stage times between samples).
 fn model() -> ir::Model {

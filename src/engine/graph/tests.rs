@@ -4,12 +4,12 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::graph::{Graph, Matrix};
+use super::tape::{Graph, Matrix};
 use super::*;
-use crate::ir::{Activation, Constraint};
-use crate::train::fixtures::{
+use crate::engine::fixtures::{
     kitchen_sink, random_batch, rk4_reference, ClosureSpec, ModelBuilder, OutputSpec,
 };
+use crate::ir::{Activation, Constraint};
 
 fn setup(precision: Precision, step: f64, substeps: usize, scales: Vec<Vec<f64>>) -> Setup {
     Setup {
@@ -160,7 +160,7 @@ fn softplus_activation_is_safe_in_value_and_gradient() {
     // loss = mean(y^2): d loss / dx = 2 y sigmoid(x) / n.
     let zeros = vec![0.0; inputs.len()];
     let ones = vec![1.0; inputs.len()];
-    let block = super::graph::LossBlock {
+    let block = super::tape::LossBlock {
         prediction: &y,
         targets: &zeros,
         weights: None,
@@ -168,7 +168,7 @@ fn softplus_activation_is_safe_in_value_and_gradient() {
     };
     let loss = graph.normalised_mse(&[block]).unwrap();
     let mut grads = graph.backward(loss).unwrap();
-    let gradient = super::graph::gradient_of(&mut grads, &x).unwrap();
+    let gradient = super::tape::gradient_of(&mut grads, &x).unwrap();
     for ((g, &x), &y) in gradient.iter().zip(&inputs).zip(&values) {
         let sigmoid = 1.0 / (1.0 + f64::exp(-x));
         let expected = 2.0 * y * sigmoid / inputs.len() as f64;
@@ -351,14 +351,14 @@ fn a_multiplicative_prior_with_a_silent_network_is_its_prior() {
 fn closure_outputs_follow_the_prior_and_scale_rules() {
     let model = kitchen_sink(Activation::Softplus);
     let scales = vec![vec![1.0, 0.3, 0.2]];
-    let program = program::Program::compile(&model, &scales).unwrap();
+    let program = crate::engine::program::Program::compile(&model, &scales).unwrap();
     let (x, s, e, u) = (1.5, 0.8, 0.3, 0.6);
     let nets = [0.25, -0.5, 2.0];
     let raw_params = [
         crate::numeric::real::inverse_softplus(0.5),
         crate::numeric::real::logit((1.5 - 0.5) / 2.5),
     ];
-    let values = program.forward(&program::ProgramInputs {
+    let values = program.forward(&crate::engine::program::ProgramInputs {
         rows: 1,
         states: &[x, s, e],
         inputs: &[u],

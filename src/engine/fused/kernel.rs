@@ -17,8 +17,8 @@
 //! saves two of the eight large products of a GB2 step. (A rollout's predicted states fed
 //! back into the embedding are part of that constant part: they are known before the step.)
 
-use crate::backend::program::{Program, ProgramInputs};
-use crate::backend::{BackendError, Batch, Setup, StepSettings};
+use crate::engine::graph::{BackendError, Batch, Setup, StepSettings};
+use crate::engine::program::{Program, ProgramInputs};
 use crate::ir::{self, Dynamics};
 use crate::numeric::Real;
 

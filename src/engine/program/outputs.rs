@@ -43,7 +43,7 @@ pub const TAIL: f64 = 1.0 - JOIN;
 /// How far inside each end of its range an output `in [lo, hi]` starts at most, as a
 /// share of `hi - lo` (module documentation).
 pub const BOUNDED_MARGIN: f64 = 1.0 / 16.0;
-use crate::backend::BackendError;
+use crate::engine::graph::BackendError;
 use crate::ir::{ClosureOutput, Constraint, PriorKind};
 
 impl Compiler<'_> {

@@ -2,7 +2,7 @@
 //! network's layers from the output down to the first, whose weight gradient is completed
 //! per stage time by the kernel (see [`super::kernel`]).
 
-use crate::backend::program::{ProgramInputs, ReverseScratch};
+use crate::engine::program::{ProgramInputs, ReverseScratch};
 
 use super::activation::Lane;
 use super::dense::{add_column_sums, Gemm, View};

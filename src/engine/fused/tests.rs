@@ -7,8 +7,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::*;
+use crate::engine::fixtures::{chemostat, kitchen_sink, random_batch, setup};
 use crate::ir::Activation;
-use crate::train::fixtures::{chemostat, kitchen_sink, random_batch, setup};
 
 /// Weights of order one everywhere, so every path carries gradient.
 pub(super) fn random_weights(template: &[NamedTensor], seed: u64) -> Vec<NamedTensor> {
@@ -123,7 +123,7 @@ fn gradients_match_the_backend_with_irregular_steps_and_loss_weights() {
 /// of the correction factor, at network outputs on both sides of zero.
 #[test]
 fn gradients_match_the_backend_for_positive_outputs_under_priors() {
-    let model = crate::backend::tests_positive::positive_priors();
+    let model = crate::engine::graph::tests_positive::positive_priors();
     for precision in [Precision::F64, Precision::F32] {
         let setup = setup(&model, precision, 1);
         let batch = random_batch(&model, &setup, 6, 4);
@@ -175,7 +175,7 @@ fn shipped(
     rows: usize,
     precision: Precision,
 ) -> (ir::Model, Batch, Setup) {
-    use crate::train::pairs::{stage_fractions, PairTable};
+    use crate::engine::pairs::{stage_fractions, PairTable};
     let (model, track, first, setup) = shipped_track(model, data, rows + 1, (precision, 1));
     let pairs: Vec<(usize, usize)> = (first..first + rows).map(|k| (0, k)).collect();
     let fractions = stage_fractions(model.dynamics, 1);
@@ -193,7 +193,7 @@ pub(super) fn shipped_track(
     knots: usize,
     (precision, substeps): (Precision, usize),
 ) -> (ir::Model, crate::record::Track, usize, Setup) {
-    use crate::train::pairs::first_pair_row;
+    use crate::engine::pairs::first_pair_row;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let model = crate::driver::compile_file(&root.join(model), &[])
         .unwrap()
@@ -207,8 +207,8 @@ pub(super) fn shipped_track(
         crate::data::MinRows::new(2, "one step"),
     )
     .unwrap();
-    let record = crate::train::fixtures::record(&model, &data);
-    let track = crate::train::fixtures::track(&model, &data);
+    let record = crate::engine::fixtures::record(&model, &data);
+    let track = crate::engine::fixtures::track(&model, &data);
     let step = track.steps[0];
     let first = first_pair_row(&model, step);
     let setup = Setup {
@@ -216,7 +216,7 @@ pub(super) fn shipped_track(
         substeps,
         precision,
         seed: 0,
-        normalisation: crate::train::fixtures::normalise(&record, first + knots),
+        normalisation: crate::engine::fixtures::normalise(&record, first + knots),
         scales: (model.closures.iter())
             .map(|c| vec![1.0; c.outputs.len()])
             .collect(),
