@@ -24,9 +24,9 @@
 //! Params are trained unconstrained: `positive` through softplus (initialised at the
 //! inverse softplus of the guess), `in [lo, hi]` through `lo + (hi - lo) sigmoid`.
 
-mod tape;
 pub mod layout;
 mod net;
+mod tape;
 
 #[cfg(test)]
 mod tests;

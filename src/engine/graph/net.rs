@@ -10,13 +10,11 @@ use dfdx::tensor_ops::Device;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::tape::{
-    gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix, Scalar, Vector,
-};
 use super::layout::{
     check_setup, closure_layout, prepare, prepare_rollout, raw_initial_value, ClosureLayout, Frame,
     Prepared, PreparedStep,
 };
+use super::tape::{gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix, Scalar, Vector};
 use super::{
     BackendError, Batch, NamedTensor, Network, Prediction, RolloutBatch, Setup, StepSettings,
 };
