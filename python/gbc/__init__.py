@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import json
 import math
+import pathlib
 from typing import Any, Callable, Iterable, Optional, Sequence, Union
 
 from . import _gbc
 from ._gbc import GbcError
 
-__all__ = ["Model", "Run", "Diagnosis", "Comparison", "diagnose", "simulate", "compare",
-           "GbcError"]
+__all__ = ["Model", "Run", "SavedRun", "Diagnosis", "Comparison", "diagnose", "simulate",
+           "compare", "load_run", "GbcError"]
 
 
 def _column(values: Any) -> list:
@@ -245,6 +246,50 @@ class Run:
 
     def __repr__(self) -> str:
         return f"gbc.Run({self.directory!r})"
+
+
+class SavedRun:
+    """A run or ensemble directory that ``gbc train`` wrote, read back for its model
+    (``gbc predict --weights DIR``): ``predict``, ``is_ensemble``, ``notes``."""
+
+    def __init__(self, native: "_gbc.Saved", model: Model, directory: str):
+        self._native, self.model, self.directory = native, model, str(directory)
+
+    @property
+    def is_ensemble(self) -> bool:
+        """Whether it is an ensemble: its predictions carry the median and a band."""
+        return self._native.is_ensemble()
+
+    @property
+    def notes(self) -> list:
+        """How the model differs from the one trained, outside its structure."""
+        return self._native.notes()
+
+    def predict(self, data: Any, mode: str = "offline", history: str = "held",
+                band: float = 0.9):
+        """Predictions along ``data`` (a DataFrame or a list of them) as ``gbc predict``
+        writes them: ``t``, the states, closure and model outputs (an ensemble: the median
+        and the ``band`` level's ``_lo``/``_hi`` columns); an ``experiment`` column when
+        there are several. The band's coverage of the measured cells is ``.attrs["coverage"]``."""
+        import pandas as pd
+
+        header, columns, experiments, coverage = self._native.predict(
+            _tables(data, "data"), mode, history, band)
+        frame = pd.DataFrame(dict(zip(header, columns)), columns=header)
+        if len(set(experiments)) > 1:
+            frame.insert(0, "experiment", experiments)
+        frame.attrs["coverage"] = coverage
+        return frame
+
+    def __repr__(self) -> str:
+        kind = "ensemble" if self.is_ensemble else "run"
+        return f"<gbc.SavedRun {kind} of {self.model.name!r} at {self.directory!r}>"
+
+
+def load_run(model: Model, directory: str) -> SavedRun:
+    """Reads the run or ensemble ``gbc train`` wrote into ``directory`` (for ``model``, the
+    model it was trained as, or one that differs only outside its structure)."""
+    return SavedRun(_gbc.load_run(model._native, pathlib.Path(directory)), model, directory)
 
 
 class Report:

@@ -311,25 +311,7 @@ impl Run {
         mode: &str,
         history: &str,
     ) -> PyResult<Vec<(String, Vec<String>, Vec<Vec<f64>>, Option<String>)>> {
-        let mode = match mode {
-            "offline" => Mode::Offline,
-            "online" => Mode::Online,
-            "online-trained-step" | "online_trained_step" => Mode::OnlineTrainedStep,
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "expected mode `offline`, `online` or `online-trained-step`, found `{other}`"
-                )))
-            }
-        };
-        let history = match history {
-            "held" => History::Held,
-            "measured" => History::Measured,
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "expected history `held` or `measured`, found `{other}`"
-                )))
-            }
-        };
+        let (mode, history) = (mode_of(mode)?, history_of(history)?);
         let records = records(py, &self.inner.model, data)?;
         let predictions =
             (self.inner.predict(&records, mode, history)).map_err(|e| raise(py, e))?;
@@ -523,6 +505,84 @@ fn compare(
     Ok(Comparison { inner })
 }
 
+/// `offline`, `online` or `online-trained-step`, as `gbc predict --mode` spells them.
+fn mode_of(mode: &str) -> PyResult<Mode> {
+    match mode {
+        "offline" => Ok(Mode::Offline),
+        "online" => Ok(Mode::Online),
+        "online-trained-step" | "online_trained_step" => Ok(Mode::OnlineTrainedStep),
+        other => Err(PyValueError::new_err(format!(
+            "expected mode `offline`, `online` or `online-trained-step`, found `{other}`"
+        ))),
+    }
+}
+
+/// `held` or `measured`, as `--history` spells them.
+fn history_of(history: &str) -> PyResult<History> {
+    match history {
+        "held" => Ok(History::Held),
+        "measured" => Ok(History::Measured),
+        other => Err(PyValueError::new_err(format!(
+            "expected history `held` or `measured`, found `{other}`"
+        ))),
+    }
+}
+
+/// A run or ensemble directory read back, as `gbc predict --weights DIR` reads it.
+#[pyclass(module = "gbc._gbc", frozen)]
+struct Saved {
+    inner: api::SavedRun,
+}
+
+#[pymethods]
+impl Saved {
+    /// Whether it is an ensemble (its predictions carry a band).
+    fn is_ensemble(&self) -> bool {
+        self.inner.is_ensemble()
+    }
+
+    /// How the model differs from the one trained, outside its structure.
+    fn notes(&self) -> Vec<String> {
+        self.inner.notes().to_vec()
+    }
+
+    /// Predictions along every experiment of `data` as `gbc predict` writes them:
+    /// `(header, columns, experiment of each row, band coverage in words)`.
+    #[pyo3(signature = (data, mode = "offline", history = "held", band = 0.9))]
+    #[allow(clippy::type_complexity)]
+    fn predict(
+        &self,
+        py: Python<'_>,
+        data: &Bound<'_, PyList>,
+        mode: &str,
+        history: &str,
+        band: f64,
+    ) -> PyResult<(Vec<String>, Vec<Vec<f64>>, Vec<String>, String)> {
+        let spec = api::PredictSpec {
+            mode: mode_of(mode)?,
+            history: history_of(history)?,
+            band,
+            ..api::PredictSpec::default()
+        };
+        let records = records(py, self.inner.model(), data)?;
+        let predicted = (self.inner.predict(&records, &spec, &|_| {})).map_err(|e| raise(py, e))?;
+        let coverage = predicted.coverage_text();
+        Ok((
+            predicted.header,
+            predicted.columns,
+            predicted.experiments,
+            coverage,
+        ))
+    }
+}
+
+/// Reads the run or ensemble `gbc train` wrote into `directory`, for `model`.
+#[pyfunction]
+fn load_run(py: Python<'_>, model: &Model, directory: PathBuf) -> PyResult<Saved> {
+    let inner = api::SavedRun::load(&model.inner, &directory).map_err(|e| raise(py, e))?;
+    Ok(Saved { inner })
+}
+
 /// The native module.
 #[pymodule]
 fn _gbc(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -530,10 +590,12 @@ fn _gbc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Run>()?;
     m.add_class::<Diagnosis>()?;
     m.add_class::<Comparison>()?;
+    m.add_class::<Saved>()?;
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(load_run, m)?)?;
     m.add("GbcError", m.py().get_type::<GbcError>())?;
     Ok(())
 }

@@ -57,6 +57,21 @@ def test_train_and_predict_equal_the_cli(tmp_path):
     assert "<svg" in run.report._repr_html_()
 
 
+def test_a_saved_run_predicts_as_gbc_predict(tmp_path):
+    flags = ["--epochs", 3, "--train-points", 300, "--precision", "f64", "--seed", 2]
+    cli("train", GB1, STEPS, *flags, "-o", tmp_path / "run")
+    cli("predict", GB1, STEPS, "--weights", tmp_path / "run", "--mode", "online",
+        "-o", tmp_path / "cli.csv")
+    saved = gbc.load_run(gbc.Model.from_file(GB1), tmp_path / "run")
+    assert not saved.is_ensemble
+    predicted = saved.predict(read(STEPS), mode="online")
+    written = read(tmp_path / "cli.csv")
+    assert list(predicted.columns) == list(written.columns)
+    assert (predicted.to_numpy() == written.to_numpy()).all()
+    with pytest.raises(gbc.GbcError):
+        gbc.load_run(gbc.Model.from_file(GB1), tmp_path / "nothing-here")
+
+
 def test_a_frame_with_missing_cells_reads_as_its_csv_file(tmp_path):
     frame = read(OVERFLOW)
     assert frame.isna().to_numpy().any(), "the lab record has empty cells"

@@ -28,6 +28,7 @@
 pub mod bench;
 mod compare;
 mod data;
+pub mod demo;
 mod diagnose;
 mod error;
 pub mod experiment;

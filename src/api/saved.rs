@@ -145,6 +145,11 @@ impl SavedRun {
         }
     }
 
+    /// The model the run is read for.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
     /// Whether the run is an ensemble.
     pub fn is_ensemble(&self) -> bool {
         matches!(self.weights, Weights::Ensemble(_))

@@ -19,8 +19,7 @@ use crate::experiment::merge::Published;
 use crate::experiment::study::Training;
 use crate::experiment::study::{parse_model_argument, parse_sizes};
 use crate::experiment::{
-    DataFiles, ExperimentError, ExperimentFailure, Prepared, Progress, RunResult, RunSpec, Shard,
-    Study, Validation,
+    DataFiles, ExperimentError, Prepared, Progress, RunResult, RunSpec, Shard, Study, Validation,
 };
 
 /// How every run trains (the values of `gbc train --objective`).
@@ -150,14 +149,6 @@ pub fn run(args: &ExperimentArgs) -> CommandResult {
     match &args.action {
         Some(ExperimentAction::Merge(merge)) => run_merge(merge),
         None => run_study(&args.run),
-    }
-}
-
-/// An experiment failure as a command error.
-pub fn failure(failure: ExperimentFailure) -> CommandError {
-    match failure {
-        ExperimentFailure::User(reports) => CommandError::User(reports),
-        ExperimentFailure::Internal(message) => CommandError::Internal(message),
     }
 }
 
