@@ -136,8 +136,8 @@ pub(crate) fn spec_of(args: &CompareArgs) -> Result<CompareSpec, CommandError> {
 /// result as its message.
 fn report(reporter: &Reporter, finished: &AtomicU64, event: Event) {
     match event {
-        Event::Started { runs, epochs } => reporter.stage(
-            &format!("comparing: {runs} fits and trainings ({epochs} epochs each)"),
+        Event::Started { runs, .. } => reporter.stage(
+            &format!("comparing: {runs} fits and trainings (epochs as gbc train takes them)"),
             runs as u64,
             Count::Items("runs"),
             Announce::Now,
