@@ -52,13 +52,7 @@ pub fn page(comparison: &Comparison, records: &[Record], title: &str) -> String 
 /// The grey box's epochs trained, per split and seed: "B4: seed 1 280, seed 2 300".
 fn epochs_trained(comparison: &Comparison) -> String {
     let splits: Vec<String> = (comparison.splits.iter())
-        .map(|split| {
-            let runs: Vec<String> = (split.grey_box.iter())
-                .filter(|r| r.failed.is_none())
-                .map(|r| format!("seed {} {}", r.seed, r.epochs))
-                .collect();
-            format!("{}: {}", split.held_out.join(", "), runs.join(", "))
-        })
+        .map(|split| format!("{}: {}", split.held_out.join(", "), split.epochs_trained()))
         .collect();
     splits.join("; ")
 }

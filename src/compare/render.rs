@@ -37,12 +37,9 @@ pub fn text(comparison: &Comparison) -> String {
         for score in &split.scores {
             table(&mut out, score, &comparison.states);
         }
-        let trained: Vec<String> = (split.grey_box.iter())
-            .filter(|r| r.failed.is_none())
-            .map(|r| format!("seed {} {}", r.seed, r.epochs))
-            .collect();
+        let trained = split.epochs_trained();
         if !trained.is_empty() {
-            let _ = writeln!(out, "  grey box epochs trained: {}", trained.join(", "));
+            let _ = writeln!(out, "  grey box epochs trained: {trained}");
         }
     }
     if comparison

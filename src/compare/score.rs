@@ -15,6 +15,15 @@ use super::{ExperimentScore, MemberRun, SplitResult};
 const SAME_PARAMS: f64 = 1e-5;
 
 impl SplitResult {
+    /// The epochs each grey-box run that trained took: "seed 1 280, seed 2 300".
+    pub fn epochs_trained(&self) -> String {
+        let runs: Vec<String> = (self.grey_box.iter())
+            .filter(|r| r.failed.is_none())
+            .map(|r| format!("seed {} {}", r.seed, r.epochs))
+            .collect();
+        runs.join(", ")
+    }
+
     /// Whether the untrained grey box is the fitted mechanism (the same params, within the
     /// training precision), so that its distance from the mechanism's error is numerical.
     /// On a dense record the grey box's params come from the balances or Adam instead.
