@@ -40,5 +40,6 @@ pub mod sim;
 pub mod suggest;
 pub mod syntax;
 pub mod train;
+pub mod trained;
 pub mod units;
 pub mod vocabulary;

@@ -26,8 +26,8 @@ from typing import Any, Callable, Iterable, Optional, Sequence, Union
 from . import _gbc
 from ._gbc import GbcError
 
-__all__ = ["Model", "Run", "SavedRun", "Diagnosis", "Comparison", "diagnose", "simulate",
-           "compare", "load_run", "GbcError"]
+__all__ = ["Model", "Run", "Ensemble", "SavedRun", "Diagnosis", "Comparison", "Study", "diagnose",
+           "simulate", "compare", "experiment", "load_run", "GbcError"]
 
 
 def _column(values: Any) -> list:
@@ -83,7 +83,8 @@ def _flags(keywords: dict) -> list:
     return flags
 
 
-def _progress(total_hint: Optional[int], desc: str, progress: Union[bool, Callable, None]):
+def _progress(total_hint: Optional[int], desc: str, progress: Union[bool, Callable, None],
+              unit: str = "epoch"):
     """The callback that shows progress: the user's callable, a tqdm bar (updated in place
     in a notebook) when tqdm is installed, else nothing."""
     if callable(progress):
@@ -94,7 +95,7 @@ def _progress(total_hint: Optional[int], desc: str, progress: Union[bool, Callab
         from tqdm.auto import tqdm
     except ImportError:
         return None, None
-    bar = tqdm(total=total_hint, desc=desc, unit="epoch", leave=True)
+    bar = tqdm(total=total_hint, desc=desc, unit=unit, leave=True)
 
     def on_event(event: dict) -> None:
         kind = event.get("kind")
@@ -166,7 +167,7 @@ class Model:
         return self._native.source
 
     def train(self, data: Any, *, val: Any = None, progress: Union[bool, Callable, None] = None,
-              resume: Optional[str] = None, **keywords: Any) -> "Run":
+              resume: Optional[str] = None, **keywords: Any) -> Union["Run", "Ensemble"]:
         """Trains the model on ``data`` (a DataFrame or a list of them) as ``gbc train``
         does; ``val`` validates (``--val``); every other keyword is a ``gbc train`` flag
         (``epochs=20``, ``train_points=300``, ``precision="f64"``, ``seed=3``,
@@ -174,7 +175,11 @@ class Model:
         (a callable taking an event dict), else to a tqdm bar when tqdm is installed.
         A keyboard interrupt stops after the current epoch and keeps a checkpoint in the
         run directory; ``resume=DIR`` with the same data and keywords continues it, ending
-        where an uninterrupted run ends."""
+        where an uninterrupted run ends. ``ensemble=N`` trains ``gbc train --ensemble N``
+        (members in parallel, the band calibrated; ``resample``, ``jobs``, ``band``) and
+        returns an :class:`Ensemble`; it is not interrupted between members."""
+        if keywords.get("ensemble"):
+            return self._train_ensemble(data, val, progress, keywords)
         callback, bar = _progress(keywords.get("epochs"), "training", progress)
         try:
             native = _gbc.train(self._native, _tables(data, "data"), _tables(val, "val"),
@@ -184,6 +189,17 @@ class Model:
             if bar is not None:
                 bar.close()
         return Run(native, self)
+
+    def _train_ensemble(self, data: Any, val: Any, progress, keywords: dict) -> "Ensemble":
+        callback, bar = _progress(int(keywords["ensemble"]), "ensemble", progress,
+                                  unit="member")
+        try:
+            native = _gbc.train_ensemble(self._native, _tables(data, "data"),
+                                         _tables(val, "val"), _flags(keywords), callback)
+        finally:
+            if bar is not None:
+                bar.close()
+        return Ensemble(native, self)
 
     def __repr__(self) -> str:
         return f"gbc.Model({self.name!r})"
@@ -212,6 +228,18 @@ class Run:
     def metrics(self) -> dict:
         """The validation errors (``run.json``'s ``metrics``)."""
         return self.info.get("metrics", {})
+
+    @property
+    def cv(self) -> Optional[dict]:
+        """With ``cv=True``: the leave-one-experiment-out folds as ``cv/summary.json``
+        holds them (each fold's held-out errors, the pooled errors and the medians)."""
+        text = self._native.cv_json()
+        return None if text is None else json.loads(text)
+
+    @property
+    def cv_table(self) -> Optional[str]:
+        """With ``cv=True``: the folds' table as ``gbc train --cv`` prints it."""
+        return self._native.cv_table()
 
     @property
     def report(self) -> "Report":
@@ -397,3 +425,81 @@ def compare(model: Model, data: Any, *, mechanism: Optional[Model] = None,
         if bar is not None:
             bar.close()
     return Comparison(native)
+
+
+class Ensemble:
+    """A trained ensemble (``gbc train --ensemble N``): ``directory``, the fields of
+    ``ensemble.json`` as :attr:`info` (band, noise, calibration, coverage of the held-out
+    experiments), ``summary`` (what ``gbc train`` prints), ``predict`` (the median with the
+    band, as ``gbc predict --weights DIR``), the report inline in Jupyter."""
+
+    def __init__(self, native: "_gbc.Ensemble", model: Model):
+        self._native = native
+        self.model = model
+        self.directory = pathlib.Path(native.directory())
+        self.info: dict = json.loads(native.json())
+        self.summary: str = native.summary()
+
+    def predict(self, data: Any, mode: str = "offline", history: str = "held",
+                band: float = 0.9):
+        """The members' median and its band (``X_lo``, ``X_hi``) along every experiment of
+        ``data`` (:meth:`SavedRun.predict`)."""
+        return load_run(self.model, self.directory).predict(data, mode=mode, history=history,
+                                                             band=band)
+
+    def _repr_html_(self) -> str:
+        return self._native.html()
+
+    def __repr__(self) -> str:
+        return self.summary
+
+
+class Study:
+    """A study of ``gbc experiment`` that ran: ``directory`` (its runs, ``results.csv``,
+    ``results.json``, ``summary.csv``, ``figures/``, ``report.html``), ``summary`` (what
+    ``gbc experiment`` prints), ``results`` (``results.csv`` as a DataFrame, one row per
+    run), ``published`` (whether the tables and report were written: not for a shard or a
+    stopped study); the report inline in Jupyter."""
+
+    def __init__(self, native: "_gbc.Study"):
+        self._native = native
+        self.directory = pathlib.Path(native.directory())
+        self.summary = native.summary()
+        self.published = native.published()
+        self.finished = native.finished()
+
+    @property
+    def results(self):
+        """``results.csv`` (one row per run: model, size, seed, errors, params) as a
+        DataFrame; a study that published nothing raises :class:`FileNotFoundError`."""
+        import pandas as pd
+
+        return pd.read_csv(self.directory / "results.csv")
+
+    @property
+    def report_html(self) -> str:
+        """The study's ``report.html`` (figures inline)."""
+        return (self.directory / "report.html").read_text(encoding="utf-8")
+
+    def _repr_html_(self) -> str:
+        return self.report_html if self.published else f"<pre>{self.summary}</pre>"
+
+    def __repr__(self) -> str:
+        return self.summary
+
+
+def experiment(*, progress: Union[bool, Callable, None] = None, **keywords: Any) -> Study:
+    """Runs a study as ``gbc experiment`` does: every keyword is one of its flags
+    (``preset="gb1-bioreactor"``, ``config="experiments/x.json"``, or ``model=["gb1=m.gbm"]``,
+    ``data=["r.csv"]``, ``val_from=2000``, ``sizes="300,1000"``, ``replicates=3``,
+    ``epochs=20``, ``jobs=2``, ``output="experiment-x"``, ``shard="1/4"``, ...). Runs
+    already finished in the directory are reused. A keyboard interrupt starts no further
+    run (the runs under way finish and are kept) and raises ``KeyboardInterrupt``; the same
+    call again goes on from there."""
+    callback, bar = _progress(None, "study", progress, unit="run")
+    try:
+        native = _gbc.experiment(_flags(keywords), callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    return Study(native)

@@ -9,18 +9,26 @@ use std::sync::Arc;
 use gbc::api::{self, ApiError, Column, Table};
 use gbc::cli::binding;
 use gbc::cli::CommandError;
-use gbc::train::predict::Mode;
 use gbc::train::{Event, History};
+use gbc::trained::predict::Mode;
 use pyo3::create_exception;
+
+mod ensemble;
+mod saved;
+mod study;
+
+use ensemble::{train_ensemble, Ensemble};
 use pyo3::exceptions::{PyException, PyKeyboardInterrupt, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use saved::{load_run, Saved};
+use study::{experiment, Study};
 
 create_exception!(_gbc, GbcError, PyException, "An error of gbc: its `code`, `message`, `file`, `line`, `column` and `help` are attributes; `diagnostics` lists every one.");
 
 /// The Python exception of an API error: the first diagnostic's facts as attributes, all
 /// of them in `diagnostics`, the rendered text as the message.
-fn raise(py: Python<'_>, error: ApiError) -> PyErr {
+pub(crate) fn raise(py: Python<'_>, error: ApiError) -> PyErr {
     let records = error.records();
     let err = GbcError::new_err(error.rendered());
     let value = err.value(py);
@@ -38,7 +46,7 @@ fn raise(py: Python<'_>, error: ApiError) -> PyErr {
     err
 }
 
-fn command_error(py: Python<'_>, error: CommandError) -> PyErr {
+pub(crate) fn command_error(py: Python<'_>, error: CommandError) -> PyErr {
     raise(
         py,
         match error {
@@ -141,7 +149,7 @@ fn tables(given: &Bound<'_, PyList>) -> PyResult<Vec<Table>> {
     Ok(out)
 }
 
-fn records(
+pub(crate) fn records(
     py: Python<'_>,
     model: &api::Model,
     given: &Bound<'_, PyList>,
@@ -196,6 +204,8 @@ fn event_dict<'py>(py: Python<'py>, event: &Event) -> PyResult<Option<Bound<'py,
 struct Run {
     inner: api::Run,
     directory: PathBuf,
+    /// `--cv`'s folds: `cv/summary.json`'s text and the table `gbc train --cv` prints.
+    cv: Option<(String, String)>,
 }
 
 /// Trains `model` on `data` (tables), validating on `val` (tables), with the CLI's
@@ -223,6 +233,16 @@ fn train(
         Some(resumed) => Some(checkpoint_of(py, resumed, &command)?),
         None => None,
     };
+    let cv = match spec.validation.cv && resume.is_none() {
+        true => Some(folds(
+            py,
+            model,
+            records.clone(),
+            (&spec, &directory),
+            &callback,
+        )?),
+        false => None,
+    };
     let stop = Arc::new(AtomicBool::new(false));
     let control = api::Control {
         directory: Some(directory.clone()),
@@ -247,13 +267,49 @@ fn train(
     match outcome {
         Ok(inner) => {
             inner.save(&directory).map_err(|e| raise(py, e))?;
-            Ok(Run { inner, directory })
+            Ok(Run {
+                inner,
+                directory,
+                cv,
+            })
         }
         Err(error) if error.is_interrupted() => {
             Err(failure.unwrap_or_else(|| PyKeyboardInterrupt::new_err(error.to_string())))
         }
         Err(error) => Err(raise(py, error)),
     }
+}
+
+/// `--cv`'s folds, each kept under `directory`: `cv/summary.json`'s text and the table
+/// `gbc train --cv` prints; `callback` hears a `stage` per fold and its epochs.
+fn folds(
+    py: Python<'_>,
+    model: &api::Model,
+    records: Vec<gbc::record::Record>,
+    (spec, directory): (&api::TrainSpec, &std::path::Path),
+    callback: &Option<PyObject>,
+) -> PyResult<(String, String)> {
+    let epochs = spec.options.epochs;
+    let mut on_fold = |fold: usize, folds: usize| {
+        let Some(callback) = callback else { return };
+        let dict = PyDict::new(py);
+        let _ = dict.set_item("kind", "stage");
+        let _ = dict.set_item("name", format!("fold {}/{folds}", fold + 1));
+        let _ = dict.set_item("total", epochs);
+        let _ = callback.call1(py, (dict,));
+    };
+    let mut on_event = |event: Event| {
+        if let (Some(callback), Ok(Some(dict))) = (callback, event_dict(py, &event)) {
+            let _ = callback.call1(py, (dict,));
+        }
+    };
+    let listeners = (&mut on_fold as _, &mut on_event as _);
+    let result = api::cross_validate(model, records, spec, directory, listeners)
+        .map_err(|e| raise(py, e))?;
+    let json = serde_json::to_string_pretty(&result)
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+    let table = api::summary::cv_table(model.ir(), &result, directory);
+    Ok((json, table))
 }
 
 /// The checkpoint of the stopped run in `directory`, which must have been trained with the
@@ -286,6 +342,16 @@ impl Run {
     /// The run's metadata, as `run.json` holds it (JSON text).
     fn json(&self, py: Python<'_>) -> PyResult<String> {
         self.inner.json().map_err(|e| raise(py, e))
+    }
+
+    /// `--cv`'s folds as `cv/summary.json` holds them (JSON text), if it ran them.
+    fn cv_json(&self) -> Option<String> {
+        self.cv.as_ref().map(|(json, _)| json.clone())
+    }
+
+    /// The table `gbc train --cv` prints, if it ran the folds.
+    fn cv_table(&self) -> Option<String> {
+        self.cv.as_ref().map(|(_, table)| table.clone())
     }
 
     /// The report page (HTML).
@@ -506,7 +572,7 @@ fn compare(
 }
 
 /// `offline`, `online` or `online-trained-step`, as `gbc predict --mode` spells them.
-fn mode_of(mode: &str) -> PyResult<Mode> {
+pub(crate) fn mode_of(mode: &str) -> PyResult<Mode> {
     match mode {
         "offline" => Ok(Mode::Offline),
         "online" => Ok(Mode::Online),
@@ -518,7 +584,7 @@ fn mode_of(mode: &str) -> PyResult<Mode> {
 }
 
 /// `held` or `measured`, as `--history` spells them.
-fn history_of(history: &str) -> PyResult<History> {
+pub(crate) fn history_of(history: &str) -> PyResult<History> {
     match history {
         "held" => Ok(History::Held),
         "measured" => Ok(History::Measured),
@@ -526,61 +592,6 @@ fn history_of(history: &str) -> PyResult<History> {
             "expected history `held` or `measured`, found `{other}`"
         ))),
     }
-}
-
-/// A run or ensemble directory read back, as `gbc predict --weights DIR` reads it.
-#[pyclass(module = "gbc._gbc", frozen)]
-struct Saved {
-    inner: api::SavedRun,
-}
-
-#[pymethods]
-impl Saved {
-    /// Whether it is an ensemble (its predictions carry a band).
-    fn is_ensemble(&self) -> bool {
-        self.inner.is_ensemble()
-    }
-
-    /// How the model differs from the one trained, outside its structure.
-    fn notes(&self) -> Vec<String> {
-        self.inner.notes().to_vec()
-    }
-
-    /// Predictions along every experiment of `data` as `gbc predict` writes them:
-    /// `(header, columns, experiment of each row, band coverage in words)`.
-    #[pyo3(signature = (data, mode = "offline", history = "held", band = 0.9))]
-    #[allow(clippy::type_complexity)]
-    fn predict(
-        &self,
-        py: Python<'_>,
-        data: &Bound<'_, PyList>,
-        mode: &str,
-        history: &str,
-        band: f64,
-    ) -> PyResult<(Vec<String>, Vec<Vec<f64>>, Vec<String>, String)> {
-        let spec = api::PredictSpec {
-            mode: mode_of(mode)?,
-            history: history_of(history)?,
-            band,
-            ..api::PredictSpec::default()
-        };
-        let records = records(py, self.inner.model(), data)?;
-        let predicted = (self.inner.predict(&records, &spec, &|_| {})).map_err(|e| raise(py, e))?;
-        let coverage = predicted.coverage_text();
-        Ok((
-            predicted.header,
-            predicted.columns,
-            predicted.experiments,
-            coverage,
-        ))
-    }
-}
-
-/// Reads the run or ensemble `gbc train` wrote into `directory`, for `model`.
-#[pyfunction]
-fn load_run(py: Python<'_>, model: &Model, directory: PathBuf) -> PyResult<Saved> {
-    let inner = api::SavedRun::load(&model.inner, &directory).map_err(|e| raise(py, e))?;
-    Ok(Saved { inner })
 }
 
 /// The native module.
@@ -591,11 +602,15 @@ fn _gbc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Diagnosis>()?;
     m.add_class::<Comparison>()?;
     m.add_class::<Saved>()?;
+    m.add_class::<Study>()?;
+    m.add_class::<Ensemble>()?;
     m.add_function(wrap_pyfunction!(train, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(load_run, m)?)?;
+    m.add_function(wrap_pyfunction!(experiment, m)?)?;
+    m.add_function(wrap_pyfunction!(train_ensemble, m)?)?;
     m.add("GbcError", m.py().get_type::<GbcError>())?;
     Ok(())
 }

@@ -168,3 +168,100 @@ def test_compare_equals_the_cli(tmp_path):
 
     assert timeless(result.info) == timeless(expected)
     assert "<html" in result._repr_html_().lower()
+
+
+def _study_flags(out):
+    return ["--model", f"gb1={GB1}", "--data", STEPS, "--val-from", 2500, "--sizes", 200,
+            "--replicates", 3, "--epochs", 2, "--jobs", 1, "-o", out]
+
+
+def _results(directory):
+    # Wall-clock seconds differ from run to run; every other column is the same.
+    frame = read(directory / "results.csv")
+    return frame.drop(columns=[c for c in frame.columns if "seconds" in c])
+
+
+def test_experiment_equals_the_cli(tmp_path):
+    cli("experiment", *_study_flags(tmp_path / "cli"))
+    study = gbc.experiment(model=[f"gb1={GB1}"], data=[STEPS], val_from=2500, sizes="200",
+                           replicates=3, epochs=2, jobs=1, output=tmp_path / "py",
+                           progress=False)
+    assert study.published and study.finished == 3
+    assert study.directory == tmp_path / "py"
+    pd.testing.assert_frame_equal(_results(study.directory), _results(tmp_path / "cli"))
+    assert "gb1" in study.summary
+    assert "<svg" in study._repr_html_()
+    with pytest.raises(gbc.GbcError) as caught:
+        gbc.experiment(model=[f"gb1={GB1}"], data=[STEPS], val_from=2500, sizes="x",
+                       output=tmp_path / "bad", progress=False)
+    assert caught.value.code is not None
+
+
+def test_an_interrupted_study_keeps_its_runs_and_goes_on(tmp_path):
+    import _thread
+    import time
+
+    def interrupt(event):
+        if event.get("kind") == "done":
+            _thread.interrupt_main()
+            time.sleep(0.5)  # the main thread sees the signal before the next run starts
+
+    keywords = dict(model=[f"gb1={GB1}"], data=[STEPS], val_from=2500, sizes="200",
+                    replicates=3, epochs=2, jobs=1, output=tmp_path / "py")
+    with pytest.raises(KeyboardInterrupt):
+        gbc.experiment(progress=interrupt, **keywords)
+    assert not (tmp_path / "py" / "results.csv").exists()
+    study = gbc.experiment(progress=False, **keywords)
+    assert study.published and study.finished == 3
+    assert "reused" in study.summary
+    cli("experiment", *_study_flags(tmp_path / "cli"))
+    pd.testing.assert_frame_equal(_results(study.directory), _results(tmp_path / "cli"))
+
+
+def test_an_ensemble_equals_the_cli(tmp_path):
+    flags = ["--ensemble", 3, "--holdout", "B4", "--jobs", 1, "--seed", 2]
+    cli("train", MONOD, OVERFLOW, *flags, "-o", tmp_path / "cli")
+    cli("predict", MONOD, OVERFLOW, "--weights", tmp_path / "cli", "--mode", "online",
+        "-o", tmp_path / "cli.csv")
+    model = gbc.Model.from_file(MONOD)
+    ensemble = model.train({"overflow": read(OVERFLOW)}, ensemble=3, holdout=["B4"], jobs=1,
+                           seed=2, output=tmp_path / "py", progress=False)
+    assert isinstance(ensemble, gbc.Ensemble)
+    expected = json.loads((tmp_path / "cli" / "ensemble.json").read_text())
+
+    def timeless(value):
+        # Wall-clock seconds and the data's description (files or experiments) aside.
+        if isinstance(value, dict):
+            return {k: timeless(v) for k, v in value.items() if k not in ("seconds", "data")}
+        if isinstance(value, list):
+            return [timeless(v) for v in value]
+        return value
+
+    assert timeless(ensemble.info) == timeless(expected)
+    assert "coverage" in ensemble.summary
+    predicted = ensemble.predict({"overflow": read(OVERFLOW)}, mode="online")
+    written = read(tmp_path / "cli.csv")
+    assert list(predicted.columns) == list(written.columns)
+    assert (predicted.drop(columns="experiment").to_numpy() ==
+            written.drop(columns="experiment").to_numpy()).all()
+    assert "<svg" in ensemble._repr_html_()
+
+
+def test_cross_validation_equals_the_cli(tmp_path):
+    flags = ["--cv", "--epochs", 2, "--seed", 4]
+    cli("train", MONOD, OVERFLOW, *flags, "-o", tmp_path / "cli")
+    expected = json.loads((tmp_path / "cli" / "cv" / "summary.json").read_text())
+    run = gbc.Model.from_file(MONOD).train({"overflow": read(OVERFLOW)}, cv=True, epochs=2,
+                                           seed=4, output=tmp_path / "py", progress=False)
+
+    def timeless(value):
+        if isinstance(value, dict):
+            return {k: timeless(v) for k, v in value.items() if k != "seconds"}
+        if isinstance(value, list):
+            return [timeless(v) for v in value]
+        return value
+
+    assert timeless(run.cv) == timeless(expected)
+    assert [f["held_out"] for f in run.cv["folds"]] == ["B1", "B2", "B3", "B4"]
+    assert "cross-validation" in run.cv_table
+    assert (tmp_path / "py" / "cv" / "summary.json").exists()

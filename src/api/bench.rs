@@ -8,6 +8,7 @@
 //! training end to end. Each measurement is handed to the caller as it is made, and all of
 //! them come back as [`Measurements`] (JSON). docs/performance.md has the numbers.
 
+pub mod epochs;
 mod stiff;
 
 use std::path::{Path, PathBuf};
@@ -19,8 +20,8 @@ use crate::engine::graph::Precision;
 use crate::numeric::median;
 use crate::signal::Signal;
 use crate::sim::SimOptions;
-use crate::train::bench::{BenchReport, Engine};
 use crate::train::{Part, Recipe, Settings, TrainOptions, TrainingData};
+use epochs::{BenchReport, Engine};
 
 pub use stiff::StiffRow;
 
@@ -266,7 +267,7 @@ fn time_case(
                     ..settings
                 })
             };
-            let report = crate::train::bench::bench(model, data, &options)?;
+            let report = epochs::bench(model, data, &options)?;
             rows.push(TrainingRow {
                 model: label.to_string(),
                 report,

@@ -6,9 +6,12 @@
 //! [`StudyRun::execute`] trains the pending runs into a directory (finished runs found
 //! there are reused); [`StudyResults::publish`] writes tables, figures and the report, and
 //! [`summary_text`] says what came out. [`merge`] joins the directories of several shards.
+//! [`StudyPlan`] is a study with how to run it (shard, directory, threads);
+//! [`StudyRun::complete`] executes and publishes it in one call (what `gbc experiment` and
+//! the Python package's `gbc.experiment` do).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use super::ApiError;
@@ -16,7 +19,8 @@ use crate::experiment::merge::{publish, weights_in, Merged, Published};
 use crate::experiment::report::{compare, number};
 use crate::experiment::results::summarise;
 use crate::experiment::{
-    execute, grid, prepare, ExperimentFailure, Prepared, Progress, RunResult, RunSpec, Shard, Study,
+    execute_until, grid, prepare, ExperimentFailure, Prepared, Progress, RunResult, RunSpec, Shard,
+    Study,
 };
 
 impl From<ExperimentFailure> for ApiError {
@@ -26,6 +30,39 @@ impl From<ExperimentFailure> for ApiError {
             ExperimentFailure::Internal(message) => ApiError::Internal(message),
         }
     }
+}
+
+/// A study with how to run it: which shard of its grid, into which directory, on how many
+/// threads (the flags of `gbc experiment` besides the study's own).
+#[derive(Debug, Clone)]
+pub struct StudyPlan {
+    /// The study.
+    pub study: Study,
+    /// The slice of the grid to train.
+    pub shard: Shard,
+    /// The experiment directory.
+    pub out: PathBuf,
+    /// Trainings at a time.
+    pub jobs: usize,
+}
+
+impl StudyPlan {
+    /// Loads and checks the study and selects the runs of its shard ([`StudyRun::prepare`]).
+    pub fn prepare(&self) -> Result<StudyRun, ApiError> {
+        StudyRun::prepare(&self.study, self.shard)
+    }
+}
+
+/// What a study's run gave: its results and, for a whole study, what was published and
+/// the summary `gbc experiment` prints.
+pub struct StudyOutcome {
+    /// The results of the runs of the shard.
+    pub results: StudyResults,
+    /// The tables, figures and report written (a whole study only: a shard's are written
+    /// by `gbc experiment merge`).
+    pub published: Option<Published>,
+    /// What `gbc experiment` prints at the end.
+    pub summary: String,
 }
 
 /// A study loaded and checked (models compiled, records read), with the runs of its shard.
@@ -74,10 +111,22 @@ impl StudyRun {
         jobs: usize,
         on_progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<StudyResults, ApiError> {
+        self.execute_until(out, (jobs, &AtomicBool::new(false)), on_progress)
+    }
+
+    /// [`StudyRun::execute`] that starts no further run once `stop` is set (the runs under
+    /// way finish and are kept; a later call reuses every finished run).
+    pub fn execute_until(
+        &self,
+        out: &Path,
+        (jobs, stop): (usize, &AtomicBool),
+        on_progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<StudyResults, ApiError> {
         let selected = self.selected();
         let started = Instant::now();
         let reused = AtomicUsize::new(0);
-        let results = execute(&self.prepared, &selected, out, jobs.max(1), &|progress| {
+        let how = (jobs.max(1), stop);
+        let results = execute_until(&self.prepared, &selected, out, how, &|progress| {
             if let Progress::Skipped(_) = &progress {
                 reused.fetch_add(1, Ordering::Relaxed);
             }
@@ -88,6 +137,62 @@ impl StudyRun {
             seconds: started.elapsed().as_secs_f64(),
             reused: reused.into_inner(),
             out: out.to_path_buf(),
+        })
+    }
+}
+
+impl StudyRun {
+    /// Trains the selected runs into `plan.out` on `plan.jobs` threads, then publishes a
+    /// whole study (tables, figures, report) and says what came out; a shard only trains
+    /// and says how to merge. Once `stop` is set no further run starts: the outcome then
+    /// publishes nothing and says how many runs finished (a later call reuses them).
+    pub fn complete(
+        &self,
+        plan: &StudyPlan,
+        stop: &AtomicBool,
+        on_progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<StudyOutcome, ApiError> {
+        let results = self.execute_until(&plan.out, (plan.jobs, stop), on_progress)?;
+        let selected = self.selected().len();
+        if results.results.len() < selected {
+            let summary = format!(
+                "stopped: {} of {selected} runs finished in {} ({} reused); \
+                 the same study into the same directory reuses them\n",
+                results.results.len(),
+                plan.out.display(),
+                results.reused,
+            );
+            return Ok(StudyOutcome {
+                results,
+                published: None,
+                summary,
+            });
+        }
+        if !self.shard.is_all() {
+            let summary = format!(
+                "shard {}: {} runs finished in {:.1} s ({} reused, {} failed) in {}\n\
+                 when every shard is done: gbc experiment merge {}\n",
+                self.shard,
+                results.results.len(),
+                results.seconds,
+                results.reused,
+                results.failed(),
+                plan.out.display(),
+                plan.out.display()
+            );
+            return Ok(StudyOutcome {
+                results,
+                published: None,
+                summary,
+            });
+        }
+        let published = results.publish(self)?;
+        let timing = (results.seconds, results.reused);
+        let summary = summary_text(&self.prepared, &results.results, &published, timing);
+        Ok(StudyOutcome {
+            results,
+            published: Some(published),
+            summary,
         })
     }
 }

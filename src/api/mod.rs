@@ -9,6 +9,11 @@
 //! - [`TrainSpec`] and [`train`]: a training run (split, recipe, settings) with progress
 //!   through a callback and cancellation through a flag; it returns a [`Run`] that writes
 //!   itself (weights, `run.json`, report) and predicts.
+//! - [`train_ensemble`]: `--ensemble N`, members trained in parallel with their prediction
+//!   band calibrated and its coverage counted, as an [`EnsembleRun`] (its directory
+//!   written, JSON, summary).
+//! - [`cross_validate`]: `--cv`, a run per experiment left out, each kept with its
+//!   held-out free run, as a [`crate::trained::cv::CrossValidation`].
 //! - [`Run::predict`]: offline or online predictions of a record, as a [`Prediction`].
 //! - [`SimulateSpec`] and [`simulate`]: a model integrated under input programmes (noise,
 //!   ranges, fitted params, initial values), or a what-if run of a trained run, as a
@@ -27,9 +32,11 @@
 
 pub mod bench;
 mod compare;
+mod cv;
 mod data;
 pub mod demo;
 mod diagnose;
+mod ensemble;
 mod error;
 pub mod experiment;
 mod model;
@@ -42,8 +49,10 @@ pub mod summary;
 mod tests_saved;
 
 pub use compare::{compare, mechanism_of, CompareResult, CompareSpec};
+pub use cv::cross_validate;
 pub use data::{Column, Table};
 pub use diagnose::{diagnose, DiagnoseSpec, Diagnosis};
+pub use ensemble::{train_ensemble, EnsembleRun};
 pub use error::ApiError;
 pub use model::{read_records, Model};
 pub use run::{train, Control, Prediction, Run, TrainSpec, REPORT_FILE};

@@ -7,12 +7,11 @@ use std::sync::Arc;
 
 use super::{split, ApiError, Model, Split, Validation};
 use crate::record::Record;
-use crate::train::artifacts::{self, RunInfo};
-use crate::train::predict::{self, Mode};
 use crate::train::{
-    Checkpoint, Event, History, PhysicalRange, Recipe, RunControl, TrainOptions, Trained,
-    TrainingData,
+    Checkpoint, Event, History, Recipe, RunControl, TrainOptions, Trained, TrainingData,
 };
+use crate::trained::artifacts::{self, RunInfo};
+use crate::trained::predict::{self, Mode};
 
 /// Everything a training run is asked for, with the defaults of `gbc train` (its flags'
 /// names are the fields' names).
@@ -192,7 +191,7 @@ impl Run {
 
     /// The report page (HTML): losses, the free runs against the data, params.
     pub fn report_html(&self) -> String {
-        crate::train::page::run_page(
+        crate::trained::page::run_page(
             self.model.ir(),
             &self.trained,
             (&self.split.train, &self.split.validation),
@@ -214,7 +213,7 @@ impl Run {
         mode: Mode,
         history: History,
     ) -> Result<Vec<Prediction>, ApiError> {
-        let range = PhysicalRange::of_run(&self.info);
+        let range = self.info.physical_range();
         let (network, setup) = (&self.trained.network, &self.trained.setup);
         (records.iter())
             .map(|record| {

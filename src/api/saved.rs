@@ -5,7 +5,7 @@
 //! The model is matched to the weights by its structure: a model whose comments, consts or
 //! balances changed is used with notes saying what changed; one whose structure changed is
 //! refused (E0416). Offline rows are one-step predictions from the true history; online rows
-//! come from one free run driven by the data's inputs (see [`crate::train::predict`]). A free
+//! come from one free run driven by the data's inputs (see [`crate::trained::predict`]). A free
 //! run that leaves the physical range of the training data stops before the offending row,
 //! with a warning saying where and why. An ensemble run gives the members' median of every
 //! column and, for free runs, the calibrated band of each measured state (`X_lo`, `X_hi`)
@@ -18,9 +18,9 @@ use super::{ApiError, Model};
 use crate::engine::graph::Precision;
 use crate::ensemble::{self, CellCount, Loaded};
 use crate::record::Record;
-use crate::train::artifacts::{self, Restored};
-use crate::train::predict::{self, Mode};
-use crate::train::{History, PhysicalRange};
+use crate::train::History;
+use crate::trained::artifacts::{self, Restored};
+use crate::trained::predict::{self, Mode};
 
 /// A trained run read back for a model: one network, or an ensemble's members.
 pub struct SavedRun {
@@ -177,7 +177,7 @@ impl SavedRun {
         spec: &PredictSpec,
         on_event: &(dyn Fn(PredictEvent) + Sync),
     ) -> Result<Predictions, ApiError> {
-        let range = PhysicalRange::of_run(&restored.info);
+        let range = restored.info.physical_range();
         let mut predictions = Predictions::new(records.len());
         on_event(PredictEvent::Started {
             experiments: records.len(),

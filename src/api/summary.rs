@@ -10,8 +10,8 @@ use std::path::Path;
 use crate::ensemble::{self, EnsembleInfo, Resample};
 use crate::ir::Model;
 use crate::plot::tick_label;
-use crate::train::cv::{self, CrossValidation};
 use crate::train::{self, ErrorSet, Trained};
+use crate::trained::cv::{self, CrossValidation};
 
 /// `writeln!` into a `String` (which cannot fail).
 macro_rules! line {

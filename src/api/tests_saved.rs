@@ -3,8 +3,8 @@
 
 use super::*;
 use crate::io::ScratchDir;
-use crate::train::predict::Mode;
 use crate::train::History;
+use crate::trained::predict::Mode;
 
 #[test]
 fn a_saved_run_predicts_and_exports_as_the_run_it_was() {

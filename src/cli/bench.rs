@@ -15,7 +15,7 @@ use super::options::TrainingFlags;
 use super::{CommandError, CommandResult};
 use crate::api::bench::{BenchModel, BenchSpec, Measurement, TrainingRow};
 use crate::engine::graph::Precision;
-use crate::train::bench::Engine;
+use crate::train::Engine;
 
 /// Timed epochs per measurement when `--epochs` is left out.
 const BENCH_EPOCHS: usize = 20;

@@ -1,4 +1,5 @@
-//! The flags of `gbc train`, `gbc diagnose`, `gbc simulate` and `gbc compare` as the specs
+//! The flags of `gbc train`, `gbc diagnose`, `gbc simulate`, `gbc compare` and
+//! `gbc experiment` as the specs
 //! of the library API, for a
 //! binding whose keywords are these flags (`train_points=300` is `--train-points 300`): the
 //! same names, the same defaults, the same checks, by construction.
@@ -9,6 +10,7 @@ use clap::Parser;
 
 use super::compare::CompareArgs;
 use super::diagnose::DiagnoseArgs;
+use super::experiment::RunArgs;
 use super::simulate::SimulateArgs;
 use super::train::TrainArgs;
 use super::CommandError;
@@ -54,6 +56,13 @@ struct Simulate {
 struct Compare {
     #[command(flatten)]
     args: CompareArgs,
+}
+
+#[derive(Parser)]
+#[command(name = "gbc", no_binary_name = true)]
+struct Experiment {
+    #[command(flatten)]
+    args: RunArgs,
 }
 
 /// What `flags` mean to a command. The command line's two positional arguments (model and
@@ -115,4 +124,18 @@ pub fn simulate_spec(flags: &[String]) -> Result<(api::SimulateSpec, Vec<String>
 pub fn compare_spec(flags: &[String]) -> Result<api::CompareSpec, CommandError> {
     let Compare { args } = parse(flags, "compare")?;
     super::compare::spec_of(&args)
+}
+
+/// The study `gbc experiment`'s `flags` ask for (`preset`, `config`, or `model`, `data`,
+/// `sizes`, ...), with its shard, directory and threads.
+pub fn experiment_plan(flags: &[String]) -> Result<api::experiment::StudyPlan, CommandError> {
+    let Experiment { args } = parse_with(&[], flags, "experiment")?;
+    super::experiment::plan_of(&args)
+}
+
+/// The ensemble `gbc train`'s `flags` ask for (`ensemble=N` with `resample`, `jobs`,
+/// `band`), if any.
+pub fn ensemble_plan(flags: &[String]) -> Result<Option<crate::ensemble::Plan>, CommandError> {
+    let Train { args } = parse(flags, "train")?;
+    Ok(super::train::ensemble::plan_of(&args))
 }

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
-use crate::api::experiment::{summary_text, StudyRun};
+use crate::api::experiment::{summary_text, StudyPlan};
 use crate::cli::options::TrainingFlags;
 use crate::cli::progress::{Announce, Count, Reporter};
 use crate::cli::{CommandError, CommandResult};
@@ -290,12 +290,10 @@ fn override_settings(study: &mut Study, args: &RunArgs) -> Result<(), CommandErr
 
 pub use crate::experiment::default_jobs;
 
-fn run_study(args: &RunArgs) -> CommandResult {
+/// The study the flags describe with its shard (`--shard`), directory (`-o`, default
+/// `experiment-<name>`) and threads (`--jobs`, default every core).
+pub fn plan_of(args: &RunArgs) -> Result<StudyPlan, CommandError> {
     let study = study_of(args)?;
-    if args.print_study {
-        println!("{}", study.to_json());
-        return Ok(());
-    }
     let shard = match &args.shard {
         Some(text) => text.parse::<Shard>().map_err(user)?,
         None => Shard::ALL,
@@ -303,33 +301,30 @@ fn run_study(args: &RunArgs) -> CommandResult {
     let out =
         (args.out.clone()).unwrap_or_else(|| PathBuf::from(format!("experiment-{}", study.name)));
     let jobs = args.jobs.unwrap_or_else(default_jobs).max(1);
-    let run = StudyRun::prepare(&study, shard)?;
-    let bar = ProgressBar::new(&[(&run.prepared, &run.selected(), &out)]);
-    let results = run.execute(&out, jobs, &|p| bar.observe(&run.prepared, p));
-    bar.finish();
-    let results = results?;
-    if !shard.is_all() {
-        println!(
-            "shard {shard}: {} runs finished in {:.1} s ({} reused, {} failed) in {}",
-            results.results.len(),
-            results.seconds,
-            results.reused,
-            results.failed(),
-            out.display()
-        );
-        println!(
-            "when every shard is done: gbc experiment merge {}",
-            out.display()
-        );
+    Ok(StudyPlan {
+        study,
+        shard,
+        out,
+        jobs,
+    })
+}
+
+fn run_study(args: &RunArgs) -> CommandResult {
+    if args.print_study {
+        println!("{}", study_of(args)?.to_json());
         return Ok(());
     }
-    let published = results.publish(&run)?;
-    let timing = (results.seconds, results.reused);
-    print!(
-        "{}",
-        summary_text(&run.prepared, &results.results, &published, timing)
-    );
-    println!("report: {}", out.join("report.html").display());
+    let plan = plan_of(args)?;
+    let run = plan.prepare()?;
+    let bar = ProgressBar::new(&[(&run.prepared, &run.selected(), &plan.out)]);
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let outcome = run.complete(&plan, &never, &|p| bar.observe(&run.prepared, p));
+    bar.finish();
+    let outcome = outcome?;
+    print!("{}", outcome.summary);
+    if outcome.published.is_some() {
+        println!("report: {}", plan.out.join("report.html").display());
+    }
     Ok(())
 }
 

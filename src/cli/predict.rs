@@ -4,7 +4,7 @@
 //!
 //! Columns: `experiment` (when the data set has several), `t`, the states (measured, then
 //! hidden), the closure outputs, the model's outputs; one row per data row. Offline rows are one-step predictions from the true history; online rows come
-//! from one free run driven by the data's inputs (see `gbc::train::predict`). A free run
+//! from one free run driven by the data's inputs (see `gbc::trained::predict`). A free run
 //! that leaves the physical range of the training data (the run's `--range-factor`) stops:
 //! the file ends before the offending row and a warning on stderr says where and why. No
 //! value that is not finite is ever written: a table holding one is refused (E0253).
@@ -15,7 +15,7 @@ use super::data::{load_records, ColumnArgs, HistoryArg};
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
 use crate::api::{PredictEvent, PredictSpec, SavedRun};
-use crate::train::predict;
+use crate::trained::predict;
 
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

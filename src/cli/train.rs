@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod cv;
-mod ensemble;
+pub mod ensemble;
 mod progress;
 mod safety;
 
@@ -263,39 +263,16 @@ pub fn run(args: &TrainArgs) -> CommandResult {
              epochs; `gbc simulate --warmup` is a time)"
         );
     }
-    if let Some(members) = args.ensemble {
+    if let Some(plan) = ensemble::plan_of(args) {
         let directory = run_directory(args)?;
-        let split = crate::api::split(records, val, &spec.validation)?;
-        if let Some(note) = &split.note {
-            eprintln!("{note}");
-        }
-        let data = train::TrainingData {
-            train: &split.train,
-            validation: &split.validation,
-            part: split.part,
-        };
-        let source = (&model_file, model.source.as_str());
-        return ensemble::run(
-            args,
-            (model.ir(), source),
-            &data,
-            (&spec.options, &spec.recipe),
-            (members, &directory),
-        );
+        return ensemble::run(args, &model, (records, val), (&spec, &plan), &directory);
     }
     let directory = match &checkpoint {
         Some(_) => args.output.clone().unwrap_or_default(),
         None => run_directory(args)?,
     };
     if checkpoint.is_none() && args.cv {
-        let (train, _) = crate::api::hold_out(records.clone(), &args.holdout)?;
-        let keep = train::cv::Keep {
-            directory: directory.clone(),
-            model: (&model.origin, &model.source),
-            data: spec.data.as_deref().unwrap_or_default(),
-            recoveries: args.recoveries,
-        };
-        cv::cross_validate(model.ir(), &train, (&spec.options, &spec.recipe), &keep)?;
+        cv::cross_validate(&model, records.clone(), &spec, &directory)?;
     }
     let command = match &checkpoint {
         Some(checkpoint) => checkpoint.command.clone(),

@@ -7,10 +7,10 @@ use std::time::Instant;
 
 use crate::ir;
 use crate::record::{Normalisation, Record};
-use crate::train::predict::{predict_in_range, Mode};
 use crate::train::{
     self, Part, PhysicalRange, RunControl, TrainError, TrainOptions, Trained, TrainingData,
 };
+use crate::trained::predict::{predict_in_range, Mode};
 
 use super::naive::Naive;
 use super::score::{overall, split_scores};

@@ -72,7 +72,7 @@ pub enum EnsembleError {
     /// A what-if run cannot start.
     #[error(transparent)]
     #[diagnostic(transparent)]
-    WhatIf(#[from] crate::train::predict::whatif::WhatIfError),
+    WhatIf(#[from] crate::trained::predict::whatif::WhatIfError),
     /// An invariant broke.
     #[error(transparent)]
     #[diagnostic(transparent)]

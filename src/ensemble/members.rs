@@ -15,11 +15,12 @@ use super::{
 use crate::experiment::execute::run_jobs;
 use crate::ir;
 use crate::record::{Normalisation, Record};
-use crate::train::predict::{predict_in_range, Mode};
 use crate::train::{
-    artifacts, train_run, Event, Part, PhysicalRange, Recipe, RunControl, TrainError, TrainOptions,
+    train_run, Event, Part, PhysicalRange, Recipe, RunControl, TrainError, TrainOptions,
     TrainingData,
 };
+use crate::trained::artifacts;
+use crate::trained::predict::{predict_in_range, Mode};
 
 /// How many members, on what, on how many threads, and the level reported.
 #[derive(Debug, Clone, PartialEq)]

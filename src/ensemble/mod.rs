@@ -162,7 +162,7 @@ impl Run {
     /// The run of a prediction table along `record`: the first `states` columns after `t`,
     /// matched to the record's rows by time.
     pub fn of_table(
-        table: &crate::train::predict::PredictionTable,
+        table: &crate::trained::predict::PredictionTable,
         record: &crate::record::Record,
         states: usize,
     ) -> Run {

@@ -18,10 +18,10 @@ use crate::experiment::execute::run_jobs;
 use crate::ir;
 use crate::numeric::median;
 use crate::record::Record;
-use crate::train::artifacts;
-use crate::train::predict::whatif::{what_if, WhatIf};
-use crate::train::predict::{predict_in_range, Mode, PredictionTable};
 use crate::train::{History, PhysicalRange};
+use crate::trained::artifacts;
+use crate::trained::predict::whatif::{what_if, WhatIf};
+use crate::trained::predict::{predict_in_range, Mode, PredictionTable};
 
 /// Whether `directory` holds an ensemble run.
 pub fn is_ensemble(directory: &Path) -> bool {
@@ -92,7 +92,7 @@ fn for_each_member<T: Send>(
         Mutex::new((0..loaded.members.len()).map(|_| None).collect());
     let work = |member: usize| -> Result<(), EnsembleError> {
         let restored = artifacts::restore_with_notes(model, source, &loaded.members[member])?;
-        let range = PhysicalRange::of_run(&restored.info);
+        let range = restored.info.physical_range();
         let result = each(&restored, range)?;
         slots.lock().unwrap_or_else(|p| p.into_inner())[member] = Some(result);
         on_member(member);

@@ -312,8 +312,8 @@ fn an_ensemble_needs_two_members_and_two_whole_experiments_to_resample() {
 /// has a band around the median at every row.
 #[test]
 fn an_ensemble_trains_saves_and_predicts_a_band_around_its_median() {
-    use crate::train::predict::Mode;
     use crate::train::{History, Part, Recipe, TrainOptions, TrainingData};
+    use crate::trained::predict::Mode;
     let model = crate::train::fixtures::chemostat::grey_box();
     let records = chemostat_records(&model);
     let (train, held) = records.split_at(3);

@@ -13,7 +13,8 @@ use super::reference::{free_run, free_run_error, free_run_errors, mean_error};
 use super::results::{self, Measure, RunResult, RunStatus, StudyRecord};
 use super::{ExperimentError, ExperimentFailure, Study};
 use crate::numeric::mean_std;
-use crate::train::{self, artifacts, Event, TrainOptions, Trained};
+use crate::train::{self, Event, TrainOptions, Trained};
+use crate::trained::artifacts;
 
 /// Something worth showing while runs go on.
 #[derive(Debug, Clone, Copy)]
@@ -60,6 +61,25 @@ pub fn execute(
     jobs: usize,
     on_progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Vec<RunResult>, ExperimentFailure> {
+    execute_until(
+        prepared,
+        runs,
+        dir,
+        (jobs, &AtomicBool::new(false)),
+        on_progress,
+    )
+}
+
+/// [`execute`] that starts no further run once `stop` is set (runs under way finish and
+/// are written): the results are those of the runs finished, in the order of `runs`, and
+/// a later call reuses them.
+pub fn execute_until(
+    prepared: &Prepared,
+    runs: &[&RunSpec],
+    dir: &Path,
+    (jobs, stop): (usize, &AtomicBool),
+    on_progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Vec<RunResult>, ExperimentFailure> {
     claim_directory(dir, &prepared.record)?;
     let mut finished: Vec<Option<RunResult>> = Vec::with_capacity(runs.len());
     for spec in runs {
@@ -72,6 +92,9 @@ pub fn execute(
     let pending: Vec<usize> = (0..runs.len()).filter(|i| finished[*i].is_none()).collect();
     let slots = Mutex::new(finished);
     run_queue(jobs, pending.len(), &|position| {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(());
+        }
         let index = pending[position];
         let spec = runs[index];
         on_progress(Progress::Started(spec));

@@ -18,8 +18,9 @@ use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::data::Dataset;
 use crate::engine::graph::{Network, Setup};
 use crate::plot::{clip, thin, widened_range, BarChart, Chart, Series, Style, MAX_POINTS, PALETTE};
-use crate::train::predict::{predict, Mode, PredictionTable};
-use crate::train::{artifacts, History};
+use crate::train::History;
+use crate::trained::artifacts;
+use crate::trained::predict::{predict, Mode, PredictionTable};
 
 /// Figure size in pixels.
 pub const WIDTH: f64 = 640.0;

@@ -36,7 +36,7 @@ mod tests;
 mod tests_run;
 
 pub use error::{ExperimentError, ExperimentFailure};
-pub use execute::{execute, Progress};
+pub use execute::{execute, execute_until, Progress};
 pub use grid::{grid, RunSpec, Shard};
 pub use merge::merge;
 pub use prepare::{prepare, LoadedModel, Prepared};

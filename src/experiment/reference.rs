@@ -7,8 +7,8 @@ use crate::ir;
 use crate::numeric::mean_std;
 use crate::signal::Signal;
 use crate::sim::SimOptions;
-use crate::train::predict::{predict_in_range, Mode, PredictionTable};
 use crate::train::TrainError;
+use crate::trained::predict::{predict_in_range, Mode, PredictionTable};
 
 use super::ExperimentFailure;
 

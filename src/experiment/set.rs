@@ -123,7 +123,7 @@ pub fn held_out_figures(
 ) -> Vec<super::figures::Figure> {
     use super::figures::{color, Figure, DATA_COLOR, HEIGHT, WIDTH};
     use crate::plot::{clip, thin, widened_range, Chart, Series, Style, MAX_POINTS};
-    use crate::train::predict::{predict, Mode};
+    use crate::trained::predict::{predict, Mode};
     let mut figures = Vec::new();
     let Some(first) = prepared.models.iter().find_map(|m| m.set.as_ref()) else {
         return figures;

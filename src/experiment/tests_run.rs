@@ -16,8 +16,8 @@ use super::tests::scratch_dir;
 use super::{execute, grid, merge, prepare, Prepared, Progress, Shard, Study, StudyModel};
 use crate::data::MinRows;
 use crate::numeric::mean_std;
-use crate::train::artifacts;
-use crate::train::predict::{predict_in_range, Mode};
+use crate::trained::artifacts;
+use crate::trained::predict::{predict_in_range, Mode};
 
 fn tiny_study() -> Study {
     let dir = Path::new("models/mm_chemostat");

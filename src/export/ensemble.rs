@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use crate::engine::graph::Precision;
 use crate::ensemble::{self, Coverage, EnsembleError, StateNoise};
 use crate::ir;
-use crate::train::artifacts;
+use crate::trained::artifacts;
 
 use super::{ExportError, Exported, Layout};
 

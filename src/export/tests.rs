@@ -6,8 +6,8 @@ use std::path::Path;
 use super::*;
 use crate::engine::graph::Precision;
 use crate::record::Record;
-use crate::train::predict::{predict_in_range, Mode};
 use crate::train::{self, History, Part, Recipe, TrainOptions, Trained, TrainingData};
+use crate::trained::predict::{predict_in_range, Mode};
 
 /// A shipped model and the first `rows` rows of a shipped record.
 fn shipped(model: &str, data: &str, rows: usize) -> (ir::Model, Record) {

@@ -9,8 +9,8 @@ use super::Exported;
 use crate::engine::graph::Precision;
 use crate::ensemble::{self, Keep, Plan, Resample};
 use crate::record::Record;
-use crate::train::predict::{Mode, PredictionTable};
 use crate::train::{History, Part, Recipe, TrainOptions, TrainingData};
+use crate::trained::predict::{Mode, PredictionTable};
 use serde_json::Value;
 
 /// `Phi` from `erfc`, written here.

@@ -24,8 +24,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::engine::graph::{AdamState, NamedTensor, Network};
 
-use super::artifacts::{read_tensors, write_tensors};
 use super::fit::EpochEnd;
+use super::tensors::{read_tensors, write_tensors};
 use super::validation::Course;
 use super::{Event, TrainError, TrainOptions};
 
@@ -143,7 +143,7 @@ impl Checkpoint {
         let found = crate::finite::in_tensors(&self.weights, &[])
             .or_else(|| crate::finite::in_tensors(&self.best_weights, &[]));
         let path = directory.join(CHECKPOINT_TENSORS);
-        crate::finite::refuse(&path, found, super::artifacts::NOT_FINITE_HELP)?;
+        crate::finite::refuse(&path, found, super::tensors::NOT_FINITE_HELP)?;
         let mut tensors = Vec::new();
         fn prefixed<'t>(
             prefix: &'t str,

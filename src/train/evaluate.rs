@@ -120,15 +120,6 @@ impl PhysicalRange {
         range
     }
 
-    /// The range of a saved run: its training data's extremes and its `--range-factor`
-    /// (the default for runs saved before recipes were recorded). What `gbc predict` and
-    /// `gbc simulate --weights` judge a free run by.
-    pub fn of_run(info: &super::artifacts::RunInfo) -> Option<PhysicalRange> {
-        let factor =
-            (info.recipe.as_ref()).map_or(super::recipe::DEFAULT_RANGE_FACTOR, |r| r.range_factor);
-        Self::new(&info.normalisation, factor)
-    }
-
     /// No bounds for `states` states: only a value that is not finite leaves it.
     pub fn unbounded(states: usize) -> PhysicalRange {
         PhysicalRange {

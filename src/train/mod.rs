@@ -6,9 +6,10 @@
 //! the training part's measured cells, resolves closure magnitudes and warns about stiff
 //! balances ([`analysis`]), then runs Adam on shuffled mini-batches of one-step pairs
 //! ([`pairs`]) or free-run windows ([`windows`]) and reports the paper's two validation
-//! errors per experiment and pooled ([`evaluate`]). [`artifacts`] saves and reloads a
-//! trained network, [`predict`] runs it along a record, [`mod@bench`] times its training
-//! steps.
+//! errors per experiment and pooled ([`evaluate`]). What is done with a trained network
+//! (saving and reloading it, predicting with it, its report, cross-validation's fold runs)
+//! is the `trained` module's; `gbc bench` times training steps on this module's own
+//! pipeline ([`crate::api::bench`]).
 //!
 //! Decisions this module makes (`docs/training.md` has them in full):
 //! - **Loss** at measured cells only (and observables), each z-scored by its column's
@@ -23,21 +24,16 @@
 //!   driven by the data's inputs, over `--online-horizon` (default: to the end).
 
 pub mod analysis;
-pub mod artifacts;
 pub mod balances;
-pub mod bench;
 pub mod checkpoint;
 pub mod coverage;
-pub mod cv;
 mod error;
 pub mod evaluate;
 mod fit;
 mod flags;
 pub mod initial;
 pub mod mechanism;
-pub mod page;
 pub mod polish;
-pub mod predict;
 pub(crate) mod prepare;
 pub mod recipe;
 pub mod recovery;
@@ -45,28 +41,11 @@ mod run;
 pub mod settings;
 pub mod split;
 pub mod stepping;
+pub mod tensors;
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_jitter;
-#[cfg(test)]
-mod tests_mechanism;
-#[cfg(test)]
-mod tests_nonnegative;
-#[cfg(test)]
-mod tests_outputs;
-#[cfg(test)]
-mod tests_recipe;
-#[cfg(test)]
-mod tests_records;
-#[cfg(test)]
-mod tests_start;
-#[cfg(test)]
-mod tests_substeps;
-#[cfg(test)]
-mod tests_windows;
 pub mod toward;
-mod validation;
+pub(crate) mod validation;
 pub mod warnings;
 
 #[cfg(test)]

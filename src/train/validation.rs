@@ -15,7 +15,7 @@ use super::{ErrorSet, TrainError, TrainOptions, ValidationErrors};
 use crate::engine::pairs::{stage_fractions, PairAt, PairTable};
 
 /// Tracks with their hidden-state estimates and a table of pairs.
-pub(super) struct Course {
+pub(crate) struct Course {
     /// The tracks (their reference filled by the model where unknown).
     pub tracks: Vec<Track>,
     /// `hidden[track][knot]`.
@@ -55,7 +55,7 @@ impl Course {
 /// along every track of `course` with the current network (nothing to do for a model
 /// without hidden states on fully known tracks). Before the first fill the unknown
 /// stretches hold the data's provisional interpolant.
-pub(super) fn refresh(
+pub(crate) fn refresh(
     network: &Network,
     model: &ir::Model,
     course: &mut Course,

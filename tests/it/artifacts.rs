@@ -6,9 +6,9 @@ use std::path::Path;
 
 use gbc::experiment::results::{self, Measure};
 use gbc::experiment::{RunResult, RunStatus, Study, StudyRecord};
-use gbc::train::artifacts;
-use gbc::train::cv::{CrossValidation, Fold};
 use gbc::train::{BalanceFit, Divergence, ErrorSet, ParamEstimate};
+use gbc::trained::artifacts;
+use gbc::trained::cv::{CrossValidation, Fold};
 
 use crate::cli::{gbc, scratch};
 

@@ -1,5 +1,5 @@
 //! Params a fit found, read from the JSON that `gbc train` writes (`run.json` or its
-//! `--json` file: [`RunInfo::params`](crate::train::artifacts::RunInfo::params), read by the
+//! `--json` file: [`RunInfo::params`](crate::trained::artifacts::RunInfo::params), read by the
 //! same serde type) or that `gbc diagnose --json` writes (`"fitted_params": {name: value}`;
 //! with one effect applied, the params refitted with that effect,
 //! `"effects": [{"name": NAME, "params": {..}}]`).
@@ -15,7 +15,7 @@ use serde::Deserialize;
 
 use super::SimulateError;
 use crate::ir::Model;
-use crate::train::artifacts::NamedValue;
+use crate::trained::artifacts::NamedValue;
 
 /// Params by name, numbers as gbc writes them (`"inf"`, `"nan"` for the non-finite).
 #[derive(Debug, Deserialize)]

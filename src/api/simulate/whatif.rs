@@ -1,4 +1,4 @@
-//! A what-if run of a trained model (see [`crate::train::predict::whatif`]): the trained
+//! A what-if run of a trained model (see [`crate::trained::predict::whatif`]): the trained
 //! model free-run under the spec's input programmes from the declared, given or measured
 //! initial state.
 //!
@@ -16,8 +16,8 @@ use super::{
     Simulation,
 };
 use crate::record::Record;
-use crate::train::predict::whatif::{what_if, WhatIf, WhatIfError};
-use crate::train::{artifacts, PhysicalRange};
+use crate::trained::artifacts;
+use crate::trained::predict::whatif::{what_if, WhatIf, WhatIfError};
 
 /// Runs the trained model of `weights` as `spec` asks.
 pub(super) fn run(
@@ -40,7 +40,7 @@ pub(super) fn run(
         signals: &signals,
         ..what
     };
-    let range = PhysicalRange::of_run(&restored.info);
+    let range = restored.info.physical_range();
     let network = (&restored.network, &restored.setup);
     let mut table = what_if(ir, network, &what, range.as_ref()).map_err(|error| match error {
         WhatIfError::Train(error) => ApiError::from(error),

@@ -1,43 +1,41 @@
-//! `gbc train --cv`: runs the leave-one-experiment-out folds ([`crate::train::cv`]), each
+//! `gbc train --cv`: runs the leave-one-experiment-out folds ([`crate::trained::cv`]), each
 //! kept under the run directory, and prints per fold and pooled the error per state and
 //! overall, which folds' free runs diverged and where, and why a fold validates nothing.
 
-use super::progress::Progress;
-use super::{train_error, CommandResult};
-use crate::api::summary::cv_table;
-use crate::ir::Model;
-use crate::record::Record;
-use crate::train::cv::{self, Keep};
-use crate::train::{Event, Recipe, TrainOptions};
 use std::cell::RefCell;
+use std::path::Path;
 
-/// Runs the folds, keeping each under `keep.directory`, and prints the table.
+use super::progress::Progress;
+use super::CommandResult;
+use crate::api::summary::cv_table;
+use crate::api::{Model, TrainSpec};
+use crate::record::Record;
+use crate::train::Event;
+
+/// Runs the folds, keeping each under `directory`, and prints the table.
 pub(super) fn cross_validate(
     model: &Model,
-    records: &[Record],
-    settings: (&TrainOptions, &Recipe),
-    keep: &Keep,
+    records: Vec<Record>,
+    spec: &TrainSpec,
+    directory: &Path,
 ) -> CommandResult {
     let progress = RefCell::new(Progress::default());
-    let epochs = settings.0.epochs;
+    let epochs = spec.options.epochs;
+    let (train, _) = crate::api::hold_out(records.clone(), &spec.validation.holdout)?;
+    let names: Vec<String> = train.into_iter().map(|r| r.name).collect();
     let mut on_fold = |fold: usize, folds: usize| {
         progress.borrow_mut().finish();
-        let name = &records[fold].name;
+        let name = &names[fold];
         eprintln!(
             "cross-validation fold {}/{folds}: holding out `{name}`",
             fold + 1
         );
     };
     let mut on_event = |event: Event| progress.borrow_mut().observe(event, epochs);
-    let result = cv::cross_validate(
-        model,
-        records,
-        settings,
-        Some(keep),
-        (&mut on_fold, &mut on_event),
-    );
+    let listeners = (&mut on_fold as _, &mut on_event as _);
+    let result = crate::api::cross_validate(model, records, spec, directory, listeners);
     progress.borrow_mut().finish();
-    let result = result.map_err(train_error)?;
-    print!("{}", cv_table(model, &result, &keep.directory));
+    let result = result?;
+    print!("{}", cv_table(model.ir(), &result, directory));
     Ok(())
 }

@@ -1,31 +1,25 @@
 //! `gbc train --ensemble N`: the members' progress on stderr, the ensemble's report page,
 //! `--json`, and the summary on stdout (the band's noise and calibration, its coverage of
 //! the held-out experiments, the median's and the members' errors). The work is
-//! `gbc::ensemble`.
+//! `api::train_ensemble`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
 
 use super::{ResampleArg, TrainArgs};
-use crate::api::REPORT_FILE;
+use crate::api;
 use crate::cli::{CommandError, CommandResult};
-use crate::ensemble::{self, MemberEvent, Plan, Resample};
-use crate::ir::Model;
-use crate::train::{Recipe, TrainOptions, TrainingData};
+use crate::ensemble::{MemberEvent, Plan, Resample};
+use crate::record::Record;
 
 /// Seconds between progress lines of the members' epochs.
 const HEARTBEAT: f64 = 5.0;
 
-/// Trains the ensemble of `members` into `directory` and reports.
-pub(super) fn run(
-    args: &TrainArgs,
-    (model, (model_file, source)): (&Model, (&PathBuf, &str)),
-    data: &TrainingData,
-    (options, recipe): (&TrainOptions, &Recipe),
-    (members, directory): (usize, &Path),
-) -> CommandResult {
-    let plan = Plan {
+/// The ensemble the flags ask for (`--ensemble N`, `--resample`, `--jobs`, `--band`).
+pub fn plan_of(args: &TrainArgs) -> Option<Plan> {
+    let members = args.ensemble?;
+    Some(Plan {
         members,
         resample: match args.resample.unwrap_or(ResampleArg::Experiments) {
             ResampleArg::Experiments => Resample::Experiments,
@@ -36,48 +30,30 @@ pub(super) fn run(
             .unwrap_or_else(crate::experiment::default_jobs)
             .max(1),
         level: args.band,
-    };
-    let model_path = model_file.display().to_string();
-    let data_path = (args.data.iter())
-        .map(|p| p.display().to_string())
-        .collect::<Vec<_>>()
-        .join(" ");
-    let keep = ensemble::Keep {
-        directory: directory.to_path_buf(),
-        model: (&model_path, source),
-        data: &data_path,
-        recoveries: args.recoveries,
-    };
-    let started = Instant::now();
-    let progress = MemberProgress::new(members);
-    let trained =
-        ensemble::train_ensemble(model, data, (options, recipe), &plan, &keep, &|event| {
-            progress.observe(event)
-        })
-        .map_err(CommandError::user)?;
-    let title = (model_file.file_stem()).map_or(model.name.clone(), |s| s.to_string_lossy().into());
-    let page = ensemble::page::ensemble_page(
-        model,
-        &trained,
-        (data.train, data.validation),
-        plan.level,
-        &title,
-    );
-    crate::io::write_atomic(&directory.join(REPORT_FILE), page.as_bytes())
-        .map_err(CommandError::user)?;
+    })
+}
+
+/// Trains the ensemble of `plan` into `directory` and reports.
+pub(super) fn run(
+    args: &TrainArgs,
+    model: &api::Model,
+    (records, val): (Vec<Record>, Vec<Record>),
+    (spec, plan): (&api::TrainSpec, &Plan),
+    directory: &Path,
+) -> CommandResult {
+    let progress = MemberProgress::new(plan.members);
+    let data = (records, val);
+    let trained = api::train_ensemble(model, data, (spec, plan), directory, &|event| {
+        progress.observe(event)
+    })?;
+    if let Some(note) = &trained.note {
+        eprintln!("{note}");
+    }
     let json_to_stdout = (args.json.as_ref()).is_some_and(|p| p.as_os_str() == crate::io::STDOUT);
     if let Some(path) = &args.json {
-        let json = serde_json::to_string_pretty(&trained.info).map_err(|error| {
-            CommandError::Internal(format!("cannot encode the ensemble: {error}"))
-        })?;
-        crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
+        crate::io::write_atomic(path, trained.json()?.as_bytes()).map_err(CommandError::user)?;
     }
-    let text = crate::api::summary::ensemble_summary(
-        model,
-        &trained.info,
-        started.elapsed().as_secs_f64(),
-        directory,
-    );
+    let text = trained.summary_text(model);
     if json_to_stdout {
         eprint!("{text}");
     } else {

@@ -14,10 +14,11 @@ use std::time::Instant;
 use crate::ir;
 use crate::record::Record;
 
+use super::artifacts;
 use super::predict::{predict_in_range, Mode};
-use super::{
-    artifacts, train_run, EpochDivergence, ErrorSet, Event, Part, PhysicalRange, Recipe,
-    RunControl, TrainError, TrainOptions, Trained, TrainingData,
+use crate::train::{
+    train_run, EpochDivergence, ErrorSet, Event, Part, PhysicalRange, Recipe, RunControl,
+    TrainError, TrainOptions, Trained, TrainingData,
 };
 
 /// The directory of the folds under a run directory.
@@ -134,7 +135,7 @@ pub fn cross_validate(
     if let Some(keep) = keep {
         let path = keep.directory.join(CV_DIR).join(SUMMARY_FILE);
         let json = serde_json::to_string_pretty(&result)
-            .map_err(|error| artifacts::bad_run(&path, error))?;
+            .map_err(|error| crate::train::tensors::bad_run(&path, error))?;
         crate::io::write_atomic(&path, json.as_bytes())?;
     }
     Ok(result)

@@ -4,10 +4,10 @@
 
 use std::path::PathBuf;
 
-use super::fixtures::quiet;
-use super::*;
 use crate::data::MinRows;
 use crate::record::{bind, request, Record};
+use crate::train::fixtures::quiet;
+use crate::train::*;
 
 const MODEL: &str = "models/diagnose/overflow/monod.gbm";
 const DATA: &str = "models/diagnose/overflow/data/overflow.csv";
@@ -157,7 +157,7 @@ fn a_grey_box_on_a_sparse_record_starts_from_its_fitted_mechanism() {
     let options = TrainOptions {
         epochs: 1,
         seed: 1,
-        toward_mechanism: super::TowardMechanism::Strength(0.0),
+        toward_mechanism: crate::train::TowardMechanism::Strength(0.0),
         ..TrainOptions::default()
     };
     let plain = train_with(

@@ -18,7 +18,10 @@ use sha2::{Digest, Sha256};
 use crate::engine::graph::{NamedTensor, Network, Normalisation, Precision, Setup};
 use crate::ir;
 
-use super::{
+use crate::train::evaluate::PhysicalRange;
+use crate::train::recipe::DEFAULT_RANGE_FACTOR;
+use crate::train::tensors::{bad_run, read_tensors, write_tensors, NOT_FINITE_HELP};
+use crate::train::{
     Engine, Metrics, ParamEstimate, PolishSummary, Recipe, TrainError, TrainOptions, Trained,
     Warning,
 };
@@ -73,13 +76,13 @@ pub struct RunInfo {
     pub polish: Option<PolishSummary>,
     /// The params' estimate from the balances, when they came from there.
     #[serde(default)]
-    pub balance_fit: Option<super::BalanceFit>,
+    pub balance_fit: Option<crate::train::BalanceFit>,
     /// The fit of a model without closures by free runs, when its params came from there.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mechanism_fit: Option<crate::diagnose::FitSummary>,
     /// What of each training experiment trained.
     #[serde(default)]
-    pub coverage: super::coverage::Coverage,
+    pub coverage: crate::train::coverage::Coverage,
     /// Validation errors.
     pub metrics: Metrics,
     /// Warnings issued before training: stiff balances, steps with a target that do not
@@ -90,19 +93,29 @@ pub struct RunInfo {
     /// Where training went non-finite, when it did: the weights are then the kept epoch's
     /// (`gbc train` exits with E0415).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub diverged: Option<super::EpochDivergence>,
+    pub diverged: Option<crate::train::EpochDivergence>,
     /// `finished`, or `failed` when training went non-finite and no recovery was left
     /// (then [`RunInfo::diverged`] says where, in which phase, why and what to try).
     #[serde(default = "finished")]
     pub status: String,
     /// Each time training went back to its last finite epoch and continued, with a lower
-    /// learning rate ([`super::recovery`]); warnings, the run went on.
+    /// learning rate ([`crate::train::recovery`]); warnings, the run went on.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub recoveries: Vec<super::Recovery>,
+    pub recoveries: Vec<crate::train::Recovery>,
     /// The pull toward the mechanism (its strength, how `auto` chose it) and how far each
     /// closure output and param moved from the mechanism.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub toward_mechanism: Option<super::toward::MechanismDistance>,
+    pub toward_mechanism: Option<crate::train::toward::MechanismDistance>,
+}
+
+impl RunInfo {
+    /// The range of a saved run: its training data's extremes and its `--range-factor`
+    /// (the default for runs saved before recipes were recorded). What `gbc predict` and
+    /// `gbc simulate --weights` judge a free run by.
+    pub fn physical_range(&self) -> Option<PhysicalRange> {
+        let factor = (self.recipe.as_ref()).map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
+        PhysicalRange::new(&self.normalisation, factor)
+    }
 }
 
 /// The status of a run saved before [`RunInfo::status`] was recorded.
@@ -286,10 +299,6 @@ pub fn run_info(
     }
 }
 
-/// What to do about weights or params that are not finite.
-pub const NOT_FINITE_HELP: &str = "training went non-finite; lower the learning rate (--lr) \
-     or clip the gradient (--clip 1), add --substeps K, or train in --precision f64";
-
 /// Writes `run.json` and the weights into `directory` (created if missing). Weights or
 /// params that are not finite are refused ([`crate::io::IoError::NotFinite`]) before
 /// anything is written.
@@ -463,63 +472,5 @@ fn check_fits(model: &ir::Model, info: &RunInfo, directory: &Path) -> Result<(),
             &directory.join(RUN_FILE),
             "expected normalisation, closures and step that fit the model, found others",
         ))
-    }
-}
-
-/// Writes `tensors` as little-endian `f64` safetensors to `path` (atomically).
-pub fn write_tensors(path: &Path, tensors: &[NamedTensor]) -> Result<(), TrainError> {
-    let bytes: Vec<Vec<u8>> = (tensors.iter())
-        .map(|t| t.values.iter().flat_map(|v| v.to_le_bytes()).collect())
-        .collect();
-    let views = (tensors.iter().zip(&bytes))
-        .map(|(tensor, data)| {
-            let view = safetensors::tensor::TensorView::new(
-                safetensors::Dtype::F64,
-                tensor.shape.clone(),
-                data,
-            );
-            view.map(|v| (tensor.name.clone(), v))
-        })
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|error| bad_run(path, error))?;
-    let serialized = safetensors::serialize(views, &None).map_err(|error| bad_run(path, error))?;
-    crate::io::write_atomic(path, &serialized)?;
-    Ok(())
-}
-
-/// Reads the `f64` tensors of a safetensors file, in the file's order.
-pub fn read_tensors(path: &Path) -> Result<Vec<NamedTensor>, TrainError> {
-    let bytes = std::fs::read(path).map_err(|error| bad_run(path, error))?;
-    let tensors =
-        safetensors::SafeTensors::deserialize(&bytes).map_err(|error| bad_run(path, error))?;
-    let mut weights = Vec::new();
-    for (name, view) in tensors.tensors() {
-        if view.dtype() != safetensors::Dtype::F64 {
-            return Err(bad_run(
-                path,
-                format!("expected f64 tensors, found {:?} in `{name}`", view.dtype()),
-            ));
-        }
-        let values = (view.data().chunks_exact(8))
-            .map(|chunk| {
-                let mut word = [0u8; 8];
-                word.copy_from_slice(chunk);
-                f64::from_le_bytes(word)
-            })
-            .collect();
-        weights.push(NamedTensor {
-            name,
-            shape: view.shape().to_vec(),
-            values,
-        });
-    }
-    Ok(weights)
-}
-
-/// A run file that cannot be read or written, as [`TrainError::BadRun`].
-pub(crate) fn bad_run(path: &Path, error: impl std::fmt::Display) -> TrainError {
-    TrainError::BadRun {
-        path: path.display().to_string(),
-        reason: error.to_string(),
     }
 }

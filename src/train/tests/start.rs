@@ -7,10 +7,10 @@
 
 use std::path::{Path, PathBuf};
 
-use super::fixtures::{random_batch, rk4_reference, setup};
 use crate::engine::graph::{Network, Precision};
 use crate::ir::{self, Expr};
 use crate::sim::{ModelSystem, OdeSystem};
+use crate::train::fixtures::{random_batch, rk4_reference, setup};
 
 /// Every shipped model file with a closure: models/, bench/ and the `gbc init` templates.
 fn shipped_grey_boxes() -> Vec<(PathBuf, ir::Model)> {
@@ -138,7 +138,7 @@ fn a_bounded_output_starts_at_its_prior_clamped_into_its_range() {
 
 /// Three training experiments and one held out, each a short chemostat record.
 fn chemostat_experiments() -> (ir::Model, Vec<crate::record::Record>, crate::record::Record) {
-    use super::fixtures::{chemostat, record};
+    use crate::train::fixtures::{chemostat, record};
     let model = chemostat::grey_box();
     let mut records: Vec<crate::record::Record> = (1..=4)
         .map(|seed| {
@@ -158,8 +158,10 @@ fn chemostat_experiments() -> (ir::Model, Vec<crate::record::Record>, crate::rec
 /// without a pull, saying why.
 #[test]
 fn auto_chooses_the_stop_by_cross_validation_over_the_training_experiments() {
-    use super::toward::ChoiceEvent;
-    use super::{train_with, Event, Part, Recipe, TowardMechanism, TrainOptions, TrainingData};
+    use crate::train::toward::ChoiceEvent;
+    use crate::train::{
+        train_with, Event, Part, Recipe, TowardMechanism, TrainOptions, TrainingData,
+    };
     let (model, train, held) = chemostat_experiments();
     let options = TrainOptions {
         epochs: 6,
@@ -214,7 +216,7 @@ fn auto_chooses_the_stop_by_cross_validation_over_the_training_experiments() {
 /// than no pull on the same run; the loss it reports includes the penalty.
 #[test]
 fn a_strong_pull_keeps_the_grey_box_near_its_mechanism() {
-    use super::{train_with, Part, Recipe, TowardMechanism, TrainOptions, TrainingData};
+    use crate::train::{train_with, Part, Recipe, TowardMechanism, TrainOptions, TrainingData};
     let (model, train, held) = chemostat_experiments();
     let data = TrainingData {
         train: &train,
@@ -230,7 +232,7 @@ fn a_strong_pull_keeps_the_grey_box_near_its_mechanism() {
         };
         train_with(&model, &data, &options, &Recipe::paper(), &mut |_| {}).unwrap()
     };
-    let last_rms = |trained: &super::Trained| {
+    let last_rms = |trained: &crate::train::Trained| {
         let last = format!("layer{}", model.closures[0].network.hidden.len());
         let values: Vec<f64> = (trained.network.weights().into_iter())
             .filter(|t| t.name.contains(&last))
@@ -238,7 +240,7 @@ fn a_strong_pull_keeps_the_grey_box_near_its_mechanism() {
             .collect();
         crate::numeric::root_mean_square(&values)
     };
-    let moved = |trained: &super::Trained| {
+    let moved = |trained: &crate::train::Trained| {
         trained.report.toward_mechanism.as_ref().unwrap().outputs[0].moved
     };
     let (free, pulled) = (run(0.0), run(1e4));

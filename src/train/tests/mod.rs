@@ -1,5 +1,15 @@
 //! Training tests on data simulated from the paper's chemostat (spec section 4).
 
+mod jitter;
+mod mechanism;
+mod nonnegative;
+mod outputs;
+mod recipe;
+mod records;
+mod start;
+mod substeps;
+mod windows;
+
 use super::evaluate::{online_error, simulate, Feed};
 use super::fixtures::{chemostat, normalise, options, record, track, train_one};
 use super::stepping::Stepping;
@@ -7,6 +17,7 @@ use super::*;
 use crate::data::Dataset;
 use crate::engine::graph::Network;
 use crate::engine::pairs::{stage_fractions, PairTable};
+use crate::trained::{artifacts, predict};
 
 #[test]
 fn short_training_on_chemostat_data_cuts_the_validation_error() {

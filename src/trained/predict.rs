@@ -17,14 +17,14 @@ use crate::engine::graph::{Network, Setup};
 use crate::ir;
 use crate::record::{Record, Track};
 
-use super::evaluate::{run_in, simulate, Divergence, Feed, PhysicalRange};
-use super::initial::initial_state;
-use super::prepare::grid_for;
-use super::recipe::DEFAULT_RANGE_FACTOR;
-use super::split::{window_start, History};
-use super::stepping::Stepping;
-use super::{hidden_initial_values, TrainError};
 use crate::engine::pairs::stage_fractions;
+use crate::record::grid::grid_for;
+use crate::train::evaluate::{run_in, simulate, Divergence, Feed, PhysicalRange};
+use crate::train::initial::initial_state;
+use crate::train::recipe::DEFAULT_RANGE_FACTOR;
+use crate::train::split::{window_start, History};
+use crate::train::stepping::Stepping;
+use crate::train::{hidden_initial_values, TrainError};
 
 pub mod whatif;
 
@@ -34,7 +34,7 @@ pub enum Mode {
     /// One step from the true history.
     Offline,
     /// A free run from the initial history, each step cut into as many sub-steps as its
-    /// stiffness needs ([`super::stepping`]).
+    /// stiffness needs ([`crate::train::stepping`]).
     Online,
     /// A free run at the trained step alone (`--substeps` of the run): the trained one-step
     /// map iterated, as its ONNX export steps.
@@ -220,7 +220,7 @@ pub fn predict_on_track(
 
 /// The states of a free run at each of `rows` rows: the offending state at the row where
 /// it stopped, `NaN` after.
-fn stopped_states(run: &super::evaluate::Trajectory, rows: usize) -> Vec<Vec<f64>> {
+fn stopped_states(run: &crate::train::evaluate::Trajectory, rows: usize) -> Vec<Vec<f64>> {
     let mut states = run.states.clone();
     if run.divergence.is_some() {
         if let Some(last) = run.next_states.last() {

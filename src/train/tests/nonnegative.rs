@@ -7,12 +7,12 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::evaluate::{simulate, Feed, PhysicalRange, UNDERSHOOT};
-use super::stepping::{Stepping, TOLERANCE};
 use crate::engine::graph::{Network, Precision, Setup};
 use crate::engine::pairs::stage_fractions;
 use crate::ir;
 use crate::record::{Normalisation, Record, Track};
+use crate::train::evaluate::{simulate, Feed, PhysicalRange, UNDERSHOOT};
+use crate::train::stepping::{Stepping, TOLERANCE};
 
 /// A fed batch whose uptake is first order in `S` with a learned, positive rate: it passes
 /// the check (`S` and `X` declared `nonnegative`). The rate reaches tens per hour, far
@@ -103,7 +103,7 @@ fn lowest_substrate(
     record: &Record,
     stepping: Stepping,
 ) -> f64 {
-    let grid = super::prepare::grid_for(model, 1.0);
+    let grid = crate::train::prepare::grid_for(model, 1.0);
     let track = Track::lay(record, &grid, &[]);
     let fractions = stage_fractions(model.dynamics, 1);
     let last = track.len() - 2;

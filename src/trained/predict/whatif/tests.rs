@@ -3,8 +3,8 @@
 use super::*;
 use crate::engine::graph::{Batch, Precision};
 use crate::train::fixtures::{chemostat, options, record, train_one};
-use crate::train::predict::{predict_in_range, Mode};
 use crate::train::{History, Recipe, TrainOptions, Trained};
+use crate::trained::predict::{predict_in_range, Mode};
 
 fn trained() -> (ir::Model, Trained, crate::data::Dataset) {
     let (data, _) = chemostat::data(120, (0.002, 0.02), 4);

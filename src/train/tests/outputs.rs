@@ -4,9 +4,9 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::fixtures::{dataset, options, random_steps, sample_truth, track, train_one};
-use super::predict::{predict_in_range, Mode};
-use super::*;
+use crate::train::fixtures::{dataset, options, random_steps, sample_truth, track, train_one};
+use crate::train::*;
+use crate::trained::predict::{predict_in_range, Mode};
 
 /// Monod growth on a substrate that runs out: `mu = top S / (0.1 + S)`, yield 0.5.
 fn batch_monod(top: f64, rows: usize, step: f64) -> crate::data::Dataset {

@@ -3,12 +3,12 @@
 //! its rounded version; a genuinely irregular record stays irregular; steps with a target
 //! that do not train are counted and reported.
 
-use super::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
-use super::prepare::Layout;
-use super::*;
 use crate::engine::pairs::{stage_fractions, PairTable};
 use crate::ir::Activation;
 use crate::record::Record;
+use crate::train::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
+use crate::train::prepare::Layout;
+use crate::train::*;
 
 /// The grid step: ten minutes in hours.
 const STEP: f64 = 1.0 / 6.0;
@@ -186,7 +186,7 @@ fn steps_that_do_not_train_are_counted_and_reported() {
         validation: &[],
         part: Part::All,
     };
-    let trained = super::train_with(&model, &data, &options, &one_step, &mut |event| {
+    let trained = crate::train::train_with(&model, &data, &options, &one_step, &mut |event| {
         if let Event::Warning(warning) = event {
             heard.push(warning.to_string());
         }

@@ -2,11 +2,12 @@
 //! the physical range, the polish of params and their standard errors, and validation on
 //! several records.
 
-use super::fixtures::{
+use crate::ir::Constraint;
+use crate::train::fixtures::{
     chemostat, dataset, options, quiet, record, train_one, ClosureSpec, ModelBuilder, OutputSpec,
 };
-use super::*;
-use crate::ir::Constraint;
+use crate::train::*;
+use crate::trained::predict;
 
 #[test]
 fn multi_step_training_warms_up_then_rolls_out_and_improves_the_free_run() {

@@ -2,11 +2,11 @@
 //! the step (the trained step, the same run), counts sub-steps of the step, not multiples
 //! of `K`, and so stays within [`MOST_SUBSTEPS`] of them however large `K` is.
 
-use super::evaluate::{simulate, Feed, Trajectory};
-use super::fixtures::{chemostat, normalise, record, track};
-use super::stepping::{Stepping, MOST_SUBSTEPS};
 use crate::engine::graph::{Network, Precision, Setup};
 use crate::engine::pairs::stage_fractions;
+use crate::train::evaluate::{simulate, Feed, Trajectory};
+use crate::train::fixtures::{chemostat, normalise, record, track};
+use crate::train::stepping::{Stepping, MOST_SUBSTEPS};
 
 /// The exact chemostat law (no closure to train) with `substeps` RK4 sub-steps per step,
 /// run free along the stiff record (1 h steps, eigenvalues near -10 per hour) with

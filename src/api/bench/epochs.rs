@@ -1,6 +1,5 @@
 //! Training throughput: the median time of an epoch of Adam steps (and of one step) for a
-//! model on a record, timed on the same code path as `gbc train` (the entry point of
-//! `gbc bench`; `docs/performance.md` records the numbers).
+//! model on a record, timed on the same code path as `gbc train` (`gbc bench`'s training rows; `docs/performance.md` records the numbers).
 //!
 //! The pairs are built once as in training; then whole epochs of shuffled mini-batches each
 //! take one Adam step per batch (gather the batch, forward RK4 pass through the closure
@@ -17,13 +16,13 @@ use rand_chacha::ChaCha8Rng;
 use crate::engine::graph::{Network, Precision, Setup, StepSettings};
 use crate::ir;
 
-use super::prepare::Layout;
-use super::validation::{refresh, Course};
-use super::{analysis, hidden_initial_values, Part, TrainError, TrainOptions, TrainingData};
 use crate::engine::pairs::stage_fractions;
 use crate::engine::step::{Optimiser, Step, StepBatch};
+use crate::train::prepare::Layout;
+use crate::train::validation::{refresh, Course};
+use crate::train::{analysis, hidden_initial_values, Part, TrainError, TrainOptions, TrainingData};
 
-pub use super::Engine;
+pub use crate::train::Engine;
 
 /// Measured throughput.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]

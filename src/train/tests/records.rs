@@ -1,9 +1,10 @@
 //! Training on data sets: measured outputs (observables), tail splits, leave-one-out
 //! cross-validation, per-column weights, and a record thinned to a quarter of its cells.
 
-use super::fixtures::{chemostat, options, quiet, record};
-use super::*;
 use crate::record::{Observable, Record};
+use crate::train::fixtures::{chemostat, options, quiet, record};
+use crate::train::*;
+use crate::trained::{cv, predict};
 
 /// The chemostat grey box whose sensor reads `absorbance = 2 S`: `S` itself is never
 /// measured and starts from its declared value.

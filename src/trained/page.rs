@@ -7,11 +7,11 @@
 use std::fmt::Write;
 
 use super::predict::{predict, Mode, PredictionTable};
-use super::{History, Trained};
 use crate::ir;
 use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style, PALETTE};
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Record;
+use crate::train::{History, Trained};
 
 /// Figure width in pixels.
 const WIDTH: f64 = 640.0;
@@ -254,7 +254,7 @@ pub fn nmse(pairs: &[(f64, f64)], scale: f64) -> f64 {
 }
 
 /// Params with standard errors and identifiability.
-fn params_section(report: &super::TrainReport) -> String {
+fn params_section(report: &crate::train::TrainReport) -> String {
     if report.params.is_empty() {
         return String::new();
     }
