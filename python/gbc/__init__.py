@@ -278,7 +278,8 @@ class Run:
 
 class SavedRun:
     """A run or ensemble directory that ``gbc train`` wrote, read back for its model
-    (``gbc predict --weights DIR``): ``predict``, ``is_ensemble``, ``notes``."""
+    (``gbc predict --weights DIR``): ``predict``, ``export_onnx``, ``is_ensemble``,
+    ``notes``."""
 
     def __init__(self, native: "_gbc.Saved", model: Model, directory: str):
         self._native, self.model, self.directory = native, model, str(directory)
@@ -308,6 +309,12 @@ class SavedRun:
             frame.insert(0, "experiment", experiments)
         frame.attrs["coverage"] = coverage
         return frame
+
+    def export_onnx(self, path: str, precision: str = "f32") -> list:
+        """Writes the one-step map as ONNX to ``path`` as ``gbc export`` does and returns
+        the files written (an ensemble: each used member's map beside ``path`` and the
+        band's facts, ``NAME.band.json``)."""
+        return [pathlib.Path(p) for p in self._native.export_onnx(str(path), precision)]
 
     def __repr__(self) -> str:
         kind = "ensemble" if self.is_ensemble else "run"

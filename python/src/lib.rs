@@ -390,15 +390,7 @@ impl Run {
     /// Writes the one-step map as an ONNX file (`precision`: `f32` or `f64`).
     #[pyo3(signature = (path, precision = "f32"))]
     fn export_onnx(&self, py: Python<'_>, path: PathBuf, precision: &str) -> PyResult<()> {
-        let precision = match precision {
-            "f32" => gbc::engine::graph::Precision::F32,
-            "f64" => gbc::engine::graph::Precision::F64,
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "expected precision `f32` or `f64`, found `{other}`"
-                )))
-            }
-        };
+        let precision = precision_of(precision)?;
         let bytes = self
             .inner
             .export_onnx(precision)
@@ -569,6 +561,17 @@ fn compare(
     });
     let inner = outcome.map_err(|e| raise(py, e))?;
     Ok(Comparison { inner })
+}
+
+/// `f32` or `f64`, as `--precision` spells them.
+pub(crate) fn precision_of(precision: &str) -> PyResult<gbc::engine::graph::Precision> {
+    match precision {
+        "f32" => Ok(gbc::engine::graph::Precision::F32),
+        "f64" => Ok(gbc::engine::graph::Precision::F64),
+        other => Err(PyValueError::new_err(format!(
+            "expected precision `f32` or `f64`, found `{other}`"
+        ))),
+    }
 }
 
 /// `offline`, `online` or `online-trained-step`, as `gbc predict --mode` spells them.

@@ -7,12 +7,13 @@ use gbc::api;
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 
-use crate::{history_of, mode_of, raise, records, Model};
+use crate::{history_of, mode_of, precision_of, raise, records, Model};
 
 /// A run or ensemble directory read back, as `gbc predict --weights DIR` reads it.
 #[pyclass(module = "gbc._gbc", frozen)]
 pub struct Saved {
     inner: api::SavedRun,
+    directory: PathBuf,
 }
 
 #[pymethods]
@@ -55,11 +56,44 @@ impl Saved {
             coverage,
         ))
     }
+
+    /// Writes the one-step map as ONNX to `path` as `gbc export` does, and returns the
+    /// files written: for an ensemble, every used member's map beside `path` and the
+    /// band's facts (`NAME.band.json`, docs/export.md).
+    #[pyo3(signature = (path, precision = "f32"))]
+    fn export_onnx(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        precision: &str,
+    ) -> PyResult<Vec<PathBuf>> {
+        let precision = precision_of(precision)?;
+        if self.inner.is_ensemble() {
+            let model = self.inner.model();
+            let exported = gbc::export::ensemble::export(
+                model.ir(),
+                &model.source,
+                &self.directory,
+                precision,
+                &path,
+            )
+            .map_err(|e| raise(py, api::ApiError::user(e)))?;
+            exported
+                .write()
+                .map_err(|e| raise(py, api::ApiError::user(e)))?;
+            let members = exported.members.iter().map(|(path, _)| path.clone());
+            return Ok(members.chain([exported.band_path.clone()]).collect());
+        }
+        let export =
+            (self.inner.export(api::ExportFormat::Onnx, precision)).map_err(|e| raise(py, e))?;
+        export.write(&path).map_err(|e| raise(py, e))?;
+        Ok(vec![path])
+    }
 }
 
 /// Reads the run or ensemble `gbc train` wrote into `directory`, for `model`.
 #[pyfunction]
 pub fn load_run(py: Python<'_>, model: &Model, directory: PathBuf) -> PyResult<Saved> {
     let inner = api::SavedRun::load(&model.inner, &directory).map_err(|e| raise(py, e))?;
-    Ok(Saved { inner })
+    Ok(Saved { inner, directory })
 }

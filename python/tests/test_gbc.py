@@ -68,6 +68,9 @@ def test_a_saved_run_predicts_as_gbc_predict(tmp_path):
     written = read(tmp_path / "cli.csv")
     assert list(predicted.columns) == list(written.columns)
     assert (predicted.to_numpy() == written.to_numpy()).all()
+    cli("export", GB1, "--weights", tmp_path / "run", "-o", tmp_path / "cli.onnx")
+    assert saved.export_onnx(tmp_path / "py.onnx") == [tmp_path / "py.onnx"]
+    assert (tmp_path / "py.onnx").read_bytes() == (tmp_path / "cli.onnx").read_bytes()
     with pytest.raises(gbc.GbcError):
         gbc.load_run(gbc.Model.from_file(GB1), tmp_path / "nothing-here")
 
@@ -245,6 +248,11 @@ def test_an_ensemble_equals_the_cli(tmp_path):
     assert (predicted.drop(columns="experiment").to_numpy() ==
             written.drop(columns="experiment").to_numpy()).all()
     assert "<svg" in ensemble._repr_html_()
+    cli("export", MONOD, "--weights", tmp_path / "cli", "-o", tmp_path / "cli.onnx")
+    files = gbc.load_run(model, tmp_path / "py").export_onnx(tmp_path / "py.onnx")
+    written = sorted(tmp_path.glob("cli*.onnx")) + sorted(tmp_path.glob("cli*.band.json"))
+    assert len(files) == len(written) == len(ensemble.info["members"]) + 1
+    assert [f.read_bytes() for f in files[:-1]] == [f.read_bytes() for f in written[:-1]]
 
 
 def test_cross_validation_equals_the_cli(tmp_path):
