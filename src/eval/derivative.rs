@@ -184,6 +184,8 @@ impl Differentiator<'_, '_> {
             Instr::Binary(op, a, b) => self.binary(op, a, b, result),
             Instr::Call(func, a, b) => self.call(func, a, b, result),
             Instr::Exceeds(..) => Vec::new(),
+            // A product (its strong zero aside): only derivative code holds it.
+            Instr::Chain(a, b) => self.chain(&[(a, b), (b, a)]),
         }
     }
 
@@ -267,7 +269,7 @@ impl Differentiator<'_, '_> {
         let mut merged: Partials = Vec::new();
         for &(operand, coefficient) in terms {
             for (column, partial) in self.partials_of(operand) {
-                let term = self.mul(coefficient, partial);
+                let term = self.scale(coefficient, partial);
                 match merged.iter_mut().find(|(c, _)| *c == column) {
                     Some((_, sum)) => *sum = self.add(*sum, term),
                     None => merged.push((column, term)),
@@ -312,6 +314,17 @@ impl Differentiator<'_, '_> {
             self.neg(a)
         } else {
             self.builder.emit(Instr::Binary(BinOp::Mul, a, b))
+        }
+    }
+
+    /// `slope * partial` of the chain rule, `0` where `partial` is `0` at run time
+    /// ([`Instr::Chain`]); immediates fold as in [`Self::mul`].
+    fn scale(&mut self, slope: Operand, partial: Operand) -> Operand {
+        let folds = |o: Operand| matches!(o, Operand::Value(_));
+        if folds(slope) || folds(partial) {
+            self.mul(slope, partial)
+        } else {
+            self.builder.emit(Instr::Chain(slope, partial))
         }
     }
 

@@ -41,6 +41,11 @@ pub(super) enum Instr {
     /// else `0`: the branch indicator of the derivatives of `abs`, `min` and `max`; never in
     /// a program compiled from an expression alone.
     Exceeds(Operand, Operand),
+    /// The chain rule's product `slope * partial`, `0` where the partial is `0`: a slope
+    /// that is infinite (`sqrt` at `0`) or NaN times an inner function that does not move
+    /// there is `0`, the limit the finite differences see; never in a program compiled from
+    /// an expression alone.
+    Chain(Operand, Operand),
 }
 
 /// The identity of an instruction for sharing: immediates compared by their bits.
@@ -58,6 +63,7 @@ enum InstrKey {
     Binary(BinOp, OperandKey, OperandKey),
     Call(Func, OperandKey, OperandKey),
     Exceeds(OperandKey, OperandKey),
+    Chain(OperandKey, OperandKey),
 }
 
 impl Operand {
@@ -87,6 +93,7 @@ impl Instr {
             Instr::Binary(op, a, b) => InstrKey::Binary(op, a.key(), b.key()),
             Instr::Call(func, a, b) => InstrKey::Call(func, a.key(), b.key()),
             Instr::Exceeds(a, b) => InstrKey::Exceeds(a.key(), b.key()),
+            Instr::Chain(a, b) => InstrKey::Chain(a.key(), b.key()),
         }
     }
 
@@ -94,9 +101,10 @@ impl Instr {
         let immediate = |operand: Operand| matches!(operand, Operand::Value(_));
         match self {
             Instr::Neg(a) | Instr::Square(a) => immediate(a),
-            Instr::Binary(_, a, b) | Instr::Call(_, a, b) | Instr::Exceeds(a, b) => {
-                immediate(a) && immediate(b)
-            }
+            Instr::Binary(_, a, b)
+            | Instr::Call(_, a, b)
+            | Instr::Exceeds(a, b)
+            | Instr::Chain(a, b) => immediate(a) && immediate(b),
         }
     }
 
@@ -118,6 +126,14 @@ impl Instr {
                 let (a, b) = (a.fetch(slots, registers), b.fetch(slots, registers));
                 // `a > b` or either is NaN: not `a <= b`.
                 f64::from(u8::from(a.partial_cmp(&b).is_none_or(|o| o.is_gt())))
+            }
+            Instr::Chain(slope, partial) => {
+                let partial = partial.fetch(slots, registers);
+                if partial == 0.0 {
+                    0.0
+                } else {
+                    slope.fetch(slots, registers) * partial
+                }
             }
         }
     }

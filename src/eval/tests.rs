@@ -418,6 +418,34 @@ fn derivatives_are_sparse_and_exact_on_a_rate_law() {
 }
 
 #[test]
+fn an_infinite_slope_over_an_inner_function_that_does_not_move_gives_zero() {
+    // sqrt(2 - min(2, x)): above x = 2 the inner function is 0 and flat, so the function
+    // is flat (0), though sqrt's slope there is infinite; below, the chain rule holds.
+    let layout = Layout::new(&small_model());
+    let x = var(Var::State(0));
+    let inner = bin(
+        BinOp::Sub,
+        Expr::Num(2.0),
+        Expr::Call(Func::Min, vec![Expr::Num(2.0), x]),
+    );
+    let expr = Expr::Call(Func::Sqrt, vec![inner]);
+    let wrt = [layout.slot(Var::State(0))];
+    let program = JacobianProgram::compile([&expr], &layout, &wrt).unwrap();
+    let mut slots = layout.initial_slots();
+    for (at, want) in [(3.0, 0.0), (1.0, -0.5)] {
+        slots[layout.slot(Var::State(0))] = at;
+        let mut jacobian = [f64::NAN];
+        program.eval(&slots, &mut Vec::new(), &mut [0.0], &mut jacobian);
+        // d/dx sqrt(2 - x) = -1 / (2 sqrt(2 - x)) = -0.5 at x = 1.
+        assert!(
+            (jacobian[0] - want).abs() < 1e-15,
+            "at {at}: {}",
+            jacobian[0]
+        );
+    }
+}
+
+#[test]
 fn kinks_take_their_one_sided_derivative() {
     let layout = Layout::new(&small_model());
     let x = var(Var::State(0));
