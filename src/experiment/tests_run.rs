@@ -311,3 +311,31 @@ fn sizes_beyond_the_training_rows_are_refused_before_training() {
     };
     assert!(message.contains("at most 1509"), "{message}");
 }
+
+#[test]
+fn a_stopped_study_starts_no_further_run_and_the_next_call_reuses_what_finished() {
+    let dir = scratch_dir("stopped");
+    let prepared = prepared();
+    let runs = grid(&prepared.study);
+    let selected = Shard::ALL.select(&runs);
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    // Asked to stop as the first run finishes: with one job no other run starts.
+    let on_progress = |progress: Progress| {
+        if let Progress::Finished(..) = progress {
+            stop.store(true, Ordering::Relaxed);
+        }
+    };
+    let first = super::execute_until(&prepared, &selected, &dir, (1, &stop), &on_progress);
+    let first = first.unwrap_or_default();
+    assert_eq!(first.len(), 1, "one run finished before the stop");
+    let (count, started, skipped) = run_slice(&prepared, &dir, Shard::ALL);
+    assert_eq!(count, selected.len());
+    assert_eq!((started, skipped), (selected.len() - 1, 1));
+    let (all, _) = read_all(&dir);
+    assert_eq!(all.len(), selected.len());
+    assert!(
+        all.iter().any(|result| *result == first[0]),
+        "the finished run is kept"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
