@@ -198,6 +198,10 @@ def test_experiment_equals_the_cli(tmp_path):
         gbc.experiment(model=[f"gb1={GB1}"], data=[STEPS], val_from=2500, sizes="x",
                        output=tmp_path / "bad", progress=False)
     assert caught.value.code is not None
+    with pytest.raises(gbc.GbcError) as caught:
+        gbc.experiment(model=[f"gb1={GB1}"], data=[STEPS], val_from=2500, sizes="200",
+                       print_study=True, progress=False)
+    assert caught.value.code == "gbm::E1006"
 
 
 def test_an_interrupted_study_keeps_its_runs_and_goes_on(tmp_path):

@@ -130,6 +130,14 @@ pub fn compare_spec(flags: &[String]) -> Result<api::CompareSpec, CommandError> 
 /// `sizes`, ...), with its shard, directory and threads.
 pub fn experiment_plan(flags: &[String]) -> Result<api::experiment::StudyPlan, CommandError> {
     let Experiment { args } = parse_with(&[], flags, "experiment")?;
+    if args.print_study {
+        return Err(CommandError::user(KeywordError {
+            message: "`print_study` prints a study file and runs nothing: use \
+                      `gbc experiment --print-study` with the same flags"
+                .into(),
+            command: "experiment",
+        }));
+    }
     super::experiment::plan_of(&args)
 }
 
