@@ -290,11 +290,12 @@ fn folds(
     callback: &Option<PyObject>,
 ) -> PyResult<(String, String)> {
     let epochs = spec.options.epochs;
-    let mut on_fold = |fold: usize, folds: usize| {
+    let mut on_fold = |fold: usize, folds: usize, name: &str| {
         let Some(callback) = callback else { return };
         let dict = PyDict::new(py);
         let _ = dict.set_item("kind", "stage");
-        let _ = dict.set_item("name", format!("fold {}/{folds}", fold + 1));
+        let stage = format!("fold {}/{folds}: holding out {name}", fold + 1);
+        let _ = dict.set_item("name", stage);
         let _ = dict.set_item("total", epochs);
         let _ = callback.call1(py, (dict,));
     };

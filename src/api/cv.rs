@@ -6,21 +6,22 @@ use std::path::Path;
 
 use super::{hold_out, ApiError, Model, TrainSpec};
 use crate::record::Record;
-use crate::trained::cv::{self, CrossValidation, Keep, Listeners};
+use crate::trained::cv::{self, CrossValidation, Keep};
 
 /// Runs the leave-one-experiment-out folds of `spec` over the experiments of `records`
-/// that `spec` does not hold out, keeping each fold under `directory`; `on_fold(k, folds)`
-/// hears before fold `k` starts, `on_event` every fold's training.
+/// that `spec` does not hold out, keeping each fold under `directory`;
+/// `on_fold(k, folds, name)` hears before fold `k` starts (holding out experiment `name`),
+/// `on_event` every fold's training.
 pub fn cross_validate(
     model: &Model,
     records: Vec<Record>,
     spec: &TrainSpec,
     directory: &Path,
-    listeners: Listeners,
+    (on_fold, on_event): FoldListeners,
 ) -> Result<CrossValidation, ApiError> {
     let (train, _) = hold_out(records, &spec.validation.holdout)?;
-    let names = || (train.iter().map(|r| r.name.as_str())).collect::<Vec<_>>();
-    let described = spec.data.clone().unwrap_or_else(|| names().join(" "));
+    let names: Vec<String> = train.iter().map(|r| r.name.clone()).collect();
+    let described = spec.data.clone().unwrap_or_else(|| names.join(" "));
     let keep = Keep {
         directory: directory.to_path_buf(),
         model: (&model.origin, &model.source),
@@ -33,6 +34,15 @@ pub fn cross_validate(
         &train,
         settings,
         Some(&keep),
-        listeners,
+        (
+            &mut |fold, folds| on_fold(fold, folds, &names[fold]),
+            on_event,
+        ),
     )?)
 }
+
+/// Who hears of [`cross_validate`]'s folds: `(on_fold(k, folds, held-out name), on_event)`.
+pub type FoldListeners<'l> = (
+    &'l mut dyn FnMut(usize, usize, &str),
+    &'l mut dyn for<'a> FnMut(crate::train::Event<'a>),
+);

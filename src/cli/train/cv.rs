@@ -21,11 +21,8 @@ pub(super) fn cross_validate(
 ) -> CommandResult {
     let progress = RefCell::new(Progress::default());
     let epochs = spec.options.epochs;
-    let (train, _) = crate::api::hold_out(records.clone(), &spec.validation.holdout)?;
-    let names: Vec<String> = train.into_iter().map(|r| r.name).collect();
-    let mut on_fold = |fold: usize, folds: usize| {
+    let mut on_fold = |fold: usize, folds: usize, name: &str| {
         progress.borrow_mut().finish();
-        let name = &names[fold];
         eprintln!(
             "cross-validation fold {}/{folds}: holding out `{name}`",
             fold + 1
