@@ -101,8 +101,12 @@ impl JacobianProgram {
         width: usize,
         out: &mut [f64],
     ) {
+        if width == 0 {
+            // No sensitivity is carried (nothing is fitted): the product has no column.
+            return;
+        }
         run(&self.code, slots, scratch);
-        let k = m.len() / width.max(1);
+        let k = m.len() / width;
         out[..self.values.len() * width].fill(0.0);
         for &(row, column, operand) in &self.entries {
             let value = operand.fetch(slots, scratch);

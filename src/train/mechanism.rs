@@ -8,7 +8,9 @@
 //! A grey box on a sparse record starts from its mechanism the same way: its params are
 //! fitted with every closure output at its prior (or zero, [`ir::Model::mechanism`]) and
 //! held while the networks learn the correction. On a dense record the balances give the
-//! params instead ([`super::balances`]).
+//! params instead ([`super::balances`]); where they cannot (hidden states, a closure in
+//! every balance), the mechanism is fitted here too, whatever the record's density
+//! ([`fallback`]).
 
 use crate::diagnose::mechanism::{check_fittable, fit_mechanism, MechanismFit};
 use crate::diagnose::{self, FitSummary};
@@ -50,6 +52,25 @@ pub fn source(
     check_fittable(&fitted, records).is_ok().then_some(fitted)
 }
 
+/// The mechanism of a grey box whose balances cannot give its params (hidden states, or a
+/// closure in every balance: [`super::balances::estimate`] found none) on a record of any
+/// density: its params are fitted by free runs with every closure output at its prior, so
+/// that no param starts training from its declared value where the record can fit it.
+/// Only where the params would otherwise train with the network (`--params auto` under the
+/// multi-step objective) and the fitter takes the records.
+pub fn fallback(model: &ir::Model, data: &TrainingData, recipe: &Recipe) -> Option<ir::Model> {
+    let trains_params = recipe.params == ParamSource::Auto
+        && recipe.objective == Objective::MultiStep
+        && !model.params.is_empty()
+        && !model.closures.is_empty();
+    if !trains_params {
+        return None;
+    }
+    let fitted = model.mechanism();
+    let records = data.train.iter().chain(data.validation);
+    check_fittable(&fitted, records).is_ok().then_some(fitted)
+}
+
 /// Fits `model`'s params to the training rows of every training experiment of `layout`
 /// (the rows its normalisation is taken over), seeded by `--seed`.
 pub fn fit(
@@ -77,6 +98,17 @@ pub fn with_fitted_params(model: &ir::Model, fit: &MechanismFit) -> ir::Model {
         param.init = *value;
     }
     fitted
+}
+
+/// Where a grey box's params were fitted with its closures at their priors and held while
+/// the closures then trained away from them, their standard errors are the mechanism's:
+/// they count none of the closures' unknowns, and a param biased by the prior's error would
+/// be reported identified and wrong (issue 35: a yield four standard errors off). Such a
+/// param keeps its value and error but is not called identified.
+pub fn unassessed_once_trained(estimates: &mut [ParamEstimate]) {
+    for estimate in estimates {
+        estimate.identified = false;
+    }
 }
 
 /// The params' estimates of a fit (its fitted starts left out: a training run re-fits the

@@ -103,6 +103,10 @@ pub fn train_run(
         on_event(Event::Recovered(&recovery));
         fitted.recoveries.push(recovery);
     }
+    let closures_trained = !run.model.closures.is_empty() && !fitted.losses.is_empty();
+    if closures_trained && run.mechanism_fit.is_some() {
+        mechanism::unassessed_once_trained(&mut evaluation.estimates);
+    }
     let distance = run.distance(options, choice, &evaluation.estimates)?;
     Ok(run.report(options, recipe, (initial, evaluation), (fitted, distance)))
 }
@@ -271,7 +275,7 @@ fn prepare<'m>(
     let warnings: Vec<Warning> = (stiff.into_iter().map(Warning::Stiffness))
         .chain(dropped)
         .collect();
-    let mechanism_fit = match mechanism::source(model, &data, recipe, &coverage) {
+    let mut mechanism_fit = match mechanism::source(model, &data, recipe, &coverage) {
         Some(fitted) => {
             on_event(Event::Phase(FITTING));
             Some(mechanism::fit(&fitted, &data, &layout, options)?)
@@ -283,6 +287,12 @@ fn prepare<'m>(
     } else {
         None
     };
+    if mechanism_fit.is_none() && balance_fit.is_none() {
+        if let Some(fitted) = mechanism::fallback(model, &data, recipe) {
+            on_event(Event::Phase(FITTING));
+            mechanism_fit = Some(mechanism::fit(&fitted, &data, &layout, options)?);
+        }
+    }
     if recipe.params == ParamSource::Balances && balance_fit.is_none() {
         return Err(TrainError::ParamsFromBalances {
             model: model.name.clone(),

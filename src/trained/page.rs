@@ -182,10 +182,10 @@ fn fit_section(model: &ir::Model, trained: &Trained, shown: &[Shown]) -> String 
                 continue;
             }
             let scale = std.get(index).copied().unwrap_or(1.0);
+            // A run that stopped before a cell it is scored on diverged there: that cell is
+            // not dropped (which would score the rest as if the run had been fine).
             let cell = |pairs: &Option<Vec<(f64, f64)>>, what: fn(&[(f64, f64)], f64) -> f64| {
-                pairs
-                    .as_deref()
-                    .map_or("–".to_string(), |p| tick_label(what(p, scale)))
+                pairs.as_deref().map_or("–".to_string(), |p| scored(p, what, scale))
             };
             let _ = writeln!(
                 html,
@@ -205,8 +205,19 @@ fn fit_section(model: &ir::Model, trained: &Trained, shown: &[Shown]) -> String 
     html
 }
 
-/// `(time, measured, predicted)` at the measured cells of state `index` where the
-/// prediction is finite.
+/// A score of `(measured, predicted)` cells as the table shows it: "diverged" where a
+/// prediction is not finite (a free run that stopped before that cell), else the score.
+fn scored(pairs: &[(f64, f64)], score: fn(&[(f64, f64)], f64) -> f64, scale: f64) -> String {
+    if pairs.iter().any(|(_, predicted)| !predicted.is_finite()) {
+        "diverged".to_string()
+    } else {
+        tick_label(score(pairs, scale))
+    }
+}
+
+/// `(time, measured, predicted)` at the measured cells of state `index`; a cell the
+/// prediction did not reach finitely (a free run that diverged before it) keeps its
+/// non-finite prediction, so that the scores call the run diverged.
 fn paired(record: &Record, table: &PredictionTable, index: usize) -> Vec<(f64, f64, f64)> {
     let Some(column) = table.columns.get(index + 1) else {
         return Vec::new();
@@ -216,7 +227,7 @@ fn paired(record: &Record, table: &PredictionTable, index: usize) -> Vec<(f64, f
         let Ok(row) = record.times.binary_search_by(|t| t.total_cmp(time)) else {
             continue;
         };
-        if let (Some(measured), true) = (record.states[index][row], predicted.is_finite()) {
+        if let Some(measured) = record.states[index][row] {
             pairs.push((*time, measured, *predicted));
         }
     }
@@ -333,7 +344,12 @@ fn states_section(model: &ir::Model, trained: &Trained, shown: &[Shown], title: 
             if let Some(time) = split {
                 chart = chart.with_mark("validated from", time, Style::Line, SPLIT);
             }
-            html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT), ""));
+            let diverged = entry.online.as_ref().and_then(|t| t.divergence.as_ref());
+            if let Some(divergence) = diverged {
+                chart = chart.with_mark("free run diverged", divergence.time, Style::Dashed, ONLINE);
+            }
+            let caption = diverged.map_or(String::new(), |d| d.to_string());
+            html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT), &caption));
         }
     }
     html
@@ -424,6 +440,17 @@ mod tests {
         ];
         assert!((fit_percent(&half) - 50.0).abs() < 1e-12);
         assert!(fit_percent(&[(3.0, 1.0), (3.0, 2.0)]).is_nan());
+    }
+
+    #[test]
+    fn a_diverged_cell_scores_the_run_diverged_not_zero() {
+        let fine = [(1.0, 1.5), (2.0, 2.0)];
+        assert_eq!(scored(&fine, nmse, 1.0), tick_label(nmse(&fine, 1.0)));
+        // Every finite cell exact, the last one past the divergence: before the page kept
+        // only finite cells, this run scored NMSE 0 and fit 100 %.
+        let stopped = [(1.0, 1.0), (2.0, 2.0), (3.0, f64::NAN)];
+        assert_eq!(scored(&stopped, nmse, 1.0), "diverged");
+        assert_eq!(scored(&stopped, |p, _| fit_percent(p), 1.0), "diverged");
     }
 
     #[test]

@@ -15,5 +15,6 @@ mod parser;
 mod records;
 mod runs;
 mod safety;
+mod shapes;
 mod stiff;
 mod whatif;
