@@ -238,6 +238,17 @@ def row_for(case, command, code, seconds, cap, out, log, mechanism_error):
     return row
 
 
+def skipped(case, command, why):
+    """The row of a command that does not apply to a case."""
+    return {
+        "record": case["name"], "kind": case["kind"], "command": command,
+        "finished": None, "exit_code": None, "seconds": 0.0, "cap_seconds": 0,
+        "verdict": why, "mechanism_error": None, "greybox_error": None,
+        "naive_error": None, "right": None, "undecided": False,
+        "params_identified": 0, "params_within_3se": 0, "message": None,
+    }
+
+
 def fmt(value):
     if value is None:
         return "–"
@@ -273,7 +284,7 @@ def summary(rows):
         right = sum(1 for r in judged if r["right"] and not r["undecided"])
         undecided = sum(1 for r in judged if r["undecided"])
         failed = sum(1 for r in mine if r["exit_code"] not in (0, None))
-        capped = sum(1 for r in mine if not r["finished"])
+        capped = sum(1 for r in mine if r["finished"] is False)
         identified = sum(r["params_identified"] for r in mine)
         within = sum(r["params_within_3se"] for r in mine)
         out.append(
@@ -309,6 +320,10 @@ def main():
         mechanism_error = None
         for command in args.commands:
             cap = CAP_FACTOR * expected[command]
+            if command == "compare" and not case.get("holdout"):
+                # One experiment: nothing to hold out, `gbc compare` does not apply.
+                rows.append(skipped(case, command, "not applicable: no experiment held out"))
+                continue
             log = out / f"{command}.log"
             argv = command_line(args.gbc, case, command, out)
             print(f"[{index}/{len(selected)}] {case['name']}: {command} (cap {cap} s)",

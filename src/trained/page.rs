@@ -185,7 +185,9 @@ fn fit_section(model: &ir::Model, trained: &Trained, shown: &[Shown]) -> String 
             // A run that stopped before a cell it is scored on diverged there: that cell is
             // not dropped (which would score the rest as if the run had been fine).
             let cell = |pairs: &Option<Vec<(f64, f64)>>, what: fn(&[(f64, f64)], f64) -> f64| {
-                pairs.as_deref().map_or("–".to_string(), |p| scored(p, what, scale))
+                pairs
+                    .as_deref()
+                    .map_or("–".to_string(), |p| scored(p, what, scale))
             };
             let _ = writeln!(
                 html,
@@ -346,7 +348,8 @@ fn states_section(model: &ir::Model, trained: &Trained, shown: &[Shown], title: 
             }
             let diverged = entry.online.as_ref().and_then(|t| t.divergence.as_ref());
             if let Some(divergence) = diverged {
-                chart = chart.with_mark("free run diverged", divergence.time, Style::Dashed, ONLINE);
+                chart =
+                    chart.with_mark("free run diverged", divergence.time, Style::Dashed, ONLINE);
             }
             let caption = diverged.map_or(String::new(), |d| d.to_string());
             html.push_str(&figure(&chart.to_svg(WIDTH, HEIGHT), &caption));

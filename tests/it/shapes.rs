@@ -46,9 +46,7 @@ impl Shape {
         });
         text.push_str("const src = 0.2 [g/L/h]\n");
         if self.closure {
-            text.push_str(
-                "\nclosure correction {\n  outputs c [1/h] ~ 0.01\n  observe ",
-            );
+            text.push_str("\nclosure correction {\n  outputs c [1/h] ~ 0.01\n  observe ");
             text.push_str(&states[0].0);
             text.push_str("\n  network hidden [4] softplus\n}\n");
         }
@@ -74,16 +72,25 @@ impl Shape {
 }
 
 fn shapes() -> impl Strategy<Value = Shape> {
-    (0..=2usize, 0..=1usize, any::<bool>(), any::<bool>(), any::<bool>(), any::<bool>())
+    (
+        0..=2usize,
+        0..=1usize,
+        any::<bool>(),
+        any::<bool>(),
+        any::<bool>(),
+        any::<bool>(),
+    )
         .prop_filter("at least one state", |(m, h, ..)| m + h > 0)
-        .prop_map(|(measured, hidden, input, base_param, effect_param, closure)| Shape {
-            measured,
-            hidden,
-            input,
-            base_param,
-            effect_param,
-            closure,
-        })
+        .prop_map(
+            |(measured, hidden, input, base_param, effect_param, closure)| Shape {
+                measured,
+                hidden,
+                input,
+                base_param,
+                effect_param,
+                closure,
+            },
+        )
 }
 
 /// Exit code and stderr of `gbc args`.
@@ -101,7 +108,10 @@ fn no_panic((code, stderr): (Option<i32>, String), what: &str, shape: &Shape) {
         shape.text()
     );
     if code == Some(1) {
-        assert!(stderr.contains("E0") || stderr.contains("E1"), "{what}: uncoded error\n{stderr}");
+        assert!(
+            stderr.contains("E0") || stderr.contains("E1"),
+            "{what}: uncoded error\n{stderr}"
+        );
     }
 }
 
@@ -131,9 +141,9 @@ proptest! {
         let json = dir.join("d.json").display().to_string();
         let diagnosed = run(&["diagnose", &model, &data, "--json", &json, "--jobs", "1"]);
         no_panic(diagnosed.clone(), "diagnose", &shape);
-        // Where the record has a measured state and the shape a param (or nothing to fit),
-        // the diagnosis must run, not refuse.
-        if shape.measured > 0 && !shape.closure {
+        // Where the record has a measured state and the effect a param to fit (the base
+        // with or without one: issue 35's panic), the diagnosis must run, not refuse.
+        if shape.measured > 0 && !shape.closure && shape.effect_param {
             prop_assert_eq!(diagnosed.0, Some(0), "{}", diagnosed.1);
         }
         let out = dir.join("run").display().to_string();

@@ -6,7 +6,7 @@ The only writer of data/pensim.csv (no hand edits). Steps (SOURCE.md says why):
     python3 -m venv .venv && . .venv/bin/activate
     pip install numpy scipy pandas
     pip install --no-deps pensimpy==1.2.5
-    python convert.py            # about 5 minutes on 2 cores
+    python convert.py            # 4-9 minutes (about 26 s of CPU a batch)
 
 pensimpy 1.2.5 pins numpy==1.18.2, pandas==1.0.3 and scipy==1.4.1 (none builds on a current
 Python) and imports `fastodeint`, a C++ solver that is not on PyPI. So it is installed
