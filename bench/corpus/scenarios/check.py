@@ -83,7 +83,7 @@ def main():
         t_end, dt = b1["t_end"], 0.25
         grid = np.round(np.arange(0.0, t_end + 1e-9, dt), 6)
         ref = sim.sample(y0, breaks, levels, grid)
-        w_truth = worst = float("nan")
+        w_truth = worst = moved = float("nan")
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             try:
@@ -107,6 +107,11 @@ def main():
                 extra += [a for s in sc["measured"] for a in ("--init", f"{s}={gen.num(b1['initial_state'][s])}")]
                 m = simulate(args.gbc, tmp / "at_truth.gbm", t_end, dt, inputs, d / "data.csv", extra,
                              tmp / "model.csv")
+                # how far the withheld mechanism moves B1: the model without it, at the truth
+                base = simulate(args.gbc, tmp / "at_truth.gbm", t_end, dt, inputs, d / "data.csv",
+                                [a for s in sc["measured"] for a in ("--init", f"{s}={gen.num(b1['initial_state'][s])}")],
+                                tmp / "base.csv")
+                moved = max(rel_err(base[s], g[s], max(np.max(np.abs(g[s])), 1e-3)) for s in sc["measured"])
                 worst = 0.0
                 for s in sim.states:
                     if s not in m:
@@ -119,7 +124,8 @@ def main():
             except RuntimeError as e:
                 problems.append(str(e))
         print(f"{p['id']}: {'ok' if not problems else 'FAILED'} (truth.gbm vs scipy {w_truth:.1e}, "
-              f"model + {'+'.join(case['answer']['withheld']) or 'no effect'} vs truth.gbm {worst:.1e})", flush=True)
+              f"model + {'+'.join(case['answer']['withheld']) or 'no effect'} vs truth.gbm {worst:.1e}; "
+              f"without: {moved:.1e})", flush=True)
         for x in problems:
             print("   " + x.replace("\n", "\n   "))
         bad += bool(problems)
