@@ -50,7 +50,7 @@ def number(value):
     if isinstance(value, (int, float)):
         return float(value)
     try:
-        return float(str(value).replace("inf", "inf"))
+        return float(value)
     except ValueError:
         return None
 
@@ -174,6 +174,20 @@ def judge_diagnosis(report, answer):
     return verdict, right, is_undecided, identified, within
 
 
+def trained_epochs(info):
+    """What a grey-box run trained: the stop cross-validation chose, or every epoch."""
+    if not info:
+        return None
+    epochs = (info.get("training") or {}).get("epochs")
+    toward = info.get("toward_mechanism") or {}
+    choice = toward.get("choice")
+    if choice:
+        return f"stopped at epoch {choice.get('chosen')} of {choice.get('epochs')}"
+    if toward.get("unchosen"):
+        return f"{epochs} epochs (no stop chosen)"
+    return f"{epochs} epochs"
+
+
 def judge_greybox(greybox, mechanism, answer):
     """Whether a grey box's held-out error is right against its mechanism's."""
     if answer is None or greybox is None or mechanism is None:
@@ -208,10 +222,10 @@ def row_for(case, command, code, seconds, cap, out, log, mechanism_error):
         verdict, right, undecided, identified, within = judge_diagnosis(report, answer)
         row.update(verdict=verdict, right=right, undecided=undecided,
                    params_identified=identified, params_within_3se=within)
-        base = report.get("base_fit") or {}
+        # A diagnosis's "mechanism" is the base model's held-out gap, its "grey box" the
+        # credited set's.
         row["mechanism_error"] = number(report.get("gap_before"))
         row["greybox_error"] = number((report.get("selection") or {}).get("gap_after"))
-        _ = base
     elif command == "train_mechanism":
         error, info = online_error(out / "mechanism")
         row["mechanism_error"] = error
@@ -225,8 +239,7 @@ def row_for(case, command, code, seconds, cap, out, log, mechanism_error):
         identified, within = param_checks((info or {}).get("estimates"), truth)
         row.update(params_identified=identified, params_within_3se=within)
         row["right"] = judge_greybox(error, mechanism_error, answer)
-        stop = ((info or {}).get("training") or {}).get("epochs")
-        row["verdict"] = f"{stop} epochs" if stop is not None else None
+        row["verdict"] = trained_epochs(info)
     else:
         report = load(out / "compare.json") or {}
         overall = report.get("overall") or {}

@@ -48,8 +48,7 @@ pub fn source(
     } else {
         return None;
     };
-    let records = data.train.iter().chain(data.validation);
-    check_fittable(&fitted, records).is_ok().then_some(fitted)
+    fittable(fitted, data)
 }
 
 /// The mechanism of a grey box whose balances cannot give its params (hidden states, or a
@@ -66,7 +65,12 @@ pub fn fallback(model: &ir::Model, data: &TrainingData, recipe: &Recipe) -> Opti
     if !trains_params {
         return None;
     }
-    let fitted = model.mechanism();
+    fittable(model.mechanism(), data)
+}
+
+/// `fitted` where the fitter takes the records (no measured outputs; a discrete map on one
+/// uniform step).
+fn fittable(fitted: ir::Model, data: &TrainingData) -> Option<ir::Model> {
     let records = data.train.iter().chain(data.validation);
     check_fittable(&fitted, records).is_ok().then_some(fitted)
 }

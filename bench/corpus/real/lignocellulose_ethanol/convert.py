@@ -18,11 +18,12 @@ The only writer of data/ (no hand edits). Standard library only. Steps:
 Run from anywhere: `python3 convert.py [CACHE]`.
 """
 import csv
-import hashlib
 import io
 import os
-import subprocess
 import sys
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+import registry  # noqa: E402  (bench/corpus/real/registry.py)
 import zipfile
 
 PACKAGE = "dtuprosys"
@@ -45,18 +46,8 @@ OUT = os.path.join(HERE, "data", "hydrolysate.csv")
 
 
 def fetch(cache):
-    path = os.path.join(cache, ARCHIVE)
-    if not os.path.exists(path):
-        os.makedirs(cache, exist_ok=True)
-        subprocess.run(
-            [sys.executable, "-m", "pip", "download", "--no-deps", f"{PACKAGE}=={VERSION}",
-             "-d", cache],
-            check=True,
-        )
-    digest = hashlib.sha256(open(path, "rb").read()).hexdigest()
-    if digest != SHA256:
-        sys.exit(f"{path}: sha256 {digest}, expected {SHA256}")
-    return path
+    """The package's archive in `cache`, checked (`registry.fetch`)."""
+    return registry.fetch(cache, PACKAGE, VERSION, ARCHIVE, SHA256)
 
 
 def main():
