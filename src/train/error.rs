@@ -9,16 +9,6 @@ use crate::io::IoError;
 /// A training or prediction failure.
 #[derive(Debug, Error, Diagnostic)]
 pub enum TrainError {
-    /// The model has nothing to train.
-    #[error("expected a model with a closure or a param to train, found neither in `{model}`")]
-    #[diagnostic(
-        code(gbm::E0410),
-        help("declare a `closure` or a `param`, or use `gbc simulate` for a fully known model")
-    )]
-    NothingToTrain {
-        /// Model name.
-        model: String,
-    },
     /// An embedding delay shorter than the sampling step would read the target.
     #[error(
         "expected an embedding delay of at least the sampling step {step} in closure `{closure}`, \

@@ -434,15 +434,6 @@ fn check_options(options: &TrainOptions, recipe: &Recipe) -> Result<(), TrainErr
     Ok(())
 }
 
-fn check_trainable(model: &ir::Model) -> Result<(), TrainError> {
-    if model.closures.is_empty() && model.params.is_empty() {
-        return Err(TrainError::NothingToTrain {
-            model: model.name.clone(),
-        });
-    }
-    Ok(())
-}
-
 /// The training experiments whose later part validates, with the time it starts.
 pub(crate) fn validated_from(layout: &prepare::Layout) -> Vec<(String, f64)> {
     (layout.scorings[..layout.part_scorings].iter())
