@@ -6,11 +6,12 @@
 
 use std::fmt::Write;
 
-use super::predict::{predict, Mode, PredictionTable};
+use super::predict::{predict_in_range, Mode, PredictionTable};
 use crate::ir;
 use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style, PALETTE};
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Record;
+use crate::train::PhysicalRange;
 use crate::train::{History, Trained};
 
 /// Figure width in pixels.
@@ -46,13 +47,19 @@ pub fn run_page(
     (history, horizons): (History, &[usize]),
     title: &str,
 ) -> String {
+    // The run's own physical range: a free run the training's validation called diverged
+    // is drawn and scored as diverged here too.
+    let range = PhysicalRange::new(
+        &trained.setup.normalisation,
+        trained.report.recipe.range_factor,
+    );
     let predicted = |record, mode| {
-        predict(
+        predict_in_range(
             model,
             &trained.network,
             &trained.setup,
             record,
-            (mode, history),
+            (mode, history, range.as_ref()),
         )
         .ok()
     };
@@ -304,7 +311,8 @@ fn states_section(model: &ir::Model, trained: &Trained, shown: &[Shown], title: 
         "<h2>Measured and predicted</h2>\n<p>Dots: measured cells. Solid: one step from the \
          measured history. Dashed: free run from the experiment's start, driven by its inputs \
          alone. A grey vertical line marks where a training experiment's validated part \
-         starts.</p>\n",
+         starts; a dashed red one where a free run diverged (left the run's physical \
+         range, said below the figure).</p>\n",
     );
     for entry in drawn(shown) {
         let split = (trained.report.validated_from.iter())
