@@ -3,7 +3,7 @@
 //! Pipeline (see `docs/architecture.md`): [`syntax`] parses text into the [`ast`], [`check`]
 //! validates it and collects every error, [`ir`] lowers it into a plain compiled model,
 //! [`eval`] turns its expressions into fast numeric programs, [`sim`] integrates models
-//! without closures, [`data`] reads measured records, [`backend`] builds the trainable
+//! without closures, [`data`] reads measured records, [`engine`] builds the trainable
 //! grey-box network, [`numeric`] holds the statistics, linear algebra and Levenberg–Marquardt
 //! driver they all share, and [`cli`] is the command-line edge that renders diagnostics.
 #![warn(missing_docs)]
@@ -37,6 +37,7 @@ pub mod plot;
 pub mod record;
 pub mod signal;
 pub mod sim;
+pub mod stop;
 pub mod suggest;
 pub mod syntax;
 pub mod train;

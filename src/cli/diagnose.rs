@@ -109,7 +109,13 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     reporter.finish();
     let diagnosis = outcome?;
     print!("{}", diagnosis.text());
-    write_outputs(args, &diagnosis)
+    write_outputs(args, &diagnosis)?;
+    match &diagnosis.report.partial {
+        Some(note) => Err(CommandError::user(DiagnoseError::Stopped {
+            note: note.clone(),
+        })),
+        None => Ok(()),
+    }
 }
 
 /// The diagnosis the flags ask for.

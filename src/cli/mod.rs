@@ -119,6 +119,26 @@ pub enum Command {
     Lsp(lsp::LspArgs),
 }
 
+/// What a long command does when Ctrl-C or SIGTERM asks it to stop (`None`: a short
+/// command keeps the default handling).
+fn on_stop(command: &Command) -> Option<&'static str> {
+    match command {
+        Command::Train(_) => {
+            Some("training ends before its next batch, with a checkpoint of its last whole epoch")
+        }
+        Command::Diagnose(_) => {
+            Some("the fits end at their best so far; the report written is marked partial")
+        }
+        Command::Compare(_) | Command::Experiment(_) | Command::Demo(_) | Command::Bench(_) => {
+            Some("the running training ends before its next batch; nothing more starts")
+        }
+        Command::Simulate(_) | Command::Predict(_) | Command::Export(_) => {
+            Some("the command ends after its running step")
+        }
+        _ => None,
+    }
+}
+
 /// Runs one parsed command line.
 pub fn dispatch(cli: &Cli) -> CommandResult {
     match &cli.command {
@@ -152,6 +172,9 @@ pub fn main() -> i32 {
         }
     };
     let format: MessageFormat = cli.message_format.into();
+    if let Some(what) = on_stop(&cli.command) {
+        crate::stop::on_signal(what);
+    }
     // Deep but legal models recurse in the front end; a large stack keeps that safe.
     let worker = std::thread::Builder::new()
         .name("gbc".to_string())

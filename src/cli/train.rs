@@ -291,7 +291,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     }
     let control = crate::api::Control {
         directory: Some(directory.clone()),
-        stop: safety::stop_on_signal(),
+        stop: Some(crate::stop::flag()),
         resume: checkpoint,
         command,
         stop_after: args.stop_after_epochs,

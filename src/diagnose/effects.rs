@@ -151,6 +151,7 @@ pub fn named(model: &Model, x: &[f64]) -> BTreeMap<String, f64> {
 }
 
 /// Every candidate effect applied alone and fitted, ranked by held-out gap.
+#[derive(Default)]
 pub struct Ranking {
     /// Scores, best first.
     pub scores: Vec<EffectScore>,

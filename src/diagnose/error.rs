@@ -117,6 +117,16 @@ pub enum DiagnoseError {
         /// The experiment.
         experiment: String,
     },
+    /// Stopped by Ctrl-C or SIGTERM before its end; the report written is partial.
+    #[error("the diagnosis was stopped before its end: {note}")]
+    #[diagnostic(
+        code(gbm::E0810),
+        help("the report printed and written (--json, --html) holds the fits so far and says it is partial; run the diagnosis again to the end for a verdict (--skip-loci, or fewer --restarts, make it shorter)")
+    )]
+    Stopped {
+        /// Where it stopped.
+        note: String,
+    },
     /// A bug: a synthesised model did not compile, or expressions do not fit their layout.
     #[error(transparent)]
     #[diagnostic(transparent)]

@@ -183,6 +183,10 @@ impl Objective<'_> {
             }
             return columns;
         }
+        if crate::stop::requested() {
+            // Asked to stop: no differences (the fit ends at its next trial).
+            return vec![Vec::new(); theta.len()];
+        }
         let residuals = |theta: &[f64]| self.residuals(&values(constraints, theta));
         let r = residuals(theta).unwrap_or_default();
         crate::numeric::lm::forward_differences(&residuals, theta, &r, JACOBIAN_STEP)
@@ -307,6 +311,9 @@ pub fn fit(
         let best = best_gap(&results);
         let improved = best < before - AGREE * before.abs();
         if results.len() >= starts.min && !improved && agreeing(&results) >= 2 {
+            break;
+        }
+        if crate::stop::requested() {
             break;
         }
     }

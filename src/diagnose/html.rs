@@ -49,7 +49,14 @@ pub fn page(report: &Report) -> String {
              first twelve): the held-out gap of each scores the choice, it does not make it.",
         ));
     }
-    let mut sections = vec![gap];
+    let mut sections = Vec::new();
+    if let Some(partial) = &report.partial {
+        sections.push(format!(
+            "<p><strong>Partial report:</strong> {}</p>\n",
+            escape(partial)
+        ));
+    }
+    sections.push(gap);
     if !report.locus.is_empty() {
         sections.push(format!(
             "<h2>Free corrections: held-out gap left at each place</h2>\n{}",

@@ -280,13 +280,18 @@ pub fn diagnose(
         seconds: before.summary.seconds,
     });
     let gap_before = before.gap;
+    let mut partial = stopped_while("fitting the model");
     progress(Progress::Stage {
         name: "fitting effects",
         total: context.model.effects.len(),
     });
     let base_params = effects::named(context.model, &before.fitted.x);
     let effects_started = Instant::now();
-    let ranking = effects::rank_effects(&context, &before.named, gap_before, progress)?;
+    let ranking = match partial {
+        Some(_) => effects::Ranking::default(),
+        None => effects::rank_effects(&context, &before.named, gap_before, progress)?,
+    };
+    partial = partial.or_else(|| stopped_while("fitting the effects"));
     let effects_seconds = effects_started.elapsed().as_secs_f64();
     let noise = assemble::noise_estimates(&context, &before, &ranking);
     let states = assemble::state_gaps(&context, &base, &before, &noise);
@@ -301,12 +306,21 @@ pub fn diagnose(
         noise_floor,
     };
     let selection_started = Instant::now();
-    let (selection, credited_fit) =
-        selection::select(&context, &before, &ranking, levels, progress)?;
+    let (selection, credited_fit) = match partial {
+        Some(_) => Default::default(),
+        None => selection::select(&context, &before, &ranking, levels, progress)?,
+    };
+    // A selection cut short credits nothing.
+    let stopped = stopped_while("selecting effects");
+    let (selection, credited_fit) = match stopped {
+        Some(_) => Default::default(),
+        None => (selection, credited_fit),
+    };
+    partial = partial.or(stopped);
     let selection_seconds = selection_started.elapsed().as_secs_f64();
     let loci_started = Instant::now();
     // Without a significant gap there is nothing to locate.
-    let (taus, located) = if options.locate && significant {
+    let (taus, located) = if options.locate && significant && partial.is_none() {
         let taus = memory_time_constants(&context, &base, &before.fitted.x);
         let gaps = (gap_before, noise_floor);
         let located = locus::locate(&context, &before.fitted.x, &taus, gaps, progress)?;
@@ -315,6 +329,10 @@ pub fn diagnose(
         (Vec::new(), locus::Located::default())
     };
     let loci_seconds = loci_started.elapsed().as_secs_f64();
+    let (located, partial) = match partial.or_else(|| stopped_while("locating the gap")) {
+        Some(note) => (locus::Located::default(), Some(note)),
+        None => (located, None),
+    };
     let memory = assemble::memory(&located, &ranking, &selection, (levels, &taus));
     let hints = match (&located.along, located.loci.first()) {
         (Some(along), Some(best)) if significant && !memory.history_needed => {
@@ -364,6 +382,17 @@ pub fn diagnose(
             jobs: rayon::current_num_threads(),
         },
         series,
+        partial,
+    })
+}
+
+/// Where a stop asked for ([`crate::stop`]) left the diagnosis, in words, when one was.
+fn stopped_while(phase: &str) -> Option<String> {
+    crate::stop::requested().then(|| {
+        format!(
+            "stopped (Ctrl-C or SIGTERM) while {phase}; the fits of that phase ended at their \
+             best so far and the later phases did not run, so nothing here is a verdict"
+        )
     })
 }
 

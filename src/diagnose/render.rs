@@ -6,6 +6,9 @@ use std::fmt::Write;
 /// Renders the report as text answering the three questions.
 pub fn text(report: &Report) -> String {
     let mut out = String::new();
+    if let Some(partial) = &report.partial {
+        let _ = writeln!(out, "PARTIAL REPORT: {partial}\n");
+    }
     header(&mut out, report);
     where_section(&mut out, report);
     which_section(&mut out, report);

@@ -59,6 +59,10 @@ pub struct Report {
     pub split: SplitSummary,
     /// Where the time went.
     pub timing: Timing,
+    /// Set when the diagnosis was stopped (Ctrl-C, SIGTERM) before its end: the phase it
+    /// stopped in and what was not run. What it holds is the fits so far, not a verdict.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub partial: Option<String>,
     /// Data and runs of the scored experiments, for plots (not serialised).
     #[serde(skip)]
     pub series: Vec<ExperimentSeries>,

@@ -59,6 +59,12 @@ impl Simulator {
         };
         let mut first = 0;
         while first + 1 < end {
+            // A fit asked to stop needs no more derivatives ([`crate::stop`]).
+            if crate::stop::requested() {
+                return Err(IntegrationError::Stopped {
+                    t: record.times[first],
+                });
+            }
             let mut last = first + 1;
             while last + 1 < end && same_inputs(record, first, last) {
                 last += 1;

@@ -172,6 +172,7 @@ fn every_number_non_finite() -> Report {
             holdout: "tail".into(),
             share: Some(NAN),
         },
+        partial: None,
         timing: Timing {
             total: INF,
             base_fit: NAN,

@@ -199,6 +199,10 @@ pub fn minimise<P: Problem + ?Sized>(
     let mut damping = settings.initial_damping;
     let mut linear: Option<P::Linear> = None;
     for _ in 0..settings.max_trials {
+        // Asked to stop (Ctrl-C, SIGTERM): the best point so far is the outcome.
+        if crate::stop::requested() {
+            break;
+        }
         if linear.is_none() {
             if state.linearisations >= settings.max_linearisations {
                 break;

@@ -47,6 +47,16 @@ pub enum IntegrationError {
         /// Where the system was fastest.
         stuck: Stuck,
     },
+    /// Asked to stop (Ctrl-C, SIGTERM; [`crate::stop`]) before the end.
+    #[error("stopped at t = {t} (Ctrl-C or SIGTERM)")]
+    #[diagnostic(
+        code(gbm::E0719),
+        help("the run was asked to stop before its end; run it again to the end")
+    )]
+    Stopped {
+        /// Time reached.
+        t: f64,
+    },
 }
 
 impl IntegrationError {
@@ -55,7 +65,8 @@ impl IntegrationError {
         match self {
             IntegrationError::StepSizeUnderflow { t, .. }
             | IntegrationError::NonFinite { t, .. }
-            | IntegrationError::TooManySteps { t, .. } => *t,
+            | IntegrationError::TooManySteps { t, .. }
+            | IntegrationError::Stopped { t } => *t,
         }
     }
 
@@ -65,6 +76,7 @@ impl IntegrationError {
             IntegrationError::StepSizeUnderflow { stuck, .. }
             | IntegrationError::NonFinite { stuck, .. }
             | IntegrationError::TooManySteps { stuck, .. } => stuck,
+            IntegrationError::Stopped { .. } => return self,
         };
         if let Some(index) = stuck.state {
             stuck.name = names.get(index).cloned();

@@ -390,6 +390,28 @@ impl<'a> Safety<'a> {
         Ok(checkpoint.epoch + 1)
     }
 
+    /// Whether the run was asked to stop (a caller's flag, or [`crate::stop`]: Ctrl-C,
+    /// SIGTERM).
+    pub fn stop_requested(&self) -> bool {
+        stop_requested(self.control)
+    }
+
+    /// Stopped inside the epoch after `end.epoch` (whose state `end` holds again): writes
+    /// the checkpoint of that last whole epoch, so that `--resume` runs the unfinished
+    /// epoch again, and returns the interruption.
+    pub fn stopped_within(&self, mut end: EpochEnd) -> TrainError {
+        if let Some(directory) = self.control.directory.as_ref() {
+            if let Err(error) = self.checkpoint(&mut end).save(directory) {
+                return error;
+            }
+        }
+        TrainError::Interrupted {
+            epoch: end.epoch,
+            epochs: self.epochs,
+            directory: self.directory(),
+        }
+    }
+
     /// After an epoch: logs it, validates (early stopping), writes a checkpoint when one
     /// is due, and stops with [`TrainError::Interrupted`] when asked to. Returns whether
     /// training stops here (early stopping).
@@ -431,10 +453,7 @@ impl<'a> Safety<'a> {
         }
         self.log.push(row);
         let control = self.control;
-        let stop_asked = control
-            .stop
-            .as_ref()
-            .is_some_and(|s| s.load(Ordering::SeqCst));
+        let stop_asked = stop_requested(control);
         let interrupted = (stop_asked || control.stop_after == Some(epoch)) && epoch < self.epochs;
         let due = control
             .every
@@ -576,4 +595,10 @@ mod tests {
             (Some(3), Some((2, 2.0)))
         );
     }
+}
+
+/// Whether `control`'s flag or the process's stop request ([`crate::stop`]) asks a run to
+/// stop.
+pub(super) fn stop_requested(control: &RunControl) -> bool {
+    crate::stop::requested() || (control.stop.as_ref()).is_some_and(|s| s.load(Ordering::Relaxed))
 }

@@ -276,6 +276,17 @@ pub enum TrainError {
         /// The run directory holding the checkpoint.
         directory: String,
     },
+    /// Stopped (Ctrl-C, SIGTERM) before the first epoch of the run itself: nothing to
+    /// resume.
+    #[error("training was stopped while {phase}, before its first epoch")]
+    #[diagnostic(
+        code(gbm::E0433),
+        help("nothing was trained, so there is no checkpoint to resume: run the command again")
+    )]
+    StoppedBefore {
+        /// What it was doing.
+        phase: String,
+    },
     /// `gbc train --resume DIR` on a directory without a usable checkpoint.
     #[error("expected a training checkpoint in `{directory}`, found {found}")]
     #[diagnostic(

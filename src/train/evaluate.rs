@@ -112,6 +112,9 @@ pub fn simulate(
         substeps: 1,
     };
     for knot in start..=end {
+        if crate::stop::requested() {
+            return Err(BackendError::Stopped);
+        }
         let prediction = match stepping {
             Stepping::Fixed => network.predict(&fixed_batch(
                 model,

@@ -96,8 +96,10 @@ impl Fit<'_> {
             cap: usize::MAX,
             recovered: 0,
         };
-        // The last state whose weights were all finite, and its epoch.
+        // The last state whose weights were all finite, and its epoch; with the generator
+        // and rollout there (a stop inside an epoch goes back to them).
         let mut kept = (first - 1, engines.optimiser.clone());
+        let mut kept_at = (rng.clone(), 1);
         let mut diverged = None;
         let mut recoveries = Vec::new();
         let fill = fill_schedule(training);
@@ -108,14 +110,29 @@ impl Fit<'_> {
                 .min(self.longest_window());
             self.refresh_before(epoch, &mut engines, training, (&fractions, fill))?;
             let how = ((epoch, horizon), fractions.as_slice());
+            let stop = || safety.stop_requested();
             let mut checked =
-                self.checked_epoch(&mut engines, training, how, &mut rng, on_event)?;
+                self.checked_epoch(&mut engines, training, how, (&mut rng, &stop), on_event)?;
             if safety.poisoned(epoch) {
-                checked = Err("the loss became NaN (injected by a test)".into());
+                checked = Err(Unfinished::NotFinite(
+                    "the loss became NaN (injected by a test)".into(),
+                ));
             }
             let loss = match checked {
                 Ok(loss) => loss,
-                Err(what) => {
+                Err(Unfinished::Stopped) => {
+                    engines.optimiser = kept.1.clone();
+                    let end = EpochEnd {
+                        epoch: kept.0,
+                        horizon: kept_at.1,
+                        loss: f64::NAN,
+                        rng: &kept_at.0,
+                        course: training,
+                        engines: &mut engines,
+                    };
+                    return Err(safety.stopped_within(end));
+                }
+                Err(Unfinished::NotFinite(what)) => {
                     let failed = (epoch, horizon, what);
                     match self.recover(failed, &kept, &mut engines, safety) {
                         Ok(recovery) => {
@@ -147,6 +164,7 @@ impl Fit<'_> {
             };
             let stop = safety.after_epoch(end, on_event)?;
             kept = (epoch, engines.optimiser.clone());
+            kept_at = (rng.clone(), horizon);
             if stop {
                 break;
             }
@@ -231,15 +249,15 @@ impl Fit<'_> {
 
     /// One epoch with its batches told to `on_event`: its loss, or what went non-finite
     /// (the loss, or after the epoch a weight: a finite loss is the loss *before* the
-    /// epoch's last step).
+    /// epoch's last step), or that `stop` asked it to end before its next batch.
     fn checked_epoch(
         &self,
         engines: &mut Engines,
         training: &Course,
         ((epoch, horizon), fractions): ((usize, usize), &[f64]),
-        rng: &mut ChaCha8Rng,
+        (rng, stop): (&mut ChaCha8Rng, &dyn Fn() -> bool),
         on_event: &mut dyn FnMut(Event),
-    ) -> Result<Result<f64, String>, TrainError> {
+    ) -> Result<Result<f64, Unfinished>, TrainError> {
         let mut on_batch = |done, batches| {
             on_event(Event::Batch {
                 epoch,
@@ -248,14 +266,17 @@ impl Fit<'_> {
             })
         };
         let how = (horizon, fractions);
-        match self.epoch(engines, training, how, rng, &mut on_batch) {
+        match self.epoch(engines, training, how, (rng, stop), &mut on_batch) {
             Err(EpochFailure::Backend(error)) => Err(TrainError::Backend(error)),
-            Err(EpochFailure::NotFinite(loss)) => Ok(Err(format!("the loss became {loss}"))),
+            Err(EpochFailure::Stopped) => Ok(Err(Unfinished::Stopped)),
+            Err(EpochFailure::NotFinite(loss)) => Ok(Err(Unfinished::NotFinite(format!(
+                "the loss became {loss}"
+            )))),
             Ok(loss) => {
                 let params: Vec<String> =
                     self.model.params.iter().map(|p| p.name.clone()).collect();
                 Ok(match engines.non_finite(&params) {
-                    Some(found) => Err(format!("{found} after the epoch")),
+                    Some(found) => Err(Unfinished::NotFinite(format!("{found} after the epoch"))),
                     None => Ok(loss),
                 })
             }
@@ -269,7 +290,7 @@ impl Fit<'_> {
         engines: &mut Engines,
         training: &Course,
         (horizon, fractions): (usize, &[f64]),
-        rng: &mut ChaCha8Rng,
+        rng: (&mut ChaCha8Rng, &dyn Fn() -> bool),
         on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         if horizon > 1 {
@@ -282,7 +303,7 @@ impl Fit<'_> {
         &self,
         engines: &mut Engines,
         training: &Course,
-        rng: &mut ChaCha8Rng,
+        (rng, stop): (&mut ChaCha8Rng, &dyn Fn() -> bool),
         on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
@@ -291,6 +312,9 @@ impl Fit<'_> {
         let mut total = 0.0;
         let batches = order.len().div_ceil(self.options.batch_size.max(1));
         for (done, chunk) in order.chunks(self.options.batch_size).enumerate() {
+            if stop() {
+                return Err(EpochFailure::Stopped);
+            }
             let batch = training.table.batch(chunk);
             let loss = engines.step(StepBatch::Pairs(&batch), &settings)?;
             finite(loss)?;
@@ -318,7 +342,7 @@ impl Fit<'_> {
         engines: &mut Engines,
         training: &Course,
         (horizon, fractions): (usize, &[f64]),
-        rng: &mut ChaCha8Rng,
+        (rng, stop): (&mut ChaCha8Rng, &dyn Fn() -> bool),
         on_batch: &mut dyn FnMut(usize, usize),
     ) -> Result<f64, EpochFailure> {
         let settings = self.settings();
@@ -331,7 +355,7 @@ impl Fit<'_> {
             starts.extend(tiles.into_iter().map(|knot| (index, knot)));
         }
         if starts.is_empty() {
-            return self.one_step_epoch(engines, training, rng, on_batch);
+            return self.one_step_epoch(engines, training, (rng, stop), on_batch);
         }
         starts.shuffle(rng);
         let per_batch = (self.recipe.windows_per_batch)
@@ -343,6 +367,10 @@ impl Fit<'_> {
         let mut ordered = Vec::with_capacity(per_batch);
         let batches = starts.len().div_ceil(per_batch);
         for (done, chunk) in starts.chunks(per_batch).enumerate() {
+            if stop() {
+                engines.windows = batch;
+                return Err(EpochFailure::Stopped);
+            }
             // In track order, so that windows of one uniform track share their feedback.
             ordered.clear();
             ordered.extend_from_slice(chunk);
@@ -520,6 +548,16 @@ impl Engines<'_> {
 enum EpochFailure {
     Backend(crate::engine::graph::BackendError),
     NotFinite(f64),
+    /// Asked to stop before a batch.
+    Stopped,
+}
+
+/// Why an epoch has no loss.
+enum Unfinished {
+    /// It went non-finite: what did.
+    NotFinite(String),
+    /// It was asked to stop.
+    Stopped,
 }
 
 impl From<crate::engine::graph::BackendError> for EpochFailure {

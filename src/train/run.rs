@@ -41,6 +41,29 @@ pub fn train_with(
 }
 
 /// [`train_with`] under `control`: checkpoints, interruption, resuming and early stopping
+/// A free run stopped by a stop request ([`crate::stop`]) as [`TrainError::StoppedBefore`]
+/// while `phase`; any other error as it is.
+fn stopped_in(error: TrainError, phase: &str) -> TrainError {
+    match error {
+        TrainError::Backend(crate::engine::graph::BackendError::Stopped) => {
+            TrainError::StoppedBefore {
+                phase: phase.into(),
+            }
+        }
+        error => error,
+    }
+}
+
+/// [`TrainError::StoppedBefore`] when `control` was asked to stop while `phase`.
+fn unless_stopped(control: &RunControl, phase: &str) -> Result<(), TrainError> {
+    if super::checkpoint::stop_requested(control) {
+        return Err(TrainError::StoppedBefore {
+            phase: phase.into(),
+        });
+    }
+    Ok(())
+}
+
 /// ([`super::checkpoint`]).
 pub fn train_run(
     model: &ir::Model,
@@ -58,6 +81,7 @@ pub fn train_run(
     let (options, recipe, control) = (&resolved.options, &resolved.recipe, &control);
     let choice = (resolved.choice, resolved.unchosen);
     let mut run = prepare(model, data, options, recipe, on_event)?;
+    unless_stopped(control, "it was preparing (fitting its mechanism)")?;
     // On a sparse record the one-step warm-up reaches few cells: it shrinks in proportion.
     let sparse = Recipe {
         warmup_share: run.coverage.warmup_share(recipe.warmup_share),
@@ -73,7 +97,9 @@ pub fn train_run(
     if !run.layout.scorings.is_empty() {
         on_event(Event::Phase(VALIDATING));
     }
-    let initial = run.validate(options, recipe)?;
+    let scoring = "it was scoring its start";
+    let initial = (run.validate(options, recipe)).map_err(|error| stopped_in(error, scoring))?;
+    unless_stopped(control, scoring)?;
     on_event(Event::Phase(TRAINING));
     let fitted = run.fit((options, recipe), (control, started), on_event)?;
     on_event(Event::Phase(EVALUATING));

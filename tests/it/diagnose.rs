@@ -37,7 +37,7 @@ pub fn simulate_chemostat(truth: &str, t_end: &str, path: &Path) {
 /// its first row and then the cell of S at rows 3k + 1 and of P at rows 3k + 2 (a third of
 /// the cells, never both at once: irregular times per state) and rows 3k only where the
 /// input changes (logged at every change), written as e1..e3.csv.
-fn thinned_files(dir: &Path) -> Vec<String> {
+pub fn thinned_files(dir: &Path) -> Vec<String> {
     let full = dir.join("full.csv");
     simulate_chemostat("truth_decay", "599", &full);
     let content = std::fs::read_to_string(&full).expect("simulated");

@@ -148,12 +148,12 @@ fn ctrl_c_ends_the_epoch_and_leaves_a_checkpoint() {
         .spawn()
         .expect("gbc runs");
     let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    // The first progress line that counts epochs done: at least one whole epoch is done.
     for line in lines.by_ref() {
-        if line.unwrap().starts_with("training on") {
+        if line.unwrap().contains("/1000000 epochs,") {
             break;
         }
     }
-    std::thread::sleep(std::time::Duration::from_millis(300));
     let signal = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -163,7 +163,10 @@ fn ctrl_c_ends_the_epoch_and_leaves_a_checkpoint() {
     let status = child.wait().unwrap();
     assert_eq!(status.code(), Some(1), "{rest:?}");
     let rest = rest.join("\n");
-    assert!(rest.contains("stopping after this epoch"), "{rest}");
+    assert!(
+        rest.contains("stopping: training ends before its next batch"),
+        "{rest}"
+    );
     assert!(
         rest.contains("E0430") && rest.contains("--resume"),
         "{rest}"
@@ -173,6 +176,61 @@ fn ctrl_c_ends_the_epoch_and_leaves_a_checkpoint() {
     let epoch = json["epoch"].as_u64().unwrap();
     assert!((1..1_000_000).contains(&epoch), "{epoch}");
     assert_eq!(log_rows(&run).len() as u64, epoch);
+}
+
+/// SIGTERM while a diagnosis fits its model: the fits end at their best so far, the report
+/// is printed and written marked partial, and the exit code is 1 (E0810).
+#[cfg(unix)]
+#[test]
+fn sigterm_ends_a_diagnosis_with_its_report_marked_partial() {
+    let dir = scratch("sigterm-diagnose");
+    let files = crate::diagnose::thinned_files(&dir);
+    let json = dir.join("report.json");
+    let html = dir.join("report.html");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gbc"))
+        .args(["diagnose", "models/diagnose/chemostat/model.gbm"])
+        .args(&files)
+        .arg("--json")
+        .arg(&json)
+        .arg("--html")
+        .arg(&html)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gbc runs");
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    for line in lines.by_ref() {
+        if line.unwrap().starts_with("fitting the model") {
+            break;
+        }
+    }
+    let signal = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(signal.success());
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    let output = child.wait_with_output().unwrap();
+    let rest = rest.join("\n");
+    assert_eq!(output.status.code(), Some(1), "{rest}");
+    assert!(rest.contains("E0810"), "{rest}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.starts_with("PARTIAL REPORT: stopped"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let partial = report["partial"].as_str().unwrap_or_default();
+    assert!(
+        partial.contains("stopped (Ctrl-C or SIGTERM) while"),
+        "{report}"
+    );
+    assert!(
+        report["credited"].is_null(),
+        "a partial report credits nothing"
+    );
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("Partial report:"));
 }
 
 /// One-step training of GB1 on 100 pairs at a high learning rate: the free run on the

@@ -1,5 +1,5 @@
 //! `gbc train`'s run safety at the edge: the command line kept in the run directory for
-//! `--resume`, and Ctrl-C / SIGTERM turned into a stop after the current epoch.
+//! `--resume` (Ctrl-C and SIGTERM are [`crate::stop`]'s).
 //!
 //! Every checkpoint keeps the command line (its `command`): the arguments after `train`,
 //! the working directory they were given in, and the sha256 of every model and data file.
@@ -8,8 +8,6 @@
 //! training.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 
 use clap::Parser;
 use sha2::{Digest, Sha256};
@@ -94,23 +92,6 @@ pub fn resumed(directory: &Path) -> Result<(TrainArgs, Checkpoint), CommandError
     args.resume = None;
     args.stop_after_epochs = None;
     Ok((args, checkpoint))
-}
-
-/// A flag that Ctrl-C or SIGTERM sets (the run stops after the current epoch and writes a
-/// checkpoint); a second signal ends the process at once. `None` when no handler could be
-/// installed (the default handling then stays).
-pub fn stop_on_signal() -> Option<Arc<AtomicBool>> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let seen = Arc::clone(&flag);
-    let installed = ctrlc::set_handler(move || {
-        if seen.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
-        }
-        eprintln!(
-            "\nstopping after this epoch with a checkpoint (interrupt again to stop at once)"
-        );
-    });
-    installed.is_ok().then_some(flag)
 }
 
 /// The model and data files of a training.

@@ -281,6 +281,13 @@ pub enum BackendError {
         help("use the weights trained with this model, or train it again")
     )]
     WeightsMismatch(String),
+    /// A free run asked to stop (Ctrl-C, SIGTERM; [`crate::stop`]) before its end.
+    #[error("the free run was stopped (Ctrl-C or SIGTERM) before its end")]
+    #[diagnostic(
+        code(gbm::E0719),
+        help("the run was asked to stop before its end; run it again to the end")
+    )]
+    Stopped,
 }
 
 impl BackendError {

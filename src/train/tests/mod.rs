@@ -7,6 +7,7 @@ mod outputs;
 mod recipe;
 mod records;
 mod start;
+mod stopping;
 mod substeps;
 mod windows;
 

@@ -212,9 +212,19 @@ fn fold_curves(
             }
         }
     });
-    (curves.into_iter())
+    let curves: Vec<Curve> = (curves.into_iter())
         .map(|curve| curve.unwrap_or_else(|| Ok(Err("its thread ended early".into()))))
-        .collect()
+        .collect::<Result<_, _>>()
+        .map_err(|error| match error {
+            TrainError::Interrupted { .. }
+            | TrainError::Backend(crate::engine::graph::BackendError::Stopped) => {
+                TrainError::StoppedBefore {
+                    phase: "its folds were choosing where training stops".into(),
+                }
+            }
+            error => error,
+        })?;
+    Ok(curves)
 }
 
 /// Fold `index`: trains on the other records and scores the one held out before the first
@@ -226,6 +236,12 @@ fn fold_curve(
     (options, recipe, control): (&TrainOptions, &Recipe, &RunControl),
     tell: impl Fn(usize) -> bool,
 ) -> Result<Curve, TrainError> {
+    if crate::train::checkpoint::stop_requested(control) {
+        // Asked to stop: the folds not yet started are not started.
+        return Err(TrainError::StoppedBefore {
+            phase: "its folds were choosing where training stops".into(),
+        });
+    }
     let train: Vec<Record> = (records.iter().enumerate())
         .filter(|(other, _)| *other != index)
         .map(|(_, r)| r.clone())
