@@ -280,7 +280,7 @@ pub fn initial_states(context: &Context, base: &Simulator, x: &[f64]) -> Vec<Ini
         let overrides = split.overrides(index, fitted, simulator.hidden_count());
         let start = simulator.start_state(record, &overrides);
         for (k, &how) in split.starts[index].iter().enumerate() {
-            if how != Start::Cell {
+            if !matches!(how, Start::Cell | Start::CellFitted(_)) {
                 found.push(InitialState {
                     experiment: record.name.clone(),
                     state: context.model.states[k].name.clone(),

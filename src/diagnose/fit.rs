@@ -282,15 +282,21 @@ pub fn fit(
         free.iter().map(|&i| columns[i].clone()).collect::<Vec<_>>()
     };
     let sub0: Vec<f64> = free.iter().map(|&i| theta0[i]).collect();
+    // A start read from a measured cell stays at its cell in every random start.
+    let params = objective.simulator.params();
+    let pinned: Vec<bool> = (free.iter())
+        .map(|&i| i >= params && objective.split.cell_fitted(i - params))
+        .collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut draw = |first: bool| -> Vec<f64> {
         if first {
             return sub0.clone();
         }
-        (sub0.iter())
-            .map(|&t| {
+        (sub0.iter().zip(&pinned))
+            .map(|(&t, &pinned)| {
                 let noise: f64 = StandardNormal.sample(&mut rng);
-                t + RESTART_SPREAD * noise * t.abs().clamp(1.0, 3.0)
+                let spread = if pinned { 0.0 } else { RESTART_SPREAD };
+                t + spread * noise * t.abs().clamp(1.0, 3.0)
             })
             .collect()
     };

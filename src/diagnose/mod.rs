@@ -521,6 +521,7 @@ fn origin(start: Start) -> &'static str {
         Start::Cell => "measured",
         Start::Declared => "declared",
         Start::Fitted(_) => "fitted",
+        Start::CellFitted(_) => "measured, fitted from its cell",
         Start::Fixed(_) => "first measured value",
     }
 }

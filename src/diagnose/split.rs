@@ -43,6 +43,11 @@ pub enum Start {
     Declared,
     /// A value fitted with the params: index into the fitted starts.
     Fitted(usize),
+    /// The cell at the first row of an experiment with a training part, fitted with the
+    /// params (index into the fitted starts) from that cell: it is a measurement as noisy
+    /// as any other, and it stays a residual of the fit, so the start moves only as far as
+    /// the run after it asks and the params' standard errors count its uncertainty.
+    CellFitted(usize),
     /// A fixed value (an experiment that is only scored: its first measured value).
     Fixed(f64),
 }
@@ -258,7 +263,11 @@ impl Split {
             let mut starts = Vec::with_capacity(model.states.len());
             for (k, state) in model.states.iter().enumerate() {
                 let cells = &record.states[k];
-                starts.push(if cells.first().copied().flatten().is_some() {
+                let measured = cells.first().copied().flatten().is_some();
+                starts.push(if measured && !part.train.is_empty() {
+                    self.fitted_starts.push((index, k));
+                    Start::CellFitted(self.fitted_starts.len() - 1)
+                } else if measured {
                     Start::Cell
                 } else if state.init.is_some() {
                     Start::Declared
@@ -281,7 +290,7 @@ impl Split {
     pub fn overrides(&self, record: usize, fitted: &[f64], hidden: usize) -> Vec<Option<f64>> {
         let mut overrides: Vec<Option<f64>> = (self.starts[record].iter())
             .map(|start| match *start {
-                Start::Fitted(index) => fitted.get(index).copied(),
+                Start::Fitted(index) | Start::CellFitted(index) => fitted.get(index).copied(),
                 Start::Fixed(value) => Some(value),
                 Start::Cell | Start::Declared => None,
             })
@@ -307,13 +316,20 @@ impl Split {
     pub fn fitted_indices(&self, record: usize, hidden: usize) -> Vec<Option<usize>> {
         let mut indices: Vec<Option<usize>> = (self.starts[record].iter())
             .map(|start| match *start {
-                Start::Fitted(index) => Some(index),
+                Start::Fitted(index) | Start::CellFitted(index) => Some(index),
                 _ => None,
             })
             .collect();
         let first = self.first_hidden_start(record, hidden);
         indices.extend((0..hidden).map(|h| first.map(|f| f + h)));
         indices
+    }
+
+    /// Whether fitted start `index` is a first row's measured cell ([`Start::CellFitted`]):
+    /// its data pin it, so random restarts leave it where the cell is.
+    pub fn cell_fitted(&self, index: usize) -> bool {
+        (self.fitted_starts.get(index))
+            .is_some_and(|&(record, k)| matches!(self.starts[record][k], Start::CellFitted(_)))
     }
 
     /// The position of `record` among the records with a training part.
@@ -325,6 +341,22 @@ impl Split {
     pub fn fitted_count(&self, hidden: usize) -> usize {
         let per_record = if self.fit_hidden { hidden } else { 0 };
         self.fitted_starts.len() + per_record * self.training().count()
+    }
+
+    /// The measured state of every training cell, in the order of the fits' residuals
+    /// (experiment by experiment, row by row, state by state).
+    pub fn training_cell_states(&self) -> Vec<usize> {
+        let mut states = Vec::with_capacity(self.training_cells());
+        for (_, record, rows) in self.training() {
+            for row in rows {
+                for (k, column) in record.states.iter().enumerate() {
+                    if column[row].is_some() {
+                        states.push(k);
+                    }
+                }
+            }
+        }
+        states
     }
 
     /// The records with a training part, with their indices and training rows.

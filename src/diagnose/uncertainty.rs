@@ -2,8 +2,15 @@
 //! identifiability flag, and the direction in which the fit is free.
 //!
 //! At the fit's minimum, with `J` the Jacobian of the training residuals in transformed
-//! coordinates (`theta`, from the free runs' forward sensitivities), the linearised covariance is `s^2 (J'J)^-1`,
-//! `s^2 = |r|^2 / (n - q)` ([`crate::numeric::lm::standard_errors`]); an unknown's standard
+//! coordinates (`theta`, from the free runs' forward sensitivities), the linearised covariance
+//! is the sandwich `(J'J)^-1 (sum_k s_k^2 J_k'J_k) (J'J)^-1` over the measured states `k`,
+//! `s_k^2` each state's residual variance with its share of the degrees of freedom
+//! ([`crate::numeric::lm::grouped_standard_errors`]): each state's cells are z-scored by
+//! its spread, not by its noise, so the states' noise levels differ in the fit's units and
+//! one pooled `s^2` would mis-state every error. The unknowns are the params and every
+//! fitted start, the measured first cells of the training experiments among them
+//! ([`super::split::Start::CellFitted`]), so a param's error counts the starts' noise. An
+//! unknown's standard
 //! error is its marginal one times the slope of its transform. It is *identified* when the
 //! error is below [`IDENTIFIABILITY_LIMIT`] of its value (the rule `gbc train` applies to
 //! its params). When an unknown is not identified, the eigenvector of `J'J` (scaled to unit
@@ -16,7 +23,7 @@ use super::fit::{slope, thetas, values, Objective};
 use super::report::FitSummary;
 use crate::ir::Constraint;
 use crate::numeric::linalg::gauss_newton_system;
-use crate::numeric::lm::standard_errors;
+use crate::numeric::lm::grouped_standard_errors;
 use crate::numeric::symmetric_eigen;
 
 /// Relative standard error above which a param counts as poorly identified (in `gbc
@@ -80,7 +87,8 @@ pub fn summarise(
     let (aic, bic) = criteria(gap, cells, free.len());
     let all = objective.theta_jacobian(constraints, &theta);
     let columns: Vec<Vec<f64>> = free.iter().map(|&i| all[i].clone()).collect();
-    let free_errors = standard_errors(&columns, &r, free.len());
+    let states = objective.split.training_cell_states();
+    let free_errors = grouped_standard_errors(&columns, &r, &states, free.len());
     let mut errors = vec![0.0; x.len()];
     for (&i, &e) in free.iter().zip(&free_errors) {
         errors[i] = e;

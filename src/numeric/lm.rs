@@ -372,3 +372,57 @@ pub fn standard_errors(columns: &[Vec<f64>], residuals: &[f64], count: usize) ->
         })
         .collect()
 }
+
+/// [`standard_errors`] where the residuals fall into groups of their own noise level (the
+/// measured states of a fit, each z-scored by its spread, not by its noise): each group's
+/// variance `s_g^2 = |r_g|^2 / max(m_g - q m_g / m, 1)` (its share of the degrees of
+/// freedom), and the covariance the sandwich `(J'J)^-1 (sum_g s_g^2 J_g'J_g) (J'J)^-1`.
+/// With one group it is [`standard_errors`]. `groups[i]` is residual `i`'s group.
+pub fn grouped_standard_errors(
+    columns: &[Vec<f64>],
+    residuals: &[f64],
+    groups: &[usize],
+    count: usize,
+) -> Vec<f64> {
+    let unknowns = columns.len();
+    let (normal, _) = gauss_newton_system(columns, residuals);
+    let variances = group_variances(residuals, groups, unknowns);
+    let factor = Cholesky::factor(&normal, unknowns);
+    (0..count.min(unknowns))
+        .map(|i| {
+            let Some(factor) = factor.as_ref() else {
+                return f64::INFINITY;
+            };
+            // Row `j` of `J (J'J)^-1 e_i`, weighted by its group's variance.
+            let direction = factor.inverse_column(i);
+            let variance: f64 = (0..residuals.len())
+                .map(|j| {
+                    let lever: f64 = (columns.iter().zip(&direction))
+                        .map(|(column, d)| column[j] * d)
+                        .sum();
+                    variances[groups[j]] * lever * lever
+                })
+                .sum();
+            Some(variance)
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .map_or(f64::INFINITY, f64::sqrt)
+        })
+        .collect()
+}
+
+/// Per group, `|r_g|^2 / max(m_g - q m_g / m, 1)`.
+fn group_variances(residuals: &[f64], groups: &[usize], unknowns: usize) -> Vec<f64> {
+    let count = groups.iter().copied().max().map_or(0, |g| g + 1);
+    let mut sums = vec![(0.0, 0usize); count];
+    for (r, &g) in residuals.iter().zip(groups) {
+        sums[g].0 += r * r;
+        sums[g].1 += 1;
+    }
+    let m = residuals.len().max(1) as f64;
+    (sums.into_iter())
+        .map(|(sum, cells)| {
+            let freedom = cells as f64 - unknowns as f64 * cells as f64 / m;
+            sum / freedom.max(1.0)
+        })
+        .collect()
+}

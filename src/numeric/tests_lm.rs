@@ -1,7 +1,10 @@
 //! The Levenberg–Marquardt driver on problems with known answers, its difference
 //! Jacobians against analytic ones, and its standard errors against closed forms.
 
-use super::lm::{central_difference, forward_differences, standard_errors, Function, Jacobian};
+use super::lm::{
+    central_difference, forward_differences, grouped_standard_errors, standard_errors, Function,
+    Jacobian,
+};
 use super::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -167,6 +170,63 @@ fn standard_errors_match_linear_regression_and_are_infinite_where_undetermined()
     let rank_deficient = vec![t.clone(), t.clone()];
     let errors = standard_errors(&rank_deficient, &outcome.residuals, 2);
     assert!(errors.iter().all(|e| e.is_infinite()), "{errors:?}");
+}
+
+/// A line fitted to two groups of points, those at both ends 20x noisier (where they weigh
+/// most on the slope): the grouped errors
+/// match the spread of the slope over many simulated data sets (an independent Monte Carlo),
+/// where the pooled errors, which assume one noise level, do not; with one group the two
+/// agree.
+#[test]
+fn grouped_standard_errors_match_the_spread_of_refits_under_unequal_noise() {
+    let t: Vec<f64> = (0..40).map(|k| k as f64 * 0.25).collect();
+    let groups: Vec<usize> = t
+        .iter()
+        .map(|&t| usize::from(!(2.0..7.75).contains(&t)))
+        .collect();
+    let sigma = [0.05, 1.0];
+    let columns = vec![vec![1.0; t.len()], t.clone()];
+    let n = t.len() as f64;
+    let mean = t.iter().sum::<f64>() / n;
+    let spread: f64 = t.iter().map(|t| (t - mean).powi(2)).sum();
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let unit = Gaussian::new(0.0, 1.0).unwrap();
+    let (mut slopes, mut grouped, mut pooled) = (Vec::new(), 0.0, 0.0);
+    let draws = 4000;
+    for _ in 0..draws {
+        let y: Vec<f64> = (t.iter().zip(&groups))
+            .map(|(t, &g)| 1.0 + 0.5 * t + sigma[g] * unit.sample(&mut rng))
+            .collect();
+        let y_mean = y.iter().sum::<f64>() / n;
+        let slope = (t.iter().zip(&y))
+            .map(|(t, y)| (t - mean) * (y - y_mean))
+            .sum::<f64>()
+            / spread;
+        let intercept = y_mean - slope * mean;
+        let residuals: Vec<f64> = (t.iter().zip(&y))
+            .map(|(t, y)| intercept + slope * t - y)
+            .collect();
+        slopes.push(slope);
+        grouped += grouped_standard_errors(&columns, &residuals, &groups, 2)[1] / draws as f64;
+        pooled += standard_errors(&columns, &residuals, 2)[1] / draws as f64;
+    }
+    let average = slopes.iter().sum::<f64>() / draws as f64;
+    let spread_of_slopes =
+        (slopes.iter().map(|s| (s - average).powi(2)).sum::<f64>() / (draws - 1) as f64).sqrt();
+    assert!(
+        (grouped / spread_of_slopes - 1.0).abs() < 0.05,
+        "{grouped} {spread_of_slopes}"
+    );
+    assert!(
+        (pooled / spread_of_slopes - 1.0).abs() > 0.15,
+        "{pooled} {spread_of_slopes}"
+    );
+    let residuals: Vec<f64> = t.iter().map(|t| (t * 7.0).sin()).collect();
+    let one = grouped_standard_errors(&columns, &residuals, &vec![0; t.len()], 2);
+    let plain = standard_errors(&columns, &residuals, 2);
+    for (a, b) in one.iter().zip(&plain) {
+        assert!((a / b - 1.0).abs() < 1e-9, "{one:?} {plain:?}");
+    }
 }
 
 #[test]
