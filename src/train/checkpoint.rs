@@ -559,6 +559,12 @@ fn bad(directory: &Path, error: impl std::fmt::Display) -> TrainError {
     }
 }
 
+/// Whether `control`'s flag or the process's stop request ([`crate::stop`]) asks a run to
+/// stop.
+pub(super) fn stop_requested(control: &RunControl) -> bool {
+    crate::stop::requested() || (control.stop.as_ref()).is_some_and(|s| s.load(Ordering::Relaxed))
+}
+
 #[cfg(test)]
 mod tests {
     use super::EarlyStop;
@@ -595,10 +601,4 @@ mod tests {
             (Some(3), Some((2, 2.0)))
         );
     }
-}
-
-/// Whether `control`'s flag or the process's stop request ([`crate::stop`]) asks a run to
-/// stop.
-pub(super) fn stop_requested(control: &RunControl) -> bool {
-    crate::stop::requested() || (control.stop.as_ref()).is_some_and(|s| s.load(Ordering::Relaxed))
 }
