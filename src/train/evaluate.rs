@@ -243,7 +243,7 @@ pub fn run_in(
         fractions,
         (0, track.len() - 1),
         initial,
-        (Feed::Data, None, Stepping::Fixed),
+        (Feed::Data, None, Stepping::Controlled),
     )?;
     let hidden = (run.states.iter())
         .map(|s| s[measured..].to_vec())
