@@ -35,6 +35,13 @@ pub struct DiagnoseArgs {
     /// model's declarations say, e.g. records cut from one long run.
     #[arg(long)]
     pub fit_initial: bool,
+    /// Fit the first row's measured values of every training experiment with the params
+    /// (the cells stay residuals) instead of starting the free runs at them: for sparse,
+    /// noisy first assays (a small inoculum). On a misspecified model the fitted starts
+    /// absorb misfit that the held-out runs, started at their cells, do not have
+    /// (docs/diagnose.md).
+    #[arg(long)]
+    pub fit_starts: bool,
     /// How data columns are named.
     #[command(flatten)]
     pub columns: ColumnArgs,
@@ -138,6 +145,7 @@ pub fn spec_of(args: &DiagnoseArgs) -> Result<api::DiagnoseSpec, CommandError> {
             span: args.span,
             dim: args.dim,
             fit_initial: args.fit_initial,
+            fit_starts: args.fit_starts,
             locate: !args.skip_loci,
             min_rows: args.min_rows,
             ..Options::default()

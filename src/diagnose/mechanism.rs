@@ -40,6 +40,9 @@ pub fn fit_mechanism(
         options.fit_initial,
         options.min_rows,
     )?;
+    if options.fit_starts {
+        split.fit_measured_starts(model);
+    }
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     let context = Context {
         problem: None,

@@ -103,6 +103,9 @@ pub struct Options {
     pub dim: usize,
     /// Whether hidden states start from values fitted per training experiment.
     pub fit_initial: bool,
+    /// Whether the first row's measured cells of the training experiments are fitted as
+    /// unknowns (`--fit-starts`; else the free runs start at them, as the records spec says).
+    pub fit_starts: bool,
     /// Whether to search the loci (free corrections at every let, group and balance; most
     /// of the cost). Without it the report answers which effects and how far only.
     pub locate: bool,
@@ -123,6 +126,7 @@ impl Default for Options {
             span: None,
             dim: 5,
             fit_initial: false,
+            fit_starts: false,
             locate: true,
             noise: None,
             min_rows: MIN_ROWS,
@@ -437,6 +441,9 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
     };
     let parts = (holdout, options.fit_initial);
     let mut split = Split::with_min_rows(model, (train, held), parts, options.min_rows)?;
+    if options.fit_starts {
+        split.fit_measured_starts(model);
+    }
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     Ok(Context {
         problem: Some(*problem),

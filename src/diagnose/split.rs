@@ -198,7 +198,7 @@ impl Split {
             normalisation,
             declared: vec![None; model.states.len()],
         };
-        split.plan_starts(model);
+        split.plan_starts(model, false);
         split
     }
 
@@ -257,14 +257,23 @@ impl Split {
         }
     }
 
-    /// Decides where every measured state's free run starts (see the module documentation).
-    fn plan_starts(&mut self, model: &Model) {
+    /// Fits the first row's measured cells of every training experiment as unknowns
+    /// ([`Start::CellFitted`], `--fit-starts`) instead of starting the free runs at them.
+    pub fn fit_measured_starts(&mut self, model: &Model) {
+        self.starts.clear();
+        self.fitted_starts.clear();
+        self.plan_starts(model, true);
+    }
+
+    /// Decides where every measured state's free run starts (see the module documentation);
+    /// with `cells`, a training experiment's measured first cells are fitted starts.
+    fn plan_starts(&mut self, model: &Model, fit_cells: bool) {
         for (index, (record, part)) in self.records.iter().zip(&self.parts).enumerate() {
             let mut starts = Vec::with_capacity(model.states.len());
             for (k, state) in model.states.iter().enumerate() {
                 let cells = &record.states[k];
                 let measured = cells.first().copied().flatten().is_some();
-                starts.push(if measured && !part.train.is_empty() {
+                starts.push(if fit_cells && measured && !part.train.is_empty() {
                     self.fitted_starts.push((index, k));
                     Start::CellFitted(self.fitted_starts.len() - 1)
                 } else if measured {

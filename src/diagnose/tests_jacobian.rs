@@ -84,9 +84,7 @@ fn check(fit_hidden: bool) {
         split: &split,
     };
     let fitted = split.fitted_count(simulator.hidden_count());
-    // S's start in the second experiment, and the measured first cells (S in the first,
-    // X in the second), then the hidden starts.
-    assert_eq!(fitted, 3 + if fit_hidden { 2 } else { 0 });
+    assert_eq!(fitted, 1 + if fit_hidden { 2 } else { 0 });
     let mut x = vec![0.35, 1.1, 0.03];
     x.extend((0..fitted).map(|i| 0.4 + 0.3 * i as f64));
     let exact = objective.jacobian(&x).unwrap();

@@ -221,13 +221,20 @@ impl Differentiator<'_, '_> {
         // make the term NaN). A negative base takes `ln |a|`: `a^b` is real there only
         // where `b` is held at an integer, so the term is `0 * finite` where `b` does not
         // move (`(-2)^max(2, u)` below `u = 2`), not `0 * NaN`.
+        // A base that evaluates to zero (`(2 - 2) * u`) takes `ln` of the smallest normal
+        // number, so the term is `0^b * finite = 0`, not `0 * -inf`.
         if !self.partials_of(b).is_empty() && !is(a, 0.0) {
             let size = self
                 .builder
                 .emit(Instr::Call(Func::Abs, a, Operand::Value(0.0)));
+            let floored = (self.builder).emit(Instr::Call(
+                Func::Max,
+                size,
+                Operand::Value(f64::MIN_POSITIVE),
+            ));
             let log = self
                 .builder
-                .emit(Instr::Call(Func::Log, size, Operand::Value(0.0)));
+                .emit(Instr::Call(Func::Log, floored, Operand::Value(0.0)));
             terms.push((b, self.mul(result, log)));
         }
         self.chain(&terms)
