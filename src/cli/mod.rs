@@ -132,9 +132,6 @@ fn on_stop(command: &Command) -> Option<&'static str> {
         Command::Compare(_) | Command::Experiment(_) | Command::Demo(_) | Command::Bench(_) => {
             Some("the running training ends before its next batch; nothing more starts")
         }
-        Command::Simulate(_) | Command::Predict(_) | Command::Export(_) => {
-            Some("the command ends after its running step")
-        }
         _ => None,
     }
 }

@@ -95,25 +95,11 @@ pub fn fit(
     Ok(fit_mechanism(model, &training, &settings)?)
 }
 
-/// How far (a factor either way) a positive param's fitted value may lie from its
-/// declared one when a grey box starts from it.
-pub const ASYMPTOTE: f64 = 1e6;
-
-/// `model` with its params' declared values replaced by the fitted ones. A positive param
-/// the data drove toward 0 or infinity (a Monod or inhibition constant whose term the
-/// records do not support: its term vanishes either way) starts at [`ASYMPTOTE`] times, or
-/// over, its declared value: its term is as negligible there, and the training's `f32`
-/// arithmetic keeps its digits (corpus s09: an inhibition constant declared 2.1 fitted to
-/// 1.4e12 +- 1.5e23 starts at 2.1e6).
+/// `model` with its params' declared values replaced by the fitted ones.
 pub fn with_fitted_params(model: &ir::Model, fit: &MechanismFit) -> ir::Model {
     let mut fitted = model.clone();
     for (param, value) in fitted.params.iter_mut().zip(&fit.params) {
-        let declared = param.init.abs();
-        let bounded = param.constraint == ir::Constraint::Positive && declared > 0.0;
-        param.init = match bounded {
-            true => value.clamp(declared / ASYMPTOTE, declared * ASYMPTOTE),
-            false => *value,
-        };
+        param.init = *value;
     }
     fitted
 }

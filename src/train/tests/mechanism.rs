@@ -182,29 +182,3 @@ fn a_grey_box_on_a_sparse_record_starts_from_its_fitted_mechanism() {
         );
     }
 }
-
-/// A positive param fitted toward 0 or infinity starts a grey box at most a factor
-/// `ASYMPTOTE` from its declared value; a free param and one within the factor start at
-/// their fitted values.
-#[test]
-fn a_param_fitted_to_an_asymptote_starts_within_the_bound() {
-    use crate::train::mechanism::{with_fitted_params, ASYMPTOTE};
-    let source = "model m\nstate X = 1\nparam k = 2 positive\nparam K = 3 positive\n\
-                  param b = 1\nder X = -k * X / (1 + X / K) + b\n";
-    let model = crate::driver::compile("m", source, &[]).unwrap().model;
-    let fit = crate::diagnose::mechanism::MechanismFit {
-        params: vec![5.0, 1e15, -1e15],
-        summary: Default::default(),
-    };
-    let started = with_fitted_params(&model, &fit);
-    let values: Vec<f64> = started.params.iter().map(|p| p.init).collect();
-    assert_eq!(values, [5.0, 3.0 * ASYMPTOTE, -1e15]);
-    let tiny = crate::diagnose::mechanism::MechanismFit {
-        params: vec![1e-12, 3.0, 0.0],
-        summary: Default::default(),
-    };
-    assert_eq!(
-        with_fitted_params(&model, &tiny).params[0].init,
-        2.0 / ASYMPTOTE
-    );
-}
