@@ -1,18 +1,25 @@
 #!/usr/bin/env python3
 """Write data/biolector_yeast.csv from the measured BioLector fed-batches shipped by pseudobatch.
 
-The only writer of data/biolector_yeast.csv (no hand edits). Steps (SOURCE.md says why):
+The only writer of data/biolector_yeast.csv (no hand edits). Standard library only. Steps:
 
-    python3 -m venv .venv && . .venv/bin/activate
-    pip install pseudobatch==1.0.1      # brings numpy and pandas
-    python convert.py                   # a second
+1. `python3 -m pip download --no-deps --no-binary :all: pseudobatch==1.0.1 -d CACHE`
+   (this script runs it through `registry.fetch`; CACHE defaults to /tmp/gbc-corpus-cache,
+   or pass a folder with the sdist already in it as the first argument), and check the
+   archive's sha256;
+2. read `pseudobatch/datasets/data/biolector_yeast_fedbatch.csv` out of the sdist (what
+   `pseudobatch.datasets.load_real_world_yeast_fedbatch()` returns: the loader is a plain
+   `pandas.read_csv` of that file);
+3. keep the 8 wells of `Yeast_strain_1` and write the columns below.
 
-The package's `pseudobatch.datasets.load_real_world_yeast_fedbatch()` returns the record of
-one BioLector microbioreactor run: 32 wells, four Saccharomyces cerevisiae strains (8 wells
-each), every well fed by the BioLector's microfluidic pump from about 14.3 h on, one
-row per measurement cycle (about 6 min). This script keeps the 8 wells of
-`Yeast_strain_1` (one parameter set can describe one strain; the other strains are left
-in the package) and writes one experiment per well, named by the well (C01, ..., F02).
+Run from anywhere: `python3 convert.py [CACHE]`.
+
+The file is the record of one BioLector microbioreactor run: 32 wells, four Saccharomyces
+cerevisiae strains (8 wells each), every well fed by the BioLector's microfluidic pump from
+about 14.3 h on, one row per measurement cycle (about 6 min). This script keeps the 8 wells
+of `Yeast_strain_1` (one parameter set can describe one strain; the other strains are left
+in the package; `biolector_yeast_strain2` uses `Yeast_strain_2`) and writes one experiment
+per well, named by the well (C01, ..., F02).
 
 Columns, per well, one row per measurement cycle (about 6 min; KEEP_EVERY = 3 would keep
 every third), times unchanged, in h since the start of the run:
@@ -32,15 +39,30 @@ every third), times unchanged, in h since the start of the run:
 No value is changed, smoothed or left out; the flows are differences of logged totals
 between the kept rows.
 """
+import csv
+import io
+import os
+import sys
+import tarfile
 
-from __future__ import annotations
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+import registry  # noqa: E402  (bench/corpus/real/registry.py)
 
-from pathlib import Path
-
-HERE = Path(__file__).resolve().parent
-OUT = HERE / "data" / "biolector_yeast.csv"
+PACKAGE = "pseudobatch"
+VERSION = "1.0.1"
+ARCHIVE = f"{PACKAGE}-{VERSION}.tar.gz"
+SHA256 = "0195761761464655f10c85a2c942cac5320d1105f74d63463c65064f93240c4b"
+MEMBER = f"{PACKAGE}-{VERSION}/pseudobatch/datasets/data/biolector_yeast_fedbatch.csv"
 STRAIN = "Yeast_strain_1"
 KEEP_EVERY = 1  # keep every measurement cycle (3: every third, about 18 min)
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+OUT = os.path.join(HERE, "data", "biolector_yeast.csv")
+
+
+def fetch(cache):
+    """The package's archive in `cache`, checked (`registry.fetch`)."""
+    return registry.fetch(cache, PACKAGE, VERSION, ARCHIVE, SHA256, source=True)
 
 
 def fmt(v: float, digits: int = 6) -> str:
@@ -49,17 +71,17 @@ def fmt(v: float, digits: int = 6) -> str:
 
 
 def main():
-    from pseudobatch.datasets import load_real_world_yeast_fedbatch
-
-    df = load_real_world_yeast_fedbatch()
-    df = df[df["Strain"] == STRAIN]
+    cache = sys.argv[1] if len(sys.argv) > 1 else "/tmp/gbc-corpus-cache"
+    with tarfile.open(fetch(cache)) as tar:
+        text = tar.extractfile(MEMBER).read().decode("utf-8")
+    rows = [r for r in csv.DictReader(io.StringIO(text)) if r["Strain"] == STRAIN]
     lines = ["experiment,t [h],F [uL/h],F_smp [uL/h],V [uL],X [-],DO [%]"]
-    for well in sorted(df["Biolector well"].unique()):
-        w = df[df["Biolector well"] == well].sort_values("Time").reset_index(drop=True)
-        t = w["Time"].to_numpy(float)
-        acc = w["Accum. feed [uL]"].to_numpy(float)
-        smp = w["Sample volume"].to_numpy(float)
-        vol = w["Volume"].to_numpy(float)
+    for well in sorted({r["Biolector well"] for r in rows}):
+        w = sorted((r for r in rows if r["Biolector well"] == well), key=lambda r: float(r["Time"]))
+        t = [float(r["Time"]) for r in w]
+        acc = [float(r["Accum. feed [uL]"]) for r in w]
+        smp = [float(r["Sample volume"]) for r in w]
+        vol = [float(r["Volume"]) for r in w]
         n = len(w)
         for i in range(n - 1):
             # The logged volume is the logged feed minus the logged samples.
@@ -74,10 +96,10 @@ def main():
         for a, b in zip(keep[:-1], keep[1:]):
             dt = t[b] - t[a]
             feed.append((acc[b] - acc[a]) / dt)
-            out.append(smp[a:b].sum() / dt)
+            out.append(sum(smp[a:b]) / dt)
         feed.append(feed[-1])
         out.append(0.0)
-        assert abs(sum(o * (t[b] - t[a]) for o, a, b in zip(out, keep[:-1], keep[1:])) - smp.sum()) < 1e-6
+        assert abs(sum(o * (t[b] - t[a]) for o, a, b in zip(out, keep[:-1], keep[1:])) - sum(smp)) < 1e-6
         for j, i in enumerate(keep):
             lines.append(
                 ",".join(
@@ -87,14 +109,15 @@ def main():
                         fmt(feed[j], 5),
                         fmt(out[j], 5),
                         fmt(vol[i], 7),
-                        fmt(float(w["Biomass concentration [light scatter]"][i]), 4),
-                        fmt(float(w["DO%"][i]), 5),
+                        fmt(float(w[i]["Biomass concentration [light scatter]"]), 4),
+                        fmt(float(w[i]["DO%"]), 5),
                     ]
                 )
             )
-        print(f"{well}: {len(keep)} rows of {n} cycles, {t[0]:.2f}-{t[-1]:.2f} h, {int((smp > 0).sum())} samples")
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text("\n".join(lines) + "\n")
+        print(f"{well}: {len(keep)} rows of {n} cycles, {t[0]:.2f}-{t[-1]:.2f} h, {sum(1 for s in smp if s > 0)} samples")
+    os.makedirs(os.path.dirname(OUT), exist_ok=True)
+    with open(OUT, "w", newline="") as f:
+        f.write("\n".join(lines) + "\n")
     print(f"wrote {OUT} ({len(lines) - 1} rows)")
 
 
