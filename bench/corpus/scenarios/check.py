@@ -5,8 +5,12 @@ generate.py):
 1. every model.gbm, greybox.gbm and truth.gbm passes `gbc check` and `gbc fmt --check`;
 2. truth.gbm, simulated by gbc (`gbc simulate`, batch B1's input programme read from
    data.csv), reproduces generate.py's scipy trajectory of B1;
-3. model.gbm with its params at the truth's values and the withheld effects applied
-   (`--effect`) reproduces truth.gbm: the effects' text is the mechanism the truth has.
+3. model.gbm with its params at the truth's values, its guessed consts and starts put back
+   to the truth's (`answer.guesses`) and the withheld effects applied (`--effect`)
+   reproduces truth.gbm: the effects' text is the mechanism the truth has;
+4. model.gbm and greybox.gbm declare the same consts, hidden starts and noise; each is the
+   truth's (truth.json) except the guesses of `answer.guesses`, which are what the models
+   declare, and each of which is 20-50 % off the truth.
 
     python3 bench/corpus/scenarios/check.py [--gbc PATH] [--only s01 s02]
 
@@ -53,6 +57,94 @@ def simulate(gbc, model, t_end, dt, inputs, data, extra, out):
 
 def rel_err(a, b, scale):
     return float(np.max(np.abs(a - b)) / scale)
+
+
+def declarations(text):
+    """The top-level consts, hidden starts (a number or a const's name) and noise lines
+    (relative, absolute) of a model text."""
+    consts = {m[1]: float(m[2]) for m in re.finditer(r"^const (\w+) = ([0-9.eE+-]+) \[", text, re.M)}
+    hidden = {m[1]: m[2] for m in re.finditer(r"^hidden (\w+) \[[^\]]*\] = (\S+)", text, re.M)}
+    noise = {}
+    for m in re.finditer(r"^noise (\w+) = (.*)$", text, re.M):
+        rel = ab = 0.0
+        for term in m[2].split(" + "):
+            if term.endswith(" %"):
+                rel = float(term[:-2]) / 100
+            else:
+                ab = float(term.split(" [")[0])
+        noise[m[1]] = (rel, ab)
+    return consts, hidden, noise
+
+
+def same(a, b):
+    """Two (relative, absolute) noise pairs equal to the printing of a percentage."""
+    return all(abs(x - y) <= 1e-12 * max(abs(x), abs(y)) for x, y in zip(a, b))
+
+
+def off(declared, truth):
+    """Whether a guess is 20-50 % off the truth (to rounding of the printed numbers)."""
+    return 0.2 - 1e-9 <= abs(declared / truth - 1.0) <= 0.5 + 1e-9
+
+
+def check_guesses(p, d, case, truth):
+    """Check 4: the declared consts, starts and noise against the truth and the guesses."""
+    problems = []
+    g = case["answer"].get("guesses")
+    if bool(g) != p["with_guesses"]:
+        problems.append(f"answer.guesses is {'present' if g else 'absent'}, the plan says otherwise")
+    g = g or {"noise": {}, "starts": {}, "consts": {}}
+    T = truth["truth_consts"]
+    decl = {f: declarations((d / f).read_text()) for f in ("model.gbm", "greybox.gbm")}
+    if decl["model.gbm"] != decl["greybox.gbm"]:
+        problems.append("model.gbm and greybox.gbm declare different consts, hidden starts or noise")
+    consts, hidden, noise = decl["model.gbm"]
+    guessed = dict(g["consts"])
+    for state, v in g["starts"].items():
+        if "const" in v:
+            guessed[v["const"]] = v
+        elif not (state in hidden and float(hidden[state]) == v["declared"]):
+            problems.append(f"hidden {state} starts at {hidden.get(state)}, not its guess {v['declared']}")
+    for name, v in consts.items():
+        if name in guessed:
+            if v != guessed[name]["declared"] or T[name] != guessed[name]["truth"]:
+                problems.append(f"const {name} = {v}: the guess is {guessed[name]}, the truth {T[name]}")
+        elif v != T[name]:
+            problems.append(f"const {name} = {v} is not the truth's {T[name]} and not a guess")
+    for name in guessed:
+        if name not in consts:
+            problems.append(f"guessed const {name} is not a const of model.gbm")
+    b0 = truth["batches"][0]["initial_state"]
+    for state, v in hidden.items():
+        value = consts[v] if v in consts else float(v)
+        want = g["starts"][state]["declared"] if state in g["starts"] else b0[state]
+        if value != want:
+            problems.append(f"hidden {state} starts at {value}, expected {want}")
+    if set(g["starts"]) - set(hidden):
+        problems.append(f"guessed starts of states that are not hidden: {set(g['starts']) - set(hidden)}")
+    per_state = truth["noise"]["per_state"]
+    if set(noise) != (set(per_state) if truth["noise"]["declared"] else set()):
+        problems.append(f"noise declared for {sorted(noise)}, the record's is {truth['noise']}")
+    if g["noise"] and set(g["noise"]) != set(noise):
+        problems.append(f"guessed noise of {sorted(g['noise'])}, declared for {sorted(noise)}")
+    for s, (rel, ab) in noise.items():
+        t = per_state[s]
+        if s in g["noise"]:
+            v = g["noise"][s]
+            if not same((rel, ab), (v["declared"]["relative"], v["declared"]["absolute"])) or v["truth"] != t:
+                problems.append(f"noise {s} = {rel} rel + {ab} abs: the guess is {v}, the truth {t}")
+        elif not same((rel, ab), (t["relative"], t["absolute"])):
+            problems.append(f"noise {s} = {rel} rel + {ab} abs is not the truth's {t} and not a guess")
+    # every guess 20-50 % off the truth
+    values = [(f"const {n}", v["declared"], v["truth"]) for n, v in g["consts"].items()]
+    values += [(f"start of {n}", v["declared"], v["truth"]) for n, v in g["starts"].items()]
+    for s, v in g["noise"].items():
+        for k in ("relative", "absolute"):
+            values.append((f"{k} noise of {s}", v["declared"][k], v["truth"][k]))
+    values = [x for x in values if x[1] or x[2]]  # a noise term neither declares
+    for what, dv, tv in values:
+        if tv == 0.0 or not off(dv, tv):
+            problems.append(f"{what}: the guess {dv} is not 20-50 % off the truth {tv}")
+    return problems, len(values)
 
 
 def main():
@@ -102,6 +194,18 @@ def main():
                 for name, v in case["answer"]["params"].items():
                     text, n = re.subn(rf"^(\s*param {name} = )[0-9.eE+-]+", rf"\g<1>{gen.num(v)}", text, flags=re.M)
                     assert n == 1, (p["id"], name)
+                # the modeller's guesses put back to the truth: the balances are what is checked
+                g = case["answer"].get("guesses") or {"starts": {}, "consts": {}}
+                for name, v in list(g["consts"].items()) + [(v.get("const"), v) for v in g["starts"].values()]:
+                    if name:
+                        text, n = re.subn(rf"^(const {name} = )[0-9.eE+-]+", rf"\g<1>{gen.num(v['truth'])}",
+                                          text, flags=re.M)
+                        assert n == 1, (p["id"], name)
+                for state, v in g["starts"].items():
+                    if "const" not in v:
+                        text, n = re.subn(rf"^(hidden {state} \[[^\]]*\] = )[0-9.eE+-]+",
+                                          rf"\g<1>{gen.num(v['truth'])}", text, flags=re.M)
+                        assert n == 1, (p["id"], state)
                 (tmp / "at_truth.gbm").write_text(text)
                 extra = ["--hidden"] + [a for w in case["answer"]["withheld"] for a in ("--effect", w)]
                 extra += [a for s in sc["measured"] for a in ("--init", f"{s}={gen.num(b1['initial_state'][s])}")]
@@ -123,9 +227,12 @@ def main():
                                     f"{worst:.2e}")
             except RuntimeError as e:
                 problems.append(str(e))
+        # 4. the declarations: the truth's, or the guesses 20-50 % off it
+        more, n_guesses = check_guesses(p, d, case, truth)
+        problems += more
         print(f"{p['id']}: {'ok' if not problems else 'FAILED'} (truth.gbm vs scipy {w_truth:.1e}, "
               f"model + {'+'.join(case['answer']['withheld']) or 'no effect'} vs truth.gbm {worst:.1e}; "
-              f"without: {moved:.1e})", flush=True)
+              f"without: {moved:.1e}; {n_guesses} guessed values)", flush=True)
         for x in problems:
             print("   " + x.replace("\n", "\n   "))
         bad += bool(problems)

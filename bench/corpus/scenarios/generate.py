@@ -167,6 +167,7 @@ class Model:
         self.effects = []
         self.nonnegative = set()
         self.declared = set()
+        self.noise_guessed = False  # the noise lines are the modeller's figures
 
     # declarations ------------------------------------------------------------------
     def input(self, name, unit, lo, hi, doc):
@@ -232,7 +233,9 @@ class Model:
             if ab:
                 terms.append(f"{num(ab)} [{unit}]")
             what = "relative" if not ab else ("absolute" if not rel else "relative and absolute")
-            ent += docs(f"Measurement error of {name} ({what}).") + [f"noise {name} = {' + '.join(terms)}"]
+            doc = f"Measurement error of {name} ({what})" + \
+                (", the figure the lab usually quotes for it." if self.noise_guessed else ".")
+            ent += docs(doc) + [f"noise {name} = {' + '.join(terms)}"]
         block(ent)
         ent = []
         for name, value, unit, doc in self.consts:
@@ -359,6 +362,26 @@ class Family:
     mandatory = []  # always in the truth
     decoys = []  # never in the truth
     requires = {}  # mechanism -> mechanisms it needs in the truth
+    literature = []  # consts a modeller takes from the literature (guessed where guesses are)
+    inoculum = {}  # const that writes a hidden state's start -> (state, the modeller's doc)
+
+    def number(self, m, sc, name, role):
+        """Declare `name` in m: the truth's value, the scenario's starting guess where it is a
+        base param, the modeller's guess where it is guessed (model and grey box only)."""
+        P = sc["base_params"] if role != "truth" else {}
+        G = sc.get("guessed", {}) if role != "truth" else {}
+        unit, doc = self.meta[name]
+        if name in G and name not in P:
+            doc = self.inoculum[name][1] if name in self.inoculum else literature_doc(doc)
+        value = P[name] if name in P else G.get(name, sc["truth"][name])
+        return m.number(name, value, unit, doc, param=name in P)
+
+
+def literature_doc(doc):
+    """A const's doc as a modeller marks a value taken from the literature."""
+    if doc.endswith(")."):
+        return doc[:-2] + "; literature value)."
+    return doc[:-1] + " (literature value)."
 
 
 def term_sum(terms):
@@ -420,6 +443,7 @@ class Lactic(Family):
                 "tau_lag": sig(rng.uniform(1.0, 4.0)), "beta": sig(rng.uniform(0.05, 0.2))}
 
     base_param_pool = ["mu_max", "K_S", "Y_XS", "Y_PS"]
+    literature = ["mu_max", "K_S", "Y_XS", "Y_PS", "K_P", "k_d", "tau_lag", "beta"]
     mech_consts = {"product_inhibition": ["K_P"], "cell_death": ["k_d"], "growth_lag": ["tau_lag"],
                    "nongrowth_production": ["beta"]}
 
@@ -434,13 +458,11 @@ class Lactic(Family):
         sc["stiff_feed"] = sc["fed"]
 
     def build(self, sc, active, role):
-        T, fed = sc["truth"], sc["fed"]
+        fed = sc["fed"]
         m = Model(f"{sc['id']}_{role}", "")
-        P = sc["base_params"] if role != "truth" else {}
 
         def c(name):
-            unit, doc = self.meta[name]
-            return m.number(name, P.get(name, T[name]), unit, doc, param=name in P)
+            return self.number(m, sc, name, role)
 
         s0 = sc["nominal_start"]
         if fed:
@@ -604,6 +626,7 @@ class Overflow(Family):
         "V0": ("L", "Broth volume at inoculation (the recipe's)."),
     }
     base_param_pool = ["q_Smax", "K_S", "Y_XS"]
+    literature = ["q_Smax", "K_S", "Y_XS", "q_Sc", "Y_AS", "q_Amax", "K_iS", "K_A", "Y_XA", "K_IA"]
     mech_consts = {"overflow": ["q_Sc", "Y_AS"], "acetate_uptake": ["q_Amax", "K_iS"],
                    "acetate_inhibition": ["K_IA"]}
 
@@ -626,13 +649,10 @@ class Overflow(Family):
         sc["stiff_feed"] = True
 
     def build(self, sc, active, role):
-        T = sc["truth"]
         m = Model(f"{sc['id']}_{role}", "")
-        P = sc["base_params"] if role != "truth" else {}
 
         def c(name):
-            unit, doc = self.meta[name]
-            return m.number(name, P.get(name, T[name]), unit, doc, param=name in P)
+            return self.number(m, sc, name, role)
 
         s0 = sc["nominal_start"]
         m.input("F", "L/h", 0, sc["F_max"], "Glucose feed pump (0 in the batch phase).")
@@ -795,6 +815,10 @@ class Yeast(Family):
         "K_IF": ("g/L", "Furfural concentration that halves the xylose uptake."),
     }
     base_param_pool = ["q_Gmax", "q_Xymax", "q_Fmax", "Y_X", "K_Xy"]
+    literature = ["q_Gmax", "K_G", "q_Xymax", "K_Xy", "q_Fmax", "K_F", "Y_X", "Y_EG", "Y_EXy", "K_R",
+                  "K_E", "K_IG", "K_IF"]
+    inoculum = {"X0": ("X", "Inoculum density, estimated from the seed culture's OD and the pitched "
+                            "volume (the biomass is not measurable in the hydrolysate).")}
     mech_consts = {"glucose_repression": ["K_R"], "ethanol_inhibition": ["K_E"],
                    "furfural_growth": ["K_IG"], "furfural_xylose": ["K_IF"]}
 
@@ -817,13 +841,10 @@ class Yeast(Family):
         sc["stiff_feed"] = False
 
     def build(self, sc, active, role):
-        T = sc["truth"]
         m = Model(f"{sc['id']}_{role}", "")
-        P = sc["base_params"] if role != "truth" else {}
 
         def c(name):
-            unit, doc = self.meta[name]
-            return m.number(name, P.get(name, T[name]), unit, doc, param=name in P)
+            return self.number(m, sc, name, role)
 
         s0 = sc["nominal_start"]
         m.state("G", "g/L", num(s0["G"]), "Glucose (HPLC).")
@@ -935,6 +956,7 @@ class Antibiotic(Family):
         "k_d": ("1/h", "Specific lysis rate."),
     }
     base_param_pool = ["mu_max", "K_S", "Y_XS", "Y_XO", "q_Pmax"]
+    literature = ["mu_max", "K_S", "Y_XS", "Y_XO", "q_Pmax", "K_O", "K_iP", "k_h", "m_O", "K_m", "k_d"]
     mech_consts = {"oxygen_limitation": ["K_O"], "catabolite_repression": ["K_iP"],
                    "product_hydrolysis": ["k_h"], "maintenance_respiration": ["m_O"], "cell_lysis": ["k_d"]}
 
@@ -957,13 +979,11 @@ class Antibiotic(Family):
         sc["stiff_feed"] = sc["fed"]
 
     def build(self, sc, active, role):
-        T, fed = sc["truth"], sc["fed"]
+        fed = sc["fed"]
         m = Model(f"{sc['id']}_{role}", "")
-        P = sc["base_params"] if role != "truth" else {}
 
         def c(name):
-            unit, doc = self.meta[name]
-            return m.number(name, P.get(name, T[name]), unit, doc, param=name in P)
+            return self.number(m, sc, name, role)
 
         s0 = sc["nominal_start"]
         m.input("kLa", "1/h", 10, 400, "Oxygen transfer coefficient set by stirrer and air flow.")
@@ -1219,6 +1239,9 @@ def make_greybox(fam, sc, active_base):
 
 
 QUICK_FAMILIES = {"lactic": 4, "yeast": 4}  # the families without a stiff balance
+GUESS_STREAM = 100  # the guesses' generators: [MASTER_SEED, GUESS_STREAM(, index)]
+GUESSED_PER_FAMILY = 3  # 12 of 32 scenarios declare a modeller's guesses
+GUESSED_QUICK = {"lactic": 2, "yeast": 2}  # of which quick
 
 
 def plan():
@@ -1248,7 +1271,71 @@ def plan():
         out.append({"id": f"s{i + 1:02d}", "index": i + 1, "family": fams[i], "n_withheld": withheld[i],
                     "base_params_yes": base[i], "noise_declared": declared[i], "noise_kind": kinds[i],
                     "quick": quick[i], "size": "quick" if quick[i] else next(sizes)})
+    chosen = guessed_scenarios(out)
+    for p in out:
+        p["with_guesses"] = p["id"] in chosen
     return out
+
+
+def guessed_scenarios(plans):
+    """The scenarios whose model declares a modeller's guesses (noise, hidden starts, some
+    literature consts) instead of the truth: GUESSED_PER_FAMILY of each family, the quick
+    ones among them as many as GUESSED_QUICK says, a scenario with declared noise twice as
+    likely as one without. Their own generator: nothing else drawn moves."""
+    rng = np.random.default_rng([MASTER_SEED, GUESS_STREAM])
+    chosen = set()
+    for fam in FAMILIES:
+        for quick in (True, False):
+            pool = [p for p in plans if p["family"] == fam and p["quick"] == quick]
+            k = GUESSED_QUICK.get(fam, 0) if quick else GUESSED_PER_FAMILY - GUESSED_QUICK.get(fam, 0)
+            if not pool or not k:
+                continue
+            w = np.array([2.0 if p["noise_declared"] else 1.0 for p in pool])
+            for i in rng.choice(len(pool), size=k, replace=False, p=w / w.sum()):
+                chosen.add(pool[int(i)]["id"])
+    return chosen
+
+
+def off_by(rng, truth, digits=2):
+    """A modeller's figure for `truth`: 20-50 % off it (up or down at random; drawn in
+    22-48 % so that rounding to `digits` significant digits keeps it within 20-50 %)."""
+    for _ in range(100):
+        f = 1.0 + (1 if rng.random() < 0.5 else -1) * rng.uniform(0.22, 0.48)
+        for n in (digits, digits + 1):
+            g = sig(truth * f, n)
+            if 0.2 <= abs(g / truth - 1.0) <= 0.5:
+                return g
+    raise AssertionError(truth)
+
+
+def draw_guesses(sc, fam):
+    """A guessed scenario's model values (its own generator, seeded [MASTER_SEED,
+    GUESS_STREAM, index]): every declared noise term, the hidden starts written with a const
+    (the yeast's inoculum X0; the adaptation Z starts at 0 by definition and the recipe's
+    volume V0 is a design setting, both exact), and 2-3 of the base's literature consts, each
+    20-50 % off the truth."""
+    rng = np.random.default_rng([MASTER_SEED, GUESS_STREAM, sc["index"]])
+    T = sc["truth"]
+    guesses = {"noise": {}, "starts": {}, "consts": {}}
+    if sc["noise_declared"]:
+        for s in sc["measured"]:
+            rel, ab = sc["noise"][s]
+            d = (off_by(rng, rel) if rel else 0.0, off_by(rng, ab) if ab else 0.0)
+            sc["noise_guess"][s] = d
+            guesses["noise"][s] = {"unit": sc["units"][s],
+                                   "declared": {"relative": d[0], "absolute": d[1]},
+                                   "truth": {"relative": rel, "absolute": ab}}
+    consts = [c[0] for c in fam.build(sc, sc["base_mechanisms"], "model").consts]
+    for name, (state, _) in fam.inoculum.items():
+        if name in consts:
+            sc["guessed"][name] = off_by(rng, T[name])
+            guesses["starts"][state] = {"const": name, "declared": sc["guessed"][name], "truth": T[name]}
+    pool = [c for c in consts if c in fam.literature]
+    k = min(int(rng.integers(2, 4)), len(pool))
+    for name in sorted((str(x) for x in rng.choice(pool, size=k, replace=False)), key=consts.index):
+        sc["guessed"][name] = off_by(rng, T[name])
+        guesses["consts"][name] = {"declared": sc["guessed"][name], "truth": T[name]}
+    sc["guesses"] = guesses
 
 
 def n_batches(size, rng):
@@ -1427,6 +1514,10 @@ def draw_scenario(p):
     else:
         held = sum(measured[b] for b in sc["holdout"])
         assert held >= 10 and sum(measured.values()) - held >= 10, (sc["id"], measured, sc["holdout"])
+    # the model's values where they are a modeller's guesses (drawn last, from their own generator)
+    sc["guessed"], sc["noise_guess"], sc["guesses"] = {}, dict(sc["noise"]), None
+    if p["with_guesses"]:
+        draw_guesses(sc, fam)
     return sc
 
 
@@ -1500,8 +1591,9 @@ def describe(fam, sc):
 def apply_noise(m, sc):
     if sc["noise_declared"]:
         for s in sc["measured"]:
-            rel, ab = sc["noise"][s]
+            rel, ab = sc["noise_guess"][s]
             m.noise.append((s, rel, ab, sc["units"][s]))
+        m.noise_guessed = bool(sc["guesses"] and sc["guesses"]["noise"])
 
 
 def write_scenario(sc, root):
@@ -1532,9 +1624,18 @@ def write_scenario(sc, root):
         if cand in sc["withheld"]:
             withheld_values.update({k: T[k] for k in e.params})
     apply_noise(model, sc)
-    params_doc = ("Every constant of the base is known (consts); only the candidate effects have params."
-                  if not sc["base_params"] else
-                  "The params are starting guesses for the fit; the other constants are known.")
+    if not sc["guesses"]:
+        params_doc = ("Every constant of the base is known (consts); only the candidate effects have params."
+                      if not sc["base_params"] else
+                      "The params are starting guesses for the fit; the other constants are known.")
+    else:
+        held = ("the lab's design settings, "
+                + ("the inoculum's estimate, " if sc["guesses"]["starts"] else "")
+                + "and literature values where marked")
+        params_doc = (f"The consts are held fixed ({held}); only the candidate effects have params."
+                      if not sc["base_params"] else
+                      f"The params are starting guesses for the fit; the other constants are held fixed "
+                      f"({held}).")
     model.doc = wrap(f"Scenario {sc['id']} of gbc's corpus (bench/corpus/scenarios): {long} "
                      f"The record holds {runs}. {params_doc} The candidate effects are what the "
                      f"modeller suspects the model may be missing.", 90)
@@ -1592,7 +1693,9 @@ def write_scenario(sc, root):
             + f"({'declared' if sc['noise_declared'] else 'undeclared'})"
             + (f", hidden {', '.join(hidden)}" if hidden else "")
             + ("" if sc["base_params"] else ", no base params")
-            + f"; withheld: {', '.join(sc['withheld']) or 'none'}")
+            + f"; withheld: {', '.join(sc['withheld']) or 'none'}"
+            + (f"; the model's guesses (20-50 % off the truth): {guess_list(sc['guesses'])}"
+               if sc["guesses"] else ""))
     case = {
         "name": sc["id"],
         "kind": "scenario",
@@ -1602,7 +1705,8 @@ def write_scenario(sc, root):
         "holdout": sc["holdout"],
         "quick": sc["quick"],
         "expected_seconds": expected_seconds(sc, len(model.effects)),
-        "answer": {"withheld": sc["withheld"], "params": answer_params},
+        "answer": {"withheld": sc["withheld"], "params": answer_params,
+                   **({"guesses": sc["guesses"]} if sc["guesses"] else {})},
         "notes": note,
     }
     (d / "case.json").write_text(json.dumps(case, indent=1) + "\n")
@@ -1640,7 +1744,20 @@ def write_scenario(sc, root):
             "declared": sc["noise_declared"], "hidden": hidden, "base_params": bool(sc["base_params"]),
             "withheld": sc["withheld"], "decoys": sc["decoys"], "quick": sc["quick"],
             "holdout": sc["holdout"], "stiff": sc["stiff_feed"],
+            "guesses": guess_list(sc["guesses"]) if sc["guesses"] else None,
             "kb": round((d / "data.csv").stat().st_size / 1024)}
+
+
+def guess_list(g):
+    """What a scenario's model guesses, in words: 'noise of X, S, P; start of X (X0); Y_XS, K_S'."""
+    parts = []
+    if g["noise"]:
+        parts.append(f"noise of {', '.join(g['noise'])}")
+    for state, v in g["starts"].items():
+        parts.append(f"start of {state} ({v['const']})")
+    if g["consts"]:
+        parts.append(", ".join(g["consts"]))
+    return "; ".join(parts)
 
 
 def expected_seconds(sc, n_effects):
@@ -1667,8 +1784,8 @@ def expected_seconds(sc, n_effects):
 
 def table(summaries):
     out = ["| id | family | batches | sampling | rows | noise | hidden states | base params | withheld "
-           "| decoys | holdout | quick |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "| decoys | holdout | quick | guesses |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in summaries:
         kind = ("fed-batch" if s["fed"] else "batch") + ("es" if s["batches"] > 1 else "")
         samp = []
@@ -1682,7 +1799,7 @@ def table(summaries):
                    f"({'declared' if s['declared'] else 'undeclared'}) | {', '.join(s['hidden']) or '-'} "
                    f"| {'yes' if s['base_params'] else 'no'} | {', '.join(s['withheld']) or '(none)'} "
                    f"| {', '.join(s['decoys'])} | {', '.join(s['holdout']) or '(default split)'} "
-                   f"| {'yes' if s['quick'] else ''} |")
+                   f"| {'yes' if s['quick'] else ''} | {s['guesses'] or ''} |")
     return "\n".join(out) + "\n"
 
 
