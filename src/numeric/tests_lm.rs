@@ -313,3 +313,88 @@ fn an_evaluation_error_ends_the_fit() {
     let error = minimise(&mut Failing { calls: 0 }, vec![5.0], &Settings::DEFAULT).unwrap_err();
     assert_eq!(error, "failed at call 3");
 }
+
+/// Three measured series of one nonlinear model (a shared decay rate `k`, amplitudes `a` and
+/// `b`), each with its own noise level, as a diagnosis's states are: `a e^{-kt}` (sd 0.01),
+/// `a b (1 - e^{-kt})` (sd 0.4) and `b t e^{-kt}` (sd 0.05).
+fn three_series(theta: &[f64], t: &[f64]) -> Vec<f64> {
+    let (a, k, b) = (theta[0], theta[1], theta[2]);
+    let e = |t: f64| (-k * t).exp();
+    let first = t.iter().map(|&t| a * e(t));
+    let second = t.iter().map(|&t| a * b * (1.0 - e(t)));
+    let third = t.iter().map(|&t| b * t * e(t));
+    first.chain(second).chain(third).collect()
+}
+
+/// Its analytic Jacobian (columns for `a`, `k`, `b`).
+fn three_series_jacobian(theta: &[f64], t: &[f64]) -> Vec<Vec<f64>> {
+    let (a, k, b) = (theta[0], theta[1], theta[2]);
+    let e: Vec<f64> = t.iter().map(|&t| (-k * t).exp()).collect();
+    let pairs = || t.iter().copied().zip(e.iter().copied());
+    let column = |f: &dyn Fn(f64, f64) -> [f64; 3]| -> Vec<f64> {
+        let rows: Vec<[f64; 3]> = pairs().map(|(t, e)| f(t, e)).collect();
+        (0..3)
+            .flat_map(|g| rows.iter().map(move |r| r[g]))
+            .collect()
+    };
+    vec![
+        column(&|_, e| [e, b * (1.0 - e), 0.0]),
+        column(&|t, e| [-a * t * e, a * b * t * e, -b * t * t * e]),
+        column(&|t, e| [0.0, a * (1.0 - e), t * e]),
+    ]
+}
+
+/// The grouped errors of a nonlinear fit with three groups of unequal noise match the spread
+/// of the Levenberg–Marquardt refits over simulated data sets (an independent Monte Carlo),
+/// for every param; the pooled errors, which assume one noise level, do not.
+#[test]
+fn grouped_standard_errors_match_the_refits_of_a_nonlinear_fit_with_three_groups() {
+    let t: Vec<f64> = (1..=20).map(|k| k as f64 * 0.5).collect();
+    let truth = [2.0, 0.3, 1.5];
+    let sigma = [0.01, 0.4, 0.05];
+    let groups: Vec<usize> = (0..3).flat_map(|g| vec![g; t.len()]).collect();
+    let clean = three_series(&truth, &t);
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let unit = Gaussian::new(0.0, 1.0).unwrap();
+    let draws = 1500;
+    let (mut fits, mut grouped, mut pooled) = (Vec::new(), [0.0; 3], [0.0; 3]);
+    for _ in 0..draws {
+        let y: Vec<f64> = (clean.iter().zip(&groups))
+            .map(|(c, &g)| c + sigma[g] * unit.sample(&mut rng))
+            .collect();
+        let residuals = |theta: &[f64]| {
+            let model = three_series(theta, &t);
+            Some(model.iter().zip(&y).map(|(m, y)| m - y).collect())
+        };
+        let jacobian = |theta: &[f64]| three_series_jacobian(theta, &t);
+        let function = Function {
+            residuals: &residuals,
+            jacobian: Jacobian::Analytic(&jacobian),
+            damping: DAMPING,
+        };
+        let outcome = function.minimise(truth.to_vec(), &Settings::DEFAULT);
+        let columns = three_series_jacobian(&outcome.x, &t);
+        let errors = grouped_standard_errors(&columns, &outcome.residuals, &groups, 3);
+        let plain = standard_errors(&columns, &outcome.residuals, 3);
+        for i in 0..3 {
+            grouped[i] += errors[i] / draws as f64;
+            pooled[i] += plain[i] / draws as f64;
+        }
+        fits.push(outcome.x);
+    }
+    for i in 0..3 {
+        let mean = fits.iter().map(|x| x[i]).sum::<f64>() / draws as f64;
+        let spread =
+            (fits.iter().map(|x| (x[i] - mean).powi(2)).sum::<f64>() / (draws - 1) as f64).sqrt();
+        assert!(
+            (grouped[i] / spread - 1.0).abs() < 0.1,
+            "param {i}: grouped {} against the refits' spread {spread}",
+            grouped[i]
+        );
+        assert!(
+            (pooled[i] / spread - 1.0).abs() > 0.3,
+            "param {i}: pooled {} against the refits' spread {spread}",
+            pooled[i]
+        );
+    }
+}
