@@ -4,16 +4,22 @@
 The only writer of data/pensim.csv (no hand edits). Steps (SOURCE.md says why):
 
     python3 -m venv .venv && . .venv/bin/activate
-    pip install numpy scipy pandas
-    pip install --no-deps pensimpy==1.2.5
-    python convert.py            # 4-9 minutes (about 26 s of CPU a batch)
+    pip install numpy==2.4.6 scipy==1.17.1 pandas==3.1.1   # the versions that wrote the CSV
+    python convert.py [CACHE]    # 2-9 minutes (14-26 s of CPU a batch)
+
+1. `python3 -m pip download --no-deps pensimpy==1.2.5 -d CACHE` (this script runs it through
+   `registry.fetch`; CACHE defaults to /tmp/gbc-corpus-cache, or pass a folder with the
+   wheel already in it as the first argument), and check the wheel's sha256;
+2. import pensimpy from that checked wheel (a pure-Python wheel is a zip: it is put first on
+   sys.path and imported through zipimport; nothing is installed);
+3. simulate and write the columns below.
 
 pensimpy 1.2.5 pins numpy==1.18.2, pandas==1.0.3 and scipy==1.4.1 (none builds on a current
-Python) and imports `fastodeint`, a C++ solver that is not on PyPI. So it is installed
-without its pins, and its own pure-Python path is used: PenSimEnv(fast=False) integrates the
-package's `indpensim_ode_py` with scipy's odeint. `fastodeint` is imported at the top of
-`pensimpy.peni_env_setup` but only called when fast=True: an empty stand-in module lets the
-import succeed, and calling it would fail loudly.
+Python) and imports `fastodeint`, a C++ solver that is not on PyPI. So it is used without its
+pins (with the venv's numpy, scipy, pandas), and its own pure-Python path is used:
+PenSimEnv(fast=False) integrates the package's `indpensim_ode_py` with scipy's odeint.
+`fastodeint` is imported at the top of `pensimpy.peni_env_setup` but only called when
+fast=True: an empty stand-in module lets the import succeed, and calling it would fail loudly.
 
 What is simulated: ten batches of 230 h (the package's fixed length), each with its own
 random seed (initial conditions, the package's process disturbances on growth, production,
@@ -42,6 +48,7 @@ not written): the values are the simulator's, rounded to 4 significant digits.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 import types
@@ -49,6 +56,14 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+import registry  # noqa: E402  (bench/corpus/real/registry.py)
+
+PACKAGE = "pensimpy"
+VERSION = "1.2.5"
+ARCHIVE = f"{PACKAGE}-{VERSION}-py3-none-any.whl"
+SHA256 = "6fb361876b5392ecbd1ec8f855f1c1c4772de6667d1dc16d85bde8f8be498644"
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "data" / "pensim.csv"
@@ -61,7 +76,14 @@ OFFLINE_JITTER_STEPS = 8  # +-1.6 h
 RECIPE_SEED = 20240611
 
 
-def _import_pensimpy():
+def fetch(cache):
+    """The package's wheel in `cache`, checked (`registry.fetch`)."""
+    return registry.fetch(cache, PACKAGE, VERSION, ARCHIVE, SHA256)
+
+
+def _import_pensimpy(wheel):
+    """pensimpy's classes, imported from the checked wheel `wheel` (pure Python: zipimport)."""
+    sys.path.insert(0, wheel)
     stub = types.ModuleType("fastodeint")
 
     def _refuse(*_args, **_kwargs):
@@ -73,6 +95,10 @@ def _import_pensimpy():
     from pensimpy.data import constants as C
     from pensimpy.constants import NUM_STEPS
 
+    import pensimpy
+
+    if not os.path.abspath(pensimpy.__file__).startswith(os.path.abspath(wheel) + os.sep):
+        sys.exit(f"pensimpy imported from {pensimpy.__file__}, not from the checked {wheel}")
     return PenSimEnv, C, NUM_STEPS
 
 
@@ -150,8 +176,10 @@ def sig(v, digits=4):
 
 
 def main():
+    cache = sys.argv[1] if len(sys.argv) > 1 else "/tmp/gbc-corpus-cache"
+    wheel = fetch(cache)
     warnings.simplefilter("ignore")
-    PenSimEnv, C, num_steps = _import_pensimpy()
+    PenSimEnv, C, num_steps = _import_pensimpy(wheel)
     flow_cols = ["F_s", "F_oil", "F_w", "F_ab", "F_paa", "F_dis"]
     header = (
         ["experiment", "t [h]"]
