@@ -187,6 +187,15 @@ fn print_params(out: &mut String, trained: &Trained) {
         (None, None) => line!(out, "params (+- standard error):"),
     }
     for estimate in &report.estimates {
+        if estimate.held {
+            line!(
+                out,
+                "  {} = {:.6} (held at its declared value, no standard error)",
+                estimate.name,
+                estimate.value
+            );
+            continue;
+        }
         let flag = if estimate.identified {
             ""
         } else {
@@ -197,8 +206,8 @@ fn print_params(out: &mut String, trained: &Trained) {
             "  {} = {:.6} +- {:.2e} ({:.1} %){flag}",
             estimate.name,
             estimate.value,
-            estimate.std_error,
-            100.0 * estimate.relative_error
+            estimate.std_error.unwrap_or(f64::INFINITY),
+            100.0 * estimate.relative_error.unwrap_or(f64::INFINITY)
         );
     }
 }
@@ -527,5 +536,48 @@ fn coverage_lines(out: &mut String, info: &EnsembleInfo) {
             tick_label(errors.median),
             members.join(", ")
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::toward::{param_distances, MechanismDistance};
+    use crate::train::ParamEstimate;
+
+    /// Issue 43 (GB1's `Y_X 0.435 -> 0.435, +96721.50 standard errors`): a move over a
+    /// standard error of round-off is printed without a count of standard errors; a
+    /// statistical one keeps its count.
+    #[test]
+    fn a_move_over_a_round_off_error_prints_no_count_of_standard_errors() {
+        let source = "model t\nstate X = 1\nparam Y_X = 0.435 positive, k = 0.3 positive\n\
+                      der X = -k * Y_X * X\n";
+        let model = crate::driver::compile("t.gbm", source, &[]).unwrap().model;
+        let values = [
+            ("Y_X".to_string(), 0.435 + 9.67e-10),
+            ("k".to_string(), 0.33),
+        ];
+        let estimates = [
+            ParamEstimate::fitted("Y_X".into(), values[0].1, 1e-14),
+            ParamEstimate::fitted("k".into(), 0.33, 0.01),
+        ];
+        let distance = MechanismDistance {
+            strength: 0.0,
+            choice: None,
+            unchosen: None,
+            outputs: Vec::new(),
+            params: param_distances(&model, &values, &estimates),
+        };
+        let mut out = String::new();
+        print_distance(&mut out, &distance);
+        let line = |name: &str| {
+            let prefix = format!("  {name} ");
+            (out.lines())
+                .find(|l| l.starts_with(&prefix))
+                .unwrap()
+                .to_string()
+        };
+        assert_eq!(line("Y_X"), "  Y_X 0.435000 -> 0.435000", "{out}");
+        assert!(line("k").ends_with(", +3.00 standard errors"), "{out}");
     }
 }

@@ -536,6 +536,8 @@ fn origin(start: Start) -> &'static str {
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_held;
+#[cfg(test)]
 mod tests_jacobian;
 #[cfg(test)]
 mod tests_json;

@@ -175,7 +175,7 @@ fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
     }
     let params: Vec<String> = (fit.estimates.iter())
         .map(|e| {
-            if fit.pinned.iter().any(|(name, _)| name == &e.name) {
+            if e.held || fit.pinned.iter().any(|(name, _)| name == &e.name) {
                 return format!("{} = {} (held)", e.name, num(e.value));
             }
             let flag = if e.identified {
@@ -183,10 +183,9 @@ fn fit_lines(out: &mut String, label: &str, fit: &FitSummary) {
             } else {
                 " (not identified)"
             };
-            let error = if e.std_error.is_finite() {
-                num(e.std_error)
-            } else {
-                "unbounded".to_string()
+            let error = match e.std_error {
+                Some(s) if s.is_finite() => num(s),
+                _ => "unbounded".to_string(),
             };
             format!("{} = {} +- {error}{flag}", e.name, num(e.value))
         })

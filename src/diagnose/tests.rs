@@ -309,7 +309,9 @@ fn the_burden_of_enzyme_b_is_found_in_the_growth_of_x() {
         .collect();
     assert_eq!(estimates.len(), 3);
     assert!(
-        estimates.iter().all(|e| e.std_error > 0.0 && e.identified),
+        estimates
+            .iter()
+            .all(|e| e.std_error > Some(0.0) && e.identified),
         "{estimates:?}"
     );
 }

@@ -23,9 +23,10 @@ fn unidentified(name: &str) -> ParamEstimate {
     ParamEstimate {
         name: name.into(),
         value: NAN,
-        std_error: INF,
-        relative_error: INF,
+        std_error: Some(INF),
+        relative_error: Some(INF),
         identified: false,
+        held: false,
     }
 }
 
@@ -195,7 +196,7 @@ fn a_report_of_infinities_nans_and_an_unidentified_param_reads_back() {
     let read: Report = serde_json::from_str(&written).unwrap();
     assert_eq!(serde_json::to_string_pretty(&read).unwrap(), written);
     let param = &read.base_fit.estimates[0];
-    assert!(param.std_error == INF && param.value.is_nan() && !param.identified);
+    assert!(param.std_error == Some(INF) && param.value.is_nan() && !param.identified);
     assert!(read.gap_before == INF && read.noise_floor.is_nan());
     assert_eq!(read.selection.steps[0].alternatives[2].1, NEG);
     assert_eq!(read.regime[0].range, [NEG, INF]);

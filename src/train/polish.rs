@@ -229,19 +229,8 @@ impl<'a> Probe<'a> {
         let slopes = self.transform_slopes()?;
         let mut estimates = Vec::with_capacity(self.params);
         for (index, (param, value)) in model.params.iter().zip(values).enumerate() {
-            let std_error = if raw_errors[index].is_finite() {
-                raw_errors[index] * slopes[index].abs()
-            } else {
-                f64::INFINITY
-            };
-            let relative_error = std_error / value.abs().max(1e-300);
-            estimates.push(ParamEstimate {
-                name: param.name.clone(),
-                value,
-                std_error,
-                relative_error,
-                identified: relative_error < IDENTIFIABILITY_LIMIT,
-            });
+            let std_error = raw_errors[index] * slopes[index].abs();
+            estimates.push(ParamEstimate::fitted(param.name.clone(), value, std_error));
         }
         Ok(estimates)
     }
@@ -310,7 +299,7 @@ mod tests {
     fn estimates_read_under_either_name_and_round_trip() {
         let old = r#"{"name":"Y_X","value":0.4,"std_error":"inf","relative_error":"inf","well_identified":false}"#;
         let read: ParamEstimate = serde_json::from_str(old).unwrap();
-        assert!(read.std_error.is_infinite() && !read.identified);
+        assert!(read.std_error == Some(f64::INFINITY) && !read.identified && !read.held);
         let written = serde_json::to_string(&read).unwrap();
         assert!(written.contains(r#""identified":false"#), "{written}");
         assert_eq!(

@@ -11,8 +11,8 @@ use crate::ir;
 use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style, PALETTE};
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Record;
-use crate::train::PhysicalRange;
 use crate::train::{History, Trained};
+use crate::train::{ParamEstimate, PhysicalRange};
 
 /// Figure width in pixels.
 const WIDTH: f64 = 640.0;
@@ -285,10 +285,16 @@ fn params_section(report: &crate::train::TrainReport) -> String {
     for (name, value) in &report.params {
         let estimate = report.estimates.iter().find(|e| &e.name == name);
         let (se, relative, flag) = match estimate {
-            Some(e) if e.std_error.is_finite() => (
-                tick_label(e.std_error),
-                format!("{:.1} %", 100.0 * e.relative_error),
-                if e.identified { "yes" } else { "poorly" },
+            Some(e) if e.held => ("–".into(), "–".into(), "held at its declared value"),
+            Some(ParamEstimate {
+                std_error: Some(se),
+                relative_error: Some(relative),
+                identified,
+                ..
+            }) if se.is_finite() => (
+                tick_label(*se),
+                format!("{:.1} %", 100.0 * relative),
+                if *identified { "yes" } else { "poorly" },
             ),
             Some(_) => ("∞".into(), "–".into(), "no (the data leave it free)"),
             None => ("–".into(), "–".into(), "not estimated"),

@@ -40,9 +40,10 @@ fn unidentified(name: &str) -> ParamEstimate {
     ParamEstimate {
         name: name.into(),
         value: 0.5,
-        std_error: f64::INFINITY,
-        relative_error: f64::INFINITY,
+        std_error: Some(f64::INFINITY),
+        relative_error: Some(f64::INFINITY),
         identified: false,
+        held: false,
     }
 }
 
@@ -108,7 +109,7 @@ fn a_run_with_unidentified_params_and_a_diverged_free_run_reads_back_and_predict
     }
     let (again, _) = artifacts::load(&run).unwrap();
     assert_eq!(text(&again), text(&info));
-    assert_eq!(again.estimates[0].std_error, f64::INFINITY);
+    assert_eq!(again.estimates[0].std_error, Some(f64::INFINITY));
     let online = again.metrics.online.unwrap();
     assert!(online.divergence.unwrap().value.is_nan());
     // The user's view: the run predicts.

@@ -111,7 +111,7 @@ fn a_model_without_closures_is_fitted_as_gbc_diagnose_fits_it() {
         .report
         .estimates
         .iter()
-        .all(|e| e.std_error.is_finite()));
+        .all(|e| e.std_error.is_some_and(f64::is_finite)));
 }
 
 #[test]

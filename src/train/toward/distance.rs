@@ -38,7 +38,9 @@ pub struct ParamDistance {
     /// Its value after training.
     #[serde(with = "crate::json")]
     pub value: f64,
-    /// `(value - start) / standard error`, when a finite standard error is known.
+    /// `(value - start) / standard error`, when a statistical standard error is known
+    /// ([`ParamEstimate::statistical_error`]: none for a held param, an unbounded one, or
+    /// one below round-off, where the quotient would be meaningless).
     #[serde(with = "crate::json")]
     pub standard_errors: Option<f64>,
 }
@@ -124,7 +126,7 @@ fn distance(name: String, kind: Option<PriorKind>, pairs: &[(f64, f64)]) -> Outp
 }
 
 /// Each param's distance from `start` (the run's initial values), in standard errors
-/// where `estimates` give a finite one.
+/// where `estimates` give a statistical one ([`ParamEstimate::statistical_error`]).
 pub fn param_distances(
     model: &ir::Model,
     values: &[(String, f64)],
@@ -135,8 +137,7 @@ pub fn param_distances(
             let start = param.init;
             let error = (estimates.iter())
                 .find(|e| &e.name == name)
-                .map(|e| e.std_error)
-                .filter(|s| s.is_finite() && *s > 0.0);
+                .and_then(ParamEstimate::statistical_error);
             ParamDistance {
                 name: name.clone(),
                 start,
@@ -166,5 +167,33 @@ mod tests {
         let none = distance("c.c".into(), None, &pairs);
         assert!((none.moved - (14.0f64 / 3.0).sqrt()).abs() < 1e-15);
         assert_eq!(none.points, 3);
+    }
+
+    /// Issue 43: a yield fixed exactly by noise-free balances has a standard error of
+    /// round-off (1e-14 of 0.435); a move of 1e-9 is not 96721 standard errors. A held
+    /// param has none; a fitted param's move is counted in its standard errors.
+    #[test]
+    fn a_standard_error_of_round_off_or_a_held_param_gives_no_distance() {
+        let source = "model t\nstate X = 1\nparam Y_X = 0.435 positive, k = 0.3 positive, \
+                      K = 2 positive\nder X = -k * Y_X * X / (K + X)\n";
+        let model = crate::driver::compile("t.gbm", source, &[]).unwrap().model;
+        let values = [
+            ("Y_X".to_string(), 0.435 + 9.67e-10),
+            ("k".to_string(), 0.33),
+            ("K".to_string(), 2.0),
+        ];
+        let estimates = [
+            ParamEstimate::fitted("Y_X".into(), values[0].1, 1e-14),
+            ParamEstimate::fitted("k".into(), 0.33, 0.01),
+            ParamEstimate::held_at("K".into(), 2.0),
+        ];
+        let distances = param_distances(&model, &values, &estimates);
+        assert_eq!(distances[0].standard_errors, None, "{distances:?}");
+        let k = distances[1].standard_errors.unwrap();
+        assert!((k - 3.0).abs() < 1e-9, "{distances:?}");
+        assert_eq!(distances[2].standard_errors, None, "{distances:?}");
+        // Just above the rounding level the error is a statistical one again.
+        let above = ParamEstimate::fitted("Y_X".into(), 0.435, 1e-8);
+        assert_eq!(above.statistical_error(), Some(1e-8));
     }
 }
