@@ -284,21 +284,7 @@ fn params_section(report: &crate::train::TrainReport) -> String {
     );
     for (name, value) in &report.params {
         let estimate = report.estimates.iter().find(|e| &e.name == name);
-        let (se, relative, flag) = match estimate {
-            Some(e) if e.held => ("–".into(), "–".into(), "held at its declared value"),
-            Some(ParamEstimate {
-                std_error: Some(se),
-                relative_error: Some(relative),
-                identified,
-                ..
-            }) if se.is_finite() => (
-                tick_label(*se),
-                format!("{:.1} %", 100.0 * relative),
-                if *identified { "yes" } else { "poorly" },
-            ),
-            Some(_) => ("∞".into(), "–".into(), "no (the data leave it free)"),
-            None => ("–".into(), "–".into(), "not estimated"),
-        };
+        let (se, relative, flag) = param_cells(estimate);
         let _ = writeln!(
             html,
             "<tr><td>{}</td><td>{}</td><td>{se}</td><td>{relative}</td><td>{flag}</td></tr>",
@@ -308,6 +294,25 @@ fn params_section(report: &crate::train::TrainReport) -> String {
     }
     html.push_str("</table>\n");
     html
+}
+
+/// A param's standard error, relative error and flag as the params table shows them.
+fn param_cells(estimate: Option<&ParamEstimate>) -> (String, String, &'static str) {
+    match estimate {
+        Some(e) if e.held => ("–".into(), "–".into(), "no (held at its declared value)"),
+        Some(ParamEstimate {
+            std_error: Some(se),
+            relative_error: Some(relative),
+            identified,
+            ..
+        }) if se.is_finite() => (
+            tick_label(*se),
+            format!("{:.1} %", 100.0 * relative),
+            if *identified { "yes" } else { "poorly" },
+        ),
+        Some(_) => ("∞".into(), "–".into(), "no (the data leave it free)"),
+        None => ("–".into(), "–".into(), "not estimated"),
+    }
 }
 
 /// Measured cells against the one-step prediction and the free run, per state, for the
@@ -457,6 +462,20 @@ mod tests {
         ];
         assert!((fit_percent(&half) - 50.0).abs() < 1e-12);
         assert!(fit_percent(&[(3.0, 1.0), (3.0, 2.0)]).is_nan());
+    }
+
+    /// Issue 43: a held param shows no standard error and is not called identified.
+    #[test]
+    fn a_held_param_has_no_standard_error_in_the_params_table() {
+        let held = ParamEstimate::held_at("K".into(), 2.0);
+        let cells = param_cells(Some(&held));
+        assert_eq!(
+            cells,
+            ("–".into(), "–".into(), "no (held at its declared value)")
+        );
+        let fitted = ParamEstimate::fitted("k".into(), 0.5, 0.005);
+        let (se, relative, flag) = param_cells(Some(&fitted));
+        assert_eq!((relative.as_str(), flag), ("1.0 %", "yes"), "{se}");
     }
 
     #[test]
