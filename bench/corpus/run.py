@@ -1,22 +1,30 @@
 #!/usr/bin/env python3
-"""The corpus runner (issue 35): every command at default flags on every record.
+"""The corpus runner (issues 35, 43): every command at default flags on every record.
 
 For each case folder of `bench/corpus/real/` and `bench/corpus/scenarios/` (its
 `case.json`, see `bench/corpus/README.md`) it runs, one after the other, each under a
 wall-time cap of 10x the case's expected seconds:
 
 - `diagnose`: `gbc diagnose MODEL DATA --holdout H --json ...`
-- `train_mechanism`: `gbc train MODEL DATA --holdout H -o ...` (the fitted mechanism)
-- `train_greybox`: `gbc train GREYBOX DATA --holdout H -o ...`
-- `compare`: `gbc compare GREYBOX DATA --holdout H --json ...`
+- `compare`: `gbc compare GREYBOX DATA --holdout H --mechanism MODEL --json ...`: the
+  grey box (3 seeds), the case's own model fitted as its mechanism, the naive forecast;
+- `train_mechanism`, `train_greybox`: read from compare's report (its mechanism fit, and
+  its grey box trained with the first seed), so nothing trains twice. Only where compare
+  does not run (no experiment held out, or `--commands` leaves it out) do they run
+  `gbc train MODEL` and `gbc train GREYBOX` themselves.
 
-and writes one row per record and command: finished, exit code, seconds, the verdict,
-the held-out errors of the fitted mechanism, the grey box and the naive forecast, and for
-scenarios whether the answer is right. `--json FILE` writes the rows; `--markdown FILE` the
-table `docs/corpus.md` shows. Python's standard library only: CI runs it without scipy.
+It writes one row per record and command: its status (ok, failed, capped, n/a), exit code,
+seconds, the verdict (for a diagnosis: the credited set), the held-out significance, the
+held-out errors of the fitted mechanism, the grey box and the naive forecast, for scenarios
+whether the answer is right, and the params identified. `--json FILE` writes the rows;
+`--markdown FILE` the table. Python's standard library only: CI runs it without scipy.
 
-Exit status: 1 when a command panicked (exit 2) or exited with an error; a command stopped
-at its cap is reported in the table, not failed.
+Scoring (issue 43): a command that exited 0 without a readable report failed; failed and
+capped rows stay in every denominator and are counted apart; a grey box worse than the
+naive forecast is not right.
+
+Exit status: 1 when a command panicked, exited with an error or wrote no readable report;
+a command stopped at its cap is reported in the table, not failed.
 """
 
 import argparse
@@ -33,11 +41,15 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
-COMMANDS = ["diagnose", "train_mechanism", "train_greybox", "compare"]
+# In the order they run: the train rows read compare's report.
+COMMANDS = ["diagnose", "compare", "train_mechanism", "train_greybox"]
+# The commands whose rows have a right answer (a mechanism's fit is not judged).
+JUDGED = {"diagnose", "compare", "train_greybox"}
 # Expected seconds where a case does not say (2 cores).
 DEFAULT_EXPECTED = {"diagnose": 60, "train_mechanism": 30, "train_greybox": 180, "compare": 400}
 CAP_FACTOR = 10
-# A grey box is right when its held-out error is at most this many times the mechanism's.
+# A grey box is right when its held-out error is at most this many times the mechanism's
+# (and not above the naive forecast's).
 TOLERANCE = 1.1
 # Identified params: right when within this many standard errors of the truth.
 WITHIN = 3.0
@@ -45,13 +57,11 @@ WITHIN = 3.0
 
 def number(value):
     """A float from gbc's JSON (non-finite values are written by name)."""
-    if value is None:
+    if value is None or isinstance(value, bool):
         return None
-    if isinstance(value, (int, float)):
-        return float(value)
     try:
         return float(value)
-    except ValueError:
+    except (TypeError, ValueError):
         return None
 
 
@@ -75,16 +85,15 @@ def command_line(gbc, case, command, out):
     folder = case["dir"]
     data = [str(folder / d) for d in case["data"]]
     holdout = [f"--holdout={h}" for h in case.get("holdout", [])]
+    model, greybox = str(folder / case["model"]), str(folder / case["greybox"])
     if command == "diagnose":
-        return [gbc, "diagnose", str(folder / case["model"]), *data, *holdout,
-                "--json", str(out / "diagnose.json")]
+        return [gbc, "diagnose", model, *data, *holdout, "--json", str(out / "diagnose.json")]
     if command == "train_mechanism":
-        return [gbc, "train", str(folder / case["model"]), *data, *holdout,
-                "-o", str(out / "mechanism")]
+        return [gbc, "train", model, *data, *holdout, "-o", str(out / "mechanism")]
     if command == "train_greybox":
-        return [gbc, "train", str(folder / case["greybox"]), *data, *holdout,
-                "-o", str(out / "greybox")]
-    return [gbc, "compare", str(folder / case["greybox"]), *data, *holdout,
+        return [gbc, "train", greybox, *data, *holdout, "-o", str(out / "greybox")]
+    # The case's model is the mechanism: the one the diagnosis and the train rows judge by.
+    return [gbc, "compare", greybox, *data, *holdout, "--mechanism", model,
             "--json", str(out / "compare.json")]
 
 
@@ -108,76 +117,125 @@ def run(argv, cap, log):
 
 
 def load(path):
+    """The JSON object at `path`, None when it is missing, unreadable or not an object."""
     try:
-        return json.loads(Path(path).read_text())
+        value = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
+    return value if isinstance(value, dict) else None
 
 
-def online_error(run_dir):
-    """The held-out free-run error of a training run (run.json), None without one."""
-    info = load(run_dir / "run.json")
-    if not info:
-        return None, None
-    online = (info.get("metrics") or {}).get("online")
-    error = number(online.get("overall")) if online else None
-    return error, info
+def last_lines(log):
+    """The last three non-empty lines of a log, joined (the error a command printed)."""
+    try:
+        text = Path(log).read_text(errors="replace")
+    except OSError:
+        return None
+    lines = [line for line in text.splitlines() if line.strip()]
+    return " / ".join(lines[-3:])[:300] or None
 
 
-def param_checks(estimates, truth):
-    """(identified, of which within WITHIN standard errors of the truth), over the params
-    whose truth is known."""
-    identified = within = 0
-    for estimate in estimates or []:
-        name = estimate.get("name")
-        if name not in truth or not estimate.get("identified"):
-            continue
-        identified += 1
-        error = number(estimate.get("std_error"))
-        value = number(estimate.get("value"))
-        if error is not None and value is not None and abs(value - truth[name]) <= WITHIN * error:
-            within += 1
-    return identified, within
+# --- rows ---------------------------------------------------------------------------------
+
+def blank_row(case, command, source="run"):
+    """A row with nothing known yet; `source`: `run` (a command ran) or `compare` (read
+    from compare's report)."""
+    return {
+        "record": case["name"], "kind": case["kind"], "command": command, "source": source,
+        "status": "ok", "finished": None, "exit_code": None, "seconds": 0.0,
+        "cap_seconds": 0, "verdict": None, "significant": None, "mechanism_error": None,
+        "greybox_error": None, "naive_error": None, "right": None, "undecided": False,
+        "params_estimated": 0, "params_identified": 0, "params_within_3se": 0,
+        "fits_unreported": 0, "message": None,
+    }
 
 
-def judge_diagnosis(report, answer):
-    """(verdict text, right, undecided, params identified, within) of a diagnosis."""
-    selection = report.get("selection") or {}
-    credited = sorted(selection.get("credited") or [])
-    undecided = selection.get("undecided") or []
-    significant = report.get("significant")
-    if not significant:
-        verdict = "not significant"
-    elif undecided:
-        verdict = "undecided: " + " | ".join(undecided)
+def fail(row, message):
+    """Marks `row` failed with `message`: it stays in every count, as failed."""
+    row.update(status="failed", right=None, message=message)
+    return row
+
+
+def skipped(case, command, why):
+    """The row of a command that does not apply to a case (outside every count)."""
+    row = blank_row(case, command)
+    row.update(status="n/a", verdict=why)
+    return row
+
+
+def row_for(case, command, code, seconds, cap, out, log, mechanism_error=None):
+    """One row of a command that ran: its status, then what its report says. A command
+    that exited 0 but left no readable report failed."""
+    row = blank_row(case, command)
+    row.update(finished=code is not None, exit_code=code, seconds=round(seconds, 1),
+               cap_seconds=cap)
+    if code is None:
+        row.update(status="capped", message=f"stopped at its cap of {cap} s")
+        return row
+    if code != 0:
+        return fail(row, last_lines(log) or f"exit {code}")
+    fill = {"diagnose": fill_diagnose, "compare": fill_compare}.get(command, fill_train)
+    report_path = fill(row, case, out, mechanism_error)
+    if report_path is not None:
+        fail(row, f"exit 0 but no readable report at {report_path.name}")
+    return row
+
+
+def fill_diagnose(row, case, out, _mechanism_error):
+    """Fills a diagnose row from its report; the report's path when it is unusable."""
+    path = out / "diagnose.json"
+    report = load(path)
+    if report is None or report.get("partial") or "selection" not in report:
+        return path
+    row.update(judge_diagnosis(report, case.get("answer")))
+    # A diagnosis's "mechanism" is the base model's held-out gap, its "grey box" the
+    # credited set's.
+    row["mechanism_error"] = number(report.get("gap_before"))
+    row["greybox_error"] = number((report.get("selection") or {}).get("gap_after"))
+    return None
+
+
+def fill_compare(row, case, out, _mechanism_error):
+    """Fills a compare row from its report; the report's path when it is unusable."""
+    path = out / "compare.json"
+    report = load(path)
+    overall = (report or {}).get("overall")
+    if not isinstance(overall, dict):
+        return path
+    score = lambda key: number((overall.get(key) or {}).get("error"))
+    row.update(mechanism_error=score("mechanism"), greybox_error=score("grey_box"),
+               naive_error=score("naive"))
+    row["verdict"] = (overall.get("verdict") or {}).get("standing")
+    row["right"] = judge_greybox(row["greybox_error"], row["mechanism_error"],
+                                 row["naive_error"], case.get("answer"))
+    return None
+
+
+def fill_train(row, case, out, mechanism_error):
+    """Fills a `gbc train` row from its run.json; the file's path when it is unusable.
+    The grey box is judged against `mechanism_error`, the same case model's fit; `gbc
+    train` has no naive forecast, so that judgement is left open (unjudged)."""
+    folder = out / ("mechanism" if row["command"] == "train_mechanism" else "greybox")
+    info = load(folder / "run.json")
+    if info is None:
+        return folder / "run.json"
+    online = (info.get("metrics") or {}).get("online") or {}
+    error = number(online.get("overall"))
+    truth = (case.get("answer") or {}).get("params") or {}
+    estimated, identified, within = param_checks(info.get("estimates"), truth)
+    row.update(params_estimated=estimated, params_identified=identified,
+               params_within_3se=within)
+    if row["command"] == "train_mechanism":
+        row.update(mechanism_error=error, verdict="fitted")
     else:
-        verdict = " + ".join(credited) if credited else "nothing credited"
-    if answer is None:
-        return verdict, None, False, 0, 0
-    withheld = sorted(answer.get("withheld") or [])
-    truth = answer.get("params") or {}
-    sets = [sorted(s.split(" + ")) for s in undecided]
-    if undecided:
-        right, is_undecided = withheld in sets, True
-    else:
-        right, is_undecided = credited == withheld, False
-    # The params of the fit whose effects are the truth's: the base fit where nothing is
-    # withheld, the single effect's fit where one is.
-    estimates = []
-    if not withheld:
-        estimates = (report.get("base_fit") or {}).get("estimates")
-    elif len(withheld) == 1:
-        for effect in report.get("effects") or []:
-            if effect.get("name") == withheld[0]:
-                estimates = (effect.get("fit") or {}).get("estimates")
-    identified, within = param_checks(estimates, truth)
-    return verdict, right, is_undecided, identified, within
+        row.update(greybox_error=error, mechanism_error=mechanism_error,
+                   verdict=trained_epochs(info))
+        row["right"] = judge_greybox(error, mechanism_error, None, case.get("answer"))
+    return None
 
 
 def trained_epochs(info):
     """What a grey-box run trained: the stop cross-validation chose, or every epoch."""
-    if not info:
-        return None
     epochs = (info.get("training") or {}).get("epochs")
     toward = info.get("toward_mechanism") or {}
     choice = toward.get("choice")
@@ -188,81 +246,157 @@ def trained_epochs(info):
     return f"{epochs} epochs"
 
 
-def judge_greybox(greybox, mechanism, answer):
-    """Whether a grey box's held-out error is right against its mechanism's."""
-    if answer is None or greybox is None or mechanism is None:
+# --- the train rows, from compare's report --------------------------------------------------
+
+def mean_error(member):
+    """A compare member run's mean held-out error, None when it failed or scored none;
+    infinite when a free run diverged."""
+    if not member or member.get("failed"):
         return None
-    if not math.isfinite(greybox):
+    errors = [number((h.get("error") or {}).get("overall")) for h in member.get("held_out") or []]
+    errors = [e for e in errors if e is not None]
+    return sum(errors) / len(errors) if errors else None
+
+
+def train_rows_from_compare(case, compare_row, report):
+    """The train_mechanism and train_greybox rows of a case, read from compare's report:
+    its mechanism fit and its grey box's first seed, judged against that same mechanism
+    and the naive forecast. When compare failed or was capped, so are they."""
+    rows = [blank_row(case, c, source="compare") for c in ("train_mechanism", "train_greybox")]
+    if compare_row["status"] != "ok":
+        for row in rows:
+            row.update(status=compare_row["status"], message=f"compare {compare_row['status']}")
+        return rows
+    mechanism_row, greybox_row = rows
+    split = (report.get("splits") or [{}])[0]
+    mechanism = split.get("mechanism") or {}
+    mechanism_row.update(mechanism_error=mean_error(mechanism), verdict="fitted",
+                         seconds=round(number(mechanism.get("seconds")) or 0.0, 1))
+    if mechanism.get("failed"):
+        fail(mechanism_row, f"the fit failed: {mechanism['failed']}")
+    first = (split.get("grey_box") or [{}])[0]
+    greybox_row.update(
+        greybox_error=mean_error(first), mechanism_error=mechanism_row["mechanism_error"],
+        naive_error=compare_row["naive_error"],
+        seconds=round(number(first.get("seconds")) or 0.0, 1),
+        verdict=f"seed {first.get('seed')}: {first.get('epochs')} epochs")
+    greybox_row["right"] = judge_greybox(greybox_row["greybox_error"],
+                                         greybox_row["mechanism_error"],
+                                         greybox_row["naive_error"], case.get("answer"))
+    if first.get("failed") or not first:
+        fail(greybox_row, f"the training failed: {first.get('failed', 'no run')}")
+    return rows
+
+
+# --- judging ------------------------------------------------------------------------------
+
+def judge_greybox(greybox, mechanism, naive, answer):
+    """Whether a grey box's held-out error is right: finite, not above the naive
+    forecast's, within TOLERANCE of the mechanism's, and below it where the truth has
+    effects the mechanism lacks. None (unjudged) for a real record, or when the mechanism's
+    or the naive forecast's error is unknown; False when the grey box has none."""
+    if answer is None:
+        return None
+    if greybox is None or not math.isfinite(greybox):
         return False
-    if greybox > TOLERANCE * mechanism:
+    if mechanism is None or naive is None:
+        return None
+    if greybox > naive or greybox > TOLERANCE * mechanism:
         return False
     if answer.get("withheld"):
         return greybox < mechanism
     return True
 
 
-def row_for(case, command, code, seconds, cap, out, log, mechanism_error):
-    """One row of the table: what ran and how it did."""
-    answer = case.get("answer")
-    row = {
-        "record": case["name"], "kind": case["kind"], "command": command,
-        "finished": code is not None, "exit_code": code, "seconds": round(seconds, 1),
-        "cap_seconds": cap, "verdict": None, "mechanism_error": None,
-        "greybox_error": None, "naive_error": None, "right": None, "undecided": False,
-        "params_identified": 0, "params_within_3se": 0, "message": None,
-    }
-    if code not in (0, None):
-        lines = [l for l in Path(log).read_text(errors="replace").splitlines() if l.strip()]
-        row["message"] = " / ".join(lines[-3:])[:300]
-    if code != 0:
-        return row
-    truth = (answer or {}).get("params") or {}
-    if command == "diagnose":
-        report = load(out / "diagnose.json") or {}
-        verdict, right, undecided, identified, within = judge_diagnosis(report, answer)
-        row.update(verdict=verdict, right=right, undecided=undecided,
-                   params_identified=identified, params_within_3se=within)
-        # A diagnosis's "mechanism" is the base model's held-out gap, its "grey box" the
-        # credited set's.
-        row["mechanism_error"] = number(report.get("gap_before"))
-        row["greybox_error"] = number((report.get("selection") or {}).get("gap_after"))
-    elif command == "train_mechanism":
-        error, info = online_error(out / "mechanism")
-        row["mechanism_error"] = error
-        identified, within = param_checks((info or {}).get("estimates"), truth)
-        row.update(params_identified=identified, params_within_3se=within)
-        row["verdict"] = "fitted" if info else None
-    elif command == "train_greybox":
-        error, info = online_error(out / "greybox")
-        row["greybox_error"] = error
-        row["mechanism_error"] = mechanism_error
-        identified, within = param_checks((info or {}).get("estimates"), truth)
-        row.update(params_identified=identified, params_within_3se=within)
-        row["right"] = judge_greybox(error, mechanism_error, answer)
-        row["verdict"] = trained_epochs(info)
+def credited_text(credited, undecided):
+    """The verdict of a diagnosis in words: the credited set, or the sets it cannot tell
+    apart."""
+    if undecided:
+        return "undecided: " + " | ".join(undecided)
+    return " + ".join(credited) if credited else "nothing credited"
+
+
+def judge_diagnosis(report, answer):
+    """The diagnose row's verdict (the credited set), significance, rightness and
+    identified params (over every fit the verdict rests on)."""
+    selection = report.get("selection") or {}
+    credited = sorted(selection.get("credited") or [])
+    undecided = selection.get("undecided") or []
+    judged = {"verdict": credited_text(credited, undecided),
+              "significant": report.get("significant"), "undecided": bool(undecided)}
+    if answer is None:
+        return judged
+    withheld = sorted(answer.get("withheld") or [])
+    if undecided:
+        judged["right"] = withheld in [sorted(s.split(" + ")) for s in undecided]
     else:
-        report = load(out / "compare.json") or {}
-        overall = report.get("overall") or {}
-        score = lambda k: number((overall.get(k) or {}).get("error"))
-        row.update(mechanism_error=score("mechanism"), greybox_error=score("grey_box"),
-                   naive_error=score("naive"))
-        row["verdict"] = ((overall.get("verdict") or {}).get("standing"))
-        row["right"] = judge_greybox(row["greybox_error"], row["mechanism_error"], answer)
-    return row
+        judged["right"] = credited == withheld
+    truth = answer.get("params") or {}
+    totals = [0, 0, 0]
+    fits = verdict_fits(report)
+    for estimates in fits:
+        for k, count in enumerate(param_checks(estimates, truth)):
+            totals[k] += count
+    judged.update(params_estimated=totals[0], params_identified=totals[1],
+                  params_within_3se=totals[2],
+                  fits_unreported=sum(1 for e in fits if e is None))
+    return judged
 
 
-def skipped(case, command, why):
-    """The row of a command that does not apply to a case."""
-    return {
-        "record": case["name"], "kind": case["kind"], "command": command,
-        "finished": None, "exit_code": None, "seconds": 0.0, "cap_seconds": 0,
-        "verdict": why, "mechanism_error": None, "greybox_error": None,
-        "naive_error": None, "right": None, "undecided": False,
-        "params_identified": 0, "params_within_3se": 0, "message": None,
-    }
+def verdict_fits(report):
+    """The estimates of every fit a diagnosis's verdict rests on (None for a fit the
+    report does not hold): each named set's where it is undecided, the credited set's
+    where it credits one (pairs included), the base fit where it credits nothing."""
+    selection = report.get("selection") or {}
+    undecided = selection.get("undecided") or []
+    if undecided:
+        return [set_fit(report, s.split(" + ")) for s in undecided]
+    credited = selection.get("credited") or []
+    if credited:
+        return [set_fit(report, credited)]
+    return [(report.get("base_fit") or {}).get("estimates")]
 
+
+def set_fit(report, names):
+    """The estimates of the fit of the effects `names` together: a selection step's fit,
+    or for one effect its own fit; None when the report holds neither."""
+    wanted = sorted(n.strip() for n in names)
+    for step in (report.get("selection") or {}).get("steps") or []:
+        fit = step.get("fit")
+        if sorted(step.get("effects") or []) == wanted and isinstance(fit, dict):
+            return fit.get("estimates")
+    if len(wanted) == 1:
+        for effect in report.get("effects") or []:
+            if effect.get("name") == wanted[0] and isinstance(effect.get("fit"), dict):
+                return effect["fit"].get("estimates")
+    return None
+
+
+def param_checks(estimates, truth):
+    """(estimated, identified, within WITHIN standard errors of the truth) over the params
+    whose truth is known. Identified: reported identified, not `held`, with a finite
+    positive standard error."""
+    estimated = identified = within = 0
+    for estimate in estimates or []:
+        name = estimate.get("name")
+        if name not in truth:
+            continue
+        estimated += 1
+        error = number(estimate.get("std_error"))
+        value = number(estimate.get("value"))
+        if (not estimate.get("identified") or estimate.get("held")
+                or error is None or not math.isfinite(error) or error <= 0):
+            continue
+        identified += 1
+        if value is not None and abs(value - truth[name]) <= WITHIN * error:
+            within += 1
+    return estimated, identified, within
+
+
+# --- the table and the summary --------------------------------------------------------------
 
 def fmt(value):
+    """A cell: – for nothing, yes/no for a flag, 3 significant digits for a number."""
     if value is None:
         return "–"
     if isinstance(value, bool):
@@ -272,40 +406,147 @@ def fmt(value):
     return str(value)
 
 
+def right_cell(row):
+    """The right column: yes/no, unjudged, or why there is no answer."""
+    if row["status"] in ("failed", "capped") and row["kind"] != "real":
+        return f"no ({row['status']})" if row["command"] in JUDGED else "–"
+    if row["kind"] == "real" or row["status"] == "n/a" or row["command"] not in JUDGED:
+        return "–"
+    if row["undecided"]:
+        return "undecided (right set named)" if row["right"] else "no (undecided)"
+    return "unjudged" if row["right"] is None else fmt(row["right"])
+
+
+def params_cell(row):
+    """The params column: identified of estimated (truth known), within 3 SE, and the
+    fits the report does not hold."""
+    if not row["params_estimated"] and not row["fits_unreported"]:
+        return "–"
+    text = (f"{row['params_identified']} of {row['params_estimated']} "
+            f"({row['params_within_3se']} within 3 SE)")
+    if row["fits_unreported"]:
+        text += f"; {row['fits_unreported']} fit(s) not reported"
+    return text
+
+
+COLUMNS = ["record", "command", "status", "exit", "s", "verdict", "significant",
+           "mechanism", "grey box", "naive", "right", "params identified"]
+
+
+def table_line(row):
+    """One row of the markdown table."""
+    verdict = row["verdict"] if row["status"] in ("ok", "n/a") else row["message"]
+    if row["source"] == "compare" and verdict:
+        verdict = f"{verdict} (from compare)"
+    cells = [row["record"], row["command"], row["status"], fmt(row["exit_code"]),
+             fmt(row["seconds"]), fmt(verdict), fmt(row["significant"]),
+             fmt(row["mechanism_error"]), fmt(row["greybox_error"]), fmt(row["naive_error"]),
+             right_cell(row), params_cell(row)]
+    return "| " + " | ".join(c.replace("|", "/") for c in cells) + " |"
+
+
 def markdown(rows):
-    """The table of `docs/corpus.md`, then the summary counts."""
-    lines = ["| record | command | finished | exit | s | verdict | mechanism | grey box | naive | right |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        right = "undecided (right set named)" if r["undecided"] and r["right"] else fmt(r["right"])
-        verdict = r["verdict"] or (r["message"] or "–")
-        lines.append("| " + " | ".join([
-            r["record"], r["command"], fmt(r["finished"]), fmt(r["exit_code"]),
-            fmt(r["seconds"]), verdict.replace("|", "/"), fmt(r["mechanism_error"]),
-            fmt(r["greybox_error"]), fmt(r["naive_error"]), right]) + " |")
+    """The table, then the summary counts."""
+    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += [table_line(r) for r in rows]
     return "\n".join(lines + ["", summary(rows)])
 
 
+def tally(rows):
+    """Counts of one command's rows: every run, failed and capped among them; over the
+    scenarios (every row that ran, failed and capped included) right, undecided naming the
+    right set, and unjudged; the params identified."""
+    ran = [r for r in rows if r["status"] != "n/a"]
+    judged = [r for r in ran if r["kind"] != "real"]
+    count = lambda rs, test: sum(1 for r in rs if test(r))
+    ok = lambda r: r["status"] == "ok"
+    return {
+        "runs": len(ran), "not_applicable": len(rows) - len(ran),
+        "failed": count(ran, lambda r: r["status"] == "failed"),
+        "capped": count(ran, lambda r: r["status"] == "capped"),
+        "scenarios": len(judged),
+        "right": count(judged, lambda r: ok(r) and r["right"] and not r["undecided"]),
+        "undecided_right": count(judged, lambda r: ok(r) and r["right"] and r["undecided"]),
+        "unjudged": count(judged, lambda r: ok(r) and r["right"] is None),
+        "failed_scenarios": count(judged, lambda r: r["status"] == "failed"),
+        "capped_scenarios": count(judged, lambda r: r["status"] == "capped"),
+        "estimated": sum(r["params_estimated"] for r in ran),
+        "identified": sum(r["params_identified"] for r in ran),
+        "within": sum(r["params_within_3se"] for r in ran),
+        "unreported": sum(r["fits_unreported"] for r in ran),
+    }
+
+
+def summary_line(command, t):
+    """One command's summary: every denominator holds its failed and capped rows."""
+    apart = [f"{t['failed_scenarios']} failed", f"{t['capped_scenarios']} capped"]
+    if t["unjudged"]:
+        apart.append(f"{t['unjudged']} unjudged")
+    if command == "diagnose":
+        apart.append(f"{t['undecided_right']} undecided naming the right set")
+    line = (f"- `{command}`: {t['runs']} runs ({t['failed']} failed, {t['capped']} capped"
+            + (f", {t['not_applicable']} not applicable" if t["not_applicable"] else "") + ")")
+    if command in JUDGED:
+        line += f"; right {t['right']} of {t['scenarios']} scenarios ({', '.join(apart)})"
+    if t["estimated"] or t["unreported"]:
+        line += (f"; params identified {t['identified']} of {t['estimated']} estimated "
+                 f"(truth known), within 3 SE of the truth {t['within']}")
+    if t["unreported"]:
+        line += f"; {t['unreported']} fit(s) the verdict rests on not in the report"
+    return line
+
+
 def summary(rows):
-    """Counts per command: finished, failed, right among judged, identified params."""
-    out = []
+    """Counts per command."""
+    lines = []
     for command in COMMANDS:
         mine = [r for r in rows if r["command"] == command]
-        if not mine:
-            continue
-        judged = [r for r in mine if r["right"] is not None]
-        right = sum(1 for r in judged if r["right"] and not r["undecided"])
-        undecided = sum(1 for r in judged if r["undecided"])
-        failed = sum(1 for r in mine if r["exit_code"] not in (0, None))
-        capped = sum(1 for r in mine if r["finished"] is False)
-        identified = sum(r["params_identified"] for r in mine)
-        within = sum(r["params_within_3se"] for r in mine)
-        out.append(
-            f"- `{command}`: {len(mine)} runs, {capped} stopped at the cap, {failed} failed; "
-            f"right {right} of {len(judged)} judged"
-            + (f" ({undecided} undecided)" if command == "diagnose" else "")
-            + f"; params reported identified {identified}, within 3 SE of the truth {within}")
-    return "\n".join(out)
+        if mine:
+            lines.append(summary_line(command, tally(mine)))
+    return "\n".join(lines)
+
+
+# --- running the corpus ---------------------------------------------------------------------
+
+def run_command(gbc, case, command, out, mechanism_error, progress):
+    """Runs one command on a case under its cap and returns its row."""
+    expected = {**DEFAULT_EXPECTED, **(case.get("expected_seconds") or {})}
+    cap = CAP_FACTOR * expected[command]
+    log = out / f"{command}.log"
+    print(f"{progress} {case['name']}: {command} (cap {cap} s)", file=sys.stderr, flush=True)
+    code, seconds = run(command_line(gbc, case, command, out), cap, log)
+    return row_for(case, command, code, seconds, cap, out, log, mechanism_error)
+
+
+def run_case(gbc, case, commands, out, progress):
+    """The rows of one case: diagnose, compare, then the train rows, read from compare's
+    report where compare ran on the case, from `gbc train` otherwise."""
+    rows = []
+    if "diagnose" in commands:
+        rows.append(run_command(gbc, case, "diagnose", out, None, progress))
+    compare_runs = "compare" in commands and bool(case.get("holdout"))
+    if "compare" in commands and not compare_runs:
+        # One experiment: nothing to hold out, `gbc compare` does not apply.
+        rows.append(skipped(case, "compare", "not applicable: no experiment held out"))
+    if compare_runs:
+        compare_row = run_command(gbc, case, "compare", out, None, progress)
+        rows.append(compare_row)
+        derived = train_rows_from_compare(case, compare_row, load(out / "compare.json"))
+        rows += [r for r in derived if r["command"] in commands]
+        return rows
+    mechanism_error = None
+    for command in ("train_mechanism", "train_greybox"):
+        if command in commands:
+            row = run_command(gbc, case, command, out, mechanism_error, progress)
+            if command == "train_mechanism":
+                mechanism_error = row["mechanism_error"]
+            rows.append(row)
+    return rows
+
+
+def failures(rows):
+    """The rows whose command failed (an error exit, a panic, no readable report)."""
+    return [r for r in rows if r["status"] == "failed" and r["source"] == "run"]
 
 
 def main():
@@ -314,7 +555,9 @@ def main():
     parser.add_argument("--json", type=Path, help="write the rows as JSON here")
     parser.add_argument("--markdown", type=Path, help="write the table here")
     parser.add_argument("--only", nargs="*", help="only these cases, by name")
-    parser.add_argument("--commands", nargs="*", default=COMMANDS, choices=COMMANDS)
+    parser.add_argument("--commands", nargs="+", default=COMMANDS, choices=COMMANDS,
+                        help="the columns to run (default: all; the train rows come from "
+                             "compare's report when compare runs)")
     parser.add_argument("--gbc", default=str(ROOT / "target/release/gbc"))
     parser.add_argument("--keep", type=Path, help="keep every output under this folder")
     args = parser.parse_args()
@@ -329,38 +572,29 @@ def main():
         out = (args.keep or scratch) / case["name"]
         shutil.rmtree(out, ignore_errors=True)
         out.mkdir(parents=True)
-        expected = {**DEFAULT_EXPECTED, **(case.get("expected_seconds") or {})}
-        mechanism_error = None
-        for command in args.commands:
-            cap = CAP_FACTOR * expected[command]
-            if command == "compare" and not case.get("holdout"):
-                # One experiment: nothing to hold out, `gbc compare` does not apply.
-                rows.append(skipped(case, command, "not applicable: no experiment held out"))
-                continue
-            log = out / f"{command}.log"
-            argv = command_line(args.gbc, case, command, out)
-            print(f"[{index}/{len(selected)}] {case['name']}: {command} (cap {cap} s)",
-                  file=sys.stderr, flush=True)
-            code, seconds = run(argv, cap, log)
-            row = row_for(case, command, code, seconds, cap, out, log, mechanism_error)
-            if command == "train_mechanism":
-                mechanism_error = row["mechanism_error"]
+        for row in run_case(args.gbc, case, args.commands, out, f"[{index}/{len(selected)}]"):
             rows.append(row)
-            print(f"    exit {code}, {seconds:.1f} s, verdict {row['verdict']}, "
-                  f"right {row['right']}" + (f": {row['message']}" if row["message"] else ""),
+            print(f"    {row['command']}: {row['status']}, exit {row['exit_code']}, "
+                  f"{row['seconds']} s, verdict {row['verdict']}, right {row['right']}"
+                  + (f": {row['message']}" if row["message"] else ""),
                   file=sys.stderr, flush=True)
-            if args.json:
-                write(args.json, json.dumps(rows, indent=1, default=str))
+        if args.json:
+            write(args.json, json.dumps(rows, indent=1, default=str))
+    finish(args, rows, scratch)
+
+
+def finish(args, rows, scratch):
+    """Prints and writes the table, cleans up, and exits 1 when a command failed."""
     table = markdown(rows)
     print(table)
     if args.markdown:
         write(args.markdown, table + "\n")
     if not args.keep:
         shutil.rmtree(scratch, ignore_errors=True)
-    failed = [r for r in rows if r["exit_code"] not in (0, None)]
+    failed = failures(rows)
     if failed:
         print(f"{len(failed)} command(s) failed: "
-              + ", ".join(f"{r['record']}/{r['command']} (exit {r['exit_code']})" for r in failed),
+              + ", ".join(f"{r['record']}/{r['command']} ({r['message']})" for r in failed),
               file=sys.stderr)
         sys.exit(1)
 
