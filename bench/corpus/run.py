@@ -268,7 +268,7 @@ def train_rows_from_compare(case, compare_row, report):
             row.update(status=compare_row["status"], message=f"compare {compare_row['status']}")
         return rows
     mechanism_row, greybox_row = rows
-    split = (report.get("splits") or [{}])[0]
+    split = ((report or {}).get("splits") or [{}])[0]
     mechanism = split.get("mechanism") or {}
     mechanism_row.update(mechanism_error=mean_error(mechanism), verdict="fitted",
                          seconds=round(number(mechanism.get("seconds")) or 0.0, 1))
