@@ -550,6 +550,7 @@ def failures(rows):
 
 
 def main():
+    """Parses the flags, runs every selected case and writes the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="only the cases marked quick (CI)")
     parser.add_argument("--json", type=Path, help="write the rows as JSON here")
