@@ -160,7 +160,7 @@ pub fn dispatch(cli: &Cli) -> CommandResult {
 
 /// Parses the command line, runs the command and returns the process exit code.
 pub fn main() -> i32 {
-    let cli = match Cli::try_parse() {
+    let cli = match parse() {
         Ok(cli) => cli,
         Err(error) => {
             let code = if error.use_stderr() { 1 } else { 0 };
@@ -200,6 +200,19 @@ pub fn main() -> i32 {
             2
         }
     }
+}
+
+/// The command line, parsed, with what `gbc train` needs to know of how it was given
+/// (the flags given with `--resume`).
+fn parse() -> Result<Cli, clap::Error> {
+    use clap::{CommandFactory, FromArgMatches};
+    let matches = Cli::command().try_get_matches()?;
+    let mut cli = Cli::from_arg_matches(&matches)?;
+    if let (Command::Train(args), Some(("train", given))) = (&mut cli.command, matches.subcommand())
+    {
+        args.given = train::given_flags(given);
+    }
+    Ok(cli)
 }
 
 /// Prints diagnostics to stderr in the chosen format.

@@ -173,7 +173,10 @@ pub struct TrainArgs {
     pub json: Option<PathBuf>,
     /// Continue the stopped run in DIR (Ctrl-C or SIGTERM end training after the current
     /// epoch with a checkpoint): the same command line, from the checkpoint on; with the
-    /// same seed the run ends bit for bit where an uninterrupted one ends.
+    /// same seed the run ends bit for bit where an uninterrupted one ends. The run resumes
+    /// with the flags it was started with: any other flag given with --resume is refused
+    /// (E0434; only the global --message-format goes with it), start a new run to change
+    /// them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["model", "data"])]
     pub resume: Option<PathBuf>,
     /// Also write a checkpoint into the run directory after every N epochs.
@@ -215,6 +218,34 @@ pub struct TrainArgs {
     /// The level of the prediction band reported and drawn (--ensemble).
     #[arg(long, value_name = "LEVEL", default_value_t = crate::ensemble::DEFAULT_LEVEL)]
     pub band: f64,
+    /// The flags given on `gbc`'s command line (`--epochs`, ...; filled in by
+    /// [`given_flags`], empty where the arguments were parsed otherwise).
+    #[arg(skip)]
+    pub given: Vec<String>,
+}
+
+/// Flags that may go with `--resume`: they change how gbc reports, not the run.
+const WITH_RESUME: [&str; 2] = ["resume", "message_format"];
+
+/// The flags of `gbc train` given on the command line (not defaults), as spelled there
+/// (`--epochs`; a positional argument by its value name).
+pub fn given_flags(matches: &clap::ArgMatches) -> Vec<String> {
+    use clap::CommandFactory;
+    let command = super::Cli::command();
+    let Some(train) = command.find_subcommand("train") else {
+        return Vec::new();
+    };
+    (train.get_arguments())
+        .filter(|arg| !WITH_RESUME.contains(&arg.get_id().as_str()))
+        .filter(|arg| {
+            matches.value_source(arg.get_id().as_str())
+                == Some(clap::parser::ValueSource::CommandLine)
+        })
+        .map(|arg| match arg.get_long() {
+            Some(long) => format!("--{long}"),
+            None => arg.get_id().to_string().to_uppercase(),
+        })
+        .collect()
 }
 
 /// What the members of an ensemble train on.
@@ -244,6 +275,7 @@ pub fn run(args: &TrainArgs) -> CommandResult {
     let resumed;
     let (args, checkpoint) = match &args.resume {
         Some(directory) => {
+            safety::alone(args)?;
             let (saved, checkpoint) = safety::resumed(directory)?;
             resumed = saved;
             (&resumed, Some(checkpoint))

@@ -312,6 +312,20 @@ pub enum TrainError {
         /// What changed.
         what: String,
     },
+    /// `gbc train --resume DIR` with other flags: a resumed run keeps the flags it was
+    /// started with.
+    #[error("expected no other flag with --resume, found {}", flags.join(", "))]
+    #[diagnostic(
+        code(gbm::E0434),
+        help(
+            "a resumed run continues with the flags it was started with (kept in its \
+             checkpoint): pass only `--resume DIR`, or start a new run to change them"
+        )
+    )]
+    ResumeFlags {
+        /// The flags given with --resume, as spelled on the command line (`--epochs`).
+        flags: Vec<String>,
+    },
     /// Nothing left to train on.
     #[error("expected at least one training experiment, found none")]
     #[diagnostic(

@@ -2,6 +2,7 @@
 
 mod artifacts;
 mod authoring;
+mod child;
 mod cli;
 mod compare;
 mod diagnose;

@@ -2,10 +2,9 @@
 //! bit for bit where the uninterrupted run ends; Ctrl-C leaves a checkpoint; early stopping
 //! keeps the best epoch; the renamed flags and their deprecated spellings.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
 
+use crate::child::{gbc_command, Running};
 use crate::cli::{gbc, scratch};
 
 /// The bioreactor GB1 model and its record, trained by the run tests here and in `runs`.
@@ -132,37 +131,151 @@ fn resuming_needs_a_checkpoint_and_the_same_files() {
     );
 }
 
+/// Every file of a run directory with its bytes, by name.
+fn snapshot(run: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = (std::fs::read_dir(run).unwrap())
+        .map(|entry| entry.unwrap().path())
+        .map(|path| (path.display().to_string(), bytes(&path)))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn resume_refuses_every_other_flag_and_leaves_the_run_untouched() {
+    let dir = scratch("resume-flags");
+    let stopped = dir.join("stopped");
+    let output = train(&stopped, &["--stop-after-epochs", "2"]);
+    assert_eq!(output.status.code(), Some(1), "{}", stderr(&output));
+    let before = snapshot(&stopped);
+    let run = stopped.display().to_string();
+    let elsewhere = dir.join("elsewhere");
+    let elsewhere_text = elsewhere.display().to_string();
+    let cases: [(&[&str], &[&str]); 4] = [
+        (&["--resume", &run, "--epochs", "5"], &["--epochs"]),
+        (
+            &["--seed=4", "--resume", &run, "--lr", "0.1"],
+            &["--seed", "--lr"],
+        ),
+        (
+            &["--resume", &run, "-o", &elsewhere_text, "--force"],
+            &["--output", "--force"],
+        ),
+        (
+            &["--resume", &run, "--stop-after-epochs", "3"],
+            &["--stop-after-epochs"],
+        ),
+    ];
+    for (args, named) in cases {
+        let output = gbc(&[&["train"], args].concat());
+        let message = stderr(&output);
+        assert_eq!(output.status.code(), Some(1), "{args:?}: {message}");
+        assert!(message.contains("gbm::E0434"), "{args:?}: {message}");
+        for flag in named {
+            assert!(
+                message.contains(flag),
+                "{args:?} does not name {flag}: {message}"
+            );
+        }
+        assert!(
+            message.contains("flags it was started with") && message.contains("start a new run"),
+            "{message}"
+        );
+        assert_eq!(snapshot(&stopped), before, "{args:?} changed the run");
+    }
+    assert!(!elsewhere.exists());
+    // The global --message-format changes only how diagnostics print: it may go along.
+    let output = gbc(&["--message-format", "json", "train", "--resume", &run]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert_eq!(log_rows(&stopped).len(), 8);
+}
+
+/// [`SHORT`] over 16 epochs with a checkpoint after each one (which changes nothing in the
+/// run): a signal can be sent once the first epoch is done.
+const SIGNALLED: [&str; 4] = ["--epochs", "16", "--checkpoint-every", "1"];
+
+/// The log without its seconds (the last column).
+fn log_without_time(run: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(run.join("log.csv")).unwrap();
+    (text.lines())
+        .map(|line| {
+            line.rsplit_once(',')
+                .map_or(line, |(kept, _)| kept)
+                .to_string()
+        })
+        .collect()
+}
+
+/// The summary on stdout without its timing (first line) and the run's path (last line).
+fn summary_without_time(output: &std::process::Output) -> Vec<String> {
+    let text = String::from_utf8_lossy(&output.stdout).to_string();
+    let lines: Vec<String> = text.lines().map(String::from).collect();
+    let kept = lines.len().saturating_sub(1);
+    assert!(kept > 2, "{text}");
+    lines[1..kept].to_vec()
+}
+
+#[cfg(unix)]
+#[test]
+fn a_run_stopped_by_sigint_and_resumed_ends_byte_for_byte_where_an_uninterrupted_run_ends() {
+    let dir = scratch("signal-resume");
+    let whole = dir.join("whole");
+    let uninterrupted = train(&whole, &SIGNALLED);
+    assert!(uninterrupted.status.success(), "{}", stderr(&uninterrupted));
+    let stopped = dir.join("stopped");
+    let run = stopped.display().to_string();
+    let mut args = vec!["train", GB1, STEPS, "-o", &run];
+    args.extend(short_with(&SIGNALLED));
+    let mut child = Running::start(&mut gbc_command(&args), false);
+    let checkpoint = stopped.join("checkpoint.json");
+    child.until("a checkpoint is written", || checkpoint.exists());
+    child.signal("INT");
+    let end = child.finish();
+    let rest = end.stderr.join("\n");
+    assert_eq!(end.status.code(), Some(1), "{rest}");
+    assert!(rest.contains("E0430"), "{rest}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&checkpoint).unwrap()).unwrap();
+    let epoch = json["epoch"].as_u64().unwrap();
+    assert!((1..16).contains(&epoch), "stopped after epoch {epoch}");
+    let resumed = gbc(&["train", "--resume", &run]);
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+    let said = format!("after epoch {epoch} of 16");
+    assert!(stderr(&resumed).contains(&said), "{}", stderr(&resumed));
+    assert!(!checkpoint.exists());
+    for file in [
+        "weights.safetensors",
+        "run.json",
+        "report.html",
+        "model.gbm",
+    ] {
+        let same = bytes(&whole.join(file)) == bytes(&stopped.join(file));
+        assert!(
+            same,
+            "the resumed run's {file} differs (stopped after epoch {epoch})"
+        );
+    }
+    assert_eq!(log_without_time(&whole), log_without_time(&stopped));
+    assert_eq!(
+        summary_without_time(&uninterrupted),
+        summary_without_time(&resumed)
+    );
+}
+
 #[cfg(unix)]
 #[test]
 fn ctrl_c_ends_the_epoch_and_leaves_a_checkpoint() {
     let dir = scratch("sigint");
     let run = dir.join("run");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gbc"))
-        .args(["train", GB1, STEPS, "--objective", "one-step"])
-        .args(["--epochs", "1000000", "--train-points", "200", "-o"])
-        .arg(&run)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .env("NO_COLOR", "1")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("gbc runs");
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut command = gbc_command(&["train", GB1, STEPS, "--objective", "one-step"]);
+    command.args(["--epochs", "1000000", "--train-points", "200", "-o"]);
+    let mut child = Running::start(command.arg(&run), false);
     // The first progress line that counts epochs done: at least one whole epoch is done.
-    for line in lines.by_ref() {
-        if line.unwrap().contains("/1000000 epochs,") {
-            break;
-        }
-    }
-    let signal = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(signal.success());
-    let rest: Vec<String> = lines.map_while(Result::ok).collect();
-    let status = child.wait().unwrap();
-    assert_eq!(status.code(), Some(1), "{rest:?}");
-    let rest = rest.join("\n");
+    child.line(|line| line.contains("/1000000 epochs,"));
+    child.signal("INT");
+    let end = child.finish();
+    let rest = end.stderr.join("\n");
+    assert_eq!(end.status.code(), Some(1), "{rest}");
     assert!(
         rest.contains("stopping: training ends before its next batch"),
         "{rest}"
@@ -187,36 +300,16 @@ fn sigterm_ends_a_diagnosis_with_its_report_marked_partial() {
     let files = crate::diagnose::thinned_files(&dir);
     let json = dir.join("report.json");
     let html = dir.join("report.html");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gbc"))
-        .args(["diagnose", "models/diagnose/chemostat/model.gbm"])
-        .args(&files)
-        .arg("--json")
-        .arg(&json)
-        .arg("--html")
-        .arg(&html)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .env("NO_COLOR", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("gbc runs");
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    for line in lines.by_ref() {
-        if line.unwrap().starts_with("fitting the model") {
-            break;
-        }
-    }
-    let signal = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(signal.success());
-    let rest: Vec<String> = lines.map_while(Result::ok).collect();
-    let output = child.wait_with_output().unwrap();
-    let rest = rest.join("\n");
-    assert_eq!(output.status.code(), Some(1), "{rest}");
+    let mut command = gbc_command(&["diagnose", "models/diagnose/chemostat/model.gbm"]);
+    command.args(&files).arg("--json").arg(&json);
+    let mut child = Running::start(command.arg("--html").arg(&html), true);
+    child.line(|line| line.starts_with("fitting the model"));
+    child.signal("TERM");
+    let end = child.finish();
+    let rest = end.stderr.join("\n");
+    assert_eq!(end.status.code(), Some(1), "{rest}");
     assert!(rest.contains("E0810"), "{rest}");
-    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stdout = end.stdout;
     assert!(stdout.starts_with("PARTIAL REPORT: stopped"), "{stdout}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();

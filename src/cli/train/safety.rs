@@ -3,9 +3,10 @@
 //!
 //! Every checkpoint keeps the command line (its `command`): the arguments after `train`,
 //! the working directory they were given in, and the sha256 of every model and data file.
-//! `gbc train --resume DIR` parses those arguments again (relative paths against that
-//! working directory), checks that no file changed (E0432) and hands the checkpoint to
-//! training.
+//! `gbc train --resume DIR` parses those arguments again, checks that no file changed
+//! (E0432), enters that working directory (so that relative paths read, and are recorded,
+//! as they were) and hands the checkpoint to training. A flag given with `--resume` is
+//! refused (E0434) rather than dropped.
 
 use std::path::{Path, PathBuf};
 
@@ -49,6 +50,17 @@ pub fn command(args: &TrainArgs) -> Result<serde_json::Value, CommandError> {
         .map_err(|error| CommandError::Internal(format!("cannot encode arguments: {error}")))
 }
 
+/// Refuses flags given with `--resume` (E0434): the run resumes with the flags it was
+/// started with, and a flag given now would be dropped without a word.
+pub fn alone(args: &TrainArgs) -> Result<(), CommandError> {
+    match args.given.is_empty() {
+        true => Ok(()),
+        false => Err(train_error(TrainError::ResumeFlags {
+            flags: args.given.clone(),
+        })),
+    }
+}
+
 /// The arguments and the checkpoint of the stopped run in `directory`.
 pub fn resumed(directory: &Path) -> Result<(TrainArgs, Checkpoint), CommandError> {
     let no_checkpoint = |found: String| {
@@ -70,15 +82,6 @@ pub fn resumed(directory: &Path) -> Result<(TrainArgs, Checkpoint), CommandError
     };
     let mut args = *args;
     let base = &saved.directory;
-    let anchor = |path: &mut PathBuf| {
-        if path.is_relative() && path.as_os_str() != crate::io::STDOUT {
-            *path = base.join(&*path);
-        }
-    };
-    args.model.iter_mut().for_each(anchor);
-    args.data.iter_mut().for_each(anchor);
-    args.val.iter_mut().for_each(anchor);
-    args.json.iter_mut().for_each(anchor);
     for (path, hash) in &saved.files {
         let path = base.join(path);
         if file_hash(&path) != *hash {
@@ -87,11 +90,28 @@ pub fn resumed(directory: &Path) -> Result<(TrainArgs, Checkpoint), CommandError
             }));
         }
     }
-    args.output = Some(directory.to_path_buf());
+    args.output = Some(enter(base, directory)?);
     args.force = true;
     args.resume = None;
     args.stop_after_epochs = None;
     Ok((args, checkpoint))
+}
+
+/// Makes `base`, the working directory the run started in, the current one, so that the
+/// saved arguments read as they did (and `run.json` records the paths as given then);
+/// returns the run directory `directory` (given here) as an absolute path.
+fn enter(base: &Path, directory: &Path) -> Result<PathBuf, CommandError> {
+    let gone = |error: std::io::Error| {
+        train_error(TrainError::ResumeChanged {
+            what: format!(
+                "the directory the run started in, `{}`, cannot be entered ({error})",
+                base.display()
+            ),
+        })
+    };
+    let directory = std::path::absolute(directory).map_err(gone)?;
+    std::env::set_current_dir(base).map_err(gone)?;
+    Ok(directory)
 }
 
 /// The model and data files of a training.
