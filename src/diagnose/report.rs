@@ -292,6 +292,10 @@ pub struct SelectionStep {
     pub accepted: bool,
     /// Why it is credited or not, in words.
     pub reason: String,
+    /// The set's fit (its params with their uncertainty): what a verdict that credits the
+    /// set rests on, pairs included. Absent in reports written before it was kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitSummary>,
 }
 
 /// Forward selection over the effects.

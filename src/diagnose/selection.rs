@@ -454,6 +454,7 @@ fn step(
         alternatives: Vec::new(),
         accepted,
         reason,
+        fit: Some(fit.summary.clone()),
     }
 }
 

@@ -129,6 +129,7 @@ fn every_number_non_finite() -> Report {
                 ]),
                 accepted: true,
                 reason: "diverged".into(),
+                fit: Some(fit()),
             }],
             credited: vec!["product_decay".into()],
             gap_after: INF,

@@ -75,6 +75,21 @@ fn overflow_with_uptake_is_credited_as_a_pair_at_the_acetate_balance() {
             .gap_after
     };
     assert!(report.selection.gap_after < 0.2 * single("overflow"));
+    // The credited pair's own fit is in the report: every param of both effects, estimated
+    // together (what a reader of the verdict checks its params against).
+    let pair = (report.selection.steps.iter())
+        .filter(|s| s.accepted)
+        .find(|s| s.effects.len() == 2)
+        .expect("the pair's step");
+    let fit = pair.fit.as_ref().expect("the pair's fit");
+    for effect in ["acetate_uptake", "overflow"] {
+        let own = &report.effects.iter().find(|e| e.name == effect).unwrap();
+        for name in own.params.keys() {
+            let estimate = fit.estimates.iter().find(|e| &e.name == name);
+            assert!(estimate.is_some(), "{name} of {effect} missing: {fit:?}");
+        }
+    }
+    assert_eq!(fit.unknowns, pair.unknowns);
     let first = &report.locus[0];
     assert_eq!((first.name.as_str(), first.kind), ("A", LocusKind::Balance));
     // The acetate noise is not its curvature between assays: well under a tenth of its
