@@ -28,6 +28,7 @@ a command stopped at its cap is reported in the table, not failed.
 """
 
 import argparse
+import csv
 import json
 import math
 import os
@@ -78,6 +79,47 @@ def cases(quick, only):
                 continue
             found.append(case)
     return found
+
+
+def experiments(case):
+    """The experiments of a case's data files (their `experiment` column), in order."""
+    names = []
+    for name in case["data"]:
+        with open(case["dir"] / name, newline="") as f:
+            for row in csv.DictReader(f):
+                if row.get("experiment") not in names:
+                    names.append(row.get("experiment"))
+    return names
+
+
+def contract_problems(case):
+    """What in a case breaks the case contract (bench/corpus/README.md), in words."""
+    problems = []
+    for key in ("name", "kind", "model", "greybox", "data", "holdout", "quick"):
+        if key not in case:
+            problems.append(f"no `{key}`")
+    names = experiments(case)
+    held = case.get("holdout") or []
+    if len(names) > 1 and not held:
+        problems.append(f"{len(names)} experiments and none held out")
+    if held and set(held) >= set(names):
+        problems.append("nothing left to train on")
+    problems += [f"held-out {h} is not an experiment of the data" for h in held if h not in names]
+    quick = case.get("quick")
+    if isinstance(quick, list) and not set(quick) <= set(COMMANDS):
+        problems.append(f"`quick` names unknown commands: {sorted(set(quick) - set(COMMANDS))}")
+    if case.get("kind") == "scenario" and not isinstance(case.get("answer"), dict):
+        problems.append("a scenario without an answer")
+    return problems
+
+
+def case_commands(case, commands, quick):
+    """The commands to run on `case`: `commands`, and under `--quick` only those its
+    `quick` field lists where it lists some (`true` runs them all)."""
+    listed = case.get("quick")
+    if quick and isinstance(listed, list):
+        return [c for c in commands if c in listed]
+    return list(commands)
 
 
 def command_line(gbc, case, command, out):
@@ -567,13 +609,18 @@ def main():
     selected = cases(args.quick, args.only)
     if not selected:
         sys.exit("no case found (bench/corpus/real/*/case.json, scenarios/*/case.json)")
+    broken = {c["name"]: contract_problems(c) for c in selected}
+    if any(broken.values()):
+        sys.exit("cases that break the case contract (bench/corpus/README.md): "
+                 + "; ".join(f"{n}: {', '.join(p)}" for n, p in broken.items() if p))
     rows = []
     scratch = Path(tempfile.mkdtemp(prefix="gbc-corpus-"))
     for index, case in enumerate(selected, 1):
         out = (args.keep or scratch) / case["name"]
         shutil.rmtree(out, ignore_errors=True)
         out.mkdir(parents=True)
-        for row in run_case(args.gbc, case, args.commands, out, f"[{index}/{len(selected)}]"):
+        commands = case_commands(case, args.commands, args.quick)
+        for row in run_case(args.gbc, case, commands, out, f"[{index}/{len(selected)}]"):
             rows.append(row)
             print(f"    {row['command']}: {row['status']}, exit {row['exit_code']}, "
                   f"{row['seconds']} s, verdict {row['verdict']}, right {row['right']}"

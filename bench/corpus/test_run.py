@@ -292,5 +292,36 @@ class Identified(unittest.TestCase):
         self.assertEqual((judged["params_estimated"], judged["params_identified"]), (2, 1))
 
 
+class Contract(unittest.TestCase):
+    """The case contract (README.md) holds on every case, and a break is named."""
+
+    def test_every_case_of_the_corpus_holds_the_contract(self):
+        found = run.cases(False, None)
+        self.assertGreaterEqual(len(found), 30)
+        for case in found:
+            self.assertEqual(run.contract_problems(case), [], case["name"])
+
+    def test_quick_commands_are_the_listed_ones(self):
+        case = {"quick": ["diagnose", "train_mechanism"]}
+        self.assertEqual(run.case_commands(case, run.COMMANDS, True),
+                         ["diagnose", "train_mechanism"])
+        self.assertEqual(run.case_commands(case, run.COMMANDS, False), run.COMMANDS)
+        self.assertEqual(run.case_commands({"quick": True}, ["diagnose"], True), ["diagnose"])
+
+    def test_a_record_of_several_experiments_holding_none_out_breaks_it(self):
+        with tempfile.TemporaryDirectory() as folder:
+            Path(folder, "data.csv").write_text("experiment,t [h],X [g/L]\nB1,0,1\nB2,0,1\n")
+            case = {**scenario(folder), "quick": False, "holdout": []}
+            self.assertIn("2 experiments and none held out", run.contract_problems(case))
+            case = {**case, "holdout": ["B3"]}
+            self.assertIn("held-out B3 is not an experiment of the data",
+                          run.contract_problems(case))
+            case = {**case, "holdout": ["B1", "B2"]}
+            self.assertIn("nothing left to train on", run.contract_problems(case))
+            case = {**case, "holdout": ["B2"], "quick": ["diagnose", "fit"]}
+            self.assertEqual(run.contract_problems(case),
+                             ["`quick` names unknown commands: ['fit']"])
+
+
 if __name__ == "__main__":
     unittest.main()
