@@ -96,6 +96,11 @@ pub fn experiment(
                 stop.store(true, Ordering::SeqCst);
             }
         }
+        // An interrupt that arrived after the last check (the study's last run ended within
+        // the same 100 ms) is the caller's too: it is raised, not left pending.
+        if let Err(error) = py.check_signals() {
+            interrupt.get_or_insert(error);
+        }
         worker.join()
     });
     let outcome = outcome
