@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
 use std::time::Duration;
 
 use gbc::api::experiment::StudyOutcome;
@@ -47,14 +48,22 @@ impl Study {
 
 /// Tells `callback` how far the study is: a `stage` event with the runs in all, then a
 /// `done` event per run finished or reused.
-fn tell(callback: &Option<PyObject>, kind: &str, fill: impl FnOnce(&Bound<'_, PyDict>)) {
-    let Some(callback) = callback else { return };
+/// A `KeyboardInterrupt` the callback raises is returned (the study stops as at Ctrl-C);
+/// any other error of the callback is ignored, as a progress display's is.
+fn tell(
+    callback: &Option<PyObject>,
+    kind: &str,
+    fill: impl FnOnce(&Bound<'_, PyDict>),
+) -> Option<PyErr> {
+    let callback = callback.as_ref()?;
     Python::with_gil(|py| {
         let dict = PyDict::new(py);
         let _ = dict.set_item("kind", kind);
         fill(&dict);
-        let _ = callback.call1(py, (dict,));
-    });
+        let error = callback.call1(py, (dict,)).err()?;
+        let interrupted = error.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py);
+        interrupted.then_some(error)
+    })
 }
 
 /// Runs the study `gbc experiment`'s `flags` describe (`--preset`, `--config`, or
@@ -72,19 +81,27 @@ pub fn experiment(
     let run = plan.prepare().map_err(|e| raise(py, e))?;
     let total = run.selected().len();
     let name = format!("running {total} trainings");
-    tell(&callback, "stage", |d| {
+    if let Some(interrupt) = tell(&callback, "stage", |d| {
         let _ = d.set_item("name", &name);
         let _ = d.set_item("total", total);
-    });
+    }) {
+        return Err(interrupt);
+    }
+    let stop = AtomicBool::new(false);
+    let raised: Mutex<Option<PyErr>> = Mutex::new(None);
     let on_progress = |progress: Progress| match progress {
         Progress::Finished(spec, _) | Progress::Skipped(spec) => {
-            tell(&callback, "done", |d| {
+            let error = tell(&callback, "done", |d| {
                 let _ = d.set_item("item", &spec.id);
             });
+            if let Some(error) = error {
+                stop.store(true, Ordering::SeqCst);
+                let mut slot = raised.lock().unwrap_or_else(|e| e.into_inner());
+                slot.get_or_insert(error);
+            }
         }
         Progress::Started(_) | Progress::Epoch(..) => {}
     };
-    let stop = AtomicBool::new(false);
     let mut interrupt: Option<PyErr> = None;
     let outcome = std::thread::scope(|scope| {
         let worker = scope.spawn(|| run.complete(&plan, &stop, &on_progress));
@@ -106,7 +123,8 @@ pub fn experiment(
     let outcome = outcome
         .map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("the study's thread panicked"))?
         .map_err(|e| raise(py, e))?;
-    if let Some(interrupt) = interrupt {
+    let raised = raised.into_inner().unwrap_or_else(|e| e.into_inner());
+    if let Some(interrupt) = interrupt.or(raised) {
         return Err(interrupt);
     }
     Ok(Study {
