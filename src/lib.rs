@@ -2,7 +2,7 @@
 //!
 //! Pipeline (see `docs/architecture.md`): [`syntax`] parses text into the [`ast`], [`check`]
 //! validates it and collects every error, [`ir`] lowers it into a plain compiled model,
-//! [`eval`] turns its expressions into fast numeric programs, [`sim`] integrates models
+//! [`eval`] turns its expressions into fast numeric programs, [`solve::ode`] integrates models
 //! without closures, [`data`] reads measured records, [`engine`] builds the trainable
 //! grey-box network, [`numeric`] holds the statistics, linear algebra and Levenberg–Marquardt
 //! driver they all share, and [`cli`] is the command-line edge that renders diagnostics.
@@ -36,7 +36,7 @@ pub mod numeric;
 pub mod plot;
 pub mod record;
 pub mod signal;
-pub mod sim;
+pub mod solve;
 pub mod stop;
 pub mod suggest;
 pub mod syntax;

@@ -19,7 +19,7 @@ use crate::data::MinRows;
 use crate::engine::graph::Precision;
 use crate::numeric::median;
 use crate::signal::Signal;
-use crate::sim::SimOptions;
+use crate::solve::ode::SimOptions;
 use crate::train::{Part, Recipe, Settings, TrainOptions, TrainingData};
 use epochs::{BenchReport, Engine};
 
@@ -294,7 +294,7 @@ fn time_simulation(root: &Path) -> Result<SimulationRow, ApiError> {
     for _ in 0..3 {
         let started = Instant::now();
         let trajectory =
-            crate::sim::simulate(&model, &signals, &options).map_err(ApiError::user)?;
+            crate::solve::ode::simulate(&model, &signals, &options).map_err(ApiError::user)?;
         seconds.push(started.elapsed().as_secs_f64());
         samples = trajectory.times.len();
     }

@@ -27,7 +27,7 @@ pub use error::SimulateError;
 use super::{ApiError, Model};
 use crate::ir;
 use crate::signal::Signal;
-use crate::sim::{Method, SimOptions, Tolerances, Trajectory};
+use crate::solve::ode::{Method, SimOptions, Tolerances, Trajectory};
 
 /// Everything a simulation is asked for, with the defaults of `gbc simulate` (its flags'
 /// names are the fields' names).
@@ -93,7 +93,7 @@ impl Default for SimulateSpec {
             ranges: Vec::new(),
             hidden: false,
             tolerances: Tolerances::default(),
-            max_steps: crate::sim::DEFAULT_MAX_STEPS,
+            max_steps: crate::solve::ode::DEFAULT_MAX_STEPS,
             integrator: Method::Auto,
             jobs: None,
         }
@@ -174,7 +174,7 @@ pub fn simulate(
     };
     on_event(SimulateEvent::Started);
     let mut progress = |done, total| on_event(SimulateEvent::Samples { done, total });
-    let simulated = crate::sim::simulate_with_progress(&ir, &signals, &options, &mut progress);
+    let simulated = crate::solve::ode::simulate_with_progress(&ir, &signals, &options, &mut progress);
     on_event(SimulateEvent::Finished);
     let mut trajectory = simulated.map_err(ApiError::user)?;
     if let Some(divergence) = range::stop_outside(&ir, &mut trajectory, &range) {
@@ -188,7 +188,7 @@ pub fn simulate(
 
 /// `dt` is needed without weights.
 fn missing_dt() -> ApiError {
-    ApiError::user(crate::sim::SimError::Options(
+    ApiError::user(crate::solve::ode::SimError::Options(
         "expected --dt (the sampling step), found none".into(),
     ))
 }

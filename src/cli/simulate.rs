@@ -10,7 +10,7 @@ mod tests_inputs;
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
 use crate::api::{SimulateEvent, SimulateSpec};
-use crate::sim::Tolerances;
+use crate::solve::ode::Tolerances;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `gbc simulate`.
@@ -104,17 +104,17 @@ pub struct SimulateArgs {
     pub atol: f64,
     /// Most integration steps in the whole run before it stops with an error that names the
     /// fastest balance.
-    #[arg(long, value_name = "N", default_value_t = crate::sim::DEFAULT_MAX_STEPS)]
+    #[arg(long, value_name = "N", default_value_t = crate::solve::ode::DEFAULT_MAX_STEPS)]
     pub max_steps: usize,
     /// Integration method: `auto` (explicit Dormand–Prince, Radau IIA where the balances
     /// turn stiff), `explicit` or `implicit`.
     #[arg(long, value_name = "METHOD", default_value = "auto", value_parser = parse_method)]
-    pub integrator: crate::sim::Method,
+    pub integrator: crate::solve::ode::Method,
 }
 
 /// `--integrator auto|explicit|implicit`.
-fn parse_method(text: &str) -> Result<crate::sim::Method, String> {
-    use crate::sim::Method;
+fn parse_method(text: &str) -> Result<crate::solve::ode::Method, String> {
+    use crate::solve::ode::Method;
     match text {
         "auto" => Ok(Method::Auto),
         "explicit" => Ok(Method::Explicit),

@@ -21,7 +21,7 @@ use crate::eval::Program;
 use crate::ir::Constraint;
 use crate::numeric::{dot, root_mean_square, NormalEquations};
 use crate::record::{Normalisation, Record};
-use crate::sim::IntegrationError;
+use crate::solve::ode::IntegrationError;
 
 /// Ridge strengths tried (relative to the mean diagonal of the normal equations).
 const RIDGES: [f64; 5] = [1e-9, 1e-7, 1e-5, 1e-3, 1e-1];

@@ -10,7 +10,7 @@ use super::split::Split;
 use super::{check_options, ranking::Blocks, Context, DiagnoseError, Options};
 use crate::ir::{Dynamics, Model};
 use crate::record::Record;
-use crate::sim::Method;
+use crate::solve::ode::Method;
 
 /// A mechanistic model fitted to whole training experiments.
 #[derive(Debug, Clone, PartialEq)]

@@ -50,7 +50,7 @@ pub use split::MIN_ROWS;
 use crate::check::Checked;
 use crate::ir::{Constraint, Model};
 use crate::record::Record;
-use crate::sim::Method;
+use crate::solve::ode::Method;
 use ranking::Blocks;
 use simulate::{tolerances, Simulator};
 use split::{Holdout, Split, Start};

@@ -21,7 +21,7 @@ use super::simulate::{inputs_at, Run};
 use super::split::Split;
 use crate::numeric::dot;
 use crate::record::Record;
-use crate::sim::IntegrationError;
+use crate::solve::ode::IntegrationError;
 
 /// Below this share of one-step pairs ([`Split::one_step_share`]) a record is sparse: a
 /// one-step correction that does worse in the loop than none is grown from none instead.

@@ -2,7 +2,7 @@
 //! every param and with every state's initial value. The fits' Jacobians are read off
 //! these ([`super::fit::Objective::jacobian`]) instead of differencing free runs: one
 //! integration per experiment instead of one per unknown, and derivatives of the very
-//! solution the residuals come from (the integrator's own steps, `crate::sim::sensitivity`).
+//! solution the residuals come from (the integrator's own steps, `crate::solve::ode::sensitivity`).
 //!
 //! Columns: the model's params (declaration order), then the initial values of the states
 //! asked for (those whose start is an unknown of the fit). A state that starts from its
@@ -12,7 +12,7 @@
 use super::simulate::{same_inputs, Run, Simulator};
 use crate::ir::Dynamics;
 use crate::record::Record;
-use crate::sim::{IntegrationError, OdeSystem};
+use crate::solve::ode::{IntegrationError, OdeSystem};
 
 /// The sensitivities of a free run, row by row.
 #[derive(Debug, Clone, PartialEq)]
@@ -123,7 +123,7 @@ impl Simulator {
             self.system.rhs(t, state, &mut next);
             self.system
                 .sensitivity_jacobians(t, state, &mut states, &mut params);
-            crate::sim::sensitivity::multiply_add(&states, s, &params, n, p, &mut moved);
+            crate::solve::ode::sensitivity::multiply_add(&states, s, &params, n, p, &mut moved);
             if next.iter().chain(&moved).any(|v| !v.is_finite()) {
                 return Err(IntegrationError::non_finite(record.times[row + 1]));
             }

@@ -5,7 +5,7 @@
 //!
 //! Rows may be irregularly spaced and cells missing. Inputs are held from each row to the
 //! next (zero-order hold, as the record holds them). Continuous models are integrated by
-//! [`crate::sim::Integrator`] (Dormand–Prince, Radau IIA where the balances are stiff),
+//! [`crate::solve::ode::Integrator`] (Dormand–Prince, Radau IIA where the balances are stiff),
 //! which reports the state at every row's time whatever the spacing, restarted wherever an
 //! input changes; discrete models apply their map once per row. Optional *correction* slots
 //! (outputs of a synthesised closure, see [`super::locus`]) are held constant over each
@@ -16,7 +16,7 @@ use super::DiagnoseError;
 use crate::eval::{JacobianProgram, Program};
 use crate::ir::{Dynamics, Model, Var};
 use crate::record::Record;
-use crate::sim::{IntegrationError, Integrator, Method, ModelSystem, OdeSystem, Tolerances};
+use crate::solve::ode::{IntegrationError, Integrator, Method, ModelSystem, OdeSystem, Tolerances};
 
 /// Most integration steps between two input switches (or over one interval of a one-step
 /// prediction) before a run is declared failed (wild params): a failing run costs no more.

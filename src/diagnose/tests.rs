@@ -9,7 +9,7 @@
 
 use super::split::{Holdout, Split};
 use super::*;
-use crate::sim::SimOptions;
+use crate::solve::ode::SimOptions;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -34,7 +34,7 @@ pub(super) fn simulate(truth: &str, program: &str, t_end: f64, seed: u64) -> Sim
             program.generate(input, 0.0, t_end, 1.0).unwrap()
         })
         .collect();
-    let trajectory = crate::sim::simulate(&model, &signals, &SimOptions::new(t_end, 1.0)).unwrap();
+    let trajectory = crate::solve::ode::simulate(&model, &signals, &SimOptions::new(t_end, 1.0)).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noisy = (trajectory.states.iter())
         .map(|values| {

@@ -7,7 +7,7 @@ use super::fit::Objective;
 use super::simulate::Simulator;
 use super::split::{Holdout, Split};
 use crate::record::Record;
-use crate::sim::Tolerances;
+use crate::solve::ode::Tolerances;
 
 /// Monod uptake with a small saturation constant (stiff once S is low), a hidden state
 /// driven by the input, and a declared start that depends on a param.
@@ -40,12 +40,12 @@ fn records(model: &crate::ir::Model) -> Vec<Record> {
                 })
                 .collect();
             let signal = crate::signal::Signal::new(times.clone(), input.clone()).unwrap();
-            let options = crate::sim::SimOptions {
+            let options = crate::solve::ode::SimOptions {
                 t_start: times[0],
                 initial: vec![None, Some(1.5 + e as f64)],
-                ..crate::sim::SimOptions::new(times[39], 0.01)
+                ..crate::solve::ode::SimOptions::new(times[39], 0.01)
             };
-            let run = crate::sim::simulate(model, &[signal], &options).unwrap();
+            let run = crate::solve::ode::simulate(model, &[signal], &options).unwrap();
             let at = |column: &Vec<f64>, t: f64| column[((t - times[0]) / 0.01).round() as usize];
             let states = (run.states.iter())
                 .map(|column| times.iter().map(|&t| 1.02 * at(column, t)).collect())

@@ -7,7 +7,7 @@ use thiserror::Error;
 
 use crate::data::DataError;
 use crate::io::IoError;
-use crate::sim::SimError;
+use crate::solve::ode::SimError;
 use crate::train::TrainError;
 
 /// A problem with an experiment's description or directory.

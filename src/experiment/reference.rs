@@ -6,7 +6,7 @@ use crate::engine::graph::{Network, Setup};
 use crate::ir;
 use crate::numeric::mean_std;
 use crate::signal::Signal;
-use crate::sim::SimOptions;
+use crate::solve::ode::SimOptions;
 use crate::train::TrainError;
 use crate::trained::predict::{predict_in_range, Mode, PredictionTable};
 
@@ -133,7 +133,7 @@ pub fn truth_along(
             .collect(),
         ..SimOptions::new(last_time, data.step)
     };
-    let run = crate::sim::simulate(truth, &signals, &options)?;
+    let run = crate::solve::ode::simulate(truth, &signals, &options)?;
     let rows = run.len().min(data.len());
     let mut deviation: f64 = 0.0;
     for (index, state) in truth.states.iter().enumerate() {

@@ -12,7 +12,7 @@ use super::ApiError;
 use crate::ir::Model;
 use crate::numeric::median;
 use crate::signal::Signal;
-use crate::sim::{SimOptions, Stats};
+use crate::solve::ode::{SimOptions, Stats};
 
 /// Repetitions of each case.
 const REPEATS: usize = 5;
@@ -104,7 +104,7 @@ fn time_case(case: &str, jobs: &[Job]) -> Result<StiffRow, ApiError> {
         stats = Stats::default();
         let started = Instant::now();
         for job in jobs {
-            let run = crate::sim::simulate(&job.model, &job.signals, &job.options)
+            let run = crate::solve::ode::simulate(&job.model, &job.signals, &job.options)
                 .map_err(ApiError::user)?;
             stats.add(&run.stats);
         }

@@ -13,7 +13,7 @@
 
 use crate::api::ApiError;
 use crate::ir::{merge_noise, Measured, Model, Noise, NoiseSpec};
-use crate::sim::Trajectory;
+use crate::solve::ode::Trajectory;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};

@@ -3,7 +3,7 @@
 
 use super::SimulateError;
 use crate::ir::Model;
-use crate::sim::Trajectory;
+use crate::solve::ode::Trajectory;
 use crate::train::PhysicalRange;
 
 /// The range a plain simulation stays in: unbounded but for `ranges`, `(state, lo, hi)`

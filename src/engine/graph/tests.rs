@@ -417,7 +417,7 @@ fn mismatched_weights_are_rejected() {
     assert!(network.set_weights(&weights).is_err());
 }
 
-/// The same one step through `crate::sim` (adaptive Dormand-Prince, tight tolerances) on the
+/// The same one step through `crate::solve::ode` (adaptive Dormand-Prince, tight tolerances) on the
 /// truth with `kcat` a const: the network agrees to RK4 accuracy, and to far better with
 /// sub-steps.
 #[test]
@@ -434,16 +434,16 @@ fn one_step_matches_the_adaptive_simulator() {
         .der("E", "(E0 - E) / theta")
         .build();
     let (state, inlet, step) = ([0.02, 0.004], 0.018, 2.0);
-    let options = crate::sim::SimOptions {
-        tolerances: crate::sim::Tolerances {
+    let options = crate::solve::ode::SimOptions {
+        tolerances: crate::solve::ode::Tolerances {
             rtol: 1e-12,
             atol: 1e-15,
         },
         initial: vec![Some(state[0]), Some(state[1])],
-        ..crate::sim::SimOptions::new(step, step)
+        ..crate::solve::ode::SimOptions::new(step, step)
     };
     let signal = crate::signal::Signal::constant(0.0, inlet);
-    let simulated = crate::sim::simulate(&truth, &[signal], &options).unwrap();
+    let simulated = crate::solve::ode::simulate(&truth, &[signal], &options).unwrap();
     let reference = [simulated.states[0][1], simulated.hidden[0][1]];
     let model = chemostat_with_exact_law();
     let relative_error = |substeps| {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use crate::engine::graph::{Network, Precision};
 use crate::ir::{self, Expr};
-use crate::sim::{ModelSystem, OdeSystem};
+use crate::solve::ode::{ModelSystem, OdeSystem};
 use crate::train::fixtures::{random_batch, rk4_reference, setup};
 
 /// Every shipped model file with a closure: models/, bench/ and the `gbc init` templates.

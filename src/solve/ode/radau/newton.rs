@@ -5,8 +5,8 @@
 
 use super::{Radau, C, E, MU_COMPLEX, MU_REAL, NEWTON_MAXITER, T, TI};
 use crate::numeric::{Complex, Lu};
-use crate::sim::error::IntegrationError;
-use crate::sim::system::{all_finite, rms, OdeSystem, Tolerances};
+use crate::solve::ode::error::IntegrationError;
+use crate::solve::ode::system::{all_finite, rms, OdeSystem, Tolerances};
 
 /// The outcome of the Newton iterations.
 pub(super) struct Newton {

@@ -2,7 +2,7 @@
 //! differences of the integration itself.
 
 use crate::ir::Model;
-use crate::sim::{Integrator, Method, ModelSystem, OdeSystem, Tolerances};
+use crate::solve::ode::{Integrator, Method, ModelSystem, OdeSystem, Tolerances};
 
 fn compile(source: &str) -> Model {
     crate::driver::compile("test.gbm", source, &[])

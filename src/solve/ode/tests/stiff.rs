@@ -2,7 +2,7 @@
 //! known values; the step budget's diagnostic.
 
 use super::{rotation_exact, Rotation, DECAY, FREQUENCY, START};
-use crate::sim::{Dopri5, IntegrationError, Integrator, Method, OdeSystem, Tolerances};
+use crate::solve::ode::{Dopri5, IntegrationError, Integrator, Method, OdeSystem, Tolerances};
 
 /// `y' = A y` with `A = V diag(-1, -fast) V^-1`, `V = [[1, 1], [1, -1]]`: a slow and a fast
 /// mode, mixed in both components (stiff once `fast` is large).
@@ -62,7 +62,7 @@ fn run(
     method: Method,
     start: &[f64],
     samples: &[f64],
-) -> (Vec<Vec<f64>>, crate::sim::Stats) {
+) -> (Vec<Vec<f64>>, crate::solve::ode::Stats) {
     let mut integrator = Integrator::new(start.len(), TIGHT, 1_000_000, method);
     let mut y = start.to_vec();
     let mut recorded = Vec::new();

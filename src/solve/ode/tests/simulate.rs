@@ -5,7 +5,7 @@ use super::reference::richardson;
 use super::{rotation_exact, DECAY, FREQUENCY, START};
 use crate::ir::{Dynamics, Model};
 use crate::signal::Signal;
-use crate::sim::{simulate, SimError, SimOptions};
+use crate::solve::ode::{simulate, SimError, SimOptions};
 
 /// A piecewise-constant signal from `(switch time, value)` pairs.
 fn steps(pairs: &[(f64, f64)]) -> Signal {

@@ -1,0 +1,8 @@
+//! The solving wing, below training and the diagnosis: what both ask of a model without
+//! learning anything about it.
+//!
+//! - [`ode`]: the integration schemes (explicit Dormand–Prince, implicit Radau IIA, the
+//!   switch between them), their forward sensitivities, step control and the free run of a
+//!   model without closures.
+
+pub mod ode;
