@@ -2,7 +2,7 @@
 //! a [`Diagnosis`] out that renders itself as the CLI's text, JSON and HTML.
 
 use super::{hold_out, ApiError, Model};
-use crate::diagnose::{self, DiagnoseError, Options, Problem, Progress, Report};
+use crate::diagnose::{self, Options, Problem, Progress, Report};
 use crate::ir::NoiseSpec;
 use crate::record::Record;
 
@@ -46,7 +46,7 @@ pub fn diagnose(
     on_progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Diagnosis, ApiError> {
     if spec.jobs == Some(0) {
-        return Err(ApiError::user(DiagnoseError::BadOption {
+        return Err(ApiError::user(crate::solve::fit::FitError::BadOption {
             option: "--jobs".into(),
             expected: "at least 1 thread".into(),
             found: "0".into(),
@@ -88,7 +88,7 @@ fn check_holdout_names(records: &[Record], holdout: &[String]) -> Result<(), Api
         let known = records.iter().any(|r| &r.name == name);
         if !known && name.trim().parse::<f64>().is_ok() {
             let names: Vec<&str> = records.iter().map(|r| r.name.as_str()).collect();
-            return Err(ApiError::user(DiagnoseError::BadOption {
+            return Err(ApiError::user(crate::solve::fit::FitError::BadOption {
                 option: "--holdout".into(),
                 expected: format!("the name of an experiment ({})", names.join(", ")),
                 found: name.clone(),

@@ -128,7 +128,7 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
 /// The diagnosis the flags ask for.
 pub fn spec_of(args: &DiagnoseArgs) -> Result<api::DiagnoseSpec, CommandError> {
     if let Some(delay) = args.delay {
-        return Err(CommandError::user(DiagnoseError::BadOption {
+        return Err(CommandError::user(crate::solve::fit::FitError::BadOption {
             option: "--delay".into(),
             expected: "--span T, the longest time constant of the history".into(),
             found: delay.to_string(),

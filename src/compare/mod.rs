@@ -4,7 +4,7 @@
 //!
 //! - the **mechanism**: the grey box with every closure output at its prior, or zero
 //!   ([`ir::Model::mechanism`]), or a closure-free model given, fitted by the one fitter of
-//!   mechanistic params ([`crate::diagnose::mechanism`], through [`train::train_run`], so
+//!   mechanistic params ([`crate::solve::fit::mechanism`], through [`train::train_run`], so
 //!   that its error is the one `gbc train` reports for it) and run free on each held-out
 //!   experiment from its first row;
 //! - the **grey box**, trained with `gbc train`'s defaults once per seed, run free the same

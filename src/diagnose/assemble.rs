@@ -8,10 +8,11 @@ use super::locus::{Located, HISTORY_MARGIN, PRESENT_RESIDUAL};
 use super::render::num;
 use super::report::*;
 use super::selection::Levels;
-use super::simulate::Simulator;
-use super::split::{measured_rows, Holdout, Start};
-use super::{noise, origin, Context};
+use super::{origin, Context};
 use crate::record::measure;
+use crate::solve::fit::noise;
+use crate::solve::fit::simulate::Simulator;
+use crate::solve::fit::split::{measured_rows, Holdout, Start};
 
 /// Per measured state, its noise: estimated from the data ([`noise::noise_floors`]), at
 /// most the training residual of the model's fit and of the best effect's (by BIC).
@@ -234,7 +235,7 @@ pub fn series(
 ) -> Vec<ExperimentSeries> {
     let model = context.model;
     let measured = model.states.len();
-    let columns = |run: &super::simulate::Run, end: usize| -> Vec<Vec<f64>> {
+    let columns = |run: &crate::solve::fit::simulate::Run, end: usize| -> Vec<Vec<f64>> {
         (0..measured)
             .map(|k| (0..end).map(|row| run.row(row)[k]).collect())
             .collect()

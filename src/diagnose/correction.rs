@@ -15,12 +15,12 @@
 
 use super::features::FeatureMap;
 use super::memory::FilterBank;
-use super::simulate::{inputs_at, Simulator};
-use super::split::Split;
 use crate::eval::Program;
 use crate::ir::Constraint;
 use crate::numeric::{dot, root_mean_square, NormalEquations};
 use crate::record::{Normalisation, Record};
+use crate::solve::fit::simulate::{inputs_at, Simulator};
+use crate::solve::fit::split::Split;
 use crate::solve::ode::IntegrationError;
 
 /// Ridge strengths tried (relative to the mean diagonal of the normal equations).

@@ -3,13 +3,14 @@
 //! forward selection of several effects ([`super::selection`]).
 
 use super::evaluate::{scored_errors, Errors};
-use super::fit::{fit, Fitted, Objective, Starts};
 use super::ranking::{compare, Comparison, RESAMPLES};
 use super::report::{Confidence, EffectScore, FitSummary};
-use super::simulate::{tolerances, Run, Simulator};
-use super::uncertainty::summarise;
 use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Model};
+use crate::solve::fit::fitter::{Fitted, Starts};
+use crate::solve::fit::model::{fit_model, ModelFit};
+use crate::solve::fit::simulate::{Run, Simulator};
+use crate::solve::fit::FitError;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -34,26 +35,6 @@ pub struct Scored {
     pub training_squares: Vec<(f64, usize)>,
 }
 
-/// A fit pinned along a free direction is kept when its training gap is within this share
-/// of the free fit's.
-pub const PIN_TOLERANCE: f64 = 1e-6;
-
-/// Components of a free direction within this share of the largest are equally large.
-const PIN_TIE: f64 = 0.9;
-
-/// The unknown to pin when a fit leaves a direction free: among the direction's largest
-/// components (within [`PIN_TIE`] of the largest; an exact scaling symmetry gives several
-/// of equal size) the first declared, if it is not identified.
-fn pin(summary: &FitSummary, names: &[String]) -> Option<usize> {
-    let largest = summary.free_direction.first()?.1.abs();
-    let index = (summary.free_direction.iter())
-        .filter(|(_, v)| v.abs() >= PIN_TIE * largest)
-        .filter_map(|(name, _)| names.iter().position(|n| n == name))
-        .min()?;
-    let estimate = summary.estimates.iter().find(|e| e.name == names[index])?;
-    (!estimate.identified).then_some(index)
-}
-
 /// Fits `model` from the unknowns `start` (by name: params and `STATE@EXPERIMENT` starts;
 /// others from their defaults), and scores it on the held-out parts.
 pub fn fit_and_score(
@@ -75,50 +56,19 @@ pub fn fit_and_score_with(
     seed: u64,
 ) -> Result<Scored, DiagnoseError> {
     let started = Instant::now();
-    let simulator = Simulator::new(model, &[], tolerances())?;
-    let unknowns = context.unknowns(model, &simulator);
-    let x = unknowns.values(start);
-    let constraints = &unknowns.constraints;
-    let objective = Objective {
-        simulator: &simulator,
-        split: &context.split,
-    };
-    let free = vec![false; x.len()];
-    let mut fitted = fit(&objective, constraints, &x, (starts, &free), seed);
-    let names = unknowns.names.as_slice();
-    let mut summary = summarise(&objective, constraints, &fitted.x, (names, &free));
-    if let Some(pinned) = pin(&summary, names) {
-        // The data leave a direction free: hold its largest component at its declared
-        // value, so that fits are compared at one point of the ridge, not at arbitrary
-        // ones; kept if the gap stays within [`PIN_TOLERANCE`] (the direction was free).
-        let mut fixed = free;
-        fixed[pinned] = true;
-        let mut held = fitted.x.clone();
-        held[pinned] = unknowns.defaults[pinned];
-        let refit = fit(
-            &objective,
-            constraints,
-            &held,
-            (Starts::new(0), &fixed),
-            seed,
-        );
-        if refit.gap <= fitted.gap * (1.0 + PIN_TOLERANCE) {
-            let starts = fitted.starts + refit.starts;
-            summary = summarise(&objective, constraints, &refit.x, (names, &fixed));
-            fitted = Fitted { starts, ..refit };
-        }
-    }
-    let (errors, runs) = held_out(context, &simulator, &fitted.x);
-    let training_squares = (objective.residuals(&fitted.x))
-        .map(|r| super::noise::by_state(&context.split, &r))
-        .unwrap_or_default();
-    summary.starts = fitted.starts;
+    let fit = fit_model(&context.split, model, (start, starts), seed)?;
+    let (errors, runs) = held_out(context, &fit.simulator, &fit.fitted.x);
+    let named = fit.named();
+    let ModelFit {
+        fitted,
+        mut summary,
+        training_squares,
+        ..
+    } = fit;
     summary.seconds = started.elapsed().as_secs_f64();
     Ok(Scored {
         gap: errors.gap(),
-        named: (unknowns.names.iter().cloned())
-            .zip(fitted.x.iter().copied())
-            .collect(),
+        named,
         fitted,
         summary,
         errors,
@@ -273,7 +223,10 @@ pub fn block_sums(context: &Context, scored: &Scored) -> Vec<(f64, usize)> {
 
 /// The model with the named effects applied.
 pub fn lower(context: &Context, effects: &[&str]) -> Result<Model, DiagnoseError> {
-    ir::lower(context.problem()?.checked, effects).map_err(|error| DiagnoseError::Unsimulable {
-        reason: format!("effect {}: {error}", effects.join(" + ")),
+    let lowered = ir::lower(context.problem.checked, effects);
+    lowered.map_err(|error| {
+        DiagnoseError::Fit(FitError::Unsimulable {
+            reason: format!("effect {}: {error}", effects.join(" + ")),
+        })
     })
 }

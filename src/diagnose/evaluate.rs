@@ -2,10 +2,10 @@
 //! one step), per state, per time window and per operating regime.
 
 use super::report::{Regime, Window};
-use super::simulate::{Run, Simulator};
-use super::split::Split;
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::{Normalisation, Record};
+use crate::solve::fit::simulate::{Run, Simulator};
+use crate::solve::fit::split::Split;
 use std::ops::Range;
 
 /// Quantile bins per variable in the regime analysis.

@@ -28,15 +28,15 @@
 use super::correction::{self, Corrected, LocusValue, Pass, Solution};
 use super::evaluate::Errors;
 use super::features::FeatureMap;
-use super::fit::thetas;
 use super::graph::Graph;
 use super::ranking::compare;
 use super::refine::{refine, score, Refinement};
 use super::report::{Locus, LocusKind};
-use super::simulate::{tolerances, Simulator};
 use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Constraint, Var};
 use crate::numeric::{mean_std, root_mean_square};
+use crate::solve::fit::fitter::thetas;
+use crate::solve::fit::simulate::{tolerances, Simulator};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -86,7 +86,7 @@ impl Target {
 /// Every let that reaches a balance, every group of them, then every balance (measured,
 /// then hidden states).
 pub fn targets(context: &Context) -> Result<Vec<Target>, DiagnoseError> {
-    let graph = Graph::of(context.problem()?.checked);
+    let graph = Graph::of(context.problem.checked);
     let model = context.model;
     let lets: Vec<String> = (model.lets.iter())
         .map(|l| l.name.clone())
@@ -238,7 +238,7 @@ fn summarise(
     let comparison = compare(&sums, context.seed(5000));
     let best_bound = trials.first().map_or(f64::INFINITY, Trial::bound);
     let excess = |gap: f64| (gap - noise_floor).max(0.0);
-    let graph = Graph::of(context.problem()?.checked);
+    let graph = Graph::of(context.problem.checked);
     let upstream = |i: usize| {
         let best = &trials[0].target;
         (trials[i].target.members.iter())
@@ -316,12 +316,12 @@ pub(super) fn synthesise(
         .collect();
     let source = format!(
         "{}\n\nclosure {CLOSURE} {{\n  outputs {}\n}}\n\neffect {EFFECT} {{\n  {}\n}}\n",
-        context.problem()?.source,
+        context.problem.source,
         outputs.join(", "),
         target.patches().join("\n  ")
     );
     let compiled =
-        crate::driver::compile(context.problem()?.name, &source, &[EFFECT]).map_err(|reports| {
+        crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
             let messages: Vec<String> = reports.iter().map(|r| r.to_string()).collect();
             DiagnoseError::internal(format!(
                 "correction at `{}` does not compile: {}",

@@ -18,9 +18,9 @@
 //! quarter of the longest training part. Time constants are spaced geometrically from the
 //! median row spacing to the span.
 
-use super::simulate::Run;
-use super::split::Split;
 use crate::numeric::median;
+use crate::solve::fit::simulate::Run;
+use crate::solve::fit::split::Split;
 
 /// The span is this many correlation times of the residual.
 pub const SPAN_FACTOR: f64 = 2.0;

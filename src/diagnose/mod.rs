@@ -25,35 +25,30 @@ mod effects;
 mod error;
 mod evaluate;
 mod features;
-mod fit;
 mod graph;
 pub mod html;
 mod locus;
-pub mod mechanism;
-mod memory;
-mod noise;
+pub mod memory;
 mod ranking;
 mod refine;
 pub mod render;
 mod report;
 mod selection;
-mod sensitivity;
-mod simulate;
-mod split;
 mod symbolic;
-pub mod uncertainty;
 
+pub use crate::solve::fit::split::MIN_ROWS;
 pub use error::DiagnoseError;
 pub use report::*;
-pub use split::MIN_ROWS;
 
 use crate::check::Checked;
-use crate::ir::{Constraint, Model};
+use crate::ir::Model;
 use crate::record::Record;
+use crate::solve::fit::simulate::{tolerances, Simulator};
+use crate::solve::fit::split::{Holdout, Split, Start};
+use crate::solve::fit::unknowns::Unknowns;
+use crate::solve::fit::{check_fittable, FitError, FitOptions};
 use crate::solve::ode::Method;
 use ranking::Blocks;
-use simulate::{tolerances, Simulator};
-use split::{Holdout, Split, Start};
 use std::time::Instant;
 
 /// The gap is significant when it exceeds this multiple of the noise floor.
@@ -134,6 +129,20 @@ impl Default for Options {
     }
 }
 
+impl Options {
+    /// The options of every fit the diagnosis makes.
+    pub fn fitting(&self) -> FitOptions {
+        FitOptions {
+            restarts: self.restarts,
+            seed: self.seed,
+            fit_initial: self.fit_initial,
+            fit_starts: self.fit_starts,
+            noise: self.noise.clone(),
+            min_rows: self.min_rows,
+        }
+    }
+}
+
 /// Progress of a diagnosis, for a progress bar.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Progress {
@@ -155,9 +164,8 @@ pub enum Progress {
 
 /// Everything the stages share.
 pub struct Context<'a> {
-    /// The model's text and checked form, which effects and corrections are lowered from
-    /// (`None` for a fit alone, [`mechanism::fit_mechanism`]).
-    problem: Option<Problem<'a>>,
+    /// The model's text and checked form, which effects and corrections are lowered from.
+    problem: Problem<'a>,
     options: &'a Options,
     model: &'a Model,
     split: Split,
@@ -170,91 +178,14 @@ pub struct Context<'a> {
 }
 
 impl<'a> Context<'a> {
-    /// The problem's text and checked model, for the stages that lower effects and
-    /// corrections (an internal error in a fit-only context).
-    fn problem(&self) -> Result<&Problem<'a>, DiagnoseError> {
-        (self.problem.as_ref())
-            .ok_or_else(|| DiagnoseError::internal("a fit-only context lowers no effect"))
-    }
-
     /// A seed for task `index`, derived from the user's seed.
     fn seed(&self, index: u64) -> u64 {
-        self.options
-            .seed
-            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            .wrapping_add(index.wrapping_mul(0xD1B5_4A32_D192_ED03))
+        self.options.fitting().task_seed(index)
     }
 
-    /// The unknowns of a fit of `model` (compiled as `simulator`): its params, the fitted
-    /// starts of measured states, then (with `--fit-initial`) of its hidden states in every
-    /// training experiment; named `STATE@EXPERIMENT`, with default values (declared params,
-    /// first measured values, declared initial values).
+    /// The unknowns of a fit of `model` (compiled as `simulator`) on the split.
     fn unknowns(&self, model: &Model, simulator: &Simulator) -> Unknowns {
-        let split = &self.split;
-        let mut unknowns = Unknowns::default();
-        for param in &model.params {
-            unknowns.push(param.name.clone(), param.constraint, param.init);
-        }
-        let guesses = self.initial_guesses();
-        for (&(record, state), guess) in split.fitted_starts.iter().zip(guesses) {
-            let name = format!(
-                "{}@{}",
-                model.states[state].name, split.records[record].name
-            );
-            unknowns.push(name, Constraint::Free, guess);
-        }
-        if split.fit_hidden {
-            let mut simulator = simulator.clone();
-            let declared: Vec<f64> = model.params.iter().map(|p| p.init).collect();
-            simulator.set_params(&declared);
-            for (_, record, _) in split.training() {
-                let start = simulator.start_state(record, &[]);
-                for (h, state) in model.hidden.iter().enumerate() {
-                    let name = format!("{}@{}", state.name, record.name);
-                    unknowns.push(name, Constraint::Free, start[model.states.len() + h]);
-                }
-            }
-        }
-        unknowns
-    }
-
-    /// First guesses of the fitted starts: the state's first measured value in the
-    /// experiment's training part, else its training mean.
-    fn initial_guesses(&self) -> Vec<f64> {
-        (self.split.fitted_starts.iter())
-            .map(|&(record, state)| {
-                let rows = self.split.parts[record].train.clone();
-                let cells = &self.split.records[record].states[state][rows];
-                (cells.iter().flatten().next().copied())
-                    .unwrap_or(self.split.normalisation.state_mean[state])
-            })
-            .collect()
-    }
-}
-
-/// The unknowns of a fit, in order.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Unknowns {
-    /// Names: params, then `STATE@EXPERIMENT` for fitted starts.
-    pub names: Vec<String>,
-    /// Constraints (fitted starts are free).
-    pub constraints: Vec<Constraint>,
-    /// Default values.
-    pub defaults: Vec<f64>,
-}
-
-impl Unknowns {
-    fn push(&mut self, name: String, constraint: Constraint, default: f64) {
-        self.names.push(name);
-        self.constraints.push(constraint);
-        self.defaults.push(default);
-    }
-
-    /// Values from `start` by name, defaults elsewhere.
-    pub fn values(&self, start: &std::collections::BTreeMap<String, f64>) -> Vec<f64> {
-        (self.names.iter().zip(&self.defaults))
-            .map(|(name, default)| start.get(name).copied().unwrap_or(*default))
-            .collect()
+        Unknowns::of(&self.split, model, simulator)
     }
 }
 
@@ -431,7 +362,7 @@ fn memory_time_constants(context: &Context, base: &Simulator, x: &[f64]) -> Vec<
 fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a>, DiagnoseError> {
     let model = problem.model;
     check_options(options)?;
-    mechanism::check_fittable(model, problem.records.iter().chain(problem.held_out))?;
+    check_fittable(model, problem.records.iter().chain(problem.held_out))?;
     let train = problem.records.to_vec();
     let held = problem.held_out.to_vec();
     let holdout = match options.val_fraction {
@@ -446,7 +377,7 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
     }
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     Ok(Context {
-        problem: Some(*problem),
+        problem: *problem,
         options,
         model,
         blocks: Blocks::new(&split),
@@ -456,11 +387,13 @@ fn context<'a>(problem: &Problem<'a>, options: &'a Options) -> Result<Context<'a
 }
 
 fn check_options(options: &Options) -> Result<(), DiagnoseError> {
-    let bad = |option: &str, expected: &str, found: String, help: &str| DiagnoseError::BadOption {
-        option: option.into(),
-        expected: expected.into(),
-        found,
-        help: help.into(),
+    let bad = |option: &str, expected: &str, found: String, help: &str| {
+        DiagnoseError::Fit(FitError::BadOption {
+            option: option.into(),
+            expected: expected.into(),
+            found,
+            help: help.into(),
+        })
     };
     if let Some(share) = options.val_fraction {
         if !(share > 0.0 && share < 1.0) {
@@ -472,14 +405,7 @@ fn check_options(options: &Options) -> Result<(), DiagnoseError> {
             ));
         }
     }
-    if options.min_rows < 2 {
-        return Err(bad(
-            "--min-rows",
-            "at least 2 measured rows",
-            options.min_rows.to_string(),
-            "a fit and a score each need a few measured rows; the default is 10",
-        ));
-    }
+    options.fitting().check()?;
     if options.dim < 1 {
         return Err(bad(
             "--dim",
@@ -515,7 +441,7 @@ fn check_runs(context: &Context, base: &Simulator) -> Result<bool, DiagnoseError
             .overrides(index, fitted, simulator.hidden_count());
         simulator
             .free_run(record, &overrides, record.len())
-            .map_err(|error| DiagnoseError::Unsimulable {
+            .map_err(|error| FitError::Unsimulable {
                 reason: format!("experiment `{}`: {error}", record.name),
             })?;
     }

@@ -12,7 +12,7 @@
 //! ranking's uncertainty.
 
 use super::evaluate::Errors;
-use super::split::Split;
+use crate::solve::fit::split::Split;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::ops::Range;

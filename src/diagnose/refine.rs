@@ -15,12 +15,12 @@
 use super::correction::{filtered_for, Corrected, Solution};
 use super::evaluate::{scored_errors, Errors};
 use super::features::FeatureMap;
-use super::fit::{polish_within, values};
 use super::memory::FilterBank;
-use super::simulate::{inputs_at, Run};
-use super::split::Split;
 use crate::numeric::dot;
 use crate::record::Record;
+use crate::solve::fit::fitter::{polish_within, values};
+use crate::solve::fit::simulate::{inputs_at, Run};
+use crate::solve::fit::split::Split;
 use crate::solve::ode::IntegrationError;
 
 /// Below this share of one-step pairs ([`Split::one_step_share`]) a record is sparse: a

@@ -1,6 +1,7 @@
 //! The report as readable text (what `gbc diagnose` prints).
 
 use super::report::*;
+pub use crate::numeric::text::num;
 use std::fmt::Write;
 
 /// Renders the report as text answering the three questions.
@@ -14,29 +15,6 @@ pub fn text(report: &Report) -> String {
     which_section(&mut out, report);
     how_far_section(&mut out, report);
     out
-}
-
-/// A number with 3 significant digits, in plain or scientific notation; "diverged" for an
-/// infinite gap.
-pub fn num(value: f64) -> String {
-    if !value.is_finite() {
-        return if value.is_nan() {
-            "n/a".into()
-        } else {
-            "diverged".into()
-        };
-    }
-    let magnitude = value.abs();
-    if magnitude != 0.0 && !(1e-3..1e5).contains(&magnitude) {
-        format!("{value:.2e}")
-    } else {
-        let decimals = if magnitude == 0.0 {
-            0
-        } else {
-            (2 - magnitude.log10().floor() as i32).max(0) as usize
-        };
-        format!("{value:.decimals$}")
-    }
 }
 
 /// An optional number, `-` when absent.

@@ -142,7 +142,7 @@ fn confirm(
             let candidate = &candidates[i];
             let names: Vec<&str> = candidate.effects.iter().map(String::as_str).collect();
             let model = lower(context, &names)?;
-            let starts = super::fit::Starts::new(restarts);
+            let starts = crate::solve::fit::fitter::Starts::new(restarts);
             let seed = context.seed(6000 + i as u64);
             let fit = fit_and_score_with(context, &model, (&candidate.fit.named, starts), seed)?;
             progress(Progress::Done {
@@ -156,7 +156,9 @@ fn confirm(
         let old = &candidates[i].fit;
         if fit.fitted.gap < old.fitted.gap * (1.0 - 1e-9) {
             candidates[i].fit = fit;
-        } else if (fit.fitted.gap - old.fitted.gap).abs() <= super::fit::AGREE * old.fitted.gap {
+        } else if (fit.fitted.gap - old.fitted.gap).abs()
+            <= crate::solve::fit::fitter::AGREE * old.fitted.gap
+        {
             // The wider search (its first start the old best) counts who reached it again.
             let agreeing = old.fitted.agreeing.max(fit.fitted.agreeing);
             candidates[i].fit.fitted.agreeing = agreeing;

@@ -7,8 +7,8 @@
 //! injected (a perfect model's held-out gap is the mean squared normalised noise at the
 //! held-out cells, computed from the clean and noisy records without any fitting).
 
-use super::split::{Holdout, Split};
 use super::*;
+use crate::solve::fit::split::{Holdout, Split};
 use crate::solve::ode::SimOptions;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -34,7 +34,8 @@ pub(super) fn simulate(truth: &str, program: &str, t_end: f64, seed: u64) -> Sim
             program.generate(input, 0.0, t_end, 1.0).unwrap()
         })
         .collect();
-    let trajectory = crate::solve::ode::simulate(&model, &signals, &SimOptions::new(t_end, 1.0)).unwrap();
+    let trajectory =
+        crate::solve::ode::simulate(&model, &signals, &SimOptions::new(t_end, 1.0)).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noisy = (trajectory.states.iter())
         .map(|values| {
@@ -400,7 +401,10 @@ fn models_with_closures_or_too_little_data_are_refused() {
         &sets,
         &Options::default(),
     );
-    assert!(matches!(refused, Err(DiagnoseError::HasClosures { .. })));
+    assert!(matches!(
+        refused,
+        Err(DiagnoseError::Fit(FitError::HasClosures { .. }))
+    ));
     let mut short = sets[0].clone();
     short.record = short.record.rows(0..20);
     let refused = try_run(CHEMOSTAT_MODEL, &[short], &Options::default()).unwrap_err();

@@ -3,10 +3,10 @@
 //! value, a fitted start of a measured state, and fitted hidden starts; on a stiff stretch
 //! and across input switches.
 
-use super::fit::Objective;
-use super::simulate::Simulator;
-use super::split::{Holdout, Split};
 use crate::record::Record;
+use crate::solve::fit::fitter::Objective;
+use crate::solve::fit::simulate::Simulator;
+use crate::solve::fit::split::{Holdout, Split};
 use crate::solve::ode::Tolerances;
 
 /// Monod uptake with a small saturation constant (stiff once S is low), a hidden state

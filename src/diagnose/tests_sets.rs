@@ -316,11 +316,11 @@ fn bad_options_and_data_are_refused_with_their_codes() {
     assert!(
         matches!(
             error,
-            DiagnoseError::TailTooSmall {
+            DiagnoseError::Fit(FitError::TailTooSmall {
                 train: 3,
                 test: 0,
                 ..
-            }
+            })
         ),
         "{error}"
     );
@@ -337,6 +337,6 @@ fn bad_options_and_data_are_refused_with_their_codes() {
         });
     assert!(matches!(
         try_run(CHEMOSTAT_MODEL, &observed, &Options::default()),
-        Err(DiagnoseError::MeasuredOutput { .. })
+        Err(DiagnoseError::Fit(FitError::MeasuredOutput { .. }))
     ));
 }

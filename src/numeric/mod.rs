@@ -21,6 +21,7 @@ pub mod real;
 pub mod rounding;
 pub mod stats;
 pub mod tensor;
+pub mod text;
 pub mod times;
 
 #[cfg(test)]

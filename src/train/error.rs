@@ -340,7 +340,7 @@ pub enum TrainError {
     /// Fitting a model without closures by free runs failed.
     #[error(transparent)]
     #[diagnostic(transparent)]
-    Mechanism(#[from] crate::diagnose::DiagnoseError),
+    Mechanism(#[from] crate::solve::fit::FitError),
     /// Writing an artifact failed.
     #[error(transparent)]
     #[diagnostic(transparent)]

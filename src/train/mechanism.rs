@@ -1,5 +1,5 @@
 //! A model without closures is fitted, not trained: `gbc train` hands it to the one fitter
-//! of mechanistic params ([`crate::diagnose::mechanism`], the free-run least squares of
+//! of mechanistic params ([`crate::solve::fit::mechanism`], the free-run least squares of
 //! `gbc diagnose`: starts until no new basin appears, declared noise as weights, exact
 //! sensitivities, standard errors), so that both commands give the same fit. The params
 //! are then held fixed, no epoch runs, and the run is scored and saved like any other
@@ -12,9 +12,8 @@
 //! every balance), the mechanism is fitted here too, whatever the record's density
 //! ([`fallback`]).
 
-use crate::diagnose::mechanism::{check_fittable, fit_mechanism, MechanismFit};
-use crate::diagnose::{self, FitSummary};
 use crate::ir;
+use crate::solve::fit::{check_fittable, fit_mechanism, FitOptions, FitSummary, MechanismFit};
 
 use super::coverage::{Coverage, DENSE_SHARE};
 use super::prepare::Layout;
@@ -86,11 +85,13 @@ pub fn fit(
     let training: Vec<_> = (data.train.iter().zip(&layout.trainings))
         .map(|(record, part)| record.rows(part.rows.clone()))
         .collect();
-    let settings = diagnose::Options {
+    let settings = FitOptions {
         restarts: RESTARTS,
         seed: options.seed,
+        fit_initial: false,
+        fit_starts: false,
+        noise: None,
         min_rows: MIN_ROWS,
-        ..diagnose::Options::default()
     };
     Ok(fit_mechanism(model, &training, &settings)?)
 }

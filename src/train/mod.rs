@@ -293,7 +293,7 @@ pub struct TrainReport {
     pub balance_fit: Option<BalanceFit>,
     /// The fit of a model without closures by free runs, when its params came from there
     /// ([`mechanism`]; then no epoch ran).
-    pub mechanism_fit: Option<crate::diagnose::FitSummary>,
+    pub mechanism_fit: Option<crate::solve::fit::FitSummary>,
     /// What of each training experiment trained ([`coverage`]).
     pub coverage: coverage::Coverage,
     /// Each experiment's initial state (training experiments first).

@@ -24,8 +24,8 @@ use super::{
     polish, with_initial_params, Event, InitialState, Metrics, Objective, ParamSource, Part,
     PhysicalRange, Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData, Warning,
 };
-use crate::diagnose::mechanism::MechanismFit;
 use crate::engine::pairs::stage_fractions;
+use crate::solve::fit::MechanismFit;
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
 /// params from the balances), fit, evaluate, report.

@@ -79,7 +79,7 @@ pub struct RunInfo {
     pub balance_fit: Option<crate::train::BalanceFit>,
     /// The fit of a model without closures by free runs, when its params came from there.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub mechanism_fit: Option<crate::diagnose::FitSummary>,
+    pub mechanism_fit: Option<crate::solve::fit::FitSummary>,
     /// What of each training experiment trained.
     #[serde(default)]
     pub coverage: crate::train::coverage::Coverage,

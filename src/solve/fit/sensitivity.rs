@@ -1,6 +1,6 @@
 //! Free runs with their forward sensitivities: how every state at every row moves with
 //! every param and with every state's initial value. The fits' Jacobians are read off
-//! these ([`super::fit::Objective::jacobian`]) instead of differencing free runs: one
+//! these ([`super::fitter::Objective::jacobian`]) instead of differencing free runs: one
 //! integration per experiment instead of one per unknown, and derivatives of the very
 //! solution the residuals come from (the integrator's own steps, `crate::solve::ode::sensitivity`).
 //!

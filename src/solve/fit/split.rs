@@ -17,7 +17,7 @@
 //! scored, its first measured value there (nothing may be fitted on held-out data). Hidden
 //! states take their declared initial values.
 
-use super::DiagnoseError;
+use super::FitError;
 use crate::ir::Model;
 use crate::record::{Normalisation, Record};
 use std::ops::Range;
@@ -92,7 +92,7 @@ impl Split {
         train: Vec<Record>,
         held: Vec<Record>,
         (holdout, fit_hidden): (Holdout, bool),
-    ) -> Result<Split, DiagnoseError> {
+    ) -> Result<Split, FitError> {
         Split::with_min_rows(model, (train, held), (holdout, fit_hidden), MIN_ROWS)
     }
 
@@ -102,7 +102,7 @@ impl Split {
         (train, held): (Vec<Record>, Vec<Record>),
         (holdout, fit_hidden): (Holdout, bool),
         min_rows: usize,
-    ) -> Result<Split, DiagnoseError> {
+    ) -> Result<Split, FitError> {
         let mut parts = Vec::with_capacity(train.len() + held.len());
         for record in &train {
             parts.push(match holdout {
@@ -129,7 +129,7 @@ impl Split {
         };
         let (fit, scored) = (count(&|p| p.train.clone()), count(&|p| p.test.clone()));
         if fit < min_rows || scored < min_rows {
-            return Err(DiagnoseError::TooFewRows {
+            return Err(FitError::TooFewRows {
                 needed: min_rows,
                 train: fit,
                 test: scored,
@@ -151,7 +151,7 @@ impl Split {
         train: Vec<Record>,
         fit_hidden: bool,
         min_rows: usize,
-    ) -> Result<Split, DiagnoseError> {
+    ) -> Result<Split, FitError> {
         let parts: Vec<Part> = (train.iter())
             .map(|record| Part {
                 train: 0..record.len(),
@@ -162,7 +162,7 @@ impl Split {
             .map(|record| measured_rows(record, 0..record.len()).count())
             .sum();
         if fit < min_rows {
-            return Err(DiagnoseError::TooFewRows {
+            return Err(FitError::TooFewRows {
                 needed: min_rows,
                 train: fit,
                 test: 0,
@@ -417,11 +417,11 @@ pub fn cells_in(record: &Record, rows: Range<usize>) -> usize {
 }
 
 /// The tail split of one experiment: the last `share` of its measured rows is scored.
-fn tail(record: &Record, share: f64) -> Result<Part, DiagnoseError> {
+fn tail(record: &Record, share: f64) -> Result<Part, FitError> {
     let rows: Vec<usize> = measured_rows(record, 0..record.len()).collect();
     let held = ((rows.len() as f64) * share).round() as usize;
     if held == 0 || held >= rows.len() {
-        return Err(DiagnoseError::TailTooSmall {
+        return Err(FitError::TailTooSmall {
             experiment: record.name.clone(),
             share,
             train: rows.len().saturating_sub(held),
@@ -567,7 +567,7 @@ mod tests {
         assert!(
             matches!(
                 error,
-                DiagnoseError::TailTooSmall {
+                FitError::TailTooSmall {
                     train: 3,
                     test: 0,
                     ..

@@ -1,16 +1,16 @@
-//! The one fitter of a mechanistic model's params: the free-run least squares of the
-//! diagnosis ([`super::fit`]: multi-start Levenberg–Marquardt on the z-scored free-run
-//! residuals at every measured cell, declared noise as weights, exact sensitivities, a
-//! free direction held), offered on its own so that `gbc train` fits a model without
+//! A mechanistic model's params fitted to whole training experiments: the free-run least
+//! squares ([`super::model::fit_model`]: multi-start Levenberg–Marquardt on the z-scored
+//! free-run residuals at every measured cell, declared noise as weights, exact
+//! sensitivities, a free direction held), so that `gbc train` fits a model without
 //! closures exactly as `gbc diagnose` fits it before its effects.
 
-use super::effects::fit_and_score;
-use super::report::FitSummary;
+use super::fitter::Starts;
+use super::model::fit_model;
 use super::split::Split;
-use super::{check_options, ranking::Blocks, Context, DiagnoseError, Options};
+use super::{FitError, FitOptions, FitSummary};
 use crate::ir::{Dynamics, Model};
 use crate::record::Record;
-use crate::solve::ode::Method;
+use std::collections::BTreeMap;
 
 /// A mechanistic model fitted to whole training experiments.
 #[derive(Debug, Clone, PartialEq)]
@@ -24,15 +24,13 @@ pub struct MechanismFit {
 }
 
 /// Fits `model`'s params to every measured cell of `training` (whole experiments: cut them
-/// to the rows that train first) with the diagnosis's fitter under `options` (`restarts`,
-/// `seed`, `noise`, `fit_initial`, `min_rows`; the options about held-out data and effects
-/// are not used).
+/// to the rows that train first) under `options`.
 pub fn fit_mechanism(
     model: &Model,
     training: &[Record],
-    options: &Options,
-) -> Result<MechanismFit, DiagnoseError> {
-    check_options(options)?;
+    options: &FitOptions,
+) -> Result<MechanismFit, FitError> {
+    options.check()?;
     check_fittable(model, training.iter())?;
     let mut split = Split::fit_only(
         model,
@@ -44,20 +42,13 @@ pub fn fit_mechanism(
         split.fit_measured_starts(model);
     }
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
-    let context = Context {
-        problem: None,
-        options,
-        model,
-        blocks: Blocks::new(&split),
-        split,
-        corrections: Method::Auto,
-    };
-    let declared = std::collections::BTreeMap::new();
-    let scored = fit_and_score(&context, model, &declared, context.seed(0))?;
-    let params = scored.fitted.x[..model.params.len()].to_vec();
+    let declared = BTreeMap::new();
+    let starts = Starts::new(options.restarts);
+    let fit = fit_model(&split, model, (&declared, starts), options.task_seed(0))?;
+    let params = fit.fitted.x[..model.params.len()].to_vec();
     Ok(MechanismFit {
         params,
-        summary: scored.summary,
+        summary: fit.summary,
     })
 }
 
@@ -66,17 +57,17 @@ pub fn fit_mechanism(
 pub fn check_fittable<'r>(
     model: &Model,
     records: impl Iterator<Item = &'r Record> + Clone,
-) -> Result<(), DiagnoseError> {
+) -> Result<(), FitError> {
     if !model.closures.is_empty() {
         let names: Vec<&str> = model.closures.iter().map(|c| c.name.as_str()).collect();
-        return Err(DiagnoseError::HasClosures {
+        return Err(FitError::HasClosures {
             model: model.name.clone(),
             closures: names.join(", "),
         });
     }
     for record in records.clone() {
         if let Some(observable) = record.observables.first() {
-            return Err(DiagnoseError::MeasuredOutput {
+            return Err(FitError::MeasuredOutput {
                 model: model.name.clone(),
                 output: observable.name.clone(),
             });
@@ -92,7 +83,7 @@ pub fn check_fittable<'r>(
                     .is_some_and(|(a, b)| (a - b).abs() > 1e-6 * b)
         });
         if let Some((record, _)) = irregular {
-            return Err(DiagnoseError::IrregularMap {
+            return Err(FitError::IrregularMap {
                 experiment: record.name.clone(),
             });
         }

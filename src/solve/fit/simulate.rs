@@ -8,11 +8,11 @@
 //! [`crate::solve::ode::Integrator`] (Dormand–Prince, Radau IIA where the balances are stiff),
 //! which reports the state at every row's time whatever the spacing, restarted wherever an
 //! input changes; discrete models apply their map once per row. Optional *correction* slots
-//! (outputs of a synthesised closure, see [`super::locus`]) are held constant over each
+//! (outputs of a synthesised closure: the loci of `crate::diagnose`) are held constant over each
 //! interval. [`Simulator::sensitive_run`] carries the forward sensitivities to the params
 //! and the initial values along a free run ([`super::sensitivity`]).
 
-use super::DiagnoseError;
+use super::FitError;
 use crate::eval::{JacobianProgram, Program};
 use crate::ir::{Dynamics, Model, Var};
 use crate::record::Record;
@@ -70,8 +70,8 @@ impl Simulator {
         model: &Model,
         corrections: &[Var],
         tolerances: Tolerances,
-    ) -> Result<Self, DiagnoseError> {
-        let internal = |e: crate::eval::CompileError| DiagnoseError::internal(e.to_string());
+    ) -> Result<Self, FitError> {
+        let internal = |e: crate::eval::CompileError| FitError::internal(e.to_string());
         let mut system = ModelSystem::new(model).map_err(internal)?;
         let params: Vec<usize> = system.layout().param_range().collect();
         let dim = system.dim();
@@ -86,7 +86,7 @@ impl Simulator {
         let hidden_init = (model.hidden.iter())
             .map(|state| match &state.init {
                 Some(init) => Program::compile(init, system.layout()).map_err(internal),
-                None => Err(DiagnoseError::MissingInitial {
+                None => Err(FitError::MissingInitial {
                     state: state.name.clone(),
                 }),
             })
@@ -132,9 +132,8 @@ impl Simulator {
     }
 
     /// Compiles an expression of this model (e.g. a let's value) against its slots.
-    pub fn compile(&self, expr: &crate::ir::Expr) -> Result<Program, DiagnoseError> {
-        Program::compile(expr, self.system.layout())
-            .map_err(|e| DiagnoseError::internal(e.to_string()))
+    pub fn compile(&self, expr: &crate::ir::Expr) -> Result<Program, FitError> {
+        Program::compile(expr, self.system.layout()).map_err(|e| FitError::internal(e.to_string()))
     }
 
     /// Sets the params (constrained values, declaration order) from the first entries of

@@ -179,7 +179,7 @@ fn trimmed_mean(mut squares: Vec<f64>) -> (f64, f64) {
 
 /// Per measured state, the sum of the squares of its cells' residuals (rescaled to
 /// normalised units) and their count, from the residuals as
-/// [`super::fit::Objective::residuals`] gives them (row by row, state by state, scaled by
+/// [`super::fitter::Objective::residuals`] gives them (row by row, state by state, scaled by
 /// the square root of the training cells).
 pub fn by_state(split: &Split, residuals: &[f64]) -> Vec<(f64, usize)> {
     let states = split.normalisation.state_std.len();
@@ -222,7 +222,7 @@ pub fn cap_by_fit(estimates: &mut [NoiseEstimate], squares: &[(f64, usize)], unk
 
 /// `4 % + 0.01` (in the state's unit).
 fn declared_text(noise: &crate::ir::Noise) -> String {
-    use super::render::num;
+    use crate::numeric::text::num;
     let relative = (noise.relative > 0.0).then(|| format!("{} %", num(100.0 * noise.relative)));
     let absolute = (noise.absolute > 0.0).then(|| num(noise.absolute));
     [relative, absolute]

@@ -19,8 +19,8 @@
 //! units) gives the same trajectory. Free-run residuals are correlated in time, so the
 //! errors measure how sharply the data pin the fit, not confidence intervals.
 
-use super::fit::{slope, thetas, values, Objective};
-use super::report::FitSummary;
+use super::fitter::{slope, thetas, values, Objective};
+use super::summary::FitSummary;
 use crate::ir::Constraint;
 use crate::numeric::linalg::gauss_newton_system;
 use crate::numeric::lm::grouped_standard_errors;
