@@ -7,6 +7,7 @@
 mod build;
 mod error;
 mod guard;
+mod span;
 mod unit;
 
 pub use error::SyntaxError;

@@ -9,7 +9,7 @@ type Result<T> = std::result::Result<T, SyntaxError>;
 /// The largest exponent magnitude a unit may carry.
 const MAX_EXPONENT: i32 = 99;
 
-use super::build::span_of;
+use super::span::span_of;
 
 fn shape_error(pair: &Pair<Rule>) -> SyntaxError {
     SyntaxError::internal(pair.as_span().start(), "unexpected unit parse tree shape")
