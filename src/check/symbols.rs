@@ -193,3 +193,14 @@ fn declared(item: &Item, closure_index: usize) -> Vec<(&ast::Ident, Kind)> {
         _ => Vec::new(),
     }
 }
+
+/// A name as its declaring scope sees it.
+pub type Key = (Scope, String);
+
+/// The scope that declares `name` as seen from `scope`.
+pub fn owner(symbols: &Symbols, scope: Scope, name: &str) -> Scope {
+    match scope {
+        Scope::Effect(i) if symbols.effects.get(i).is_some_and(|e| e.contains_key(name)) => scope,
+        _ => Scope::Model,
+    }
+}

@@ -14,14 +14,11 @@
 //! then verification reports each disagreement once.
 
 use super::exprs::Evaluator;
-use super::symbols::{effect_items, Scope, Symbols};
+use super::symbols::{effect_items, owner, Key, Scope, Symbols};
 use super::{CheckError, Sink};
 use crate::ast::{self, ItemKind, Span};
 use crate::units::{conversion, resolve, Comparison, Symbol, Unit, SYMBOL_NAMES};
 use std::collections::HashMap;
-
-/// A name as its declaring scope sees it.
-pub type Key = (Scope, String);
 
 /// The unit of one name, declared or inferred.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,14 +47,6 @@ impl UnitTable {
     pub fn get(&self, symbols: &Symbols, scope: Scope, name: &str) -> Option<&UnitEntry> {
         self.names
             .get(&(owner(symbols, scope, name), name.to_string()))
-    }
-}
-
-/// The scope that declares `name` as seen from `scope`.
-pub fn owner(symbols: &Symbols, scope: Scope, name: &str) -> Scope {
-    match scope {
-        Scope::Effect(i) if symbols.effects.get(i).is_some_and(|e| e.contains_key(name)) => scope,
-        _ => Scope::Model,
     }
 }
 
