@@ -1,6 +1,7 @@
 //! The symbol table: every declared name, its kind, where it is declared and in which scope.
 
-use super::{CheckError, Sink};
+use super::error::CheckError;
+use super::sink::Sink;
 use crate::ast::{self, Item, ItemKind, Span};
 use std::collections::HashMap;
 
@@ -191,5 +192,16 @@ fn declared(item: &Item, closure_index: usize) -> Vec<(&ast::Ident, Kind)> {
             .map(|o| (&o.name, Kind::ClosureOutput(closure_index)))
             .collect(),
         _ => Vec::new(),
+    }
+}
+
+/// A name as its declaring scope sees it.
+pub type Key = (Scope, String);
+
+/// The scope that declares `name` as seen from `scope`.
+pub fn owner(symbols: &Symbols, scope: Scope, name: &str) -> Scope {
+    match scope {
+        Scope::Effect(i) if symbols.effects.get(i).is_some_and(|e| e.contains_key(name)) => scope,
+        _ => Scope::Model,
     }
 }

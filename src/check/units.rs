@@ -13,15 +13,14 @@
 //! undeclared name an equation determines (source order, repeated until nothing changes),
 //! then verification reports each disagreement once.
 
+use super::error::CheckError;
 use super::exprs::Evaluator;
-use super::symbols::{effect_items, Scope, Symbols};
-use super::{CheckError, Sink};
+use super::sink::Sink;
+use super::symbols::{effect_items, owner, Key, Scope, Symbols};
 use crate::ast::{self, ItemKind, Span};
+use crate::suggest::closest;
 use crate::units::{conversion, resolve, Comparison, Symbol, Unit, SYMBOL_NAMES};
 use std::collections::HashMap;
-
-/// A name as its declaring scope sees it.
-pub type Key = (Scope, String);
 
 /// The unit of one name, declared or inferred.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,14 +49,6 @@ impl UnitTable {
     pub fn get(&self, symbols: &Symbols, scope: Scope, name: &str) -> Option<&UnitEntry> {
         self.names
             .get(&(owner(symbols, scope, name), name.to_string()))
-    }
-}
-
-/// The scope that declares `name` as seen from `scope`.
-pub fn owner(symbols: &Symbols, scope: Scope, name: &str) -> Scope {
-    match scope {
-        Scope::Effect(i) if symbols.effects.get(i).is_some_and(|e| e.contains_key(name)) => scope,
-        _ => Scope::Model,
     }
 }
 
@@ -357,7 +348,7 @@ pub(super) fn unknown_unit(symbol: &str, span: Span) -> CheckError {
     });
     let suggestion = alias
         .map(|(_, unit)| *unit)
-        .or(super::closest(symbol, SYMBOL_NAMES))
+        .or(closest(symbol, SYMBOL_NAMES))
         .map(|best| format!("did you mean `{best}`?"));
     let help = refused.or(suggestion).unwrap_or_else(|| {
         format!(

@@ -1,8 +1,8 @@
 //! Sampling a typed program into a [`Signal`] on a simulation's time grid.
 
 use super::error::{ArgumentSource, SignalError};
+use super::piecewise::Signal;
 use super::program::{Hold, Levels, Number, Switch};
-use super::Signal;
 use crate::ir::Input;
 use miette::SourceSpan;
 use rand::{Rng, SeedableRng};

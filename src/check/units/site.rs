@@ -1,9 +1,8 @@
 //! The places where a unit is required: every expression of the model with the unit it
 //! must have.
 
-use super::Key;
 use crate::ast::{self, ClosureItem, Constraint, ItemKind, PatchOp, SExpr};
-use crate::check::symbols::{effect_items, Scope, Symbols};
+use crate::check::symbols::{effect_items, owner, Key, Scope, Symbols};
 
 /// What unit an expression must have.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,10 +55,7 @@ struct Collector<'a, 'b> {
 
 impl<'a> Collector<'a, '_> {
     fn key(&self, name: &str) -> Key {
-        (
-            super::owner(self.symbols, self.scope, name),
-            name.to_string(),
-        )
+        (owner(self.symbols, self.scope, name), name.to_string())
     }
 
     fn push(&mut self, expr: &'a SExpr, target: Target, context: String) {
