@@ -1,5 +1,6 @@
 //! Check diagnostics (spec section 6): every one has a code, a labelled span and a help line.
 
+use crate::suggest::closest;
 use miette::{Diagnostic, SourceSpan};
 use thiserror::Error;
 
@@ -492,4 +493,16 @@ pub enum CheckError {
         #[help]
         help: String,
     },
+}
+
+/// A "did you mean" help line for `name` among `candidates`, or a generic hint.
+pub fn suggest<'a>(
+    name: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+    what: &str,
+) -> String {
+    match closest(name, candidates) {
+        Some(best) => format!("did you mean `{best}`?"),
+        None => format!("declare it first, or check the spelling of the {what}"),
+    }
 }

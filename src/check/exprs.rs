@@ -1,9 +1,11 @@
 //! Expression checks: names resolve, functions exist with the right arity, constant
 //! expressions are constant, definitions are acyclic; and evaluation of constants.
 
+use super::error::{suggest, CheckError};
+use super::sink::Sink;
 use super::symbols::{effect_items, Kind, Scope, Symbols};
-use super::{suggest, CheckError, Sink};
 use crate::ast::{self, Expr, ItemKind, SExpr, Span};
+use crate::suggest::closest;
 use crate::vocabulary::Func;
 use std::collections::HashMap;
 
@@ -191,7 +193,7 @@ fn check_call(function: &ast::Ident, found: usize, span: Span, sink: &mut Sink) 
         sink.push(CheckError::UnknownFunction {
             name: function.node.clone(),
             span: function.span.into(),
-            help: match super::closest(&function.node, Func::ALL.iter().map(|f| f.name())) {
+            help: match closest(&function.node, Func::ALL.iter().map(|f| f.name())) {
                 Some(best) => format!("did you mean `{best}`?"),
                 None => format!(
                     "the functions are {}",

@@ -9,29 +9,17 @@
 mod error;
 pub mod exprs;
 pub mod noise;
+mod sink;
 mod structure;
 pub mod symbols;
 pub mod units;
 
-pub use error::CheckError;
+pub use error::{suggest, CheckError};
+pub use sink::Sink;
 pub use symbols::{Kind, Scope, Symbol, Symbols};
 
 use crate::ast;
 use std::collections::HashMap;
-
-/// Where check errors are collected.
-#[derive(Debug, Default)]
-pub struct Sink {
-    /// The errors so far, in the order found.
-    pub errors: Vec<CheckError>,
-}
-
-impl Sink {
-    /// Records an error.
-    pub fn push(&mut self, error: CheckError) {
-        self.errors.push(error);
-    }
-}
 
 /// A model that passed every check, with what the checks computed.
 #[derive(Debug, Clone)]
@@ -97,18 +85,6 @@ fn first_offset(error: &CheckError) -> usize {
         .labels()
         .and_then(|mut labels| labels.next())
         .map_or(0, |label| label.offset())
-}
-
-/// A "did you mean" help line for `name` among `candidates`, or a generic hint.
-pub fn suggest<'a>(
-    name: &str,
-    candidates: impl IntoIterator<Item = &'a str>,
-    what: &str,
-) -> String {
-    match closest(name, candidates) {
-        Some(best) => format!("did you mean `{best}`?"),
-        None => format!("declare it first, or check the spelling of the {what}"),
-    }
 }
 
 pub use crate::suggest::{closest, edit_distance};

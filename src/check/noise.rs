@@ -9,9 +9,10 @@
 //! the quantity has none, the number is taken in the quantity's own unit. A relative term
 //! above 100 % is allowed (the checks have no warnings).
 
+use super::error::CheckError;
+use super::sink::Sink;
 use super::symbols::{Kind, Scope, Symbols};
 use super::units::{shown, unknown_unit, UnitTable};
-use super::{CheckError, Sink};
 use crate::ast::{self, ItemKind, NoiseKind, NoiseTerm, Span};
 use crate::units::{resolve, Comparison, Unit};
 use std::collections::HashMap;

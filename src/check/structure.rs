@@ -1,10 +1,12 @@
 //! Structural checks: every state has exactly one balance, dynamics are not mixed, closures
 //! are well formed and used, params start inside their constraints, effects patch real names.
 
+use super::error::{suggest, CheckError};
 use super::exprs::{names, Evaluator};
+use super::sink::Sink;
 use super::symbols::{effect_items, Kind, Scope, Symbols};
-use super::{suggest, CheckError, Sink};
 use crate::ast::{self, ClosureItem, Constraint, ItemKind, Span};
+use crate::suggest::closest;
 use crate::vocabulary::Activation;
 use std::collections::{HashMap, HashSet};
 
@@ -338,7 +340,7 @@ fn check_network(
             sink.push(CheckError::UnknownActivation {
                 name: activation.node.clone(),
                 span: activation.span.into(),
-                help: match super::closest(&activation.node, names) {
+                help: match closest(&activation.node, names) {
                     Some(best) => format!("did you mean `{best}`?"),
                     None => format!("the activations are {}", names.join(", ")),
                 },
@@ -355,7 +357,7 @@ fn check_prior(
     sink: &mut Sink,
 ) {
     if !outputs.contains(&prior.target.node.as_str()) {
-        let help = match super::closest(&prior.target.node, outputs.iter().copied()) {
+        let help = match closest(&prior.target.node, outputs.iter().copied()) {
             Some(best) => format!("did you mean `{best}`?"),
             None => format!("its outputs are {}", outputs.join(", ")),
         };

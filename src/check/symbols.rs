@@ -1,6 +1,7 @@
 //! The symbol table: every declared name, its kind, where it is declared and in which scope.
 
-use super::{CheckError, Sink};
+use super::error::CheckError;
+use super::sink::Sink;
 use crate::ast::{self, Item, ItemKind, Span};
 use std::collections::HashMap;
 

@@ -13,10 +13,12 @@
 //! undeclared name an equation determines (source order, repeated until nothing changes),
 //! then verification reports each disagreement once.
 
+use super::error::CheckError;
 use super::exprs::Evaluator;
+use super::sink::Sink;
 use super::symbols::{effect_items, owner, Key, Scope, Symbols};
-use super::{CheckError, Sink};
 use crate::ast::{self, ItemKind, Span};
+use crate::suggest::closest;
 use crate::units::{conversion, resolve, Comparison, Symbol, Unit, SYMBOL_NAMES};
 use std::collections::HashMap;
 
@@ -346,7 +348,7 @@ pub(super) fn unknown_unit(symbol: &str, span: Span) -> CheckError {
     });
     let suggestion = alias
         .map(|(_, unit)| *unit)
-        .or(super::closest(symbol, SYMBOL_NAMES))
+        .or(closest(symbol, SYMBOL_NAMES))
         .map(|best| format!("did you mean `{best}`?"));
     let help = refused.or(suggestion).unwrap_or_else(|| {
         format!(

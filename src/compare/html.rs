@@ -5,8 +5,8 @@
 
 use std::fmt::Write;
 
-use super::score::number;
-use super::{Comparison, Curve, ExperimentScore, HeldOutRun, Score, SplitResult};
+use super::comparison::{Comparison, Curve, ExperimentScore, HeldOutRun, MemberRun, SplitResult};
+use super::score::{number, times, Score};
 use crate::plot::{clip, escape, figure, page as html_page, widened_range, Chart, Series, Style};
 use crate::record::Record;
 
@@ -99,8 +99,8 @@ fn score_table(scores: &[&ExperimentScore]) -> String {
             number(grey.range.0),
             number(grey.range.1),
             number(score.naive.error),
-            super::score::times(score.verdict.ratio_to_mechanism),
-            super::score::times(score.verdict.ratio_to_naive),
+            times(score.verdict.ratio_to_mechanism),
+            times(score.verdict.ratio_to_naive),
             grey.diverged.len(),
             grey.runs,
             score.verdict.standing,
@@ -235,7 +235,7 @@ fn state_chart<'a>(
             add(label, curve_of(held), OTHER_SEEDS, Style::Line);
         }
     }
-    let on = |run: &'a super::MemberRun| run.held_out.get(index).and_then(curve_of);
+    let on = |run: &'a MemberRun| run.held_out.get(index).and_then(curve_of);
     if let Some(run) = median.and_then(|m| split.grey_box.get(m)) {
         let label = format!("grey box, seed {} (median)", run.seed);
         add(&label, on(run), GREY_BOX, Style::Line);

@@ -13,7 +13,7 @@ use crate::record::measure::cell_error;
 use crate::record::{Normalisation, Record};
 use crate::train::ErrorSet;
 
-use super::Curve;
+use super::comparison::Curve;
 
 /// One training experiment's measured cells of one state: `(time since start, value)`,
 /// in time order.

@@ -4,8 +4,8 @@
 
 use std::fmt::Write;
 
-use super::score::number;
-use super::{Comparison, ExperimentScore, Score};
+use super::comparison::{Comparison, ExperimentScore};
+use super::score::{number, Score};
 
 /// The text report.
 pub fn text(comparison: &Comparison) -> String {

@@ -12,12 +12,11 @@ use crate::train::{
 };
 use crate::trained::predict::{predict_in_range, Mode};
 
+use super::comparison::{Comparison, Curve, HeldOutRun, MemberRun, SplitResult};
+use super::error::CompareError;
 use super::naive::Naive;
-use super::score::{overall, split_scores};
-use super::{
-    CompareError, Comparison, Curve, Event, HeldOutRun, Member, MemberRun, Options, SplitResult,
-    Splits,
-};
+use super::options::{Event, Member, Options, Splits};
+use super::scoring::{overall, split_scores};
 
 /// Compares `grey_box` with `mechanism` (closure-free, the same states) and the naive
 /// forecast on `options`' splits of `records` (bound to the grey box; `mechanism_records`
@@ -34,57 +33,13 @@ pub fn compare(
         .into_iter()
         .chain(options.seeds.iter().map(|&s| Member::GreyBox(s)))
         .collect();
-    let items: Vec<(usize, Member)> = (0..splits.len())
-        .flat_map(|split| members.iter().map(move |&m| (split, m)))
-        .collect();
-    let names: Vec<Vec<String>> = (splits.iter())
-        .map(|held| held.iter().map(|&i| records[i].name.clone()).collect())
-        .collect();
-    on_event(Event::Started {
-        runs: items.len(),
-        epochs: options.training.epochs,
-    });
-    let slots: Mutex<Vec<Option<Outcome>>> = Mutex::new((0..items.len()).map(|_| None).collect());
-    let work = |item: usize| -> Result<(), CompareError> {
-        let (split, member) = items[item];
-        let (model, bound) = match member {
-            Member::Mechanism => (mechanism, mechanism_records),
-            Member::Untrained | Member::GreyBox(_) => (grey_box, records),
-        };
-        let held_out = &names[split][..];
-        let parts = parted(bound, &splits[split]);
-        let mut on_epoch = |epoch| {
-            on_event(Event::Epoch {
-                member,
-                held_out,
-                epoch,
-            })
-        };
-        let started = Instant::now();
-        let outcome = match run_member(model, (&parts.0, &parts.1), options, member, &mut on_epoch)
-        {
-            Err(error @ (TrainError::Io(_) | TrainError::Backend(_))) => return Err(error.into()),
-            Err(error) if crate::error::is_bug(&error) => return Err(error.into()),
-            outcome => outcome,
-        };
-        let seconds = started.elapsed().as_secs_f64();
-        let error = outcome.as_ref().ok().and_then(|(run, _)| mean_error(run));
-        on_event(Event::Finished {
-            member,
-            held_out,
-            seconds,
-            error,
-        });
-        let outcome = outcome.map(|(run, norm)| (MemberRun { seconds, ..run }, norm));
-        lock(&slots)[item] = Some(outcome);
-        Ok(())
-    };
-    let unstarted = |message: String| CompareError::from(bug(message));
-    crate::experiment::execute::run_jobs(options.jobs, items.len(), &work, unstarted)?;
-    let mut outcomes = slots
-        .into_inner()
-        .unwrap_or_else(|p| p.into_inner())
-        .into_iter();
+    let jobs = Jobs::new(
+        (grey_box, mechanism),
+        (records, mechanism_records),
+        (&splits, &members),
+        options,
+    );
+    let mut outcomes = jobs.run(on_event)?.into_iter();
     let states: Vec<String> = grey_box.states.iter().map(|s| s.name.clone()).collect();
     let mut results = Vec::with_capacity(splits.len());
     for held in &splits {
@@ -103,6 +58,110 @@ pub fn compare(
         states,
         splits: results,
     })
+}
+
+/// Every training of a comparison: each member on each split, one job each.
+struct Jobs<'a> {
+    /// The grey box and the mechanism.
+    models: (&'a ir::Model, &'a ir::Model),
+    /// The experiments bound to the grey box, and bound to the mechanism.
+    records: (&'a [Record], &'a [Record]),
+    /// Each split's held-out experiments, by index.
+    splits: &'a [Vec<usize>],
+    /// Each split's held-out experiments, by name.
+    names: Vec<Vec<String>>,
+    /// Every job: a split and a member, split by split.
+    items: Vec<(usize, Member)>,
+    /// The comparison's options.
+    options: &'a Options,
+}
+
+impl<'a> Jobs<'a> {
+    /// The jobs of `members` on `splits`.
+    fn new(
+        models: (&'a ir::Model, &'a ir::Model),
+        records: (&'a [Record], &'a [Record]),
+        (splits, members): (&'a [Vec<usize>], &[Member]),
+        options: &'a Options,
+    ) -> Self {
+        let items = (0..splits.len())
+            .flat_map(|split| members.iter().map(move |&m| (split, m)))
+            .collect();
+        let names = (splits.iter())
+            .map(|held| held.iter().map(|&i| records.0[i].name.clone()).collect())
+            .collect();
+        Jobs {
+            models,
+            records,
+            splits,
+            names,
+            items,
+            options,
+        }
+    }
+
+    /// Runs every job on the options' threads; their outcomes, in job order.
+    fn run(&self, on_event: &(dyn Fn(Event) + Sync)) -> Result<Vec<Option<Outcome>>, CompareError> {
+        on_event(Event::Started {
+            runs: self.items.len(),
+            epochs: self.options.training.epochs,
+        });
+        let slots: Mutex<Vec<Option<Outcome>>> =
+            Mutex::new((0..self.items.len()).map(|_| None).collect());
+        let work = |item: usize| -> Result<(), CompareError> {
+            let outcome = self.run_one(item, on_event)?;
+            lock(&slots)[item] = Some(outcome);
+            Ok(())
+        };
+        let unstarted = |message: String| CompareError::from(bug(message));
+        crate::experiment::execute::run_jobs(
+            self.options.jobs,
+            self.items.len(),
+            &work,
+            unstarted,
+        )?;
+        Ok(slots.into_inner().unwrap_or_else(|p| p.into_inner()))
+    }
+
+    /// Trains and scores job `item`'s member on its split, telling `on_event` of its epochs
+    /// and its end; an I/O, backend or internal failure is an error, any other a failed
+    /// outcome.
+    fn run_one(
+        &self,
+        item: usize,
+        on_event: &(dyn Fn(Event) + Sync),
+    ) -> Result<Outcome, CompareError> {
+        let (split, member) = self.items[item];
+        let (model, bound) = match member {
+            Member::Mechanism => (self.models.1, self.records.1),
+            Member::Untrained | Member::GreyBox(_) => (self.models.0, self.records.0),
+        };
+        let held_out = &self.names[split][..];
+        let parts = parted(bound, &self.splits[split]);
+        let mut on_epoch = |epoch| {
+            on_event(Event::Epoch {
+                member,
+                held_out,
+                epoch,
+            })
+        };
+        let started = Instant::now();
+        let parts = (&parts.0[..], &parts.1[..]);
+        let outcome = match run_member(model, parts, self.options, member, &mut on_epoch) {
+            Err(error @ (TrainError::Io(_) | TrainError::Backend(_))) => return Err(error.into()),
+            Err(error) if crate::error::is_bug(&error) => return Err(error.into()),
+            outcome => outcome,
+        };
+        let seconds = started.elapsed().as_secs_f64();
+        let error = outcome.as_ref().ok().and_then(|(run, _)| mean_error(run));
+        on_event(Event::Finished {
+            member,
+            held_out,
+            seconds,
+            error,
+        });
+        Ok(outcome.map(|(run, norm)| (MemberRun { seconds, ..run }, norm)))
+    }
 }
 
 /// What one item left: its run and the normalisation it was scored with, or why it did not

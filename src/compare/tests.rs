@@ -5,7 +5,7 @@
 use super::naive::Naive;
 use super::*;
 use crate::record::{Normalisation, Record};
-use crate::train::{self, Part, TrainingData};
+use crate::train::{self, Part, Recipe, TrainOptions, TrainingData};
 
 /// A first-order decay with a learned correction `r` (no prior: zero in the mechanism).
 const GREY_BOX: &str = "model decay\ntime h\nstate x = 1\nparam k = 0.5 positive\n\

@@ -2,7 +2,8 @@
 //! requested columns, with cells that may be missing.
 
 use super::error::{ColumnRef, DataError, DataSource, Location};
-use super::source::{clean, clean_range, scan_record, span};
+use super::scan::{clean, clean_range, scan_record};
+use super::source::span;
 use crate::numeric::OffGrid;
 use miette::SourceSpan;
 use std::path::PathBuf;

@@ -1,15 +1,13 @@
 //! One data file: its delimiter and header, then its rows, grouped into experiments.
 
 use super::cells::{self, Cell};
-use super::error::DataError;
+use super::error::{ColumnRef, DataError, Location};
 use super::experiment::{Experiment, Origin, Series};
 use super::header::{Header, Layout};
+use super::request::Request;
+use super::scan::{blank_line_between, clean, clean_range, scan_record, skip_line_breaks};
 use super::sniff::{count_fields, sniff};
-use super::source::{
-    blank_line_between, clean, clean_range, column, delimiter_name, scan_record, skip_line_breaks,
-    span, Source,
-};
-use super::Request;
+use super::source::{column, delimiter_name, span, Source};
 use std::collections::HashMap;
 use std::ops::Range;
 
@@ -312,7 +310,7 @@ impl Reader<'_> {
     }
 
     /// A location at the current row, in the column at `position`.
-    fn at(&self, position: usize) -> Box<super::Location> {
+    fn at(&self, position: usize) -> Box<Location> {
         self.source()
             .at(self.row, column(position, self.header_text(position)))
     }
@@ -332,7 +330,7 @@ impl Reader<'_> {
                 values,
             })
             .collect();
-        let reference = |position: usize| super::ColumnRef {
+        let reference = |position: usize| ColumnRef {
             index: position + 1,
             name: header.cells[position].text.clone(),
         };

@@ -2,8 +2,9 @@
 //! names experiments, and which holds each requested column (`--column` mappings applied).
 
 use super::error::DataError;
-use super::source::{clean, clean_range, column, span, Source};
-use super::{Request, Role};
+use super::request::{Request, Role};
+use super::scan::{clean, clean_range};
+use super::source::{column, span, Source};
 use crate::suggest::closest;
 use std::collections::HashMap;
 use std::ops::Range;

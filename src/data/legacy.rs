@@ -4,10 +4,51 @@
 //! needs on top.
 
 use super::error::DataError;
+use super::request::{MinRows, Request, Wanted};
 use super::set::{check_length, check_times, experiments, load};
 use super::source::Source;
-use super::{Column, Dataset, MinRows, Request, Wanted};
 use std::path::{Path, PathBuf};
+
+/// One named column of a single record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// The requested name.
+    pub name: String,
+    /// Values, one per row.
+    pub values: Vec<f64>,
+}
+
+/// A single uniformly sampled, complete record: what [`read`] gives (the single-record
+/// view, retired once the commands read [`DataSet`](super::DataSet)s).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// Where it was read from (for messages).
+    pub path: PathBuf,
+    /// The time column.
+    pub times: Vec<f64>,
+    /// The sampling step (uniform).
+    pub step: f64,
+    /// The requested columns, in the order asked for.
+    pub columns: Vec<Column>,
+}
+
+impl Dataset {
+    /// The values of column `name`, if present.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| c.values.as_slice())
+    }
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.times.len()
+    }
+    /// Whether the record has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+}
 
 /// Reads the data file at `path`, keeping the time column and the `required` columns (in
 /// that order): one experiment, every requested cell measured, a uniform time step, and

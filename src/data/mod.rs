@@ -60,177 +60,20 @@ mod experiment;
 mod file;
 mod header;
 mod legacy;
+mod request;
+mod scan;
 mod set;
 mod sniff;
 mod source;
 
 pub use error::{ColumnRef, DataError, DataSource, Location};
 pub use experiment::{DataSet, Experiment, Origin, Series};
-pub use legacy::{read, read_str};
+pub use legacy::{read, read_str, Column, Dataset};
+pub use request::{parse_mapping, MinRows, Request, Role, Wanted};
 pub use set::{read_set, read_set_str};
 
 use crate::io::{write_atomic, IoError};
-use std::path::{Path, PathBuf};
-
-/// What a command needs from the data: the columns the model reads, with their roles, the
-/// `--column` mappings, and how many rows an experiment needs.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Request {
-    /// The columns, in the order the model wants them.
-    pub columns: Vec<Wanted>,
-    /// `--column NAME=HEADER` mappings, in the order given: NAME is a requested column,
-    /// `t` or `experiment`.
-    pub mapping: Vec<(String, String)>,
-    /// How many rows each experiment needs.
-    pub min_rows: MinRows,
-}
-
-impl Request {
-    /// A request for `columns`, with no mapping and no need beyond one row.
-    pub fn new(columns: Vec<Wanted>) -> Self {
-        Request {
-            columns,
-            mapping: Vec::new(),
-            min_rows: MinRows::new(1, "an experiment has at least one row"),
-        }
-    }
-    /// The same request with `--column` mappings.
-    pub fn with_mapping(mut self, mapping: Vec<(String, String)>) -> Self {
-        self.mapping = mapping;
-        self
-    }
-    /// The same request, needing `min_rows` rows per experiment.
-    pub fn with_min_rows(mut self, min_rows: impl Into<MinRows>) -> Self {
-        self.min_rows = min_rows.into();
-        self
-    }
-}
-
-/// Parses the argument of `--column`, `NAME=HEADER` (split at the first `=`, both sides
-/// trimmed, neither empty); the error says what was expected.
-pub fn parse_mapping(argument: &str) -> Result<(String, String), String> {
-    match argument.split_once('=') {
-        Some((name, header)) if !name.trim().is_empty() && !header.trim().is_empty() => {
-            Ok((name.trim().to_string(), header.trim().to_string()))
-        }
-        _ => Err(format!(
-            "expected NAME=HEADER (e.g. `X=Biomass`), found `{argument}`"
-        )),
-    }
-}
-
-/// A column the model reads, and what it is to the model.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Wanted {
-    /// The model's name for it (a header, or the NAME of a `--column` mapping).
-    pub name: String,
-    /// What it is.
-    pub role: Role,
-}
-
-impl Wanted {
-    /// An input column.
-    pub fn input(name: impl Into<String>) -> Self {
-        Wanted {
-            name: name.into(),
-            role: Role::Input,
-        }
-    }
-    /// A measured-state column.
-    pub fn state(name: impl Into<String>) -> Self {
-        Wanted {
-            name: name.into(),
-            role: Role::State,
-        }
-    }
-    /// An optional column.
-    pub fn optional(name: impl Into<String>) -> Self {
-        Wanted {
-            name: name.into(),
-            role: Role::Optional,
-        }
-    }
-}
-
-/// What a requested column is to the model, which decides what the reader demands of it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Role {
-    /// An input: a required column with a value at each experiment's first row. It holds
-    /// its last value until the next one (zero-order hold, applied by the consumer).
-    Input,
-    /// A measured state: a required column with at least one value in each experiment.
-    State,
-    /// Read if present (e.g. an observable that may be measured); absent or empty is fine.
-    Optional,
-}
-
-/// One named column of a single record.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Column {
-    /// The requested name.
-    pub name: String,
-    /// Values, one per row.
-    pub values: Vec<f64>,
-}
-
-/// A single uniformly sampled, complete record: what [`read`] gives (the single-record
-/// view, retired once the commands read [`DataSet`]s).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Dataset {
-    /// Where it was read from (for messages).
-    pub path: PathBuf,
-    /// The time column.
-    pub times: Vec<f64>,
-    /// The sampling step (uniform).
-    pub step: f64,
-    /// The requested columns, in the order asked for.
-    pub columns: Vec<Column>,
-}
-
-impl Dataset {
-    /// The values of column `name`, if present.
-    pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.columns
-            .iter()
-            .find(|c| c.name == name)
-            .map(|c| c.values.as_slice())
-    }
-    /// Number of rows.
-    pub fn len(&self) -> usize {
-        self.times.len()
-    }
-    /// Whether the record has no rows.
-    pub fn is_empty(&self) -> bool {
-        self.times.is_empty()
-    }
-}
-
-/// How many data rows a model needs, and why (for the message when an experiment has
-/// fewer).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct MinRows {
-    /// The least number of data rows (header excluded).
-    pub rows: usize,
-    /// Why, in words completing "expected at least N data rows (...)", e.g. "the embedding
-    /// needs 46 rows of history".
-    pub reason: String,
-}
-
-impl MinRows {
-    /// A requirement of `rows` data rows for `reason`.
-    pub fn new(rows: usize, reason: impl Into<String>) -> Self {
-        MinRows {
-            rows,
-            reason: reason.into(),
-        }
-    }
-}
-
-impl From<usize> for MinRows {
-    fn from(rows: usize) -> Self {
-        MinRows::new(rows, format!("the model needs {rows}"))
-    }
-}
+use std::path::Path;
 
 /// Writes a table as CSV, atomically: a header line, then one line per row. Numbers are
 /// written in their shortest form that reads back to the same `f64` (plain decimals, or

@@ -5,8 +5,8 @@ use super::error::DataError;
 use super::experiment::{DataSet, Experiment};
 use super::file::{open, read_rows, Opened};
 use super::header::{EXPERIMENT, TIME};
+use super::request::{MinRows, Request, Role};
 use super::source::Source;
-use super::{MinRows, Request, Role};
 use crate::suggest::did_you_mean;
 use std::path::PathBuf;
 

@@ -9,7 +9,7 @@
 //! with `,`. Ties go to tab, then `;`, then `,`: where `;` splits as well as `,` does, the
 //! commas are decimal commas or text.
 
-use super::source::{clean, scan_record, skip_line_breaks};
+use super::scan::{clean, scan_record, skip_line_breaks};
 
 /// The candidates, in order of preference on a tie.
 const CANDIDATES: [u8; 3] = [b'\t', b';', b','];

@@ -3,6 +3,7 @@
 use super::*;
 use crate::io::ScratchDir;
 use miette::Diagnostic;
+use std::path::PathBuf;
 
 type TestResult = Result<(), Box<dyn std::error::Error>>;
 

@@ -14,7 +14,7 @@
 
 use super::band::{calibrated_factor, BaseBand};
 use super::noise::StateNoise;
-use super::Run;
+use super::run::Run;
 use crate::numeric::median;
 use crate::record::measure::{cell_error, mean_over_states, StateErrors};
 use crate::record::Record;

@@ -2,24 +2,25 @@
 //! each state, the band's calibration, its coverage of the held-out experiments and the
 //! errors, written to `ensemble.json`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
 
 use super::calibrate::{self, MemberRuns};
+use super::error::EnsembleError;
+use super::info::{BandRule, EnsembleInfo, MemberInfo, ENSEMBLE_FILE, MEMBERS_DIR, RULE};
 use super::noise::{self, StateNoise};
-use super::{
-    resample, BandRule, EnsembleError, EnsembleInfo, MemberInfo, Resample, Run, ENSEMBLE_FILE,
-    MEMBERS_DIR, RULE,
-};
+use super::resample::{self, Resample};
+use super::run::Run;
 use crate::experiment::execute::run_jobs;
 use crate::ir;
 use crate::record::{Normalisation, Record};
 use crate::train::{
-    train_run, Event, Part, PhysicalRange, Recipe, RunControl, TrainError, TrainOptions,
-    TrainingData,
+    self, train_run, Event, History, Part, PhysicalRange, Recipe, RunControl, TrainError,
+    TrainOptions, TrainingData,
 };
 use crate::trained::artifacts;
+use crate::trained::keep::Keep;
 use crate::trained::predict::{predict_in_range, Mode};
 
 /// How many members, on what, on how many threads, and the level reported.
@@ -33,19 +34,6 @@ pub struct Plan {
     pub jobs: usize,
     /// The band level the coverage is counted at.
     pub level: f64,
-}
-
-/// Where the ensemble is written and what its runs record.
-#[derive(Debug, Clone)]
-pub struct Keep<'a> {
-    /// The run directory (`ensemble.json`, `members/`).
-    pub directory: PathBuf,
-    /// The model file as given, and its text.
-    pub model: (&'a str, &'a str),
-    /// The data files, in words.
-    pub data: &'a str,
-    /// Recoveries from a non-finite epoch per member.
-    pub recoveries: usize,
 }
 
 /// What a member is doing.
@@ -261,22 +249,7 @@ fn train_member(
     let seed = options.seed.wrapping_add(member as u64);
     let draws = resample::draws(plan.resample, data.train.len(), seed);
     let bag = drawn_records(data.train, &draws);
-    let names = |indices: &[usize]| -> Vec<String> {
-        (indices.iter())
-            .map(|&i| data.train[i].name.clone())
-            .collect()
-    };
-    let mut info = MemberInfo {
-        index: member + 1,
-        seed,
-        run: member_directory(member),
-        trained_on: names(&draws),
-        out_of_bag: names(&resample::out_of_bag(&draws, data.train.len())),
-        status: "finished".into(),
-        used: false,
-        validation_error: None,
-        seconds: 0.0,
-    };
+    let mut info = member_info(data.train, &draws, member, seed);
     on_event(MemberEvent::Started {
         member: member + 1,
         members: plan.members,
@@ -297,26 +270,8 @@ fn train_member(
         last_epoch,
         ..RunControl::default()
     };
-    let mut forward = |event: Event| match event {
-        Event::Epoch { epoch, .. } => on_event(MemberEvent::Epoch {
-            member: member + 1,
-            epoch,
-            epochs: options.epochs,
-        }),
-        Event::Phase(phase) => on_event(MemberEvent::Phase {
-            member: member + 1,
-            phase,
-        }),
-        _ => {}
-    };
-    let outcome = train_run(
-        model,
-        &member_data,
-        (&member_options, recipe),
-        &control,
-        &mut forward,
-    );
-    let trained = match outcome {
+    let how = (&member_options, recipe);
+    let trained = match train_one(model, &member_data, how, &control, (member, on_event)) {
         Ok(trained) => trained,
         Err(error @ (TrainError::Io(_) | TrainError::Backend(_))) => return Err(error.into()),
         Err(error) => {
@@ -333,16 +288,73 @@ fn train_member(
     if let Some(diverged) = &trained.report.diverged {
         info.status = format!("diverged: epoch {}, {}", diverged.epoch, diverged.what);
     }
-    let range = PhysicalRange::new(
-        &trained.setup.normalisation,
-        trained.report.recipe.range_factor,
-    );
     on_event(MemberEvent::Phase {
         member: member + 1,
         phase: RUNNING_FREE,
     });
-    let how = (Mode::Online, options.history, range.as_ref());
-    let runs = (data.train.iter().chain(data.validation))
+    let runs = free_runs(model, data, &trained, options.history);
+    info.used = trained.report.diverged.is_none();
+    info.seconds = started.elapsed().as_secs_f64();
+    Ok(Outcome { info, runs })
+}
+
+/// Member `member`'s (0-based) description before it trains: its seed, its run directory
+/// and the experiments it drew from `train` and left out of its bag.
+fn member_info(train: &[Record], draws: &[usize], member: usize, seed: u64) -> MemberInfo {
+    let names = |indices: &[usize]| -> Vec<String> {
+        (indices.iter()).map(|&i| train[i].name.clone()).collect()
+    };
+    MemberInfo {
+        index: member + 1,
+        seed,
+        run: member_directory(member),
+        trained_on: names(draws),
+        out_of_bag: names(&resample::out_of_bag(draws, train.len())),
+        status: "finished".into(),
+        used: false,
+        validation_error: None,
+        seconds: 0.0,
+    }
+}
+
+/// One member's training run, its epochs and phases told as [`MemberEvent`]s of member
+/// `member` (0-based).
+fn train_one(
+    model: &ir::Model,
+    data: &TrainingData,
+    (options, recipe): (&TrainOptions, &Recipe),
+    control: &RunControl,
+    (member, on_event): (usize, &(dyn Fn(MemberEvent) + Sync)),
+) -> Result<train::Trained, TrainError> {
+    let mut forward = |event: Event| match event {
+        Event::Epoch { epoch, .. } => on_event(MemberEvent::Epoch {
+            member: member + 1,
+            epoch,
+            epochs: options.epochs,
+        }),
+        Event::Phase(phase) => on_event(MemberEvent::Phase {
+            member: member + 1,
+            phase,
+        }),
+        _ => {}
+    };
+    train_run(model, data, (options, recipe), control, &mut forward)
+}
+
+/// A trained member's free runs along every experiment (the training ones, then the
+/// held-out ones), each cut where it diverges; an experiment it cannot run is an empty run.
+fn free_runs(
+    model: &ir::Model,
+    data: &TrainingData,
+    trained: &train::Trained,
+    history: History,
+) -> Vec<Run> {
+    let range = PhysicalRange::new(
+        &trained.setup.normalisation,
+        trained.report.recipe.range_factor,
+    );
+    let how = (Mode::Online, history, range.as_ref());
+    (data.train.iter().chain(data.validation))
         .map(|record| {
             let table = predict_in_range(model, &trained.network, &trained.setup, record, how);
             table.map_or_else(
@@ -353,10 +365,7 @@ fn train_member(
                 },
             )
         })
-        .collect();
-    info.used = trained.report.diverged.is_none();
-    info.seconds = started.elapsed().as_secs_f64();
-    Ok(Outcome { info, runs })
+        .collect()
 }
 
 /// The records of `draws`, in draw order; a repeated experiment is renamed `NAME (draw K)`.

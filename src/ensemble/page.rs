@@ -6,7 +6,10 @@
 use std::fmt::Write;
 
 use super::calibrate::{cells, CellCount};
-use super::{EnsembleInfo, Trained};
+use super::info::EnsembleInfo;
+use super::members::Trained;
+use super::resample::Resample;
+use super::run::Run;
 use crate::ir;
 use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style};
 use crate::record::Record;
@@ -40,8 +43,8 @@ pub fn ensemble_page(
         escape(&model.name),
         info.members.len(),
         match info.resample {
-            super::Resample::Experiments => "each on a bootstrap of whole training experiments",
-            super::Resample::None => "every member on every training experiment",
+            Resample::Experiments => "each on a bootstrap of whole training experiments",
+            Resample::None => "every member on every training experiment",
         },
         info.seed,
         info.seed + info.members.len().saturating_sub(1) as u64,
@@ -195,7 +198,7 @@ fn experiment_figures(
     title: &str,
 ) -> String {
     let info = &trained.info;
-    let runs: Vec<&super::Run> = (trained.members.iter())
+    let runs: Vec<&Run> = (trained.members.iter())
         .filter_map(|m| m.runs.get(index))
         .collect();
     let mut html = String::new();
@@ -239,7 +242,7 @@ fn experiment_figures(
 /// The share of the state's cells inside the band, in words.
 fn caption(
     record: &Record,
-    runs: &[&super::Run],
+    runs: &[&Run],
     info: &EnsembleInfo,
     (state, level): (usize, f64),
 ) -> String {

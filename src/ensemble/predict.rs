@@ -12,7 +12,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use super::calibrate::{count, CellCount};
-use super::{row_at, EnsembleError, EnsembleInfo, Run, ENSEMBLE_FILE};
+use super::error::EnsembleError;
+use super::info::{EnsembleInfo, ENSEMBLE_FILE};
+use super::noise::StateNoise;
+use super::run::{row_at, Run};
 use crate::error::Bug;
 use crate::experiment::execute::run_jobs;
 use crate::ir;
@@ -191,6 +194,46 @@ pub fn predict_table(
     (record, tables): (&Record, &[PredictionTable]),
     level: Option<f64>,
 ) -> Result<BandTable, EnsembleError> {
+    let header = common_header(tables)?;
+    let banding = Banding {
+        noise: &info.band.noise,
+        factors: (0..model.states.len())
+            .map(|s| level.and_then(|l| info.calibration.factor(s, l)))
+            .collect(),
+        state_columns: state_columns(model, &header)?,
+    };
+    let combined = combine(record, tables, header.len(), &banding);
+    let mut banded = Vec::new();
+    let mut full_header = header;
+    let mut columns = combined.columns;
+    for (state, (lo, hi)) in combined.bands.into_iter().enumerate() {
+        if banding.factors[state].is_some() {
+            let name = &model.states[state].name;
+            full_header.extend([format!("{name}_lo"), format!("{name}_hi")]);
+            columns.extend([lo, hi]);
+            banded.push(name.clone());
+        }
+    }
+    let coverage = match level.filter(|_| !banded.is_empty()) {
+        Some(level) => band_coverage(model, info, (record, tables), level, &banded),
+        None => Vec::new(),
+    };
+    Ok(BandTable {
+        table: PredictionTable {
+            header: full_header,
+            columns,
+            divergence: None,
+        },
+        banded,
+        coverage,
+        stopped: stopped_members(info, tables),
+        ended: combined.ended,
+    })
+}
+
+/// The header every member's table shares (an internal error where they differ or have
+/// none).
+fn common_header(tables: &[PredictionTable]) -> Result<Vec<String>, EnsembleError> {
     let header = (tables.first()).map_or_else(Vec::new, |t| t.header.clone());
     if header.is_empty() || tables.iter().any(|t| t.header != header) {
         return Err(Bug::new(
@@ -199,21 +242,52 @@ pub fn predict_table(
         )
         .into());
     }
-    let states = model.states.len();
-    let state_columns: Vec<usize> = (model.states.iter())
+    Ok(header)
+}
+
+/// The column of each of the model's states in `header`.
+fn state_columns(model: &ir::Model, header: &[String]) -> Result<Vec<usize>, EnsembleError> {
+    Ok((model.states.iter())
         .map(|s| header.iter().position(|h| *h == s.name))
         .collect::<Option<_>>()
-        .ok_or_else(|| Bug::new("the ensemble's prediction", "a state without its column"))?;
-    let noise = &info.band.noise;
-    let factors: Vec<Option<f64>> = (0..states)
-        .map(|s| level.and_then(|l| info.calibration.factor(s, l)))
-        .collect();
+        .ok_or_else(|| Bug::new("the ensemble's prediction", "a state without its column"))?)
+}
+
+/// How each state's band is made from the members' predictions.
+struct Banding<'a> {
+    /// The measurement noise of each state.
+    noise: &'a [StateNoise],
+    /// Each state's calibrated factor at the level asked for (`None`: no band).
+    factors: Vec<Option<f64>>,
+    /// The column of each state in the members' tables.
+    state_columns: Vec<usize>,
+}
+
+/// The members combined row by row.
+struct Combined {
+    /// The members' median of every column.
+    columns: Vec<Vec<f64>>,
+    /// Each state's band, lower and upper edge (empty for a state without one).
+    bands: Vec<(Vec<f64>, Vec<f64>)>,
+    /// The time from which fewer than half the members ran.
+    ended: Option<f64>,
+}
+
+/// The median of every column and each state's band, row by row from the first row any
+/// member predicts, until fewer than half the members that started still run.
+fn combine(
+    record: &Record,
+    tables: &[PredictionTable],
+    width: usize,
+    banding: &Banding,
+) -> Combined {
     let rows = member_rows(record, tables);
     let starts: Vec<usize> = (rows.iter())
         .map(|m| m.iter().position(Option::is_some).unwrap_or(record.len()))
         .collect();
-    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); header.len()];
-    let mut bands: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); states];
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); width];
+    let mut bands: Vec<(Vec<f64>, Vec<f64>)> =
+        vec![(Vec::new(), Vec::new()); banding.factors.len()];
     let mut ended = None;
     let first = starts.iter().copied().min().unwrap_or(record.len());
     for row in first..record.len() {
@@ -227,59 +301,60 @@ pub fn predict_table(
             let at: Vec<f64> = living.iter().map(|v| v[column]).collect();
             values.push(median(&at).unwrap_or(f64::NAN));
         }
+        banding.extend(&mut bands, &living);
+    }
+    Combined {
+        columns,
+        bands,
+        ended,
+    }
+}
+
+impl Banding<'_> {
+    /// Extends each banded state's `bands` by the band of the `living` members' row.
+    fn extend(&self, bands: &mut [(Vec<f64>, Vec<f64>)], living: &[&Vec<f64>]) {
         for (state, (lo, hi)) in bands.iter_mut().enumerate() {
-            let Some(factor) = factors[state] else {
+            let Some(factor) = self.factors[state] else {
                 continue;
             };
-            let predictions = living.iter().map(|v| v[state_columns[state]]);
-            let (l, h) = (noise[state].base_band(predictions))
+            let predictions = living.iter().map(|v| v[self.state_columns[state]]);
+            let (l, h) = (self.noise[state].base_band(predictions))
                 .map_or((f64::NAN, f64::NAN), |b| b.stretched(factor));
             lo.push(l);
             hi.push(h);
         }
     }
-    let mut banded = Vec::new();
-    let mut full_header = header;
-    for (state, (lo, hi)) in bands.into_iter().enumerate() {
-        if factors[state].is_some() {
-            let name = &model.states[state].name;
-            full_header.extend([format!("{name}_lo"), format!("{name}_hi")]);
-            columns.extend([lo, hi]);
-            banded.push(name.clone());
-        }
-    }
-    let coverage = match level.filter(|_| !banded.is_empty()) {
-        Some(level) => {
-            let runs: Vec<Run> = (tables.iter())
-                .map(|t| Run::of_table(t, record, states))
-                .collect();
-            let runs: Vec<&Run> = runs.iter().collect();
-            let (counts, _) = count(record, &runs, (noise, &info.calibration), level);
-            counts
-                .into_iter()
-                .filter(|c| banded.contains(&c.state))
-                .collect()
-        }
-        None => Vec::new(),
-    };
-    let stopped = (tables.iter().zip(info.used()))
+}
+
+/// The data's measured cells inside the band at `level`, per `banded` state.
+fn band_coverage(
+    model: &ir::Model,
+    info: &EnsembleInfo,
+    (record, tables): (&Record, &[PredictionTable]),
+    level: f64,
+    banded: &[String],
+) -> Vec<CellCount> {
+    let runs: Vec<Run> = (tables.iter())
+        .map(|t| Run::of_table(t, record, model.states.len()))
+        .collect();
+    let runs: Vec<&Run> = runs.iter().collect();
+    let noise = &info.band.noise;
+    let (counts, _) = count(record, &runs, (noise, &info.calibration), level);
+    counts
+        .into_iter()
+        .filter(|c| banded.contains(&c.state))
+        .collect()
+}
+
+/// Each member's divergence, in words (`member 3: ...`).
+fn stopped_members(info: &EnsembleInfo, tables: &[PredictionTable]) -> Vec<String> {
+    (tables.iter().zip(info.used()))
         .filter_map(|(t, m)| {
             t.divergence
                 .as_ref()
                 .map(|d| format!("member {}: {d}", m.index))
         })
-        .collect();
-    Ok(BandTable {
-        table: PredictionTable {
-            header: full_header,
-            columns,
-            divergence: None,
-        },
-        banded,
-        coverage,
-        stopped,
-        ended,
-    })
+        .collect()
 }
 
 /// Per member, per record row, the row of its table at that time (`None`: not predicted).

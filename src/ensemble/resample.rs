@@ -4,7 +4,17 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::Resample;
+/// What the members are trained on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Resample {
+    /// A bootstrap of whole training experiments (as many draws as experiments, with
+    /// replacement) per member: the experiments a member did not draw calibrate the band.
+    Experiments,
+    /// Every member on every training experiment, differing by seed alone (no member is
+    /// out of bag: the band cannot be calibrated).
+    None,
+}
 
 /// The stream of the generator the draws use (other users of a seed use stream 0).
 const STREAM: u64 = 0x656e_7365_6d62_6c65;

@@ -12,8 +12,8 @@
 //! Non-smooth functions get their one-sided derivative: `abs'(0) = 0`; `min(a, b)` follows
 //! `a` where `a <= b`, `max(a, b)` follows `a` where `a >= b`.
 
-use super::program::{balance_order, run, Builder, Instr, Operand};
-use super::{CompileError, Layout};
+use super::layout::Layout;
+use super::program::{balance_order, run, Builder, CompileError, Instr, Operand};
 use crate::ir::{BinOp, Expr, Func, Model};
 
 /// The partial derivatives of one register: `(column, value)` by increasing column.

@@ -6,8 +6,8 @@
 //! a `let` inlined in several balances is computed once per evaluation of a
 //! [`ProgramSet`].
 
+use super::layout::Layout;
 use super::scalar::{apply_binary, apply_func};
-use super::Layout;
 use crate::ir::{BinOp, Expr, Func, Model, Var};
 use std::collections::HashMap;
 

@@ -4,7 +4,7 @@
 use super::*;
 use crate::ir::{
     Balance, BinOp, Closure, ClosureOutput, Const, Constraint, Dynamics, Embedding, Expr, Func,
-    Input, Model, Network, Param, State,
+    Input, Model, Network, Param, State, Var,
 };
 use proptest::prelude::*;
 

@@ -2,10 +2,10 @@
 //! study's record over time and each input programme, with the row where validation starts
 //! marked, so a reader sees what the models were given before reading how they did.
 
-use super::figures::{axis_titles, color, Figure, DATA_COLOR, HEIGHT, WIDTH};
+use super::figure::{axis_titles, color, Figure, HEIGHT, WIDTH};
 use super::prepare::Prepared;
 use super::study::Validation;
-use crate::plot::{thin, Chart, Series, Style, MAX_POINTS};
+use crate::plot::{thin, Chart, Series, Style, DATA_COLOR, MAX_POINTS};
 
 /// Colour of the validation rows and of the mark where they start.
 const VALIDATION_COLOR: &str = crate::plot::SPLIT_COLOR;

@@ -12,38 +12,28 @@
 
 use std::path::{Path, PathBuf};
 
+use super::black_box::is_black_box;
+use super::data_figure::data_figures;
+use super::figure::{axis_titles, color, Figure, TrainedModel, HEIGHT, WIDTH};
+use super::held_out::held_out_figures;
 use super::prepare::{LoadedModel, Prepared};
 use super::reference::{first_predicted_row, free_run, true_params, truth_along, TruthRun};
 use super::results::{runs_of, summarise, RunResult, Spread};
 use crate::data::Dataset;
 use crate::engine::graph::{Network, Setup};
-use crate::plot::{clip, thin, widened_range, BarChart, Chart, Series, Style, MAX_POINTS, PALETTE};
+use crate::plot::{
+    clip, thin, widened_range, BarChart, Chart, Series, Style, DATA_COLOR, MAX_POINTS,
+};
 use crate::train::History;
 use crate::trained::artifacts;
 use crate::trained::predict::{predict, Mode, PredictionTable};
 
-/// Figure size in pixels.
-pub const WIDTH: f64 = 640.0;
-/// Figure height in pixels.
-pub const HEIGHT: f64 = 380.0;
-pub use crate::plot::DATA_COLOR;
 /// Errors above this are drawn at it in the MSE figures (an MSE of 1 is the error of
 /// predicting the mean; 100 is a free run ten standard deviations off).
 pub const MSE_CEILING: f64 = 100.0;
 /// Largest deviation (in standard deviations) of the truth from the data before the
 /// closure figures carry a warning.
 pub const TRUTH_TOLERANCE: f64 = 0.05;
-
-/// One figure.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Figure {
-    /// File stem (`<name>.svg`).
-    pub name: String,
-    /// A sentence saying what it shows.
-    pub caption: String,
-    /// The SVG document.
-    pub svg: String,
-}
 
 /// Where a run's weights are, if anywhere.
 pub type WeightsLookup<'a> = &'a dyn Fn(&str) -> Option<PathBuf>;
@@ -54,7 +44,7 @@ pub fn draw(
     results: &[RunResult],
     weights: WeightsLookup,
 ) -> (Vec<Figure>, Vec<String>) {
-    let mut figures = super::data_figure::data_figures(prepared);
+    let mut figures = data_figures(prepared);
     figures.push(mse_figure(prepared, results, Metric::Offline));
     figures.push(mse_figure(prepared, results, Metric::Online));
     let mut notes = Vec::new();
@@ -67,7 +57,7 @@ pub fn draw(
         }
     }
     if prepared.study.on_data_set() {
-        figures.extend(super::set::held_out_figures(prepared, &trained, size));
+        figures.extend(held_out_figures(prepared, &trained, size));
         notes.push(
             "the closure figures need one uniform record along which the truth runs: left out \
              on a data set"
@@ -102,22 +92,6 @@ pub enum Metric {
     Offline,
     /// Free run.
     Online,
-}
-
-/// The time axis title and the value axis title of quantity `name`, with units from the
-/// first model of the study that gives `name` one.
-pub fn axis_titles(prepared: &Prepared, name: &str) -> (String, String) {
-    let models = prepared.models.iter().map(|m| &m.model);
-    let time = (models.clone().find(|m| m.time_unit.is_some()))
-        .map_or_else(|| "time".to_string(), |m| m.time_label());
-    let axis = (models.clone().find(|m| m.units.names.contains_key(name)))
-        .map_or_else(|| name.to_string(), |m| m.axis_label(name));
-    (time, axis)
-}
-
-/// The colour of the model at `index` in the study.
-pub fn color(index: usize) -> &'static str {
-    PALETTE[index % PALETTE.len()]
 }
 
 /// Validation MSE against training points, median and min–max band per model.
@@ -212,9 +186,6 @@ fn restore_representative(
         .map_err(|error| format!("cannot restore run `{}`: {error}", run.id))?;
     Ok((network, setup, run.id.clone()))
 }
-
-/// A model's index in the study, its representative network and setup, and the run id.
-pub type TrainedModel = (usize, Network, Setup, String);
 
 /// Predictions of every restored model along `data`, with the notes of those that failed.
 fn predictions<'a>(
@@ -335,7 +306,7 @@ fn closure_figures(
     };
     let grey: Vec<&TrainedModel> = (trained.iter())
         .filter(|(index, ..)| !prepared.models[*index].model.closures.is_empty())
-        .filter(|(index, ..)| !super::is_black_box(&prepared.models[*index].model))
+        .filter(|(index, ..)| !is_black_box(&prepared.models[*index].model))
         .collect();
     let mut tables = Vec::new();
     for entry in &grey {

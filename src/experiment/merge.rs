@@ -6,7 +6,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::execute::claim_directory;
-use super::figures::{self, Figure};
+use super::figure::Figure;
+use super::figures;
 use super::prepare::{prepare, Prepared};
 use super::results::{self, RunResult};
 use super::{report, tables, ExperimentError, ExperimentFailure};

@@ -17,11 +17,14 @@
 //! - **Representative runs** for the trajectory figures: at the study's representative size,
 //!   the replicate with the median online error (the lower middle one for an even count).
 
+mod black_box;
 pub mod data_figure;
 mod error;
 pub mod execute;
+pub mod figure;
 pub mod figures;
 pub mod grid;
+pub mod held_out;
 pub mod merge;
 pub mod prepare;
 pub mod reference;
@@ -35,6 +38,7 @@ mod tests;
 #[cfg(test)]
 mod tests_run;
 
+pub use black_box::is_black_box;
 pub use error::{ExperimentError, ExperimentFailure};
 pub use execute::{execute, execute_until, Progress};
 pub use grid::{grid, RunSpec, Shard};
@@ -42,20 +46,6 @@ pub use merge::merge;
 pub use prepare::{prepare, LoadedModel, Prepared};
 pub use results::{RunResult, RunStatus, StudyRecord};
 pub use study::{DataFiles, Study, StudyModel, Validation};
-
-use crate::ir;
-
-/// Whether a model is a black box: a discrete map (`next`), or balances that are each a
-/// closure output alone (`der X = dX`).
-pub fn is_black_box(model: &ir::Model) -> bool {
-    // A continuous model is a black box when every balance is a bare closure output (its
-    // derivative learned whole, as `blackbox_ode.gbm`): no physics left in it.
-    let learned = |balance: &ir::Balance| {
-        matches!(balance.expr, ir::Expr::Var(ir::Var::ClosureOutput { .. }))
-    };
-    model.dynamics == ir::Dynamics::Discrete
-        || (!model.balances.is_empty() && model.balances.iter().all(learned))
-}
 
 /// The default number of runs at once (trainings, ensemble members): the number of cores.
 pub fn default_jobs() -> usize {

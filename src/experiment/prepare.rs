@@ -158,7 +158,9 @@ fn prepare_set(
     Ok(Prepared {
         record: study_record(study)?,
         study: study.clone(),
-        reference_scale: set::reference_scale(&models),
+        reference_scale: set::reference_scale(
+            (models.iter()).filter_map(|m| m.set.as_ref().map(|set| (&m.model, set))),
+        ),
         training: empty.clone(),
         validation_source: empty,
         models,

@@ -3,10 +3,12 @@
 
 use std::fmt::Write;
 
-use super::figures::{representative, Figure};
+use super::black_box::is_black_box;
+use super::figure::Figure;
+use super::figures::representative;
 use super::prepare::Prepared;
 use super::results::{runs_of, spread, summarise, RunResult, Spread, SummaryRow};
-use super::{is_black_box, Study, Validation};
+use super::{Study, Validation};
 use crate::plot::escape;
 
 /// How often a grey-box model's median error is below a black-box model's.
@@ -174,52 +176,103 @@ pub fn section(
 /// it loses (by median, size by size) and why.
 fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
     let rows = summarise(&prepared.study, results);
-    let summary = |label: &str, size: usize, online: bool| {
-        (rows.iter())
-            .find(|r| r.model == label && r.size == size)
-            .and_then(|r| if online { r.online } else { r.offline })
-    };
     let Some(black) = prepared.models.iter().find(|m| is_black_box(&m.model)) else {
         return String::new();
     };
     let sizes = prepared.study.sorted_sizes();
-    // "size 100" or "sizes 100, 200".
-    let list = |sizes: &[usize]| {
-        let names: Vec<String> = sizes.iter().map(ToString::to_string).collect();
-        let noun = if sizes.len() == 1 { "size" } else { "sizes" };
-        format!("{noun} {}", names.join(", "))
-    };
     let mut html = String::new();
     for grey in prepared.models.iter().filter(|m| !is_black_box(&m.model)) {
-        // Sizes where the grey box's median is below the black box's, the others, and
-        // those of either kind where each median lies inside the other's replicate range.
-        let split = |online: bool| {
-            let (mut wins, mut losses, mut ties) = (Vec::new(), Vec::new(), Vec::new());
-            for &size in &sizes {
-                let pair = (
-                    summary(&grey.label, size, online),
-                    summary(&black.label, size, online),
-                );
-                if let (Some(g), Some(b)) = pair {
-                    if g.median < b.median {
-                        wins.push(size);
-                    } else {
-                        losses.push(size);
-                    }
-                    let inside = |x: f64, range: &Spread| range.min <= x && x <= range.max;
-                    if inside(g.median, &b) && inside(b.median, &g) {
-                        ties.push(size);
-                    }
+        let duel = Duel {
+            rows: &rows,
+            grey: &grey.label,
+            black: &black.label,
+            sizes: &sizes,
+        };
+        let _ = writeln!(html, "{}", duel.verdict());
+    }
+    html
+}
+
+/// A grey box against a black box over a study's sizes, by the medians of its summary.
+struct Duel<'a> {
+    /// The study's summary rows.
+    rows: &'a [SummaryRow],
+    /// The grey box's label.
+    grey: &'a str,
+    /// The black box's label.
+    black: &'a str,
+    /// The study's sizes, smallest first.
+    sizes: &'a [usize],
+}
+
+/// Where a grey box stands against a black box in one error (online or offline).
+struct Tally {
+    /// Sizes where the grey box's median is below the black box's.
+    wins: Vec<usize>,
+    /// The other sizes where both have a median.
+    losses: Vec<usize>,
+    /// Sizes where each median lies inside the other's replicate range.
+    ties: Vec<usize>,
+}
+
+impl Duel<'_> {
+    /// The verdict's paragraph.
+    fn verdict(&self) -> String {
+        let online = self.tally(true);
+        let offline = self.tally(false);
+        let largest = self.sizes.last().copied().unwrap_or(0);
+        let at_largest = self.at_largest(largest);
+        let (win_note, loss_note) = if online.wins.contains(&largest) {
+            (at_largest, String::new())
+        } else {
+            (String::new(), at_largest)
+        };
+        let wins = wins_text(&online, &offline, self.sizes.len(), &win_note);
+        let losses = losses_text(&online, &offline, &loss_note);
+        let ties = ties_text(&online);
+        format!(
+            "<p><b>{}</b> against <b>{}</b>. <i>Where the grey box wins:</i> {wins}. \
+             <i>Where it loses:</i> {losses}.{ties}</p>",
+            escape(self.grey),
+            escape(self.black)
+        )
+    }
+
+    /// The spread of model `label`'s online or offline error at `size`.
+    fn summary(&self, label: &str, size: usize, online: bool) -> Option<Spread> {
+        (self.rows.iter())
+            .find(|r| r.model == label && r.size == size)
+            .and_then(|r| if online { r.online } else { r.offline })
+    }
+
+    /// The sizes the grey box wins, loses and ties in the online or offline error.
+    fn tally(&self, online: bool) -> Tally {
+        let (mut wins, mut losses, mut ties) = (Vec::new(), Vec::new(), Vec::new());
+        for &size in self.sizes {
+            let pair = (
+                self.summary(self.grey, size, online),
+                self.summary(self.black, size, online),
+            );
+            if let (Some(g), Some(b)) = pair {
+                if g.median < b.median {
+                    wins.push(size);
+                } else {
+                    losses.push(size);
+                }
+                let inside = |x: f64, range: &Spread| range.min <= x && x <= range.max;
+                if inside(g.median, &b) && inside(b.median, &g) {
+                    ties.push(size);
                 }
             }
-            (wins, losses, ties)
-        };
-        let (online_wins, online_losses, online_ties) = split(true);
-        let (offline_wins, offline_losses, _) = split(false);
-        let largest = sizes.last().copied().unwrap_or(0);
-        let at_largest = match (
-            summary(&grey.label, largest, true),
-            summary(&black.label, largest, true),
+        }
+        Tally { wins, losses, ties }
+    }
+
+    /// Both online medians at the `largest` size, as a note to a win or a loss.
+    fn at_largest(&self, largest: usize) -> String {
+        match (
+            self.summary(self.grey, largest, true),
+            self.summary(self.black, largest, true),
         ) {
             (Some(g), Some(b)) => format!(
                 "; at {largest} points online MSE {} against {}",
@@ -227,70 +280,76 @@ fn verdicts(prepared: &Prepared, results: &[RunResult]) -> String {
                 number(b.median)
             ),
             _ => String::new(),
-        };
-        let (win_note, loss_note) = if online_wins.contains(&largest) {
-            (at_largest, String::new())
-        } else {
-            (String::new(), at_largest)
-        };
-        let wins = match (online_wins.is_empty(), offline_wins.is_empty()) {
-            (false, _) => format!(
-                "the free run at {} of {} sizes ({}{win_note}), and one step ahead at {} \
-                 of them. The balances carry the grey box: the network learns only the \
-                 unknown rates, and an error in a rate shifts the trajectory without breaking \
-                 mass conservation, so it does not compound the way a black box's does",
-                online_wins.len(),
-                sizes.len(),
-                (online_wins.iter().map(ToString::to_string))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                offline_wins.len()
-            ),
-            (true, false) => format!(
-                "one step ahead only, at {}: the balances help the one-step fit, \
-                 but this grid gives no size where its free run is the better one",
-                list(&offline_wins)
-            ),
-            (true, true) => "nowhere in this grid".to_string(),
-        };
-        let losses = match (online_losses.is_empty(), offline_losses.is_empty()) {
-            (true, true) => "nowhere in this grid".to_string(),
-            (true, false) => format!(
-                "one step ahead at {}: judged from the measured history, the black \
-                 box's direct map to the next state fits as well or better, and its freedom \
-                 only costs it in the free run",
-                list(&offline_losses)
-            ),
-            (false, _) => format!(
-                "the free run at {}{loss_note}: with these training pairs and epochs \
-                 the learned rates are not yet right over the whole range of states the free \
-                 run visits, and the balances then carry a wrong rate forward{}",
-                list(&online_losses),
-                if offline_losses.is_empty() {
-                    String::new()
-                } else {
-                    format!("; one step ahead too at {}", list(&offline_losses))
-                }
-            ),
-        };
-        let ties = if online_ties.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " At {} the two free-run medians lie inside each other's replicate range: \
-                 a tie more than a win or a loss.",
-                list(&online_ties)
-            )
-        };
-        let _ = writeln!(
-            html,
-            "<p><b>{}</b> against <b>{}</b>. <i>Where the grey box wins:</i> {wins}. \
-             <i>Where it loses:</i> {losses}.{ties}</p>",
-            escape(&grey.label),
-            escape(&black.label)
-        );
+        }
     }
-    html
+}
+
+/// "size 100" or "sizes 100, 200".
+fn size_list(sizes: &[usize]) -> String {
+    let names: Vec<String> = sizes.iter().map(ToString::to_string).collect();
+    let noun = if sizes.len() == 1 { "size" } else { "sizes" };
+    format!("{noun} {}", names.join(", "))
+}
+
+/// Where the grey box wins, out of `compared` sizes, and why.
+fn wins_text(online: &Tally, offline: &Tally, compared: usize, note: &str) -> String {
+    match (online.wins.is_empty(), offline.wins.is_empty()) {
+        (false, _) => format!(
+            "the free run at {} of {} sizes ({}{note}), and one step ahead at {} \
+             of them. The balances carry the grey box: the network learns only the \
+             unknown rates, and an error in a rate shifts the trajectory without breaking \
+             mass conservation, so it does not compound the way a black box's does",
+            online.wins.len(),
+            compared,
+            (online.wins.iter().map(ToString::to_string))
+                .collect::<Vec<_>>()
+                .join(", "),
+            offline.wins.len()
+        ),
+        (true, false) => format!(
+            "one step ahead only, at {}: the balances help the one-step fit, \
+             but this grid gives no size where its free run is the better one",
+            size_list(&offline.wins)
+        ),
+        (true, true) => "nowhere in this grid".to_string(),
+    }
+}
+
+/// Where the grey box loses, and why.
+fn losses_text(online: &Tally, offline: &Tally, note: &str) -> String {
+    match (online.losses.is_empty(), offline.losses.is_empty()) {
+        (true, true) => "nowhere in this grid".to_string(),
+        (true, false) => format!(
+            "one step ahead at {}: judged from the measured history, the black \
+             box's direct map to the next state fits as well or better, and its freedom \
+             only costs it in the free run",
+            size_list(&offline.losses)
+        ),
+        (false, _) => format!(
+            "the free run at {}{note}: with these training pairs and epochs \
+             the learned rates are not yet right over the whole range of states the free \
+             run visits, and the balances then carry a wrong rate forward{}",
+            size_list(&online.losses),
+            if offline.losses.is_empty() {
+                String::new()
+            } else {
+                format!("; one step ahead too at {}", size_list(&offline.losses))
+            }
+        ),
+    }
+}
+
+/// The sizes where the free runs tie, as a sentence (empty without any).
+fn ties_text(online: &Tally) -> String {
+    if online.ties.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " At {} the two free-run medians lie inside each other's replicate range: \
+             a tie more than a win or a loss.",
+            size_list(&online.ties)
+        )
+    }
 }
 
 fn comparison_list(comparisons: &[Comparison]) -> String {

@@ -5,7 +5,6 @@
 //! `gbc train --train-points`), and every error is on the scale of the held-out
 //! experiments' measured cells.
 
-use super::prepare::LoadedModel;
 use super::{ExperimentError, ExperimentFailure, Study, Validation};
 use crate::data::MinRows;
 use crate::ir;
@@ -79,13 +78,12 @@ pub fn load(study: &Study, model: &ir::Model) -> Result<SetSplit, ExperimentFail
 /// The standard deviation of each measured state over the held-out experiments' measured
 /// cells, by name (the first model that has the state decides): the common scale of every
 /// error of the study.
-pub fn reference_scale(models: &[LoadedModel]) -> Vec<(String, f64)> {
+pub fn reference_scale<'a>(
+    models: impl IntoIterator<Item = (&'a ir::Model, &'a SetSplit)>,
+) -> Vec<(String, f64)> {
     let mut scale: Vec<(String, f64)> = Vec::new();
-    for loaded in models {
-        let Some(set) = &loaded.set else {
-            continue;
-        };
-        for (index, state) in loaded.model.states.iter().enumerate() {
+    for (model, set) in models {
+        for (index, state) in model.states.iter().enumerate() {
             if scale.iter().any(|(name, _)| name == &state.name) {
                 continue;
             }
@@ -112,93 +110,4 @@ pub fn available_pairs(
         &set.training_data(),
         options,
     )?)
-}
-
-/// Free runs of each held-out experiment (from its first row) by the representative run of
-/// every model, against the measured cells: one figure per experiment and state.
-pub fn held_out_figures(
-    prepared: &super::Prepared,
-    trained: &[super::figures::TrainedModel],
-    size: usize,
-) -> Vec<super::figures::Figure> {
-    use super::figures::{color, Figure, DATA_COLOR, HEIGHT, WIDTH};
-    use crate::plot::{clip, thin, widened_range, Chart, Series, Style, MAX_POINTS};
-    use crate::trained::predict::{predict, Mode};
-    let mut figures = Vec::new();
-    let Some(first) = prepared.models.iter().find_map(|m| m.set.as_ref()) else {
-        return figures;
-    };
-    for (held, record) in first.held.iter().enumerate() {
-        let states = &prepared.models[0].model.states;
-        for (index, state) in states.iter().enumerate() {
-            let cells: Vec<(f64, f64)> = (record.times.iter().zip(&record.states[index]))
-                .filter_map(|(t, cell)| cell.map(|v| (*t, v)))
-                .collect();
-            if cells.is_empty() {
-                continue;
-            }
-            let values: Vec<f64> = cells.iter().map(|(_, v)| *v).collect();
-            let range = widened_range(&values);
-            let title = format!(
-                "{}: free run of held-out {} ({size} training points): {}",
-                prepared.study.name, record.name, state.name
-            );
-            let (time, axis) = super::figures::axis_titles(prepared, &state.name);
-            let mut chart = Chart::new(&title, &time, &axis).with(
-                Series::line("data", cells)
-                    .styled(Style::Markers)
-                    .colored(DATA_COLOR),
-            );
-            for (model, network, setup, _) in trained {
-                let loaded = &prepared.models[*model];
-                let Some(own) = loaded.set.as_ref().and_then(|s| s.held.get(held)) else {
-                    continue;
-                };
-                let Ok(table) = predict(
-                    &loaded.model,
-                    network,
-                    setup,
-                    own,
-                    (Mode::Online, crate::train::History::Held),
-                ) else {
-                    continue;
-                };
-                let Some(column) = table.header.iter().position(|h| h == &state.name) else {
-                    continue;
-                };
-                let points =
-                    (table.columns[0].iter().copied()).zip(table.columns[column].iter().copied());
-                let (label, points) = clip(&loaded.label, points, range);
-                chart = chart.with(
-                    Series::line(&label, thin(points, MAX_POINTS))
-                        .styled(Style::Dashed)
-                        .colored(color(*model)),
-                );
-            }
-            figures.push(Figure {
-                name: format!("heldout_{}_{}", file_safe(&record.name), state.name),
-                caption: format!(
-                    "Free run of {} over the held-out experiment {}, from its first row and \
-                     driven by its inputs alone, by the median replicate of each model trained \
-                     on {size} points, against its measured cells.",
-                    state.name, record.name
-                ),
-                svg: chart.to_svg(WIDTH, HEIGHT),
-            });
-        }
-    }
-    figures
-}
-
-/// `name` with every character but letters, digits, `-` and `_` replaced by `_`.
-fn file_safe(name: &str) -> String {
-    (name.chars())
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
 }

@@ -2,8 +2,11 @@
 //! blank lines between them, and each entry printed in canonical form.
 
 use super::expr::{list, pieces, push_expr, text, wrap, Piece};
-use super::{comment_start, WIDTH};
 use crate::ast::{self, ClosureItem, Constraint, ItemKind, SExpr, SUnit, Span, Spanned};
+use crate::syntax::comment_start;
+
+/// Lines are wrapped beyond this many columns.
+pub const WIDTH: usize = 100;
 
 /// Prints `model` (parsed from `source`) in the canonical layout.
 pub fn print(source: &str, model: &ast::Model) -> String {

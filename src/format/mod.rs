@@ -15,13 +15,12 @@
 mod expr;
 mod layout;
 
+pub use layout::WIDTH;
+
 use crate::ast;
 use crate::syntax::{self, SyntaxError};
 use miette::Diagnostic;
 use thiserror::Error;
-
-/// Lines are wrapped beyond this many columns.
-pub const WIDTH: usize = 100;
 
 /// Why a file could not be formatted.
 #[derive(Debug, Clone, Error, Diagnostic, PartialEq)]

@@ -3,7 +3,7 @@
 //! fits this model's params with the one fitter of mechanistic params and starts the grey
 //! box from them (`docs/training.md`, "A grey box starts from its mechanism").
 
-use super::{Expr, Model, Var};
+use super::model::{Expr, Model, Var};
 
 impl Model {
     /// This model without closures: each closure output becomes its prior (`*=` and `+=`

@@ -12,65 +12,10 @@
 //! the declarations per quantity ([`merge_noise`]); a level of zero removes a quantity's
 //! noise.
 
-use super::{Model, QuantityUnit};
+use super::model::{Measured, Model, Noise, QuantityUnit};
 use crate::check::noise::NoiseLevel;
 use miette::Diagnostic;
 use thiserror::Error;
-
-/// A quantity that is compared with data: a measured state or an output.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Measured {
-    /// Measured state `states[i]`.
-    State(usize),
-    /// Output `outputs[i]` (measured where its name is a data column).
-    Output(usize),
-}
-
-/// The measurement noise of one quantity (combined error model): a measurement of value
-/// `y` has the standard deviation `sqrt(absolute^2 + (relative * y)^2)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Noise {
-    /// The quantity.
-    pub target: Measured,
-    /// Relative standard deviation, a fraction of the value (`4 %` is 0.04).
-    pub relative: f64,
-    /// Absolute standard deviation, in the quantity's unit.
-    pub absolute: f64,
-}
-
-impl Noise {
-    /// The standard deviation of a measurement of value `value`:
-    /// `sqrt(absolute^2 + (relative * value)^2)` (computed without overflow).
-    pub fn sigma(&self, value: f64) -> f64 {
-        self.absolute.hypot(self.relative * value)
-    }
-
-    /// The variance of a measurement of value `value`: `absolute^2 + (relative * value)^2`.
-    pub fn variance(&self, value: f64) -> f64 {
-        let relative = self.relative * value;
-        self.absolute * self.absolute + relative * relative
-    }
-
-    /// Whether both terms are zero (a noise-free quantity).
-    pub fn is_zero(&self) -> bool {
-        self.relative == 0.0 && self.absolute == 0.0
-    }
-
-    /// The level as a declaration writes it, without a unit: `4 % + 0.01`, `3 %`, `0.05`.
-    pub fn level_text(&self) -> String {
-        let mut terms = Vec::new();
-        if self.relative != 0.0 {
-            terms.push(format!(
-                "{} %",
-                crate::ast::format_number(self.relative * 100.0)
-            ));
-        }
-        if self.absolute != 0.0 || terms.is_empty() {
-            terms.push(crate::ast::format_number(self.absolute));
-        }
-        terms.join(" + ")
-    }
-}
 
 impl Model {
     /// The name of a measured quantity.

@@ -18,7 +18,9 @@
 //! something that may be zero or negative, and the like: a zero factor does not make such
 //! a term vanish.
 
-use super::{BinOp, ClosureOutput, Constraint, Expr, Func, Model, PriorKind, Var};
+use super::model::{ClosureOutput, Constraint, Expr, Model, PriorKind, Var};
+use crate::ast::BinOp;
+use crate::vocabulary::Func;
 
 /// The signs a value can take: a set of negative, zero, positive, plus whether it may fail
 /// to be finite (infinite or NaN).

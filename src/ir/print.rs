@@ -1,7 +1,10 @@
 //! The canonical text form of a compiled model (`gbc compile --emit ir`): deterministic,
 //! one fact per line, expressions printed with names. Golden files test this text.
 
-use super::*;
+use super::model::{
+    var_name, Closure, Constraint, Definition, Dynamics, Expr, Measured, Model, PriorKind,
+    QuantityUnit,
+};
 use crate::ast::{self, format_number, Span, Spanned};
 use std::fmt::Write;
 
@@ -11,18 +14,6 @@ pub fn print(model: &Model) -> String {
     // Writing into a String cannot fail.
     let _ = write_model(&mut out, model);
     out
-}
-
-/// The name of a variable in `model`.
-pub fn var_name(model: &Model, var: Var) -> &str {
-    match var {
-        Var::Input(i) => &model.inputs[i].name,
-        Var::State(i) => &model.states[i].name,
-        Var::Hidden(i) => &model.hidden[i].name,
-        Var::Const(i) => &model.consts[i].name,
-        Var::Param(i) => &model.params[i].name,
-        Var::ClosureOutput { closure, output } => &model.closures[closure].outputs[output].name,
-    }
 }
 
 /// An expression of `model` as source text.

@@ -9,7 +9,7 @@ use super::frame::{
     legend_width, open, text, text_width, write_legend, Entry, Frame, CHAR_WIDTH, LEGEND_GAP,
     MARGIN_BOTTOM, MARGIN_LEFT, MARGIN_RIGHT, MARGIN_TOP,
 };
-use super::{Style, MARKER_RADIUS, PALETTE};
+use super::style::{Style, MARKER_RADIUS, PALETTE};
 
 /// Grouped bars: one group per category, one bar per named value set.
 #[derive(Debug, Clone, PartialEq, Default)]

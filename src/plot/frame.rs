@@ -5,7 +5,8 @@
 use std::fmt::Write;
 
 use super::axis::{tick_label, Axis};
-use super::{escape, Style};
+use super::markup::escape;
+use super::style::{Style, BAND_OPACITY};
 
 /// Room left of the plot area (tick labels and the turned y-axis title), in pixels.
 pub(super) const MARGIN_LEFT: f64 = 70.0;
@@ -188,17 +189,13 @@ pub(super) fn write_legend(
     // is).
     for entry in entries.iter().filter(|e| !e.name.is_empty()) {
         let color = entry.color;
-        let dash = if entry.style == Style::Dashed {
-            r#" stroke-dasharray="5,3""#
-        } else {
-            ""
-        };
+        let dash = entry.style.dash();
         if entry.shaded {
             writeln!(
                 svg,
                 r#"<rect x="{x}" y="{}" width="20" height="10" fill="{color}" fill-opacity="{}"/>"#,
                 y - 9.0,
-                super::line::BAND_OPACITY
+                BAND_OPACITY
             )?;
         } else if entry.style != Style::Markers {
             writeln!(

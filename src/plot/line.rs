@@ -8,36 +8,7 @@ use super::frame::{
     legend_width, open, write_legend, Entry, Frame, LEGEND_GAP, MARGIN_BOTTOM, MARGIN_LEFT,
     MARGIN_RIGHT, MARGIN_TOP,
 };
-use super::PALETTE;
-
-/// How a series is drawn.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Style {
-    /// A polyline through the points.
-    Line,
-    /// A dashed polyline.
-    Dashed,
-    /// A circle at each point.
-    Markers,
-    /// A polyline with a circle at each point.
-    LineMarkers,
-}
-
-impl Style {
-    fn dash(self) -> &'static str {
-        if self == Style::Dashed {
-            r#" stroke-dasharray="5,3""#
-        } else {
-            ""
-        }
-    }
-}
-
-/// Opacity of a band's shading (and of its legend sample).
-pub const BAND_OPACITY: f64 = 0.18;
-
-/// Radius of markers unless a series says otherwise, in pixels.
-pub const MARKER_RADIUS: f64 = 3.0;
+use super::style::{Style, BAND_OPACITY, MARKER_RADIUS, PALETTE};
 
 /// One named series of points, optionally with a band (`lower`, `upper` per point).
 #[derive(Debug, Clone, PartialEq)]

@@ -17,31 +17,17 @@ mod axis;
 mod bar;
 mod frame;
 mod line;
+mod markup;
 mod page;
 mod points;
+mod style;
 #[cfg(test)]
 mod tests;
 
 pub use axis::{linear_ticks, log_ticks, tick_label};
 pub use bar::{Bar, BarChart, Bars};
-pub use line::{Chart, Mark, Series, Style, MARKER_RADIUS};
+pub use line::{Chart, Mark, Series};
+pub use markup::escape;
 pub use page::{figure, page};
 pub use points::{clip, thin, titled, widened_range, MAX_POINTS};
-
-/// Colour of measured data and of the truth in every report.
-pub const DATA_COLOR: &str = "#000000";
-/// Colour of the line where training ends and validation starts, in every report.
-pub const SPLIT_COLOR: &str = "#888888";
-
-/// Colours cycled through by series without an explicit colour.
-pub const PALETTE: [&str; 8] = [
-    "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
-];
-
-/// Escapes text for SVG/HTML.
-pub fn escape(text: &str) -> String {
-    text.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
+pub use style::{Style, DATA_COLOR, MARKER_RADIUS, PALETTE, SPLIT_COLOR};

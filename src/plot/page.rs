@@ -2,7 +2,7 @@
 
 use std::fmt::Write;
 
-use super::escape;
+use super::markup::escape;
 
 /// A whole HTML page: a title, an introduction (HTML) and sections (HTML), the one style
 /// of every gbc report.

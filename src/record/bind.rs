@@ -6,7 +6,7 @@
 //! state without a column is simply not measured; every model `output` is read where a
 //! column (or a `--column` mapping) names it.
 
-use super::{Observable, Record};
+use super::experiment::{Observable, Record};
 use crate::data::{DataSet, Experiment, MinRows, Request, Wanted};
 use crate::ir;
 

@@ -19,7 +19,7 @@
 //!   knots), clamped to the first knot before the record (history held at its first value)
 //!   and to the last after it.
 
-use super::Record;
+use super::experiment::Record;
 use crate::numeric::rounding;
 
 /// How a record is laid on its grid.

@@ -4,7 +4,7 @@
 use super::error::SignalError;
 use super::generate::Context;
 use super::parse::Piece;
-use super::Signal;
+use super::piecewise::Signal;
 use crate::data::{read_set, Experiment, Request, Series, Wanted};
 use crate::suggest::did_you_mean;
 use std::path::PathBuf;

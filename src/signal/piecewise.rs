@@ -1,4 +1,4 @@
-//! The signal type: a piecewise-constant function of time.
+//! A piecewise-constant signal: the values an input holds between its breaks.
 
 use super::error::SignalError;
 

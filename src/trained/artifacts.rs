@@ -22,8 +22,8 @@ use crate::train::evaluate::PhysicalRange;
 use crate::train::recipe::DEFAULT_RANGE_FACTOR;
 use crate::train::tensors::{bad_run, read_tensors, write_tensors, NOT_FINITE_HELP};
 use crate::train::{
-    Engine, Metrics, ParamEstimate, PolishSummary, Recipe, TrainError, TrainOptions, Trained,
-    Warning,
+    Engine, Metrics, ParamEstimate, PolishSummary, Recipe, TrainError, TrainOptions, TrainReport,
+    Trained, Warning,
 };
 
 /// File name of the weights inside a run directory.
@@ -216,41 +216,9 @@ pub fn run_info(
 ) -> RunInfo {
     let setup = &trained.setup;
     let report = &trained.report;
-    let name_of = |var: ir::Var| match var {
-        ir::Var::Input(i) => model.inputs[i].name.clone(),
-        ir::Var::State(i) => model.states[i].name.clone(),
-        other => format!("{other:?}"),
-    };
-    let closures = (model.closures.iter().zip(&setup.scales))
-        .map(|(closure, scales)| ClosureInfo {
-            name: closure.name.clone(),
-            observe: closure
-                .embedding
-                .observe
-                .iter()
-                .map(|&v| name_of(v))
-                .collect(),
-            delay: closure.embedding.delay,
-            dim: closure.embedding.dim,
-            scales: (closure.outputs.iter().zip(scales))
-                .map(|(o, &value)| NamedValue {
-                    name: o.name.clone(),
-                    value,
-                })
-                .collect(),
-        })
-        .collect();
     RunInfo {
         gbc_version: env!("CARGO_PKG_VERSION").to_string(),
-        model: ModelInfo {
-            name: model.name.clone(),
-            path: model_path.to_string(),
-            source_sha256: source_hash(source),
-            structure: structure(model),
-            structure_sha256: fingerprint(&structure(model)),
-            source_file: Some(SOURCE_FILE.to_string()),
-            source: source.to_string(),
-        },
+        model: model_info(model, model_path, source),
         data: data_path.to_string(),
         dynamics: match model.dynamics {
             ir::Dynamics::Continuous => "der".into(),
@@ -263,22 +231,14 @@ pub fn run_info(
         inputs: model.inputs.iter().map(|i| i.name.clone()).collect(),
         states: model.states.iter().map(|s| s.name.clone()).collect(),
         normalisation: setup.normalisation.clone(),
-        closures,
+        closures: closure_infos(model, &setup.scales),
         params: (report.params.iter())
             .map(|(name, value)| NamedValue {
                 name: name.clone(),
                 value: *value,
             })
             .collect(),
-        training: TrainingInfo {
-            epochs: options.epochs,
-            batch_size: options.batch_size,
-            learning_rate: options.learning_rate,
-            train_pairs: report.train_pairs,
-            validation_pairs: report.validation_pairs,
-            final_loss: report.losses.last().copied(),
-            engine: report.engine,
-        },
+        training: training_info(options, report),
         recipe: Some(report.recipe.clone()),
         estimates: report.estimates.clone(),
         polish: report.polish.clone(),
@@ -296,6 +256,62 @@ pub fn run_info(
         },
         recoveries: report.recoveries.clone(),
         toward_mechanism: report.toward_mechanism.clone(),
+    }
+}
+
+/// The model trained: its name, the file as given, its source and structure with their
+/// hashes.
+fn model_info(model: &ir::Model, path: &str, source: &str) -> ModelInfo {
+    ModelInfo {
+        name: model.name.clone(),
+        path: path.to_string(),
+        source_sha256: source_hash(source),
+        structure: structure(model),
+        structure_sha256: fingerprint(&structure(model)),
+        source_file: Some(SOURCE_FILE.to_string()),
+        source: source.to_string(),
+    }
+}
+
+/// Each closure's embedding (the quantities it observes by name) and the magnitude
+/// `scales` of its outputs.
+fn closure_infos(model: &ir::Model, scales: &[Vec<f64>]) -> Vec<ClosureInfo> {
+    let name_of = |var: ir::Var| match var {
+        ir::Var::Input(i) => model.inputs[i].name.clone(),
+        ir::Var::State(i) => model.states[i].name.clone(),
+        other => format!("{other:?}"),
+    };
+    (model.closures.iter().zip(scales))
+        .map(|(closure, scales)| ClosureInfo {
+            name: closure.name.clone(),
+            observe: closure
+                .embedding
+                .observe
+                .iter()
+                .map(|&v| name_of(v))
+                .collect(),
+            delay: closure.embedding.delay,
+            dim: closure.embedding.dim,
+            scales: (closure.outputs.iter().zip(scales))
+                .map(|(o, &value)| NamedValue {
+                    name: o.name.clone(),
+                    value,
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// How the run trained: the options asked for and the pairs, loss and engine it had.
+fn training_info(options: &TrainOptions, report: &TrainReport) -> TrainingInfo {
+    TrainingInfo {
+        epochs: options.epochs,
+        batch_size: options.batch_size,
+        learning_rate: options.learning_rate,
+        train_pairs: report.train_pairs,
+        validation_pairs: report.validation_pairs,
+        final_loss: report.losses.last().copied(),
+        engine: report.engine,
     }
 }
 

@@ -8,13 +8,14 @@
 //! A fold that cannot train or validate is reported with why, and the others still are;
 //! a fold whose training goes non-finite keeps its last finite weights, like any run.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use crate::ir;
 use crate::record::Record;
 
 use super::artifacts;
+pub use super::keep::Keep;
 use super::predict::{predict_in_range, Mode};
 use crate::train::{
     train_run, EpochDivergence, ErrorSet, Event, Part, PhysicalRange, Recipe, RunControl,
@@ -71,19 +72,6 @@ pub struct CrossValidation {
     /// Median over folds of the overall online error (infinite where a fold diverged).
     #[serde(with = "crate::json")]
     pub median_online: Option<f64>,
-}
-
-/// Where and how the folds are kept.
-#[derive(Debug, Clone)]
-pub struct Keep<'a> {
-    /// The run directory ([`CV_DIR`] goes under it).
-    pub directory: PathBuf,
-    /// The model file as given, and its text (for each fold's `run.json`).
-    pub model: (&'a str, &'a str),
-    /// The data files, in words.
-    pub data: &'a str,
-    /// Recoveries from a non-finite epoch per fold ([`RunControl::recoveries`]).
-    pub recoveries: usize,
 }
 
 /// Who hears of the folds: `(on_fold, on_event)` of [`cross_validate`].

@@ -9,5 +9,6 @@
 
 pub mod artifacts;
 pub mod cv;
+pub mod keep;
 pub mod page;
 pub mod predict;

@@ -11,7 +11,7 @@ use crate::ir;
 use crate::plot::{escape, figure, page, thin, tick_label, Chart, Series, Style, PALETTE};
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Record;
-use crate::train::{History, Trained};
+use crate::train::{History, TrainReport, Trained};
 use crate::train::{ParamEstimate, PhysicalRange};
 
 /// Figure width in pixels.
@@ -47,6 +47,33 @@ pub fn run_page(
     (history, horizons): (History, &[usize]),
     title: &str,
 ) -> String {
+    let shown = shown_experiments(model, trained, (train, validation), history);
+    let report = &trained.report;
+    let sections = vec![
+        training_section(report, horizons, title),
+        fit_section(model, trained, &shown),
+        params_section(report),
+        states_section(model, trained, &shown, title),
+        closures_section(model, &shown, title),
+    ];
+    page(
+        &format!("{title}: training report"),
+        &format!(
+            "<p>Model <code>{}</code>. Every figure is drawn from the saved run: rerun \
+             <code>gbc predict</code> for the tables behind them.</p>",
+            escape(&model.name)
+        ),
+        &sections,
+    )
+}
+
+/// Every experiment, training ones first, with its role and both predictions along it.
+fn shown_experiments<'a>(
+    model: &ir::Model,
+    trained: &Trained,
+    (train, validation): (&'a [Record], &'a [Record]),
+    history: History,
+) -> Vec<Shown<'a>> {
     // The run's own physical range: a free run the training's validation called diverged
     // is drawn and scored as diverged here too.
     let range = PhysicalRange::new(
@@ -63,7 +90,7 @@ pub fn run_page(
         )
         .ok()
     };
-    let shown: Vec<Shown> = (train.iter().map(|r| (r, "training")))
+    (train.iter().map(|r| (r, "training")))
         .chain(validation.iter().map(|r| (r, "validation")))
         .map(|(record, role)| Shown {
             record,
@@ -71,9 +98,12 @@ pub fn run_page(
             offline: predicted(record, Mode::Offline),
             online: predicted(record, Mode::Online),
         })
-        .collect();
-    let report = &trained.report;
-    let mut sections = Vec::new();
+        .collect()
+}
+
+/// The training section: pairs, epochs and recipe, how errors are measured, and the loss
+/// curve (or why there is none).
+fn training_section(report: &TrainReport, horizons: &[usize], title: &str) -> String {
     let losses = if report.losses.is_empty() {
         match &report.mechanism_fit {
             Some(fit) => format!(
@@ -97,7 +127,7 @@ pub fn run_page(
             },
         )
     };
-    sections.push(format!(
+    format!(
         "<h2>Training</h2>\n<p>{} pairs, {} epochs ({} recipe), learning rate {}, grid step up to \
          {}. Errors are over measured cells only; NMSE is the paper's (squared error over the \
          training data's variance), fit is MATLAB's <code>100 (1 - |y - ŷ| / |y - mean y|)</code> \
@@ -107,19 +137,6 @@ pub fn run_page(
         report.recipe.objective.name(),
         tick_label(report.learning_rate),
         tick_label(report.dt),
-    ));
-    sections.push(fit_section(model, trained, &shown));
-    sections.push(params_section(report));
-    sections.push(states_section(model, trained, &shown, title));
-    sections.push(closures_section(model, &shown, title));
-    page(
-        &format!("{title}: training report"),
-        &format!(
-            "<p>Model <code>{}</code>. Every figure is drawn from the saved run: rerun \
-             <code>gbc predict</code> for the tables behind them.</p>",
-            escape(&model.name)
-        ),
-        &sections,
     )
 }
 
@@ -274,7 +291,7 @@ pub fn nmse(pairs: &[(f64, f64)], scale: f64) -> f64 {
 }
 
 /// Params with standard errors and identifiability.
-fn params_section(report: &crate::train::TrainReport) -> String {
+fn params_section(report: &TrainReport) -> String {
     if report.params.is_empty() {
         return String::new();
     }

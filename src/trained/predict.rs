@@ -19,7 +19,7 @@ use crate::record::{Record, Track};
 
 use crate::engine::pairs::stage_fractions;
 use crate::record::grid::grid_for;
-use crate::train::evaluate::{run_in, simulate, Divergence, Feed, PhysicalRange};
+use crate::train::evaluate::{run_in, simulate, Divergence, Feed, PhysicalRange, Trajectory};
 use crate::train::initial::initial_state;
 use crate::train::recipe::DEFAULT_RANGE_FACTOR;
 use crate::train::split::{window_start, History};
@@ -145,18 +145,8 @@ pub fn predict_on_track(
     (mode, range): (Mode, Option<&PhysicalRange>),
 ) -> Result<PredictionTable, TrainError> {
     let first = start.knot;
-    let initial = start.hidden_initial.to_vec();
     let fractions = stage_fractions(model.dynamics, setup.substeps);
-    let run_in = run_in(network, model, &track, &fractions, &initial)?;
-    for (state, values) in run_in.states.iter().enumerate() {
-        track.fill(state, values);
-    }
-    let mut hidden_start = run_in.hidden.get(first).cloned().unwrap_or(initial);
-    for (value, given) in hidden_start.iter_mut().zip(start.hidden_at_start) {
-        if let Some(given) = given {
-            *value = *given;
-        }
-    }
+    let hidden_start = run_in_hidden(model, network, &mut track, &fractions, start)?;
     let last = track.len() - 1;
     // Free runs and one step from the data control their steps (a stiff interval is
     // integrated stably either way); `OnlineTrainedStep` iterates the trained map.
@@ -186,6 +176,40 @@ pub fn predict_on_track(
             )
             .collect(),
     };
+    Ok(PredictionTable {
+        header: table_header(model),
+        columns: table_columns(&track, (first, last), &states, &run),
+        divergence: run.divergence,
+    })
+}
+
+/// Runs the hidden states in along `track` from its first knot, filling the states the
+/// data do not know; the hidden states at `start.knot`, with those `start` gives replacing
+/// the run-in values.
+fn run_in_hidden(
+    model: &ir::Model,
+    network: &Network,
+    track: &mut Track,
+    fractions: &[f64],
+    start: Start,
+) -> Result<Vec<f64>, TrainError> {
+    let initial = start.hidden_initial.to_vec();
+    let run_in = run_in(network, model, track, fractions, &initial)?;
+    for (state, values) in run_in.states.iter().enumerate() {
+        track.fill(state, values);
+    }
+    let mut hidden_start = run_in.hidden.get(start.knot).cloned().unwrap_or(initial);
+    for (value, given) in hidden_start.iter_mut().zip(start.hidden_at_start) {
+        if let Some(given) = given {
+            *value = *given;
+        }
+    }
+    Ok(hidden_start)
+}
+
+/// The columns of a prediction table: time, the states (measured, then hidden), every
+/// closure output, then every model output.
+fn table_header(model: &ir::Model) -> Vec<String> {
     let mut header = vec!["t".to_string()];
     header.extend(
         model
@@ -200,6 +224,18 @@ pub fn predict_on_track(
             .map(|o| o.name.clone()),
     );
     header.extend(model.outputs.iter().map(|o| o.name.clone()));
+    header
+}
+
+/// The table's columns at the knots `first..=last` that are record rows: the times, the
+/// predicted `states`, and the run's closure outputs and model outputs.
+fn table_columns(
+    track: &Track,
+    (first, last): (usize, usize),
+    states: &[Vec<f64>],
+    run: &Trajectory,
+) -> Vec<Vec<f64>> {
+    let knots = last + 1 - first;
     let rows: Vec<usize> = (first..=last)
         .filter(|&k| track.rows[k].is_some())
         .collect();
@@ -208,19 +244,15 @@ pub fn predict_on_track(
         rows.iter().map(|&k| padded[k - first].clone()).collect()
     };
     let mut columns = vec![rows.iter().map(|&k| track.times[k]).collect()];
-    columns.extend(transpose(&pick(&states)));
+    columns.extend(transpose(&pick(states)));
     columns.extend(transpose(&pick(&run.closure_outputs)));
     columns.extend(transpose(&pick(&run.outputs)));
-    Ok(PredictionTable {
-        header,
-        columns,
-        divergence: run.divergence,
-    })
+    columns
 }
 
 /// The states of a free run at each of `rows` rows: the offending state at the row where
 /// it stopped, `NaN` after.
-fn stopped_states(run: &crate::train::evaluate::Trajectory, rows: usize) -> Vec<Vec<f64>> {
+fn stopped_states(run: &Trajectory, rows: usize) -> Vec<Vec<f64>> {
     let mut states = run.states.clone();
     if run.divergence.is_some() {
         if let Some(last) = run.next_states.last() {

@@ -2,7 +2,16 @@
 //! outputs, observed variables and networks), the balances with their patches, the units
 //! and the effects' source lines.
 
-use super::*;
+use super::error::LowerError;
+use super::lowerer::{combine, Lowerer};
+use crate::ast::{self, ItemKind, PatchOp};
+use crate::check::Scope;
+use crate::ir::model::{
+    uses_closure, Balance, Closure, ClosureOutput, Effect, Embedding, Expr, Model, Network, Prior,
+    PriorKind, QuantityUnit, Units, Var,
+};
+use crate::vocabulary::Activation;
+use std::collections::HashMap;
 
 impl<'a> Lowerer<'a> {
     pub(super) fn closure(&mut self, decl: &ast::ClosureDecl) -> Result<Closure, LowerError> {
@@ -229,25 +238,5 @@ fn effect_lines(kind: &ItemKind) -> Vec<String> {
             patch.expr.node
         )],
         _ => Vec::new(),
-    }
-}
-
-pub(super) fn closure_outputs(decl: &ast::ClosureDecl) -> Vec<&ast::Ident> {
-    decl.items
-        .iter()
-        .filter_map(|line| match &line.node {
-            ast::ClosureItem::Outputs(list) => Some(list),
-            _ => None,
-        })
-        .flatten()
-        .map(|o| &o.name)
-        .collect()
-}
-
-pub(super) fn combine(value: Expr, op: PatchOp, term: Expr) -> Expr {
-    match op {
-        PatchOp::Mul => Expr::Bin(BinOp::Mul, Box::new(value), Box::new(term)),
-        PatchOp::Add => Expr::Bin(BinOp::Add, Box::new(value), Box::new(term)),
-        PatchOp::Set => term,
     }
 }

@@ -7,61 +7,13 @@
 //! expression is one term. The balance patches of applied effects (`der X += e`) add
 //! their terms the same way.
 
-use super::*;
+use super::error::{LowerError, NegativeLearnedTerm};
+use super::lowerer::{Lowerer, MAX_DEPTH};
+use crate::ast::{self, BinOp, PatchOp, SExpr, Span};
+use crate::check::Scope;
+use crate::ir::model::{uses_closure, Dynamics, Expr, Model, Var};
 use crate::ir::nonnegative::{self, Signs};
-
-/// E0136: a learned term that can drive a `nonnegative` state below zero.
-#[derive(Debug, Clone, Error, Diagnostic, PartialEq)]
-#[error("a learned term can drive `{state}` below zero{applied}")]
-#[diagnostic(code(gbm::E0136))]
-pub struct NegativeLearnedTerm {
-    /// The state declared `nonnegative`.
-    pub state: String,
-    /// ` (with effect `E` applied)`, or empty.
-    pub applied: String,
-    /// Why the term is not proven, in words.
-    pub why: String,
-    /// The term, as written (in the balance, a `let` it uses, or an effect's patch).
-    #[label("{why}")]
-    pub span: miette::SourceSpan,
-    /// Where the state is declared `nonnegative`.
-    #[label("declared `nonnegative` here")]
-    pub declared: miette::SourceSpan,
-    /// The rewrite that passes.
-    #[help]
-    pub help: String,
-}
-
-/// The E0136 errors of each effect applied alone, for a model that lowers cleanly without
-/// effects: `gbc check` reports a patch that adds a learned term a `nonnegative` state
-/// cannot take, though nothing applies it yet (other errors of an effect show where it is
-/// applied).
-pub fn effect_violations(checked: &Checked) -> Vec<LowerError> {
-    let effects: Vec<&ast::EffectDecl> =
-        crate::check::symbols::effect_items(&checked.ast).collect();
-    let items = (checked.ast.items.iter()).chain(effects.iter().flat_map(|e| &e.items));
-    let declared = items
-        .filter_map(|item| match &item.kind {
-            ItemKind::State(list) | ItemKind::Hidden(list) => Some(list),
-            _ => None,
-        })
-        .flatten()
-        .any(|binding| binding.nonnegative.is_some());
-    if !declared || !checked.is_trainable() {
-        return Vec::new();
-    }
-    let mut found: Vec<LowerError> = Vec::new();
-    for effect in effects {
-        let Err(errors) = lower_reporting(checked, &[effect.name.node.as_str()]) else {
-            continue;
-        };
-        let violations = errors
-            .into_iter()
-            .filter(|e| matches!(e, LowerError::NegativeLearnedTerm(_)));
-        found.extend(violations);
-    }
-    found
-}
+use std::collections::HashMap;
 
 /// One additive term of a balance as written.
 struct Term {
