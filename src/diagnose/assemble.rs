@@ -2,13 +2,13 @@
 //! noise floor, the memory verdict, windows and regimes, series for plots, starts and the
 //! split.
 
+use super::context::{Context, SIGNIFICANCE};
 use super::effects::{Ranking, Scored};
 use super::evaluate::{offline_errors, regimes, windows, Variable};
 use super::locus::{Located, HISTORY_MARGIN, PRESENT_RESIDUAL};
 use super::render::num;
 use super::report::*;
 use super::selection::Levels;
-use super::{origin, Context};
 use crate::record::measure;
 use crate::solve::fit::noise;
 use crate::solve::fit::simulate::Simulator;
@@ -103,7 +103,7 @@ pub fn memory(
         time_constants: taus.to_vec(),
         reason: String::new(),
     };
-    let significant = levels.gap_before > super::SIGNIFICANCE * levels.noise_floor;
+    let significant = levels.gap_before > SIGNIFICANCE * levels.noise_floor;
     let Some(first) = located.loci.first().filter(|_| significant) else {
         memory.reason = if significant {
             "not probed: the free corrections were not tried".into()
@@ -329,5 +329,16 @@ pub fn split_summary(context: &Context) -> SplitSummary {
             Holdout::Tail(share) => Some(share),
             Holdout::Experiments => None,
         },
+    }
+}
+
+/// Where a measured state's run starts, in words.
+fn origin(start: Start) -> &'static str {
+    match start {
+        Start::Cell => "measured",
+        Start::Declared => "declared",
+        Start::Fitted(_) => "fitted",
+        Start::CellFitted(_) => "measured, fitted from its cell",
+        Start::Fixed(_) => "first measured value",
     }
 }

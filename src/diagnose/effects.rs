@@ -2,10 +2,11 @@
 //! alone, each candidate effect alone (ranked, with a block-bootstrap confidence), and
 //! forward selection of several effects ([`super::selection`]).
 
+use super::context::{Context, Progress};
+use super::error::DiagnoseError;
 use super::evaluate::{scored_errors, Errors};
 use super::ranking::{compare, Comparison, RESAMPLES};
 use super::report::{Confidence, EffectScore, FitSummary};
-use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Model};
 use crate::solve::fit::fitter::{Fitted, Starts};
 use crate::solve::fit::model::{fit_model, ModelFit};

@@ -25,14 +25,15 @@
 //! leaves more than [`PRESENT_RESIDUAL`] of the excess gap (the gap before, above the noise
 //! floor) and history at most 1 / [`HISTORY_MARGIN`] of what the present leaves.
 
+use super::context::{Context, Progress};
 use super::correction::{self, Corrected, LocusValue, Pass, Solution};
+use super::error::DiagnoseError;
 use super::evaluate::Errors;
 use super::features::FeatureMap;
 use super::graph::Graph;
 use super::ranking::compare;
 use super::refine::{refine, score, Refinement};
 use super::report::{Locus, LocusKind};
-use super::{Context, DiagnoseError, Progress};
 use crate::ir::{self, Constraint, Var};
 use crate::numeric::{mean_std, root_mean_square};
 use crate::solve::fit::fitter::thetas;
@@ -172,6 +173,22 @@ impl Trial {
     fn bound(&self) -> f64 {
         self.best().map_or(f64::INFINITY, |v| v.gap)
     }
+
+    /// The report's entry for this trial (`tied`: with the best).
+    fn locus(&self, tied: bool) -> Locus {
+        let gap = |v: &Option<Variant>| v.as_ref().map_or(f64::INFINITY, |v| v.gap);
+        Locus {
+            name: self.target.name.clone(),
+            kind: self.target.kind,
+            members: self.target.members.clone(),
+            bound_after: self.bound(),
+            bound_present: gap(&self.present),
+            bound_history: gap(&self.history),
+            tied,
+            depth: self.target.depth,
+            seconds: self.seconds,
+        }
+    }
 }
 
 /// Tries every target with the fitted model `x` (params, then fitted starts) and the history
@@ -223,12 +240,43 @@ pub fn locate(
     summarise(context, trials, gaps)
 }
 
+/// The loci in the report's order (the best and those tied with it first, most specific
+/// and upstream first), the memory verdict at the first and its correction along the data.
 fn summarise(
     context: &Context,
     mut trials: Vec<Trial>,
-    (gap_before, noise_floor): (f64, f64),
+    gaps: (f64, f64),
 ) -> Result<Located, DiagnoseError> {
     trials.sort_by(|a, b| a.bound().total_cmp(&b.bound()));
+    let tied = tied_with_best(context, &trials, gaps);
+    let order = report_order(&trials, &tied);
+    let loci: Vec<Locus> = (order.iter()).map(|&i| trials[i].locus(tied[i])).collect();
+    let (gap_before, noise_floor) = gaps;
+    let excess = |gap: f64| (gap - noise_floor).max(0.0);
+    let history_dependent = loci.first().is_some_and(|best| {
+        excess(best.bound_present) > PRESENT_RESIDUAL * excess(gap_before)
+            && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
+    });
+    let along = order.first().and_then(|&i| {
+        let trial = &trials[i];
+        let variant = trial.present.as_ref().filter(|v| v.gap.is_finite())?;
+        (trial.target.members.len() == 1).then(|| along(context, trial, variant))
+    });
+    Ok(Located {
+        loci,
+        history_dependent,
+        along,
+    })
+}
+
+/// Per trial (sorted by bound), whether it is the best or tied with it: within
+/// [`TIE_FACTOR`] of the best bound and either not told apart from it by the block
+/// bootstrap or upstream of it and leaving nearly as little of the gap ([`NEAR_TIE`]).
+fn tied_with_best(
+    context: &Context,
+    trials: &[Trial],
+    (gap_before, noise_floor): (f64, f64),
+) -> Vec<bool> {
     let sums: Vec<_> = (trials.iter())
         .map(|t| match t.best() {
             Some(v) => context.blocks.sums(&v.errors),
@@ -248,13 +296,18 @@ fn summarise(
         upstream(i)
             && excess(trials[i].bound()) - excess(best_bound) < NEAR_TIE * excess(gap_before)
     };
-    let tied: Vec<bool> = (0..trials.len())
+    (0..trials.len())
         .map(|i| {
             i == 0
                 || (trials[i].bound() <= TIE_FACTOR * best_bound
                     && (comparison.tied_with_best(i) || as_much(i)))
         })
-        .collect();
+        .collect()
+}
+
+/// The order of the trials in the report: the tied ones first, by kind and deepest first,
+/// then every other by bound.
+fn report_order(trials: &[Trial], tied: &[bool]) -> Vec<usize> {
     let mut order: Vec<usize> = (0..trials.len()).collect();
     order.sort_by(|&a, &b| {
         let key = |i: usize| {
@@ -273,37 +326,7 @@ fn summarise(
             .then(depth(b).cmp(&depth(a)))
             .then(trials[a].bound().total_cmp(&trials[b].bound()))
     });
-    let loci: Vec<Locus> = (order.iter())
-        .map(|&i| {
-            let trial = &trials[i];
-            let gap = |v: &Option<Variant>| v.as_ref().map_or(f64::INFINITY, |v| v.gap);
-            Locus {
-                name: trial.target.name.clone(),
-                kind: trial.target.kind,
-                members: trial.target.members.clone(),
-                bound_after: trial.bound(),
-                bound_present: gap(&trial.present),
-                bound_history: gap(&trial.history),
-                tied: tied[i],
-                depth: trial.target.depth,
-                seconds: trial.seconds,
-            }
-        })
-        .collect();
-    let history_dependent = loci.first().is_some_and(|best| {
-        excess(best.bound_present) > PRESENT_RESIDUAL * excess(gap_before)
-            && excess(best.bound_present) > HISTORY_MARGIN * excess(best.bound_history)
-    });
-    let along = order.first().and_then(|&i| {
-        let trial = &trials[i];
-        let variant = trial.present.as_ref().filter(|v| v.gap.is_finite())?;
-        (trial.target.members.len() == 1).then(|| along(context, trial, variant))
-    });
-    Ok(Located {
-        loci,
-        history_dependent,
-        along,
-    })
+    order
 }
 
 /// The model with corrections at `target`; `None` when no balance uses them.

@@ -56,8 +56,34 @@ fn header(out: &mut String, report: &Report) {
     );
 }
 
+/// Section 1: how large the gap is against the noise, the fitted params and starts, each
+/// state's share and, for a significant gap, where and when it lies.
 fn where_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "1. Where the gap lies");
+    gap_lines(out, report);
+    fit_lines(out, "fitted params", &report.base_fit);
+    for start in &report.initial_states {
+        let _ = writeln!(
+            out,
+            "   initial {} of {}: {} ({})",
+            start.state,
+            start.experiment,
+            num(start.value),
+            start.origin
+        );
+    }
+    state_table(out, &report.states);
+    if !report.significant {
+        let _ = writeln!(out);
+        return;
+    }
+    loci(out, report);
+    when_lines(out, report);
+    let _ = writeln!(out);
+}
+
+/// The gap before against the noise floor, with its verdict, and the mean error per state.
+fn gap_lines(out: &mut String, report: &Report) {
     let ratio = if !report.gap_before.is_finite() {
         "-".to_string()
     } else if report.noise_floor > 0.0 {
@@ -84,23 +110,16 @@ fn where_section(out: &mut String, report: &Report) {
         "   error before {} (the mean over states of each state's NMSE, the measure of gbc train and predict; the gap pools cells)",
         num(report.gap_before_per_state)
     );
-    fit_lines(out, "fitted params", &report.base_fit);
-    for start in &report.initial_states {
-        let _ = writeln!(
-            out,
-            "   initial {} of {}: {} ({})",
-            start.state,
-            start.experiment,
-            num(start.value),
-            start.origin
-        );
-    }
+}
+
+/// Each measured state's share of the gap, its errors and its noise.
+fn state_table(out: &mut String, states: &[StateGap]) {
     let _ = writeln!(
         out,
         "   {:<12} {:>8} {:>10} {:>10} {:>10}  noise from",
         "state", "share", "online", "offline", "noise"
     );
-    for state in &report.states {
+    for state in states {
         let _ = writeln!(
             out,
             "   {:<12} {:>8} {:>10} {:>10} {:>10}  {}",
@@ -112,11 +131,10 @@ fn where_section(out: &mut String, report: &Report) {
             state.noise_estimate
         );
     }
-    if !report.significant {
-        let _ = writeln!(out);
-        return;
-    }
-    loci(out, report);
+}
+
+/// When and in which regime the error lies, and the formulas proposed for the correction.
+fn when_lines(out: &mut String, report: &Report) {
     for window in report.windows.iter().take(3) {
         let _ = writeln!(
             out,
@@ -143,7 +161,6 @@ fn where_section(out: &mut String, report: &Report) {
             hint.target, hint.r2, hint.text
         );
     }
-    let _ = writeln!(out);
 }
 
 /// The params of a fit with their standard errors, flags and free direction.
@@ -260,12 +277,25 @@ pub fn phrase(regime: &Regime) -> String {
     }
 }
 
+/// Section 2: every effect ranked, how certain the ranking is, and the sets of effects
+/// the selection tried.
 fn which_section(out: &mut String, report: &Report) {
     let _ = writeln!(out, "2. Which effects cause it");
     if report.effects.is_empty() {
         let _ = writeln!(out, "   the model declares no effect\n");
         return;
     }
+    effect_table(out, &report.effects);
+    ranking_line(out, &report.confidence);
+    if let Some(best) = report.effects.first() {
+        fit_lines(out, &format!("{} params", best.name), &best.fit);
+    }
+    selection_table(out, &report.selection);
+    let _ = writeln!(out);
+}
+
+/// The effects, each applied alone, in the ranking's order.
+fn effect_table(out: &mut String, effects: &[EffectScore]) {
     let _ = writeln!(
         out,
         "   ranked by BIC of the training fit; the held-out gap scores each choice"
@@ -275,7 +305,7 @@ fn which_section(out: &mut String, report: &Report) {
         "   {:<4} {:<24} {:>11} {:>10} {:>9} {:>7} {:>6} {:>7}  params",
         "rank", "effect", "BIC", "gap after", "shrink", "P(best)", "starts", "s"
     );
-    for (rank, effect) in report.effects.iter().enumerate() {
+    for (rank, effect) in effects.iter().enumerate() {
         let params: Vec<String> = (effect.params.iter())
             .map(|(k, v)| format!("{k} = {}", num(*v)))
             .collect();
@@ -293,7 +323,10 @@ fn which_section(out: &mut String, report: &Report) {
             params.join(", ")
         );
     }
-    let confidence = &report.confidence;
+}
+
+/// Whether the held-out data tell the best effect apart from the others, and how surely.
+fn ranking_line(out: &mut String, confidence: &Confidence) {
     let certainty = format!(
         "margin to the second {} +- {} of the gap; best in {} of {} draws over {} blocks",
         percent(confidence.margin),
@@ -314,10 +347,10 @@ fn which_section(out: &mut String, report: &Report) {
             confidence.indistinguishable.join(", ")
         );
     }
-    if let Some(best) = report.effects.first() {
-        fit_lines(out, &format!("{} params", best.name), &best.fit);
-    }
-    let selection = &report.selection;
+}
+
+/// The sets of effects the forward selection tried, with its verdict on each.
+fn selection_table(out: &mut String, selection: &Selection) {
     let _ = writeln!(
         out,
         "   sets of effects, chosen by {}:",
@@ -353,7 +386,6 @@ fn which_section(out: &mut String, report: &Report) {
         );
     }
     let _ = writeln!(out, "   verdict: {}", selection.stop);
-    let _ = writeln!(out);
 }
 
 fn how_far_section(out: &mut String, report: &Report) {

@@ -27,11 +27,12 @@
 //! and the block-bootstrap spread of its decrease ([`super::ranking`]) are reported, and a
 //! credited set that does worse on the held-out data than the model is flagged.
 
+use super::context::{Context, Progress, CREDIT, SIGNIFICANCE};
 use super::effects::{block_sums, fit_and_score, fit_and_score_with, lower, Ranking, Scored};
+use super::error::DiagnoseError;
 use super::ranking::compare;
 use super::render::num;
 use super::report::{Selection, SelectionStep};
-use super::{Context, DiagnoseError, Progress, CREDIT, SIGNIFICANCE};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 

@@ -8,7 +8,9 @@
 //! held-out cells, computed from the clean and noisy records without any fitting).
 
 use super::*;
+use crate::record::Record;
 use crate::solve::fit::split::{Holdout, Split};
+use crate::solve::fit::FitError;
 use crate::solve::ode::SimOptions;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

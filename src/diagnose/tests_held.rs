@@ -3,6 +3,7 @@
 //! and the text; the unknown fitted beside it keeps a finite, positive standard error.
 
 use super::*;
+use crate::record::Record;
 
 /// Only the product `a b` is seen: the fit leaves `(1, -1)` free in log units and holds
 /// `a`, the first declared.

@@ -5,6 +5,8 @@
 
 use super::tests::*;
 use super::*;
+use crate::record::Record;
+use crate::solve::fit::FitError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

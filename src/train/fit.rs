@@ -10,11 +10,12 @@
 //! states are refreshed and at the end, so that the polish and the evaluation see the
 //! trained network.
 
+mod engines;
+
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::engine::fused::FusedNetwork;
 use crate::engine::graph::{AdamState, BackendError, NamedTensor, Network, Setup, StepSettings};
 use crate::ir;
 
@@ -28,8 +29,9 @@ use super::{
 };
 use crate::engine::graph::RolloutBatch;
 use crate::engine::pairs::stage_fractions;
-use crate::engine::step::{Optimiser, Step, StepBatch};
+use crate::engine::step::{Optimiser, StepBatch};
 use crate::engine::windows::{rollout_batch_into, shooting_starts};
+use engines::Engines;
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -80,7 +82,6 @@ impl Fit<'_> {
         safety: &mut Safety,
     ) -> Result<Fitted, TrainError> {
         let options = self.options;
-        let fractions = stage_fractions(self.model.dynamics, options.substeps);
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
         // A checkpoint puts its weights and Adam state into `network`; the optimiser starts
@@ -96,96 +97,106 @@ impl Fit<'_> {
             cap: usize::MAX,
             recovered: 0,
         };
-        // The last state whose weights were all finite, and its epoch; with the generator
-        // and rollout there (a stop inside an epoch goes back to them).
-        let mut kept = (first - 1, engines.optimiser.clone());
-        let mut kept_at = (rng.clone(), 1);
+        let mut epochs = Epochs {
+            epoch: first,
+            kept: (first - 1, engines.optimiser.clone()),
+            kept_at: (rng.clone(), 1),
+            rng,
+            losses,
+            recoveries: Vec::new(),
+            fractions: stage_fractions(self.model.dynamics, options.substeps),
+            fill: fill_schedule(training),
+        };
         let mut diverged = None;
-        let mut recoveries = Vec::new();
-        let fill = fill_schedule(training);
-        let mut epoch = first;
-        while epoch <= options.epochs {
-            let horizon = (self.recipe.horizon_at(epoch, options.epochs))
-                .min(engines.cap)
-                .min(self.longest_window());
-            self.refresh_before(epoch, &mut engines, training, (&fractions, fill))?;
-            let how = ((epoch, horizon), fractions.as_slice());
-            let stop = || safety.stop_requested();
-            let mut checked =
-                self.checked_epoch(&mut engines, training, how, (&mut rng, &stop), on_event)?;
-            if safety.poisoned(epoch) {
-                checked = Err(Unfinished::NotFinite(
-                    "the loss became NaN (injected by a test)".into(),
-                ));
-            }
-            let loss = match checked {
-                Ok(loss) => loss,
-                Err(Unfinished::Stopped) => {
-                    engines.optimiser = kept.1.clone();
-                    let end = EpochEnd {
-                        epoch: kept.0,
-                        horizon: kept_at.1,
-                        loss: f64::NAN,
-                        rng: &kept_at.0,
-                        course: training,
-                        engines: &mut engines,
-                    };
-                    return Err(safety.stopped_within(end));
+        while epochs.epoch <= options.epochs {
+            match self.next_epoch(&mut epochs, &mut engines, training, on_event, safety)? {
+                After::Next => epochs.epoch += 1,
+                After::Again => {}
+                After::Stop => break,
+                After::Diverged(failed) => {
+                    diverged = Some(failed);
+                    break;
                 }
-                Err(Unfinished::NotFinite(what)) => {
-                    let failed = (epoch, horizon, what);
-                    match self.recover(failed, &kept, &mut engines, safety) {
-                        Ok(recovery) => {
-                            on_event(Event::Recovered(&recovery));
-                            recoveries.push(recovery);
-                            continue;
-                        }
-                        Err(failed) => {
-                            diverged = Some(failed);
-                            break;
-                        }
-                    }
-                }
-            };
-            losses.push(loss);
-            on_event(Event::Epoch {
-                epoch,
-                loss,
-                horizon,
-            });
-            let engines = &mut engines;
-            let end = EpochEnd {
-                epoch,
-                horizon,
-                loss,
-                rng: &rng,
-                course: training,
-                engines,
-            };
-            let stop = safety.after_epoch(end, on_event)?;
-            kept = (epoch, engines.optimiser.clone());
-            kept_at = (rng.clone(), horizon);
-            if stop {
-                break;
             }
-            epoch += 1;
         }
         let engine = match engines.fused {
             Some(_) => Engine::Fused,
             None => Engine::Graph,
         };
-        let diverged = settle(diverged, kept, &mut engines, safety)?;
+        let diverged = settle(diverged, epochs.kept, &mut engines, safety)?;
         engines.graph_with_state()?;
         let best = safety.finish(network)?;
         Ok(Fitted {
-            losses,
+            losses: epochs.losses,
             engine,
             diverged: diverged.map(|d| EpochDivergence {
                 kept_epoch: best.unwrap_or(d.kept_epoch),
                 ..d
             }),
-            recoveries,
+            recoveries: epochs.recoveries,
         })
+    }
+
+    /// Epoch `epochs.epoch`, told to `on_event` and handed to `safety`; what the epochs do
+    /// next. A stop inside it ends the run at the last epoch kept
+    /// ([`Safety::stopped_within`]); a non-finite loss recovers (the same epoch again) or
+    /// ends the epochs.
+    fn next_epoch(
+        &self,
+        epochs: &mut Epochs,
+        engines: &mut Engines,
+        training: &mut Course,
+        on_event: &mut dyn FnMut(Event),
+        safety: &mut Safety,
+    ) -> Result<After, TrainError> {
+        let (epoch, options) = (epochs.epoch, self.options);
+        let horizon = (self.recipe.horizon_at(epoch, options.epochs))
+            .min(engines.cap)
+            .min(self.longest_window());
+        let fractions = epochs.fractions.as_slice();
+        self.refresh_before(epoch, engines, training, (fractions, epochs.fill))?;
+        let how = ((epoch, horizon), fractions);
+        let stop = || safety.stop_requested();
+        let mut checked =
+            self.checked_epoch(engines, training, how, (&mut epochs.rng, &stop), on_event)?;
+        if safety.poisoned(epoch) {
+            checked = Err(Unfinished::NotFinite(
+                "the loss became NaN (injected by a test)".into(),
+            ));
+        }
+        let loss = match checked {
+            Ok(loss) => loss,
+            Err(Unfinished::Stopped) => return Err(epochs.stop(engines, training, safety)),
+            Err(Unfinished::NotFinite(what)) => {
+                let failed = (epoch, horizon, what);
+                return Ok(match self.recover(failed, &epochs.kept, engines, safety) {
+                    Ok(recovery) => {
+                        on_event(Event::Recovered(&recovery));
+                        epochs.recoveries.push(recovery);
+                        After::Again
+                    }
+                    Err(failed) => After::Diverged(failed),
+                });
+            }
+        };
+        epochs.losses.push(loss);
+        on_event(Event::Epoch {
+            epoch,
+            loss,
+            horizon,
+        });
+        let end = EpochEnd {
+            epoch,
+            horizon,
+            loss,
+            rng: &epochs.rng,
+            course: training,
+            engines,
+        };
+        let stop = safety.after_epoch(end, on_event)?;
+        epochs.kept = (epoch, engines.optimiser.clone());
+        epochs.kept_at = (epochs.rng.clone(), horizon);
+        Ok(if stop { After::Stop } else { After::Next })
     }
 
     /// After epoch `failed.0` (of `failed.1` steps) went non-finite (`failed.2`): while
@@ -402,6 +413,56 @@ fn fill_schedule(training: &Course) -> (bool, usize) {
     (needs_fill, if unmeasured { 1 } else { FILL_REFRESH })
 }
 
+/// The epochs' own state between them.
+struct Epochs {
+    /// The epoch under way (1-based).
+    epoch: usize,
+    /// The shuffling generator.
+    rng: ChaCha8Rng,
+    /// The mean training loss of each epoch that stayed finite.
+    losses: Vec<f64>,
+    /// The last state whose weights were all finite, and its epoch ...
+    kept: (usize, Optimiser),
+    /// ... with the generator and rollout there (a stop inside an epoch goes back to
+    /// them).
+    kept_at: (ChaCha8Rng, usize),
+    /// Each recovery from a non-finite epoch.
+    recoveries: Vec<Recovery>,
+    /// The stage fractions of one sub-step.
+    fractions: Vec<f64>,
+    /// Whether hidden states need filling, and every how many epochs.
+    fill: (bool, usize),
+}
+
+impl Epochs {
+    /// Goes back to the last epoch kept, as the stop inside the epoch under way asks: the
+    /// error [`Safety::stopped_within`] makes of it.
+    fn stop(&self, engines: &mut Engines, training: &Course, safety: &mut Safety) -> TrainError {
+        engines.optimiser = self.kept.1.clone();
+        let end = EpochEnd {
+            epoch: self.kept.0,
+            horizon: self.kept_at.1,
+            loss: f64::NAN,
+            rng: &self.kept_at.0,
+            course: training,
+            engines,
+        };
+        safety.stopped_within(end)
+    }
+}
+
+/// What the epochs do after one.
+enum After {
+    /// The next epoch.
+    Next,
+    /// The same epoch again (after a recovery).
+    Again,
+    /// Stop ([`Safety`] said so).
+    Stop,
+    /// Stop: the epoch went non-finite with no recovery left.
+    Diverged(Failure),
+}
+
 /// An epoch that went non-finite with no recovery left.
 struct Failure {
     epoch: usize,
@@ -475,72 +536,6 @@ impl EpochEnd<'_, '_> {
     pub fn state(&self) -> (Vec<NamedTensor>, AdamState) {
         let engines = &self.engines;
         (engines.tensors(), engines.optimiser.adam_state())
-    }
-}
-
-/// The optimiser, the graph network and, where the engine asks for it, the fused step
-/// (which then runs every batch).
-struct Engines<'n> {
-    network: &'n mut Network,
-    fused: Option<FusedNetwork>,
-    optimiser: Optimiser,
-    /// The rollout batch, its buffers kept from batch to batch.
-    windows: RolloutBatch,
-    /// The learning rates' scale after recoveries (1: as asked).
-    scale: f64,
-    /// The longest rollout after recoveries (`usize::MAX`: as the recipe says).
-    cap: usize,
-    /// Recoveries so far.
-    recovered: usize,
-}
-
-impl Engines<'_> {
-    /// One optimiser step on `batch`, on the fused step where the run has one (it runs
-    /// every batch of the models it builds for), else on the graph network.
-    fn step(&mut self, batch: StepBatch, settings: &StepSettings) -> Result<f64, BackendError> {
-        let engine: &mut dyn Step = match self.fused.as_mut() {
-            Some(fused) => fused,
-            None => self.network,
-        };
-        let settings = StepSettings {
-            learning_rate: settings.learning_rate * self.scale,
-            param_learning_rate: settings.param_learning_rate * self.scale,
-            ..*settings
-        };
-        self.optimiser.step(engine, batch, &settings)
-    }
-
-    /// The optimiser's current weights as the network's named tensors.
-    fn tensors(&self) -> Vec<NamedTensor> {
-        let mut tensors = self.network.weights();
-        let flat = self.optimiser.weights();
-        let mut at = 0;
-        for tensor in &mut tensors {
-            let size = tensor.values.len();
-            tensor.values.copy_from_slice(&flat[at..at + size]);
-            at += size;
-        }
-        tensors
-    }
-
-    /// The first of the optimiser's weights (params by name) that is not finite, in words.
-    fn non_finite(&self, params: &[String]) -> Option<String> {
-        crate::finite::first_non_finite(&self.optimiser.weights())?;
-        crate::finite::in_tensors(&self.tensors(), params)
-    }
-
-    /// The graph network with the optimiser's current weights.
-    fn graph_with_weights(&mut self) -> Result<&Network, BackendError> {
-        self.network.set_flat_weights(&self.optimiser.weights())?;
-        Ok(self.network)
-    }
-
-    /// The graph network with the optimiser's weights and Adam state (what a checkpoint or
-    /// the saved run keeps).
-    fn graph_with_state(&mut self) -> Result<&Network, BackendError> {
-        self.network.set_flat_weights(&self.optimiser.weights())?;
-        self.network.set_adam_state(&self.optimiser.adam_state())?;
-        Ok(self.network)
     }
 }
 

@@ -4,28 +4,24 @@
 //! re-fitted, params polished, validation errors) and [`Run::report`] (the
 //! [`TrainReport`]). Each step reads what the one before it left in [`Run`].
 
-use std::borrow::Cow;
+mod prepared;
 
-use crate::engine::graph::{Network, Setup};
+use crate::engine::graph::Network;
 use crate::ir;
 
-use super::balances::{self, BalanceFit};
 use super::checkpoint::{RunControl, Safety};
 use super::coverage::{Coverage, DENSE_SHARE};
 use super::fit::Fitted;
 use super::polish::{ParamEstimate, PolishSummary};
 use super::prepare::Layout;
 use super::recipe::SparseBudget;
-use super::stepping;
 use super::toward::{self, MechanismDistance, StopChoice, TowardMechanism};
-use super::validation::{refresh, validate, Course};
+use super::validation::{refresh, validate};
 use super::{
-    analysis, check_options, column_weights, fit, hidden_initial_values, initial, mechanism,
-    polish, with_initial_params, Event, InitialState, Metrics, Objective, ParamSource, Part,
-    PhysicalRange, Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData, Warning,
+    fit, initial, mechanism, polish, Event, InitialState, Metrics, Objective, Part, PhysicalRange,
+    Recipe, TrainError, TrainOptions, TrainReport, Trained, TrainingData,
 };
-use crate::engine::pairs::stage_fractions;
-use crate::solve::fit::MechanismFit;
+use prepared::{prepare, trains_nothing, Run};
 
 /// Trains `model` on `data` with `recipe`: prepare (grid, split, normalisation, magnitudes,
 /// params from the balances), fit, evaluate, report.
@@ -223,8 +219,6 @@ fn sparse_budget(
     Ok((coverage.one_step_share() < DENSE_SHARE).then_some(budget))
 }
 
-/// The phase that fits a model without closures, or a grey box's mechanism ([`mechanism`]).
-pub const FITTING: &str = "fitting the params by free runs (as gbc diagnose)";
 /// The phase before the epochs ([`Event::Phase`]).
 pub const VALIDATING: &str = "validating the untrained network";
 /// The phase of the epochs.
@@ -232,196 +226,12 @@ pub const TRAINING: &str = "training";
 /// The phase after the epochs.
 pub const EVALUATING: &str = "evaluating the trained network";
 
-/// A run between its steps.
-struct Run<'m> {
-    /// The model, with its params' initial values from the balances where they came from
-    /// there.
-    model: Cow<'m, ir::Model>,
-    layout: Layout,
-    hidden_init: Vec<f64>,
-    fractions: Vec<f64>,
-    warnings: Vec<Warning>,
-    balance_fit: Option<BalanceFit>,
-    mechanism_fit: Option<MechanismFit>,
-    coverage: Coverage,
-    setup: Setup,
-    network: Network,
-    training: Course,
-    validating: Course,
-    validation_pairs: usize,
-}
-
 /// What [`Run::evaluate`] finds.
 struct Evaluation {
     metrics: Metrics,
     initial_states: Vec<InitialState>,
     polish: Option<PolishSummary>,
     estimates: Vec<ParamEstimate>,
-}
-
-/// Whether no epoch trains `model`: it has no closure, and its params were `fitted` by
-/// free runs or it has none (a fully known model is scored as declared: the held-out error
-/// of a literature model whose every constant is known).
-fn trains_nothing(model: &ir::Model, fitted: bool) -> bool {
-    model.closures.is_empty() && (fitted || model.params.is_empty())
-}
-
-/// Checks the options and builds everything the epochs need; tells `on_event` of
-/// stiffness warnings and, last, that training starts.
-fn prepare<'m>(
-    model: &'m ir::Model,
-    data: &TrainingData,
-    options: &TrainOptions,
-    recipe: &Recipe,
-    on_event: &mut dyn FnMut(Event),
-) -> Result<Run<'m>, TrainError> {
-    check_options(options, recipe)?;
-    let train_points = options.train_points.map(Some);
-    let data = TrainingData {
-        part: train_points.map_or(data.part, Part::FirstPairs),
-        ..*data
-    };
-    let layout = Layout::new(model, &data, options)?;
-    let coverage = Coverage::of(model, (&layout.tracks, &layout.trainings), &layout.pairs);
-    if !model.closures.is_empty() {
-        on_event(Event::Coverage(
-            &coverage,
-            coverage.warmup_share(recipe.warmup_share),
-        ));
-    }
-    let hidden_init = hidden_initial_values(model)?;
-    let fractions = stage_fractions(model.dynamics, options.substeps);
-    let scales = analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?;
-    let stiff = analysis::stiffness(
-        model,
-        (&layout.tracks, &layout.intervals),
-        &hidden_init,
-        options.substeps,
-    )?;
-    // Under the multi-step objective the steps without a pair still train in windows: the
-    // coverage note says what trains instead.
-    let dropped = (layout.dropped.clone())
-        .filter(|_| recipe.objective == Objective::OneStep)
-        .map(Warning::DroppedPairs);
-    let warnings: Vec<Warning> = (stiff.into_iter().map(Warning::Stiffness))
-        .chain(dropped)
-        .collect();
-    let mut mechanism_fit = match mechanism::source(model, &data, recipe, &coverage) {
-        Some(fitted) => {
-            on_event(Event::Phase(FITTING));
-            Some(mechanism::fit(&fitted, &data, &layout, options)?)
-        }
-        None => None,
-    };
-    let balance_fit = if recipe.params_from_balances() && mechanism_fit.is_none() {
-        balances::estimate(model, &scales, &layout.tracks, &layout.intervals)?
-    } else {
-        None
-    };
-    if mechanism_fit.is_none() && balance_fit.is_none() {
-        if let Some(fitted) = mechanism::fallback(model, &data, recipe) {
-            on_event(Event::Phase(FITTING));
-            mechanism_fit = Some(mechanism::fit(&fitted, &data, &layout, options)?);
-        }
-    }
-    if recipe.params == ParamSource::Balances && balance_fit.is_none() {
-        return Err(TrainError::ParamsFromBalances {
-            model: model.name.clone(),
-        });
-    }
-    let model = match (&balance_fit, &mechanism_fit) {
-        (Some(fit), _) => Cow::Owned(with_initial_params(model, fit)),
-        (None, Some(fit)) => Cow::Owned(mechanism::with_fitted_params(model, fit)),
-        (None, None) => Cow::Borrowed(model),
-    };
-    let mut setup = Setup {
-        step: layout.grid.max_step,
-        substeps: options.substeps,
-        precision: options.precision,
-        seed: options.seed,
-        normalisation: layout.normalisation.clone(),
-        scales,
-    };
-    let mut network = Network::build(&model, &setup)?;
-    // Training steps as finely as a stiff balance needs, so that no user picks
-    // `--substeps`: on a sparse record as the model's own free runs over the training
-    // knots need (the data's intervals say little there); on a dense one as the stiffness
-    // estimate asks, where it warns.
-    let substeps = if model.closures.is_empty() {
-        // Nothing trains: the params were fitted by the exact integrator.
-        options.substeps
-    } else if coverage.one_step_share() < DENSE_SHARE {
-        let place = (&layout.tracks[..], &layout.trainings[..]);
-        let how = (&fractions[..], &hidden_init[..]);
-        stepping::training_substeps((&network, &model), place, how, options.substeps)
-    } else {
-        (warnings.iter())
-            .filter_map(|w| match w {
-                Warning::Stiffness(s) => Some(s.substeps_needed),
-                _ => None,
-            })
-            .fold(options.substeps, usize::max)
-            .min(stepping::MOST_TRAINING_SUBSTEPS)
-    };
-    let mut fractions = fractions;
-    if substeps > setup.substeps {
-        setup.substeps = substeps;
-        fractions = stage_fractions(model.dynamics, substeps);
-        network = Network::build(&model, &setup)?;
-        on_event(Event::Substeps(substeps));
-    }
-    // A stiffness warning the chosen sub-steps answer is not one.
-    let mut warnings = warnings;
-    warnings.retain(|w| !matches!(w, Warning::Stiffness(s) if s.substeps_needed <= substeps));
-    for warning in &warnings {
-        on_event(Event::Warning(warning));
-    }
-    let weights = column_weights(&model, options)?;
-    let observables = &layout.normalisation.observables;
-    let mut training = Course::new(
-        &model,
-        layout.tracks.clone(),
-        (&layout.pairs, &weights, observables),
-        &fractions,
-    );
-    refresh(
-        &network,
-        &model,
-        &mut training,
-        (&fractions, false),
-        &hidden_init,
-    )?;
-    let validating = Course::new(
-        &model,
-        layout.validation_tracks.clone(),
-        (&[], &weights, observables),
-        &fractions,
-    );
-    let validation_pairs = layout.scorings.iter().map(|s| s.pairs.len()).sum();
-    on_event(Event::Started {
-        epochs: if trains_nothing(&model, mechanism_fit.is_some()) {
-            0
-        } else {
-            options.epochs
-        },
-        train_pairs: layout.pairs.len(),
-        validation_pairs,
-    });
-    Ok(Run {
-        model,
-        layout,
-        hidden_init,
-        fractions,
-        warnings,
-        balance_fit,
-        mechanism_fit,
-        coverage,
-        setup,
-        network,
-        training,
-        validating,
-        validation_pairs,
-    })
 }
 
 impl Run<'_> {

@@ -255,11 +255,8 @@ pub fn fit(
     (starts, fixed): (Starts, &[bool]),
     seed: u64,
 ) -> Fitted {
-    let theta0 = thetas(constraints, start);
-    let free: Vec<usize> = (0..theta0.len())
-        .filter(|&i| !fixed.get(i).copied().unwrap_or(false))
-        .collect();
-    if free.is_empty() {
+    let space = Subspace::new(constraints, start, fixed);
+    if space.free.is_empty() {
         let gap = objective.gap(start);
         return Fitted {
             x: start.to_vec(),
@@ -269,50 +266,116 @@ pub fn fit(
             basins: vec![gap],
         };
     }
-    let full = |sub: &[f64]| -> Vec<f64> {
-        let mut theta = theta0.clone();
-        for (&i, &value) in free.iter().zip(sub) {
+    let residuals = |sub: &[f64]| objective.residuals(&values(constraints, &space.full(sub)));
+    let jacobian = |sub: &[f64]| {
+        let columns = objective.theta_jacobian(constraints, &space.full(sub));
+        (space.free.iter())
+            .map(|&i| columns[i].clone())
+            .collect::<Vec<_>>()
+    };
+    let mut draws = Draws::new(objective, &space, seed);
+    let results = search(starts, &mut draws, &|theta| {
+        levenberg_marquardt(&residuals, &jacobian, theta)
+    });
+    let best = results
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .cloned()
+        .unwrap_or((draws.start, f64::INFINITY));
+    Fitted {
+        x: values(constraints, &space.full(&best.0)),
+        gap: best.1,
+        starts: results.len(),
+        agreeing: agreeing(&results),
+        basins: basins(&results),
+    }
+}
+
+/// The coordinates a fit moves: the start in transformed coordinates and the unknowns not
+/// held fixed.
+struct Subspace {
+    /// The start, every unknown (transformed).
+    theta0: Vec<f64>,
+    /// The unknowns that move.
+    free: Vec<usize>,
+}
+
+impl Subspace {
+    /// The unknowns of `start` (constrained values) that `fixed` does not hold.
+    fn new(constraints: &[Constraint], start: &[f64], fixed: &[bool]) -> Self {
+        let theta0 = thetas(constraints, start);
+        let free: Vec<usize> = (0..theta0.len())
+            .filter(|&i| !fixed.get(i).copied().unwrap_or(false))
+            .collect();
+        Subspace { theta0, free }
+    }
+
+    /// Every unknown (transformed), the free ones at `sub`, the others at the start.
+    fn full(&self, sub: &[f64]) -> Vec<f64> {
+        let mut theta = self.theta0.clone();
+        for (&i, &value) in self.free.iter().zip(sub) {
             theta[i] = value;
         }
         theta
-    };
-    let residuals = |sub: &[f64]| objective.residuals(&values(constraints, &full(sub)));
-    let jacobian = |sub: &[f64]| {
-        let columns = objective.theta_jacobian(constraints, &full(sub));
-        free.iter().map(|&i| columns[i].clone()).collect::<Vec<_>>()
-    };
-    let sub0: Vec<f64> = free.iter().map(|&i| theta0[i]).collect();
-    // A start read from a measured cell stays at its cell in every random start.
-    let params = objective.simulator.params();
-    let pinned: Vec<bool> = (free.iter())
-        .map(|&i| i >= params && objective.split.cell_fitted(i - params))
-        .collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut draw = |first: bool| -> Vec<f64> {
-        if first {
-            return sub0.clone();
+    }
+}
+
+/// The starts of a fit's free coordinates: the given one first, then random ones around it.
+struct Draws {
+    /// The given start.
+    start: Vec<f64>,
+    /// Per free coordinate, whether it stays at its start (a start read from a measured
+    /// cell stays at its cell in every random start).
+    pinned: Vec<bool>,
+    rng: ChaCha8Rng,
+}
+
+impl Draws {
+    /// The starts of `space` for `objective`, drawn from a generator seeded with `seed`.
+    fn new(objective: &Objective, space: &Subspace, seed: u64) -> Self {
+        let start: Vec<f64> = space.free.iter().map(|&i| space.theta0[i]).collect();
+        let params = objective.simulator.params();
+        let pinned: Vec<bool> = (space.free.iter())
+            .map(|&i| i >= params && objective.split.cell_fitted(i - params))
+            .collect();
+        Draws {
+            start,
+            pinned,
+            rng: ChaCha8Rng::seed_from_u64(seed),
         }
-        (sub0.iter().zip(&pinned))
+    }
+
+    /// The given start (`first`), or a random one around it.
+    fn draw(&mut self, first: bool) -> Vec<f64> {
+        if first {
+            return self.start.clone();
+        }
+        (self.start.iter().zip(&self.pinned))
             .map(|(&t, &pinned)| {
-                let noise: f64 = StandardNormal.sample(&mut rng);
+                let noise: f64 = StandardNormal.sample(&mut self.rng);
                 let spread = if pinned { 0.0 } else { RESTART_SPREAD };
                 t + spread * noise * t.abs().clamp(1.0, 3.0)
             })
             .collect()
-    };
+    }
+}
+
+/// Runs `minimise` from `draws` in rounds of `starts.round` side by side while the search
+/// finds new ground (see [`fit`]); every start's end and its gap, in the order drawn.
+fn search(
+    starts: Starts,
+    draws: &mut Draws,
+    minimise: &(dyn Fn(Vec<f64>) -> (Vec<f64>, f64) + Sync),
+) -> Vec<(Vec<f64>, f64)> {
+    use rayon::prelude::*;
     let mut results: Vec<(Vec<f64>, f64)> = Vec::new();
     while results.len() < starts.max {
         let count = starts.round.min(starts.max - results.len());
         let thetas: Vec<Vec<f64>> = (0..count)
-            .map(|k| draw(results.is_empty() && k == 0))
+            .map(|k| draws.draw(results.is_empty() && k == 0))
             .collect();
         let before = best_gap(&results);
-        let round: Vec<(Vec<f64>, f64)> = {
-            use rayon::prelude::*;
-            (thetas.into_par_iter())
-                .map(|theta| levenberg_marquardt(&residuals, &jacobian, theta))
-                .collect()
-        };
+        let round: Vec<(Vec<f64>, f64)> = thetas.into_par_iter().map(minimise).collect();
         results.extend(round);
         let best = best_gap(&results);
         let improved = best < before - AGREE * before.abs();
@@ -323,18 +386,7 @@ pub fn fit(
             break;
         }
     }
-    let best = results
-        .iter()
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .cloned()
-        .unwrap_or((sub0, f64::INFINITY));
-    Fitted {
-        x: values(constraints, &full(&best.0)),
-        gap: best.1,
-        starts: results.len(),
-        agreeing: agreeing(&results),
-        basins: basins(&results),
-    }
+    results
 }
 
 /// The best gap of `results` (infinite for none).

@@ -4,10 +4,12 @@
 //! sensitivities, a free direction held), so that `gbc train` fits a model without
 //! closures exactly as `gbc diagnose` fits it before its effects.
 
+use super::error::FitError;
 use super::fitter::Starts;
 use super::model::fit_model;
 use super::split::Split;
-use super::{FitError, FitOptions, FitSummary};
+use super::summary::FitSummary;
+use super::FitOptions;
 use crate::ir::{Dynamics, Model};
 use crate::record::Record;
 use std::collections::BTreeMap;

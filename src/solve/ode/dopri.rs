@@ -10,61 +10,11 @@
 //! stiffness monitor on (it then hands the stretch over to Radau IIA) and, for forward
 //! sensitivities, differentiates every stage ([`super::sensitivity::Explicit`]).
 
+use super::dopri_tableau::{combine, dense, local_error, Stages, SOLUTION, TABLEAU};
 use super::error::{IntegrationError, Stuck};
 use super::sensitivity::Explicit;
-use super::stiffness::Monitor;
+use super::stiffness::{Accepted, Monitor};
 use super::system::{all_finite, rms, OdeSystem, Stats, Tolerances};
-
-// Butcher tableau of Dormand and Prince (1980).
-const C2: f64 = 1.0 / 5.0;
-const C3: f64 = 3.0 / 10.0;
-const C4: f64 = 4.0 / 5.0;
-const C5: f64 = 8.0 / 9.0;
-const A21: f64 = 1.0 / 5.0;
-const A31: f64 = 3.0 / 40.0;
-const A32: f64 = 9.0 / 40.0;
-const A41: f64 = 44.0 / 45.0;
-const A42: f64 = -56.0 / 15.0;
-const A43: f64 = 32.0 / 9.0;
-const A51: f64 = 19372.0 / 6561.0;
-const A52: f64 = -25360.0 / 2187.0;
-const A53: f64 = 64448.0 / 6561.0;
-const A54: f64 = -212.0 / 729.0;
-const A61: f64 = 9017.0 / 3168.0;
-const A62: f64 = -355.0 / 33.0;
-const A63: f64 = 46732.0 / 5247.0;
-const A64: f64 = 49.0 / 176.0;
-const A65: f64 = -5103.0 / 18656.0;
-const A71: f64 = 35.0 / 384.0;
-const A73: f64 = 500.0 / 1113.0;
-const A74: f64 = 125.0 / 192.0;
-const A75: f64 = -2187.0 / 6784.0;
-const A76: f64 = 11.0 / 84.0;
-// Difference between the 5th- and 4th-order weights.
-const E1: f64 = 71.0 / 57600.0;
-const E3: f64 = -71.0 / 16695.0;
-const E4: f64 = 71.0 / 1920.0;
-const E5: f64 = -17253.0 / 339200.0;
-const E6: f64 = 22.0 / 525.0;
-const E7: f64 = -1.0 / 40.0;
-// Dense output of order 4 (Hairer's CONTD5).
-const D1: f64 = -12715105075.0 / 11282082432.0;
-const D3: f64 = 87487479700.0 / 32700410799.0;
-const D4: f64 = -10690763975.0 / 1880347072.0;
-const D5: f64 = 701980252875.0 / 199316789632.0;
-const D6: f64 = -1453857185.0 / 822651844.0;
-const D7: f64 = 69997945.0 / 29380423.0;
-
-/// Stages 2 to 6: their time fraction and their weights on the earlier stages.
-pub(super) const TABLEAU: [(f64, &[(usize, f64)]); 5] = [
-    (C2, &[(0, A21)]),
-    (C3, &[(0, A31), (1, A32)]),
-    (C4, &[(0, A41), (1, A42), (2, A43)]),
-    (C5, &[(0, A51), (1, A52), (2, A53), (3, A54)]),
-    (1.0, &[(0, A61), (1, A62), (2, A63), (3, A64), (4, A65)]),
-];
-/// The 5th-order solution's weights (the 7th stage is evaluated there: FSAL).
-pub(super) const SOLUTION: [(usize, f64); 5] = [(0, A71), (2, A73), (3, A74), (4, A75), (5, A76)];
 
 // PI controller (Hairer's defaults for DOPRI5).
 const SAFETY: f64 = 0.9;
@@ -110,11 +60,12 @@ pub(super) struct Options<'s> {
 pub struct Dopri5 {
     tolerances: Tolerances,
     max_steps: usize,
-    pub(super) stages: [Vec<f64>; 7],
-    pub(super) stage_state: Vec<f64>,
-    pub(super) next: Vec<f64>,
+    stages: Stages,
+    stage_state: Vec<f64>,
+    next: Vec<f64>,
     sample: Vec<f64>,
-    pub(super) jacobian: Vec<f64>,
+    /// Work space of the stiffness monitor's exact Jacobian.
+    jacobian: Vec<f64>,
     stats: Stats,
 }
 
@@ -196,30 +147,16 @@ impl Dopri5 {
         record: &mut Record,
         mut options: Options,
     ) -> Result<Reached, IntegrationError> {
-        let mut pending = samples.iter().enumerate().peekable();
-        while let Some((k, _)) = pending.next_if(|&(_, &s)| s <= t0) {
-            record(k, y, sensitivities(&options));
-        }
+        let mut samples = Samples {
+            times: samples,
+            recorded: 0,
+            record,
+        };
+        samples.record_until(t0, y, sensitivities(&options));
         if t1 <= t0 {
             return Ok(Reached::End);
         }
-        self.evaluate(system, t0, y, 0);
-        if !all_finite(&self.stages[0]) {
-            return Err(IntegrationError::non_finite(t0));
-        }
-        if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
-            sensitivity.first_stage(system, t0, y, &mut self.stats);
-        }
-        let mut stepper = Stepper {
-            t: t0,
-            h: self.initial_step(system, t0, y, t1 - t0),
-            t_end: t1,
-            previous_error: 1e-4,
-            last_rejected: false,
-            last_non_finite: false,
-            attempts: 0,
-            monitor: Monitor::new(options.monitor_stiffness.unwrap_or(usize::MAX)),
-        };
+        let mut stepper = self.start(system, (t0, t1), y, &mut options)?;
         while stepper.t < t1 {
             let last = self.check_step(system, &mut stepper, y)?;
             self.step(
@@ -232,36 +169,14 @@ impl Dopri5 {
             let error = self.error_norm(stepper.h, y);
             if error <= 1.0 {
                 let step_end = if last { t1 } else { stepper.t + stepper.h };
-                let step = (step_end, stepper.h, t1);
                 let stiff = options.monitor_stiffness.is_some()
-                    && self.stiffness(system, &mut stepper.monitor, step);
-                while let Some((k, _)) = pending.next_if(|&(_, &s)| s <= step_end) {
-                    let sample = samples[k];
-                    self.interpolate(stepper.t, stepper.h, step_end, sample, y);
-                    let s = match options.sensitivity.as_deref_mut() {
-                        Some(sensitivity) => {
-                            sensitivity.interpolate(
-                                self.theta(stepper.t, stepper.h, step_end, sample),
-                                stepper.h,
-                            );
-                            sensitivity.sample()
-                        }
-                        None => &[],
-                    };
-                    record(k, &self.sample, s);
-                }
-                y.copy_from_slice(&self.next);
-                self.stages.swap(0, 6);
-                if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
-                    sensitivity.accept();
-                }
-                stepper.accept(error, step_end);
-                self.stats.accepted += 1;
+                    && self.is_stiff(system, &mut stepper, step_end);
+                self.record_inside(&stepper, step_end, y, &mut samples, &mut options);
+                self.accept(&mut stepper, (error, step_end), y, &mut options);
                 if stiff && stepper.t < t1 {
-                    let recorded = pending.peek().map_or(samples.len(), |&(k, _)| k);
                     return Ok(Reached::Stiff {
                         t: stepper.t,
-                        recorded,
+                        recorded: samples.recorded,
                         step: stepper.h,
                     });
                 }
@@ -270,10 +185,97 @@ impl Dopri5 {
                 self.stats.rejected += 1;
             }
         }
-        for (k, _) in pending {
-            record(k, y, sensitivities(&options));
-        }
+        samples.record_rest(y, sensitivities(&options));
         Ok(Reached::End)
+    }
+
+    /// Starts a stretch `(t0, t1)` at `y`: the first stage (and its sensitivities), the
+    /// initial step and the stiffness monitor.
+    fn start<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        (t0, t1): (f64, f64),
+        y: &[f64],
+        options: &mut Options,
+    ) -> Result<Stepper, IntegrationError> {
+        self.evaluate(system, t0, y, 0);
+        if !all_finite(&self.stages[0]) {
+            return Err(IntegrationError::non_finite(t0));
+        }
+        if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
+            sensitivity.first_stage(system, t0, y, &mut self.stats);
+        }
+        Ok(Stepper {
+            t: t0,
+            h: self.initial_step(system, t0, y, t1 - t0),
+            t_end: t1,
+            previous_error: 1e-4,
+            last_rejected: false,
+            last_non_finite: false,
+            attempts: 0,
+            monitor: Monitor::new(options.monitor_stiffness.unwrap_or(usize::MAX)),
+        })
+    }
+
+    /// Whether the stiffness monitor finds the stretch stiff after the step just
+    /// accepted, ending at `step_end`.
+    fn is_stiff<S: OdeSystem>(
+        &mut self,
+        system: &mut S,
+        stepper: &mut Stepper,
+        step_end: f64,
+    ) -> bool {
+        let step = Accepted {
+            stages: (&self.stages[5], &self.stages[6]),
+            states: (&self.stage_state, &self.next),
+            span: (step_end, stepper.h, stepper.t_end),
+        };
+        stepper.monitor.is_stiff(system, step, &mut self.jacobian)
+    }
+
+    /// Records the samples inside the step just accepted, ending at `step_end`, from the
+    /// dense output (and the sensitivities' where carried).
+    fn record_inside(
+        &mut self,
+        stepper: &Stepper,
+        step_end: f64,
+        y: &[f64],
+        samples: &mut Samples,
+        options: &mut Options,
+    ) {
+        while let Some(k) = samples.next_until(step_end) {
+            let sample = samples.times[k];
+            self.interpolate(stepper.t, stepper.h, step_end, sample, y);
+            let s = match options.sensitivity.as_deref_mut() {
+                Some(sensitivity) => {
+                    sensitivity.interpolate(
+                        self.theta(stepper.t, stepper.h, step_end, sample),
+                        stepper.h,
+                    );
+                    sensitivity.sample()
+                }
+                None => &[],
+            };
+            (samples.record)(k, &self.sample, s);
+        }
+    }
+
+    /// Moves to the end of the step just accepted (its error `error`, ending at
+    /// `step_end`) and proposes the next step.
+    fn accept(
+        &mut self,
+        stepper: &mut Stepper,
+        (error, step_end): (f64, f64),
+        y: &mut [f64],
+        options: &mut Options,
+    ) {
+        y.copy_from_slice(&self.next);
+        self.stages.swap(0, 6);
+        if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
+            sensitivity.accept();
+        }
+        stepper.accept(error, step_end);
+        self.stats.accepted += 1;
     }
 
     /// Clamps the step to the end of the stretch and checks the step budget; returns
@@ -365,13 +367,7 @@ impl Dopri5 {
         let k = &self.stages;
         let sum: f64 = (0..y.len())
             .map(|i| {
-                let local = h
-                    * (E1 * k[0][i]
-                        + E3 * k[2][i]
-                        + E4 * k[3][i]
-                        + E5 * k[4][i]
-                        + E6 * k[5][i]
-                        + E7 * k[6][i]);
+                let local = local_error(h, k, i);
                 let scale = atol + rtol * y[i].abs().max(self.next[i].abs());
                 (local / scale).powi(2)
             })
@@ -459,34 +455,6 @@ fn stuck<S: OdeSystem>(system: &mut S, stepper: &Stepper, y: &[f64]) -> Stuck {
     Stuck::from_jacobian(&jacobian, n, stepper.h, false)
 }
 
-/// The continuous extension at fraction `theta` of a step of size `h` from `y` to `next`
-/// with stages `k`, entry by entry (states or their sensitivities alike).
-pub(super) fn dense(
-    theta: f64,
-    h: f64,
-    y: &[f64],
-    next: &[f64],
-    k: &[Vec<f64>; 7],
-    out: &mut [f64],
-) {
-    let theta1 = 1.0 - theta;
-    for i in 0..y.len() {
-        let difference = next[i] - y[i];
-        let slope_gap = h * k[0][i] - difference;
-        let curvature = difference - h * k[6][i] - slope_gap;
-        let correction = h
-            * (D1 * k[0][i]
-                + D3 * k[2][i]
-                + D4 * k[3][i]
-                + D5 * k[4][i]
-                + D6 * k[5][i]
-                + D7 * k[6][i]);
-        out[i] = y[i]
-            + theta
-                * (difference + theta1 * (slope_gap + theta * (curvature + theta1 * correction)));
-    }
-}
-
 impl Stepper {
     fn accept(&mut self, error: f64, step_end: f64) {
         let growth = error.powf(EXPONENT);
@@ -515,17 +483,35 @@ impl Stepper {
     }
 }
 
-/// Sets `out = y + h * sum_j weight_j * stages[j]`, entry by entry.
-#[inline]
-pub(super) fn combine(
-    out: &mut [f64],
-    y: &[f64],
-    h: f64,
-    stages: &[Vec<f64>; 7],
-    weights: &[(usize, f64)],
-) {
-    for (i, value) in out.iter_mut().enumerate() {
-        let increment: f64 = weights.iter().map(|&(j, w)| w * stages[j][i]).sum();
-        *value = y[i] + h * increment;
+/// The samples a stretch records: their times, how many are recorded, and where to.
+struct Samples<'a, 'r> {
+    times: &'a [f64],
+    recorded: usize,
+    record: &'a mut Record<'r>,
+}
+
+impl Samples<'_, '_> {
+    /// The next sample not after `bound`, counted as recorded.
+    fn next_until(&mut self, bound: f64) -> Option<usize> {
+        let k = self.recorded;
+        (k < self.times.len() && self.times[k] <= bound).then(|| {
+            self.recorded += 1;
+            k
+        })
+    }
+
+    /// Records every sample not after `bound` at `y` with sensitivities `s`.
+    fn record_until(&mut self, bound: f64, y: &[f64], s: &[f64]) {
+        while let Some(k) = self.next_until(bound) {
+            (self.record)(k, y, s);
+        }
+    }
+
+    /// Records every sample still to record at `y` with sensitivities `s`.
+    fn record_rest(&mut self, y: &[f64], s: &[f64]) {
+        for k in self.recorded..self.times.len() {
+            (self.record)(k, y, s);
+        }
+        self.recorded = self.times.len();
     }
 }

@@ -11,10 +11,12 @@
 //! [`Integrator`], [`Dopri5`] and [`Radau`] are reusable on their own.
 
 mod dopri;
+mod dopri_tableau;
 mod driver;
 mod error;
 mod integrator;
 mod radau;
+mod radau_tableau;
 pub mod sensitivity;
 mod stiffness;
 mod system;

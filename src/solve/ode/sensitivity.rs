@@ -6,39 +6,26 @@
 //!   `k_i = f(Y_i)` is differentiated, `dY_i = S + h sum_j a_ij dk_j`,
 //!   `dk_i = J(Y_i) dY_i + f_p(Y_i)`, with the same weights, and the dense output applies
 //!   to the `dk` as to the `k`.
-//! - Implicit steps: `super::radau` solves the Radau IIA stage equations of the
-//!   sensitivities exactly (they are linear in `S`), with the Jacobian at every stage.
+//! - Implicit steps ([`Implicit`]): the Radau IIA stage equations of the sensitivities
+//!   are solved exactly (they are linear in `S`), with the Jacobian at every stage.
 //!
 //! Sensitivities are `n x p` row-major: entry `(i, k)` is `dy_i/dp_k`.
 
 // Index loops below mirror the method's formulas (stage s, component i).
 #![allow(clippy::needless_range_loop)]
 
-use super::dopri::{combine, dense};
-use super::radau;
+use super::dopri_tableau::{combine, dense, Stages};
+use super::radau_tableau::{polynomial, A, C, P};
 use super::system::{OdeSystem, Stats};
 use crate::numeric::Lu;
 
-/// `out = a b + c` for `a` (`n x n`), `b` and `c` (`n x p`), row-major.
-pub fn multiply_add(a: &[f64], b: &[f64], c: &[f64], n: usize, p: usize, out: &mut [f64]) {
-    for i in 0..n {
-        let row = &mut out[i * p..(i + 1) * p];
-        row.copy_from_slice(&c[i * p..(i + 1) * p]);
-        for (j, &entry) in a[i * n..(i + 1) * n].iter().enumerate() {
-            if entry != 0.0 {
-                for (value, &b_jk) in row.iter_mut().zip(&b[j * p..(j + 1) * p]) {
-                    *value += entry * b_jk;
-                }
-            }
-        }
-    }
-}
+pub use super::system::multiply_add;
 
 /// Sensitivities through explicit Dormand–Prince steps.
 #[derive(Debug, Clone)]
 pub struct Explicit {
     current: Vec<f64>,
-    stages: [Vec<f64>; 7],
+    stages: Stages,
     stage: Vec<f64>,
     next: Vec<f64>,
     sample: Vec<f64>,
@@ -211,7 +198,7 @@ impl Implicit {
             for i in 0..n {
                 self.stage[i] = y[i] + z[s][i];
             }
-            let at = t + radau::C[s] * h;
+            let at = t + C[s] * h;
             let (states, params) = (&mut self.states_jacobians[s], &mut self.params_jacobians[s]);
             system.sensitivity_jacobians(at, &self.stage, states, params);
         }
@@ -222,9 +209,7 @@ impl Implicit {
         self.current.copy_from_slice(&stages[2]);
         for (j, column) in self.q.iter_mut().enumerate() {
             for (e, value) in column.iter_mut().enumerate() {
-                *value = (0..3)
-                    .map(|s| (stages[s][e] - self.old[e]) * radau::P[s][j])
-                    .sum();
+                *value = (0..3).map(|s| (stages[s][e] - self.old[e]) * P[s][j]).sum();
             }
         }
         self.span = (t, h, t_end);
@@ -238,7 +223,7 @@ impl Implicit {
         let mut matrix = vec![0.0; size * size];
         for s in 0..3 {
             for r in 0..3 {
-                let weight = h * radau::A[s][r];
+                let weight = h * A[s][r];
                 for a in 0..n {
                     let row = (s * n + a) * size + r * n;
                     for b in 0..n {
@@ -259,7 +244,7 @@ impl Implicit {
             for s in 0..3 {
                 for a in 0..n {
                     let forcing: f64 = (0..3)
-                        .map(|r| radau::A[s][r] * self.params_jacobians[r][a * p + k])
+                        .map(|r| A[s][r] * self.params_jacobians[r][a * p + k])
                         .sum();
                     column[s * n + a] = self.current[a * p + k] + h * forcing;
                 }
@@ -284,7 +269,7 @@ impl Implicit {
         }
         let x = (t - t_old) / h;
         for e in 0..self.sample.len() {
-            self.sample[e] = self.old[e] + radau::polynomial(&self.q, e, x);
+            self.sample[e] = self.old[e] + polynomial(&self.q, e, x);
         }
     }
 }

@@ -46,7 +46,24 @@ pub trait OdeSystem {
         let (n, p) = (y.len(), self.sensitivity_params());
         let (mut states, mut params) = (vec![0.0; n * n], vec![0.0; n * p]);
         self.sensitivity_jacobians(t, y, &mut states, &mut params);
-        super::sensitivity::multiply_add(&states, s, &params, n, p, out);
+        multiply_add(&states, s, &params, n, p, out);
+    }
+}
+
+/// `out = a b + c` for `a` (`n x n`), `b` and `c` (`n x p`), row-major: the derivative of
+/// forward sensitivities, `(df/dy) S + df/dp` (public as
+/// [`super::sensitivity::multiply_add`]).
+pub fn multiply_add(a: &[f64], b: &[f64], c: &[f64], n: usize, p: usize, out: &mut [f64]) {
+    for i in 0..n {
+        let row = &mut out[i * p..(i + 1) * p];
+        row.copy_from_slice(&c[i * p..(i + 1) * p]);
+        for (j, &entry) in a[i * n..(i + 1) * n].iter().enumerate() {
+            if entry != 0.0 {
+                for (value, &b_jk) in row.iter_mut().zip(&b[j * p..(j + 1) * p]) {
+                    *value += entry * b_jk;
+                }
+            }
+        }
     }
 }
 

@@ -17,87 +17,11 @@
 mod newton;
 
 use super::error::{IntegrationError, Stuck};
+use super::radau_tableau::{polynomial, C, E, P};
 use super::sensitivity::Implicit;
 use super::system::{all_finite, rms, OdeSystem, Stats, Tolerances};
-use crate::numeric::{Complex, Lu};
-use newton::Newton;
+use newton::{Iterations, Newton, Start, NEWTON_MAXITER};
 
-const S6: f64 = 2.449_489_742_783_178; // sqrt(6)
-/// Stage times as fractions of the step.
-pub(super) const C: [f64; 3] = [(4.0 - S6) / 10.0, (4.0 + S6) / 10.0, 1.0];
-/// The method's matrix `A` (Butcher tableau).
-pub(super) const A: [[f64; 3]; 3] = [
-    [
-        (88.0 - 7.0 * S6) / 360.0,
-        (296.0 - 169.0 * S6) / 1800.0,
-        (-2.0 + 3.0 * S6) / 225.0,
-    ],
-    [
-        (296.0 + 169.0 * S6) / 1800.0,
-        (88.0 + 7.0 * S6) / 360.0,
-        (-2.0 - 3.0 * S6) / 225.0,
-    ],
-    [(16.0 - S6) / 36.0, (16.0 + S6) / 36.0, 1.0 / 9.0],
-];
-/// Error estimate weights on the stage increments.
-const E: [f64; 3] = [
-    (-13.0 - 7.0 * S6) / 3.0,
-    (-13.0 + 7.0 * S6) / 3.0,
-    -1.0 / 3.0,
-];
-/// The real eigenvalue of `A^-1`: `3 + 3^(2/3) - 3^(1/3)`.
-const MU_REAL: f64 = 3.637_834_252_744_496;
-/// The complex eigenvalue of `A^-1`.
-const MU_COMPLEX: Complex = Complex::new(2.681_082_873_627_752, -3.050_430_199_247_411);
-/// `A^-1 = T diag(MU_REAL, MU_COMPLEX) T^-1` in real block form (digits as published).
-#[allow(clippy::excessive_precision)]
-const T: [[f64; 3]; 3] = [
-    [
-        0.094_438_762_488_975_24,
-        -0.141_255_295_020_954_21,
-        0.030_029_194_105_147_42,
-    ],
-    [
-        0.250_213_122_965_333_32,
-        0.204_129_352_293_799_94,
-        -0.382_942_112_757_261_92,
-    ],
-    [1.0, 1.0, 0.0],
-];
-/// `T^-1`.
-#[allow(clippy::excessive_precision)]
-const TI: [[f64; 3]; 3] = [
-    [
-        4.178_718_591_551_904_28,
-        0.327_682_820_761_062_37,
-        0.523_376_445_499_449_51,
-    ],
-    [
-        -4.178_718_591_551_904_28,
-        -0.327_682_820_761_062_37,
-        0.476_623_554_500_550_44,
-    ],
-    [
-        0.502_872_634_945_786_82,
-        -2.571_926_949_855_605_22,
-        0.596_039_204_828_224_92,
-    ],
-];
-/// The collocation polynomial: `y(t + x h) = y + sum_j (sum_s Z_s P[s][j]) x^(j+1)`.
-pub(super) const P: [[f64; 3]; 3] = [
-    [
-        13.0 / 3.0 + 7.0 * S6 / 3.0,
-        -23.0 / 3.0 - 22.0 * S6 / 3.0,
-        10.0 / 3.0 + 5.0 * S6,
-    ],
-    [
-        13.0 / 3.0 - 7.0 * S6 / 3.0,
-        -23.0 / 3.0 + 22.0 * S6 / 3.0,
-        10.0 / 3.0 - 5.0 * S6,
-    ],
-    [1.0 / 3.0, -8.0 / 3.0, 10.0 / 3.0],
-];
-const NEWTON_MAXITER: usize = 6;
 const MIN_FACTOR: f64 = 0.2;
 const MAX_FACTOR: f64 = 10.0;
 
@@ -116,7 +40,6 @@ struct Taken {
 pub struct Radau {
     n: usize,
     tolerances: Tolerances,
-    newton_tol: f64,
     t: f64,
     end: f64,
     y: Vec<f64>,
@@ -124,14 +47,12 @@ pub struct Radau {
     h_abs: f64,
     h_abs_old: Option<f64>,
     error_norm_old: Option<f64>,
-    jacobian: Vec<f64>,
-    current_jacobian: bool,
-    lu_real: Option<Lu<f64>>,
-    lu_complex: Option<Lu<Complex>>,
+    newton: Newton,
+    /// The stage increments of the step being taken.
     z: [Vec<f64>; 3],
-    w: [Vec<f64>; 3],
-    stage_rhs: [Vec<f64>; 3],
+    /// Work space: a state, and a right-hand side there.
     stage: Vec<f64>,
+    stage_rhs: Vec<f64>,
     scale: Vec<f64>,
     taken: Option<Taken>,
     stats: Stats,
@@ -141,11 +62,9 @@ impl Radau {
     /// An integrator for systems of `dim` equations.
     pub fn new(dim: usize, tolerances: Tolerances) -> Self {
         let work = || vec![0.0; dim];
-        let rtol = tolerances.rtol;
         Radau {
             n: dim,
             tolerances,
-            newton_tol: (10.0 * f64::EPSILON / rtol).max(0.03f64.min(rtol.sqrt())),
             t: 0.0,
             end: 0.0,
             y: work(),
@@ -153,14 +72,10 @@ impl Radau {
             h_abs: 0.0,
             h_abs_old: None,
             error_norm_old: None,
-            jacobian: vec![0.0; dim * dim],
-            current_jacobian: false,
-            lu_real: None,
-            lu_complex: None,
+            newton: Newton::new(dim, tolerances.rtol),
             z: std::array::from_fn(|_| work()),
-            w: std::array::from_fn(|_| work()),
-            stage_rhs: std::array::from_fn(|_| work()),
             stage: work(),
+            stage_rhs: work(),
             scale: work(),
             taken: None,
             stats: Stats::default(),
@@ -194,7 +109,7 @@ impl Radau {
 
     /// The Jacobian the Newton iterations use (`n x n`, row-major).
     pub fn jacobian(&self) -> &[f64] {
-        &self.jacobian
+        self.newton.jacobian()
     }
 
     /// Starts a stretch ending at `t_end` from `(t, y)`: a fresh right-hand side and
@@ -219,16 +134,8 @@ impl Radau {
             None => self.initial_step(system, t_end - t),
         };
         (self.h_abs_old, self.error_norm_old, self.taken) = (None, None, None);
-        self.refresh_jacobian(system, t);
+        self.newton.refresh(system, t, &self.y, &mut self.stats);
         Ok(())
-    }
-
-    fn refresh_jacobian<S: OdeSystem>(&mut self, system: &mut S, t: f64) {
-        system.jacobian(t, &self.y, &mut self.jacobian);
-        self.stats.jacobians += 1;
-        self.current_jacobian = true;
-        self.lu_real = None;
-        self.lu_complex = None;
     }
 
     /// SciPy's `select_initial_step` with error order 3, at most `interval`.
@@ -246,10 +153,9 @@ impl Radau {
         for i in 0..self.n {
             self.stage[i] = self.y[i] + h0 * self.f[i];
         }
-        system.rhs(self.t + h0, &self.stage, &mut self.stage_rhs[0]);
+        system.rhs(self.t + h0, &self.stage, &mut self.stage_rhs);
         self.stats.evaluations += 1;
-        let d2 =
-            rms((0..self.n).map(|i| (self.stage_rhs[0][i] - self.f[i]) / scale(self.y[i]))) / h0;
+        let d2 = rms((0..self.n).map(|i| (self.stage_rhs[i] - self.f[i]) / scale(self.y[i]))) / h0;
         let h1 = if d1 <= 1e-15 && d2 <= 1e-15 {
             (h0 * 1e-3).max(1e-6)
         } else {
@@ -308,12 +214,18 @@ impl Radau {
             for i in 0..self.n {
                 self.scale[i] = atol + self.y[i].abs() * rtol;
             }
-            let newton = self.solve_collocation(system, h)?;
+            let start = Start {
+                t: self.t,
+                y: &self.y,
+                scale: &self.scale,
+            };
+            let newton = self
+                .newton
+                .solve(system, &start, h, &mut self.z, &mut self.stats);
             if !newton.converged {
                 non_finite = newton.non_finite;
                 h_abs *= 0.5;
-                self.lu_real = None;
-                self.lu_complex = None;
+                self.newton.forget_factors();
                 self.stats.rejected += 1;
                 continue;
             }
@@ -324,8 +236,7 @@ impl Radau {
                 non_finite = !error_norm.is_finite();
                 let factor = predict_factor(h_abs, h_abs_old, error_norm, error_norm_old);
                 h_abs *= MIN_FACTOR.max(safety * factor);
-                self.lu_real = None;
-                self.lu_complex = None;
+                self.newton.forget_factors();
                 rejected = true;
                 self.stats.rejected += 1;
                 continue;
@@ -342,7 +253,7 @@ impl Radau {
         &mut self,
         system: &mut S,
         (h, t_new): (f64, f64),
-        (newton, safety): (Newton, f64),
+        (newton, safety): (Iterations, f64),
         error_norm: f64,
         (h_abs_old, error_norm_old): (Option<f64>, Option<f64>),
     ) {
@@ -352,8 +263,7 @@ impl Radau {
         if !recompute_jacobian && factor < 1.2 {
             factor = 1.0;
         } else {
-            self.lu_real = None;
-            self.lu_complex = None;
+            self.newton.forget_factors();
         }
         self.record_step(h);
         for i in 0..self.n {
@@ -363,9 +273,9 @@ impl Radau {
         system.rhs(t_new, &self.y, &mut self.f);
         self.stats.evaluations += 1;
         if recompute_jacobian {
-            self.refresh_jacobian(system, t_new);
+            self.newton.refresh(system, t_new, &self.y, &mut self.stats);
         } else {
-            self.current_jacobian = false;
+            self.newton.age();
         }
         self.h_abs_old = Some(self.h_abs);
         self.error_norm_old = Some(error_norm);
@@ -436,21 +346,50 @@ impl Radau {
         }
     }
 
+    /// The scaled norm of the embedded error estimate of a converged step of size `h`
+    /// (after a rejection, the stiff-accurate one with one more solve); NaN where a value
+    /// is not finite.
+    fn error_norm<S: OdeSystem>(&mut self, system: &mut S, h: f64, rejected: bool) -> f64 {
+        let Tolerances { rtol, atol } = self.tolerances;
+        let Some(lu_real) = self.newton.real_factor() else {
+            return f64::NAN;
+        };
+        let n = self.n;
+        let correction: Vec<f64> = (0..n)
+            .map(|i| (0..3).map(|s| self.z[s][i] * E[s]).sum::<f64>() / h)
+            .collect();
+        let mut error: Vec<f64> = (0..n).map(|i| self.f[i] + correction[i]).collect();
+        lu_real.solve_in_place(&mut error);
+        for i in 0..n {
+            let y_new = self.y[i] + self.z[2][i];
+            self.scale[i] = atol + self.y[i].abs().max(y_new.abs()) * rtol;
+        }
+        let norm = |error: &[f64], scale: &[f64]| rms((0..n).map(|i| error[i] / scale[i]));
+        let mut value = norm(&error, &self.scale);
+        if rejected && value > 1.0 {
+            for i in 0..n {
+                self.stage[i] = self.y[i] + error[i];
+            }
+            system.rhs(self.t, &self.stage, &mut error);
+            self.stats.evaluations += 1;
+            for i in 0..n {
+                error[i] += correction[i];
+            }
+            lu_real.solve_in_place(&mut error);
+            value = norm(&error, &self.scale);
+        }
+        let finite = (0..n).all(|i| (self.y[i] + self.z[2][i]).is_finite());
+        if finite {
+            value
+        } else {
+            f64::NAN
+        }
+    }
+
     /// Where the integration is stuck, from the Newton Jacobian.
     fn stuck(&self, step: f64) -> Stuck {
-        Stuck::from_jacobian(&self.jacobian, self.n, step, true)
+        Stuck::from_jacobian(self.newton.jacobian(), self.n, step, true)
     }
-}
-
-/// `sum_j q[j][i] x^(j+1)`.
-pub(super) fn polynomial(q: &[Vec<f64>; 3], i: usize, x: f64) -> f64 {
-    let mut power = x;
-    let mut value = 0.0;
-    for column in q {
-        value += column[i] * power;
-        power *= x;
-    }
-    value
 }
 
 /// The smallest double above `t` (`t` itself at infinity).
