@@ -5,14 +5,20 @@
 //! A free run given a [`PhysicalRange`] stops at the first predicted measured state that
 //! leaves it or is not finite, and records where ([`Divergence`]); its online error is then
 //! infinite, never a finite error over the knots before the stop.
+//!
+//! A free run goes through the one free run ([`crate::solve::ode::free_run`]): its segments
+//! are the knots, its stepper the network's step ([`NetworkStep`]), and after each knot the
+//! run feeds the next (the data or its own prediction) and checks the physical range.
 
-use crate::engine::graph::{BackendError, Batch, Network, Normalisation};
+use crate::engine::graph::{BackendError, Network, Normalisation};
 use crate::ir;
 use crate::record::measure::{cell_error, StateErrors};
 use crate::record::Track;
+use crate::solve::ode::{free_run, Observer, Segment};
+use std::ops::ControlFlow;
 
-use super::stepping::{Stepper, Stepping};
-use crate::engine::pairs::{embedding_row, PairTable};
+use super::stepping::{NetworkStep, Stepping};
+use crate::engine::pairs::PairTable;
 
 mod range;
 
@@ -86,120 +92,105 @@ pub fn simulate(
     (feed, range, stepping): (Feed, Option<&PhysicalRange>, Stepping),
 ) -> Result<Trajectory, BackendError> {
     let (start, end) = knots;
-    let measured = model.states.len();
-    let mut history = track.clone();
     let mut state: Vec<f64> = track.states.iter().map(|s| s[start]).collect();
     state.extend_from_slice(hidden_start);
     let scales: Vec<f64> = (track.states.iter())
         .map(|s| s.iter().fold(0.0, |m: f64, v| m.max(v.abs())))
         .chain(hidden_start.iter().map(|h| h.abs()))
         .collect();
-    let split = split_network(network, model, stepping);
-    let (stepped, step_fractions, first) = match &split {
-        Some((single, fractions, trained)) => (single, &fractions[..], *trained),
-        None => (network, fractions, 1),
+    let mut stepper = NetworkStep::new((network, model), track, fractions, &scales, stepping);
+    let declared = range
+        .filter(|_| feed == Feed::Own)
+        .map(|r| r.declared(model));
+    let mut knots = Knots {
+        track,
+        feed,
+        range: declared.as_ref(),
+        names: model.states.iter().map(|s| s.name.clone()).collect(),
+        trajectory: Trajectory {
+            start,
+            states: Vec::new(),
+            next_states: Vec::new(),
+            closure_outputs: Vec::new(),
+            outputs: Vec::new(),
+            divergence: None,
+            substeps: 1,
+        },
     };
-    let mut stepper = Stepper::for_model(model, &scales).starting_at(first);
-    let declared = range.map(|r| r.declared(model));
-    let range = declared.as_ref();
-    let mut trajectory = Trajectory {
-        start,
-        states: Vec::new(),
-        next_states: Vec::new(),
-        closure_outputs: Vec::new(),
-        outputs: Vec::new(),
-        divergence: None,
-        substeps: 1,
-    };
-    for knot in start..=end {
-        if crate::stop::requested() {
-            return Err(BackendError::Stopped);
-        }
-        let prediction = match stepping {
-            Stepping::Fixed => network.predict(&fixed_batch(
-                model,
-                (track, &history),
-                knot,
-                &state,
-                fractions,
-            ))?,
-            Stepping::Controlled => {
-                let place = (track, &history);
-                stepper
-                    .step((stepped, model), place, (knot, &state), step_fractions)?
-                    .0
-            }
-        };
-        trajectory.states.push(std::mem::take(&mut state));
-        trajectory.closure_outputs.push(prediction.closure_outputs);
-        trajectory.outputs.push(prediction.outputs);
-        let next = prediction.next_states;
-        if let Some(range) = range.filter(|_| feed == Feed::Own) {
-            let time = track.times.get(knot + 1).copied().unwrap_or(f64::NAN);
-            let names: Vec<String> = model.states.iter().map(|s| s.name.clone()).collect();
-            let at = (track.name.as_str(), knot + 1, time);
-            if let Some(divergence) = range.check(&names, at, &next) {
-                trajectory.divergence = Some(divergence);
-                trajectory.next_states.push(next);
-                break;
-            }
-        }
-        if knot + 1 < track.len() {
-            state = next.clone();
-            for (index, value) in state.iter_mut().enumerate().take(measured) {
-                let reset = feed == Feed::Data && track.known[index][knot + 1];
-                if reset {
-                    *value = track.states[index][knot + 1];
-                } else {
-                    history.states[index][knot + 1] = *value;
-                }
-            }
-        }
-        trajectory.next_states.push(next);
-    }
-    trajectory.substeps = stepper.most;
+    let segments = (start..=end).map(|knot| Segment {
+        index: knot,
+        span: (
+            track.times[knot],
+            track.times.get(knot + 1).copied().unwrap_or(f64::NAN),
+        ),
+        samples: &[],
+    });
+    free_run(&mut stepper, segments, &mut state, &mut knots)?;
+    let mut trajectory = knots.trajectory;
+    trajectory.substeps = stepper.most();
     Ok(trajectory)
 }
 
-/// What step control steps a network trained with `K > 1` sub-steps by: a one-sub-step
-/// copy of it, its stage fractions, and `K` to start from (`super::stepping`); `None` where
-/// the network steps itself (fixed steps, `next` models, `K = 1`).
-fn split_network(
-    network: &Network,
-    model: &ir::Model,
-    stepping: Stepping,
-) -> Option<(Network, Vec<f64>, usize)> {
-    let trained = network.substeps();
-    let split = stepping == Stepping::Controlled
-        && model.dynamics == ir::Dynamics::Continuous
-        && trained > 1;
-    split.then(|| {
-        let fractions = crate::engine::pairs::stage_fractions(model.dynamics, 1);
-        (network.with_substeps(1), fractions, trained)
-    })
+/// A grey box's free run along a track, knot by knot: what it records, and its say after
+/// each knot (the feed and the physical range).
+struct Knots<'a> {
+    track: &'a Track,
+    feed: Feed,
+    /// The physical range a run fed its own predictions stops outside of.
+    range: Option<&'a PhysicalRange>,
+    /// The measured states' names.
+    names: Vec<String>,
+    trajectory: Trajectory,
 }
 
-/// The one-step batch of knot `knot` of `track` (its history `history`) from `state`.
-fn fixed_batch(
-    model: &ir::Model,
-    (track, history): (&Track, &Track),
-    knot: usize,
-    state: &[f64],
-    fractions: &[f64],
-) -> Batch {
-    Batch {
-        rows: 1,
-        states: state.to_vec(),
-        inputs: track.inputs.iter().map(|u| u[knot]).collect(),
-        embeddings: (model.closures.iter())
-            .map(|c| {
-                (fractions.iter())
-                    .map(|&f| embedding_row(c, history, knot, f))
-                    .collect()
-            })
-            .collect(),
-        step_sizes: vec![track.steps[knot]],
-        ..Batch::default()
+impl Observer<NetworkStep<'_>> for Knots<'_> {
+    fn before(&mut self, _: &Segment<'_>, state: &[f64]) -> Result<(), BackendError> {
+        if crate::stop::requested() {
+            return Err(BackendError::Stopped);
+        }
+        self.trajectory.states.push(state.to_vec());
+        Ok(())
+    }
+
+    fn sample(&mut self, _: &[f64], _: &[f64]) {}
+
+    /// Records the knot's prediction; stops a run that left the physical range; feeds the
+    /// next knot: a measured state from the data where [`Feed::Data`] knows it there, else
+    /// the run's own value, into the history the embedding reads too.
+    fn after(
+        &mut self,
+        segment: &Segment<'_>,
+        state: &mut [f64],
+        stepper: &mut NetworkStep<'_>,
+    ) -> Result<ControlFlow<()>, BackendError> {
+        let knot = segment.index;
+        let prediction = (stepper.take_prediction())
+            .ok_or_else(|| BackendError::internal("a knot stepped without a prediction"))?;
+        self.trajectory
+            .closure_outputs
+            .push(prediction.closure_outputs);
+        self.trajectory.outputs.push(prediction.outputs);
+        let next = state.to_vec();
+        if let Some(range) = self.range {
+            let at = (self.track.name.as_str(), knot + 1, segment.span.1);
+            if let Some(divergence) = range.check(&self.names, at, &next) {
+                self.trajectory.divergence = Some(divergence);
+                self.trajectory.next_states.push(next);
+                return Ok(ControlFlow::Break(()));
+            }
+        }
+        if knot + 1 < self.track.len() {
+            let track = self.track;
+            for (index, value) in state.iter_mut().enumerate().take(self.names.len()) {
+                if self.feed == Feed::Data && track.known[index][knot + 1] {
+                    *value = track.states[index][knot + 1];
+                } else {
+                    stepper.remember(index, knot + 1, *value);
+                }
+            }
+        }
+        self.trajectory.next_states.push(next);
+        Ok(ControlFlow::Continue(()))
     }
 }
 

@@ -31,6 +31,7 @@
 use crate::engine::graph::{BackendError, Batch, Network, Prediction};
 use crate::ir;
 use crate::record::Track;
+use crate::solve::ode::Segment;
 
 use super::evaluate::{simulate, Feed};
 use super::split::Training;
@@ -216,6 +217,146 @@ impl Stepper {
                 }
             })
             .fold(0.0, f64::max)
+    }
+}
+
+/// A trained network's step from knot to knot of a track: the stepper of a grey box's free
+/// runs ([`crate::solve::ode::free_run`], `super::evaluate::simulate`). A segment is one
+/// knot (its index), stepped once by the whole network ([`Stepping::Fixed`]) or under step
+/// control ([`Stepping::Controlled`]); the delay embedding reads the run's own history.
+pub struct NetworkStep<'a> {
+    network: &'a Network,
+    model: &'a ir::Model,
+    track: &'a Track,
+    fractions: &'a [f64],
+    stepping: Stepping,
+    /// What step control steps a network trained with `K > 1` sub-steps by: a
+    /// one-sub-step copy of it and its stage fractions ([`split_network`]).
+    single: Option<(Network, Vec<f64>)>,
+    control: Stepper,
+    /// The track as the run has seen it: where it fed itself, its own measured states.
+    history: Track,
+    /// The prediction made at the last knot stepped from, until taken.
+    prediction: Option<Prediction>,
+}
+
+impl<'a> NetworkStep<'a> {
+    /// Steps `network` along `track` as `stepping` says, its stage fractions `fractions`,
+    /// the states' typical sizes `scales` (step control's floors).
+    pub fn new(
+        (network, model): (&'a Network, &'a ir::Model),
+        track: &'a Track,
+        fractions: &'a [f64],
+        scales: &[f64],
+        stepping: Stepping,
+    ) -> Self {
+        let split = split_network(network, model, stepping);
+        let first = split.as_ref().map_or(1, |(_, _, trained)| *trained);
+        NetworkStep {
+            network,
+            model,
+            track,
+            fractions,
+            stepping,
+            single: split.map(|(single, fractions, _)| (single, fractions)),
+            control: Stepper::for_model(model, scales).starting_at(first),
+            history: track.clone(),
+            prediction: None,
+        }
+    }
+
+    /// The most sub-steps one step needed (1 at the trained step).
+    pub fn most(&self) -> usize {
+        self.control.most
+    }
+
+    /// The prediction made at the last knot stepped from (its closure outputs and
+    /// outputs), once.
+    pub fn take_prediction(&mut self) -> Option<Prediction> {
+        self.prediction.take()
+    }
+
+    /// Writes the run's own value of measured state `state` at `knot` into the history the
+    /// delay embedding reads.
+    pub fn remember(&mut self, state: usize, knot: usize, value: f64) {
+        self.history.states[state][knot] = value;
+    }
+}
+
+impl crate::solve::ode::Stepper for NetworkStep<'_> {
+    type Error = BackendError;
+
+    fn advance(
+        &mut self,
+        segment: &Segment<'_>,
+        state: &mut [f64],
+        _: &mut dyn FnMut(&[f64], &[f64]),
+    ) -> Result<(), BackendError> {
+        let (knot, place) = (segment.index, (self.track, &self.history));
+        let prediction = match self.stepping {
+            Stepping::Fixed => {
+                let batch = fixed_batch(self.model, place, knot, state, self.fractions);
+                self.network.predict(&batch)?
+            }
+            Stepping::Controlled => {
+                let (stepped, fractions) = match &self.single {
+                    Some((single, fractions)) => (single, &fractions[..]),
+                    None => (self.network, self.fractions),
+                };
+                let pair = (stepped, self.model);
+                (self.control.step(pair, place, (knot, state), fractions)?).0
+            }
+        };
+        if prediction.next_states.len() != state.len() {
+            return Err(BackendError::internal(
+                "a step changed the number of states",
+            ));
+        }
+        state.copy_from_slice(&prediction.next_states);
+        self.prediction = Some(prediction);
+        Ok(())
+    }
+}
+
+/// What step control steps a network trained with `K > 1` sub-steps by: a one-sub-step
+/// copy of it, its stage fractions, and `K` to start from (module documentation); `None`
+/// where the network steps itself (fixed steps, `next` models, `K = 1`).
+fn split_network(
+    network: &Network,
+    model: &ir::Model,
+    stepping: Stepping,
+) -> Option<(Network, Vec<f64>, usize)> {
+    let trained = network.substeps();
+    let split = stepping == Stepping::Controlled
+        && model.dynamics == ir::Dynamics::Continuous
+        && trained > 1;
+    split.then(|| {
+        let fractions = crate::engine::pairs::stage_fractions(model.dynamics, 1);
+        (network.with_substeps(1), fractions, trained)
+    })
+}
+
+/// The one-step batch of knot `knot` of `track` (its history `history`) from `state`.
+fn fixed_batch(
+    model: &ir::Model,
+    (track, history): (&Track, &Track),
+    knot: usize,
+    state: &[f64],
+    fractions: &[f64],
+) -> Batch {
+    Batch {
+        rows: 1,
+        states: state.to_vec(),
+        inputs: track.inputs.iter().map(|u| u[knot]).collect(),
+        embeddings: (model.closures.iter())
+            .map(|c| {
+                (fractions.iter())
+                    .map(|&f| embedding_row(c, history, knot, f))
+                    .collect()
+            })
+            .collect(),
+        step_sizes: vec![track.steps[knot]],
+        ..Batch::default()
     }
 }
 

@@ -9,10 +9,9 @@
 //! declared initial value starts with that expression's derivatives by the params; a state
 //! asked for starts with a unit entry in its own initial-value column.
 
-use super::simulate::{same_inputs, Run, Simulator};
-use crate::ir::Dynamics;
+use super::simulate::{input_runs, Run, Simulator};
 use crate::record::Record;
-use crate::solve::ode::{IntegrationError, OdeSystem};
+use crate::solve::ode::{IntegrationError, Observer, OdeSystem, Renewal, Segment, Stepper};
 
 /// The sensitivities of a free run, row by row.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,90 +47,21 @@ impl Simulator {
         let mut state = self.start_state(record, overrides);
         let mut s = self.initial_sensitivities(record, overrides, initial);
         let (dim, columns) = (state.len(), s.len() / state.len().max(1));
-        let mut run = Run {
-            dim,
-            values: state.clone(),
+        let mut sensitive = Sensitive {
+            run: Run {
+                dim,
+                values: state.clone(),
+            },
+            sensitivities: RunSensitivities {
+                dim,
+                columns,
+                values: s.clone(),
+            },
         };
-        let mut sensitivities = RunSensitivities {
-            dim,
-            columns,
-            values: s.clone(),
-        };
-        let mut first = 0;
-        while first + 1 < end {
-            // A fit asked to stop needs no more derivatives ([`crate::stop`]).
-            if crate::stop::requested() {
-                return Err(IntegrationError::Stopped {
-                    t: record.times[first],
-                });
-            }
-            let mut last = first + 1;
-            while last + 1 < end && same_inputs(record, first, last) {
-                last += 1;
-            }
-            let rows = (first, last);
-            let (runs, sens) = (&mut run.values, &mut sensitivities.values);
-            let mut push = |y: &[f64], s: &[f64]| {
-                runs.extend_from_slice(y);
-                sens.extend_from_slice(s);
-            };
-            self.integrator.renew_budget();
-            self.advance_sensitive(record, rows, (&mut state, &mut s), &mut push)?;
-            first = last;
-        }
-        Ok((run, sensitivities))
-    }
-
-    /// Advances `state` and its sensitivities `s` from `rows.0` to `rows.1` with the inputs
-    /// of `rows.0`, calling `push` at every row after the first.
-    fn advance_sensitive(
-        &mut self,
-        record: &Record,
-        (first, last): (usize, usize),
-        (state, s): (&mut [f64], &mut [f64]),
-        push: &mut dyn FnMut(&[f64], &[f64]),
-    ) -> Result<(), IntegrationError> {
-        self.load(record, first, state);
-        if self.dynamics == Dynamics::Discrete {
-            return self.map_sensitive(record, (first, last), (state, s), push);
-        }
-        let times = &record.times[first + 1..=last];
-        let span = (record.times[first], record.times[last]);
-        self.integrator.integrate_with_sensitivities(
-            &mut self.system,
-            span,
-            state,
-            s,
-            times,
-            |_, y, s| push(y, s),
-        )
-    }
-
-    /// A discrete model's map once per row, with `S <- J S + f_p`.
-    fn map_sensitive(
-        &mut self,
-        record: &Record,
-        (first, last): (usize, usize),
-        (state, s): (&mut [f64], &mut [f64]),
-        push: &mut dyn FnMut(&[f64], &[f64]),
-    ) -> Result<(), IntegrationError> {
-        let (n, p) = (state.len(), s.len() / state.len().max(1));
-        let (mut next, mut moved) = (vec![0.0; n], vec![0.0; n * p]);
-        let (mut states, mut params) = (vec![0.0; n * n], vec![0.0; n * p]);
-        for row in first..last {
-            let t = record.times[row];
-            self.system.rhs(t, state, &mut next);
-            self.system
-                .sensitivity_jacobians(t, state, &mut states, &mut params);
-            crate::solve::ode::sensitivity::multiply_add(&states, s, &params, n, p, &mut moved);
-            if next.iter().chain(&moved).any(|v| !v.is_finite()) {
-                return Err(IntegrationError::non_finite(record.times[row + 1]));
-            }
-            state.copy_from_slice(&next);
-            s.copy_from_slice(&moved);
-            push(state, s);
-        }
-        Ok(())
+        let how = (Renewal::Budget, Some(&mut s[..]));
+        let segments = input_runs(record, end);
+        self.run(record, segments, &mut state, how, &mut sensitive)?;
+        Ok((sensitive.run, sensitive.sensitivities))
     }
 
     /// The sensitivities a free run of `record` starts with (see the module documentation).
@@ -167,5 +97,26 @@ impl Simulator {
             s[k * columns + params + column] = 1.0;
         }
         s
+    }
+}
+
+/// What a sensitive run keeps: the states and their sensitivities at every row.
+struct Sensitive {
+    run: Run,
+    sensitivities: RunSensitivities,
+}
+
+impl<S: Stepper<Error = IntegrationError>> Observer<S> for Sensitive {
+    /// A fit asked to stop needs no more derivatives ([`crate::stop`]).
+    fn before(&mut self, segment: &Segment<'_>, _: &[f64]) -> Result<(), IntegrationError> {
+        if crate::stop::requested() {
+            return Err(IntegrationError::Stopped { t: segment.span.0 });
+        }
+        Ok(())
+    }
+
+    fn sample(&mut self, state: &[f64], sensitivities: &[f64]) {
+        self.run.values.extend_from_slice(state);
+        self.sensitivities.values.extend_from_slice(sensitivities);
     }
 }

@@ -10,13 +10,19 @@
 //! input changes; discrete models apply their map once per row. Optional *correction* slots
 //! (outputs of a synthesised closure: the loci of `crate::diagnose`) are held constant over each
 //! interval. [`Simulator::sensitive_run`] carries the forward sensitivities to the params
-//! and the initial values along a free run ([`super::sensitivity`]).
+//! and the initial values along a free run ([`super::sensitivity`]). Every run here goes
+//! through the one free run ([`crate::solve::ode::free_run`]): its segments are the runs of
+//! rows with the same inputs (one row each for a one-step prediction).
 
 use super::FitError;
 use crate::eval::{JacobianProgram, Program};
 use crate::ir::{Dynamics, Model, Var};
 use crate::record::Record;
-use crate::solve::ode::{IntegrationError, Integrator, Method, ModelSystem, OdeSystem, Tolerances};
+use crate::solve::ode::{
+    free_run, Adaptive, IntegrationError, Integrator, Map, Method, ModelSystem, Observer,
+    OdeSystem, Renewal, Segment, Stepper, Tolerances,
+};
+use std::ops::ControlFlow;
 
 /// Most integration steps between two input switches (or over one interval of a one-step
 /// prediction) before a run is declared failed (wild params): a failing run costs no more.
@@ -229,41 +235,50 @@ impl Simulator {
         row: usize,
         state: &mut [f64],
     ) -> Result<(), IntegrationError> {
-        self.integrator.restart();
-        self.advance(record, (row, row + 1), state, &mut |_, _| {})
+        let segment = rows(record, (row, row + 1));
+        let how = (Renewal::Restart, None);
+        self.run(
+            record,
+            [segment],
+            state,
+            how,
+            &mut |_: &[f64], _: &[f64]| {},
+        )
+        .map_err(|error| error.named(&self.names))
     }
 
-    /// Advances `state` from `rows.0` to `rows.1`, inputs held at their `rows.0` values,
-    /// calling `record_row(row, state)` at every row after the first.
-    fn advance(
+    /// Runs `state` over `segments` of `record` with this model's stepper (the integrator
+    /// renewed at each as `renewal` says, carrying the sensitivities `s` along where
+    /// given), `observer` having its say ([`crate::solve::ode::free_run`]).
+    pub(super) fn run<'s, O>(
         &mut self,
         record: &Record,
-        (first, last): (usize, usize),
+        segments: impl IntoIterator<Item = Segment<'s>>,
         state: &mut [f64],
-        record_row: &mut dyn FnMut(usize, &[f64]),
-    ) -> Result<(), IntegrationError> {
-        self.load(record, first, state);
+        (renewal, s): (Renewal, Option<&mut [f64]>),
+        observer: &mut O,
+    ) -> Result<(), IntegrationError>
+    where
+        O: for<'a> Observer<Adaptive<'a>> + for<'a> Observer<Map<'a>>,
+    {
+        let inputs = &record.inputs;
         match self.dynamics {
             Dynamics::Continuous => {
-                let times = &record.times[first + 1..=last];
-                let span = (record.times[first], record.times[last]);
-                self.integrator
-                    .integrate(&mut self.system, span, state, times, |k, y| {
-                        record_row(first + 1 + k, y)
-                    })
-                    .map_err(|error| error.named(&self.names))
+                let stepper =
+                    Adaptive::new(&mut self.integrator, &mut self.system, inputs, renewal);
+                let mut stepper = match s {
+                    Some(s) => stepper.with_sensitivities(s),
+                    None => stepper,
+                };
+                free_run(&mut stepper, segments, state, observer)
             }
             Dynamics::Discrete => {
-                let mut next = vec![0.0; state.len()];
-                for row in first..last {
-                    self.system.rhs(record.times[row], state, &mut next);
-                    if next.iter().any(|v| !v.is_finite()) {
-                        return Err(IntegrationError::non_finite(record.times[row + 1]));
-                    }
-                    state.copy_from_slice(&next);
-                    record_row(row + 1, state);
-                }
-                Ok(())
+                let stepper = Map::new(&mut self.system, inputs);
+                let mut stepper = match s {
+                    Some(s) => stepper.with_sensitivities(s),
+                    None => stepper,
+                };
+                free_run(&mut stepper, segments, state, observer)
             }
         }
     }
@@ -281,17 +296,16 @@ impl Simulator {
         let dim = state.len();
         let mut values = Vec::with_capacity(end * dim);
         values.extend_from_slice(&state);
-        let mut first = 0;
-        while first + 1 < end {
-            let mut last = first + 1;
-            while last + 1 < end && same_inputs(record, first, last) {
-                last += 1;
-            }
-            let mut push = |_: usize, y: &[f64]| values.extend_from_slice(y);
-            self.integrator.renew_budget();
-            self.advance(record, (first, last), &mut state, &mut push)?;
-            first = last;
-        }
+        let mut push = |y: &[f64], _: &[f64]| values.extend_from_slice(y);
+        let segments = input_runs(record, end);
+        self.run(
+            record,
+            segments,
+            &mut state,
+            (Renewal::Budget, None),
+            &mut push,
+        )
+        .map_err(|error| error.named(&self.names))?;
         Ok(Run { dim, values })
     }
 
@@ -308,20 +322,86 @@ impl Simulator {
         self.integrator.restart();
         let mut state = self.start_state(record, overrides);
         let dim = state.len();
-        let (mut starts, mut predictions) = (Vec::new(), Vec::new());
-        for row in 0..end.saturating_sub(1) {
-            for (k, column) in record.states.iter().enumerate() {
-                if let Some(value) = column[row] {
-                    state[k] = value;
-                }
-            }
-            starts.extend_from_slice(&state);
-            self.step(record, row, &mut state)?;
-            predictions.extend_from_slice(&state);
+        if end > 1 {
+            reset_to_cells(record, 0, &mut state);
         }
+        let mut steps = OneStep {
+            record,
+            starts: Vec::new(),
+            predictions: Vec::new(),
+        };
+        let segments = (0..end.saturating_sub(1)).map(|row| rows(record, (row, row + 1)));
+        let how = (Renewal::Restart, None);
+        self.run(record, segments, &mut state, how, &mut steps)
+            .map_err(|error| error.named(&self.names))?;
         let run = |values| Run { dim, values };
-        Ok((run(starts), run(predictions)))
+        Ok((run(steps.starts), run(steps.predictions)))
     }
+}
+
+/// One-step predictions along a record: each step starts from the measured cells of its
+/// row ([`Simulator::one_step`]).
+struct OneStep<'r> {
+    record: &'r Record,
+    starts: Vec<f64>,
+    predictions: Vec<f64>,
+}
+
+impl<S: Stepper> Observer<S> for OneStep<'_> {
+    fn before(&mut self, _: &Segment<'_>, state: &[f64]) -> Result<(), S::Error> {
+        self.starts.extend_from_slice(state);
+        Ok(())
+    }
+
+    fn sample(&mut self, _: &[f64], _: &[f64]) {}
+
+    fn after(
+        &mut self,
+        segment: &Segment<'_>,
+        state: &mut [f64],
+        _: &mut S,
+    ) -> Result<ControlFlow<()>, S::Error> {
+        self.predictions.extend_from_slice(state);
+        reset_to_cells(self.record, segment.index + 1, state);
+        Ok(ControlFlow::Continue(()))
+    }
+}
+
+/// Sets every measured state that `row` of `record` has a cell for to that cell.
+fn reset_to_cells(record: &Record, row: usize, state: &mut [f64]) {
+    for (k, column) in record.states.iter().enumerate() {
+        if let Some(value) = column[row] {
+            state[k] = value;
+        }
+    }
+}
+
+/// Rows `first..=last` of `record` as a segment: the inputs of `first` held, every later
+/// row sampled.
+fn rows(record: &Record, (first, last): (usize, usize)) -> Segment<'_> {
+    Segment {
+        index: first,
+        span: (record.times[first], record.times[last]),
+        samples: &record.times[first + 1..=last],
+    }
+}
+
+/// The segments of a free run over rows `0..end` of `record`: from row 0, each from its
+/// first row to the first later row whose inputs differ (or row `end - 1`).
+pub(super) fn input_runs(record: &Record, end: usize) -> impl Iterator<Item = Segment<'_>> {
+    let mut first = 0;
+    std::iter::from_fn(move || {
+        if first + 1 >= end {
+            return None;
+        }
+        let mut last = first + 1;
+        while last + 1 < end && same_inputs(record, first, last) {
+            last += 1;
+        }
+        let segment = rows(record, (first, last));
+        first = last;
+        Some(segment)
+    })
 }
 
 /// The input values held over the interval that starts at `row`.
@@ -330,7 +410,7 @@ pub fn inputs_at(record: &Record, row: usize) -> impl Iterator<Item = f64> + '_ 
 }
 
 /// Whether the inputs of rows `a` and `b` are the same.
-pub(super) fn same_inputs(record: &Record, a: usize, b: usize) -> bool {
+fn same_inputs(record: &Record, a: usize, b: usize) -> bool {
     record.inputs.iter().all(|column| column[a] == column[b])
 }
 

@@ -1,153 +1,18 @@
 //! From a model and its input signals to a sampled [`Trajectory`].
 
-use super::{Integrator, OdeSystem, SimError, SimOptions, Stats, Trajectory};
-use crate::eval::{CompileError, CompiledRhs, JacobianProgram, Layout, Program, ProgramSet};
+use super::error::IntegrationError;
+use super::integrator::Integrator;
+use super::model::ModelSystem;
+use super::run::{free_run, Segment};
+use super::steppers::{Adaptive, Map, Renewal};
+use super::system::{OdeSystem, Stats};
+use super::{SimError, SimOptions, Trajectory};
+use crate::eval::{CompileError, Layout, Program, ProgramSet};
 use crate::ir::{Dynamics, Model};
 use crate::signal::Signal;
-use std::ops::Range;
 
 /// Most samples one simulation may record.
 const MAX_SAMPLES: usize = 100_000_000;
-
-/// A model's balances as an [`OdeSystem`] (or, for a `next` model, as its map): the states
-/// are the measured then hidden states, and the other slots (inputs, params) are held at
-/// whatever they were last set to. Its Jacobian is the exact derivative of the balances
-/// ([`JacobianProgram`]); forward sensitivities are taken with respect to the slots given
-/// to [`ModelSystem::differentiate_by`].
-#[derive(Debug, Clone)]
-pub struct ModelSystem {
-    layout: Layout,
-    rhs: CompiledRhs,
-    jacobian: JacobianProgram,
-    sensitivity: Option<JacobianProgram>,
-    extra: usize,
-    slots: Vec<f64>,
-    scratch: Vec<f64>,
-    values: Vec<f64>,
-    combined: Vec<f64>,
-    states: Range<usize>,
-}
-
-impl ModelSystem {
-    /// Compiles the balances of `model` and their Jacobian; params start at their initial
-    /// values, inputs at 0.
-    pub fn new(model: &Model) -> Result<Self, CompileError> {
-        let layout = Layout::new(model);
-        let rhs = CompiledRhs::new(model, &layout)?;
-        let states: Vec<usize> = layout.state_range().collect();
-        let jacobian = JacobianProgram::balances(model, &layout, &states)?;
-        Ok(ModelSystem {
-            slots: layout.initial_slots(),
-            states: layout.state_range(),
-            values: vec![0.0; states.len()],
-            layout,
-            rhs,
-            jacobian,
-            sensitivity: None,
-            extra: 0,
-            scratch: Vec::new(),
-            combined: Vec::new(),
-        })
-    }
-
-    /// Takes forward sensitivities with respect to the quantities in `slots` (params,
-    /// closure outputs held as corrections, ...) from now on, followed by `extra` columns
-    /// that the balances do not depend on (initial values: their sensitivities only start
-    /// non-zero).
-    pub fn differentiate_by(
-        &mut self,
-        model: &Model,
-        slots: &[usize],
-        extra: usize,
-    ) -> Result<(), CompileError> {
-        let wrt: Vec<usize> = self.states.clone().chain(slots.iter().copied()).collect();
-        self.sensitivity = Some(JacobianProgram::balances(model, &self.layout, &wrt)?);
-        self.extra = extra;
-        Ok(())
-    }
-
-    /// The slot layout of the model.
-    pub fn layout(&self) -> &Layout {
-        &self.layout
-    }
-
-    /// Sets the number of columns after the differentiated slots that the balances do not
-    /// depend on (see [`ModelSystem::differentiate_by`]).
-    pub fn set_extra_columns(&mut self, extra: usize) {
-        self.extra = extra;
-    }
-
-    /// All slots, e.g. to set params before integrating.
-    pub fn slots_mut(&mut self) -> &mut [f64] {
-        &mut self.slots
-    }
-
-    /// Holds every input at the value its signal has at time `t` (one signal per input).
-    pub fn hold_inputs(&mut self, signals: &[Signal], t: f64) {
-        for (slot, signal) in self.slots[self.layout.input_range()]
-            .iter_mut()
-            .zip(signals)
-        {
-            *slot = signal.value_at(t);
-        }
-    }
-}
-
-impl OdeSystem for ModelSystem {
-    fn dim(&self) -> usize {
-        self.rhs.dim()
-    }
-
-    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) {
-        self.slots[self.states.clone()].copy_from_slice(y);
-        self.rhs.eval(&self.slots, &mut self.scratch, dydt);
-    }
-
-    fn jacobian(&mut self, _t: f64, y: &[f64], jacobian: &mut [f64]) {
-        self.slots[self.states.clone()].copy_from_slice(y);
-        let (slots, scratch, values) = (&self.slots, &mut self.scratch, &mut self.values);
-        self.jacobian.eval(slots, scratch, values, jacobian);
-    }
-
-    fn sensitivity_params(&self) -> usize {
-        (self.sensitivity.as_ref()).map_or(0, |program| {
-            program.columns() - self.states.len() + self.extra
-        })
-    }
-
-    fn sensitivity_derivative(&mut self, _t: f64, y: &[f64], s: &[f64], out: &mut [f64]) {
-        let width = self.sensitivity_params();
-        match &self.sensitivity {
-            Some(program) => {
-                self.slots[self.states.clone()].copy_from_slice(y);
-                program.eval_product(&self.slots, &mut self.scratch, s, width, out);
-            }
-            None => out.fill(0.0),
-        }
-    }
-
-    fn sensitivity_jacobians(&mut self, t: f64, y: &[f64], states: &mut [f64], params: &mut [f64]) {
-        let Some(program) = &self.sensitivity else {
-            return self.jacobian(t, y, states);
-        };
-        self.slots[self.states.clone()].copy_from_slice(y);
-        let (n, columns) = (self.states.len(), program.columns());
-        self.combined.resize(n * columns, 0.0);
-        program.eval(
-            &self.slots,
-            &mut self.scratch,
-            &mut self.values,
-            &mut self.combined,
-        );
-        let (slots, p) = (columns - n, columns - n + self.extra);
-        for i in 0..n {
-            let row = &self.combined[i * columns..(i + 1) * columns];
-            states[i * n..(i + 1) * n].copy_from_slice(&row[..n]);
-            params[i * p..i * p + slots].copy_from_slice(&row[n..]);
-            params[i * p + slots..(i + 1) * p].fill(0.0);
-        }
-    }
-}
 
 /// Simulates a model without closures driven by `inputs` (one signal per model input, in
 /// declaration order). Params take their initial values.
@@ -171,33 +36,34 @@ pub fn simulate_with_progress(
     let times = sample_times(options)?;
     let mut system = ModelSystem::new(model)?;
     let mut state = initial_state(model, system.layout(), &options.initial)?;
+    let held: Vec<Vec<f64>> = inputs.iter().map(|signal| signal.sample(&times)).collect();
     let mut columns = vec![Vec::with_capacity(times.len()); state.len()];
-    let mut record = |k: usize, values: &[f64]| {
+    let mut recorded = 0;
+    let mut record = |values: &[f64], _: &[f64]| {
         for (column, value) in columns.iter_mut().zip(values) {
             column.push(*value);
         }
-        progress(k + 1, times.len());
+        recorded += 1;
+        progress(recorded, times.len());
     };
     let run = Run {
         inputs,
         options,
         times: &times,
+        held: &held,
     };
     let stats = match model.dynamics {
         Dynamics::Continuous => run.continuous(&mut system, &mut state, &mut record),
         Dynamics::Discrete => run.discrete(&mut system, &mut state, &mut record),
     }
-    .map_err(|error| match error {
-        SimError::Integration(error) => {
-            let names: Vec<String> = (model.states.iter().chain(&model.hidden))
-                .map(|state| state.name.clone())
-                .collect();
-            SimError::Integration(error.named(&names))
-        }
-        other => other,
+    .map_err(|error| {
+        let names: Vec<String> = (model.states.iter().chain(&model.hidden))
+            .map(|state| state.name.clone())
+            .collect();
+        SimError::Integration(error.named(&names))
     })?;
     let hidden = columns.split_off(model.states.len());
-    let algebraic = evaluate_algebraic(model, system.layout(), inputs, &times, &columns, &hidden)?;
+    let algebraic = evaluate_algebraic(model, system.layout(), held, &times, &columns, &hidden)?;
     Ok(Trajectory {
         times,
         inputs: algebraic.inputs,
@@ -214,16 +80,19 @@ struct Run<'a> {
     inputs: &'a [Signal],
     options: &'a SimOptions,
     times: &'a [f64],
+    /// The inputs held at every sample time, one column per input.
+    held: &'a [Vec<f64>],
 }
 
 impl Run<'_> {
-    /// Integrates from input switch to input switch, sampling from the dense output.
+    /// Integrates from input switch to input switch (after the warm-up, if any, with the
+    /// inputs held at their first values), sampling from the dense output.
     fn continuous(
         &self,
         system: &mut ModelSystem,
         state: &mut [f64],
-        record: &mut dyn FnMut(usize, &[f64]),
-    ) -> Result<Stats, SimError> {
+        record: &mut impl FnMut(&[f64], &[f64]),
+    ) -> Result<Stats, IntegrationError> {
         let options = self.options;
         let mut integrator = Integrator::new(
             system.dim(),
@@ -232,73 +101,68 @@ impl Run<'_> {
             options.method,
         );
         let (first, last) = (self.times[0], self.times[self.times.len() - 1]);
-        if options.warmup > 0.0 {
-            system.hold_inputs(self.inputs, first);
-            integrator.integrate(
-                system,
-                (first - options.warmup, first),
-                state,
-                &[],
-                |_, _| {},
-            )?;
-        }
         let bounds = segment_bounds(self.inputs, first, last);
+        // The inputs held over each segment: their values at its start.
+        let held: Vec<Vec<f64>> = (self.inputs.iter())
+            .map(|signal| signal.sample(&bounds))
+            .collect();
+        let warmup = (options.warmup > 0.0).then_some(Segment {
+            index: 0,
+            span: (first - options.warmup, first),
+            samples: &[],
+        });
         let mut next_sample = 0;
-        for window in bounds.windows(2) {
-            let (start, end) = (window[0], window[1]);
+        let segments = bounds.windows(2).enumerate().map(|(index, window)| {
             let samples = &self.times[next_sample..];
-            let count = samples.partition_point(|&t| t <= end);
-            system.hold_inputs(self.inputs, start);
-            let offset = next_sample;
-            integrator.integrate(system, (start, end), state, &samples[..count], |k, y| {
-                record(offset + k, y)
-            })?;
+            let count = samples.partition_point(|&t| t <= window[1]);
             next_sample += count;
-        }
+            Segment {
+                index,
+                span: (window[0], window[1]),
+                samples: &samples[..count],
+            }
+        });
+        let mut stepper = Adaptive::new(&mut integrator, system, &held, Renewal::Never);
+        free_run(
+            &mut stepper,
+            warmup.into_iter().chain(segments),
+            state,
+            record,
+        )?;
         Ok(integrator.stats())
     }
 
-    /// Iterates the map `x <- f(x, u)` once per sampling step.
+    /// Iterates the map `x <- f(x, u)` once per sampling step (after the warm-up's steps,
+    /// if any, with the inputs held at their first values).
     fn discrete(
         &self,
         system: &mut ModelSystem,
         state: &mut [f64],
-        record: &mut dyn FnMut(usize, &[f64]),
-    ) -> Result<Stats, SimError> {
-        let options = self.options;
-        let mut next = vec![0.0; state.len()];
-        let first = self.times[0];
-        system.hold_inputs(self.inputs, first);
-        let warmup_steps = (options.warmup / options.dt).round() as usize;
-        for step in 0..warmup_steps {
-            let t = first - (warmup_steps - step) as f64 * options.dt;
-            map_once(system, (t, options.dt), state, &mut next)?;
-        }
-        for (k, &t) in self.times.iter().enumerate() {
-            record(k, state);
-            if k + 1 < self.times.len() {
-                system.hold_inputs(self.inputs, t);
-                map_once(system, (t, options.dt), state, &mut next)?;
+        record: &mut impl FnMut(&[f64], &[f64]),
+    ) -> Result<Stats, IntegrationError> {
+        let (times, dt) = (self.times, self.options.dt);
+        let first = times[0];
+        let warmup_steps = (self.options.warmup / dt).round() as usize;
+        let warmup = (0..warmup_steps).map(|step| {
+            let t = first - (warmup_steps - step) as f64 * dt;
+            Segment {
+                index: 0,
+                span: (t, t + dt),
+                samples: &[],
             }
-        }
+        });
+        // Step `k` lands at `times[k] + dt`, sampled as `times[k + 1]`.
+        let steps = (0..times.len() - 1).map(|k| Segment {
+            index: k,
+            span: (times[k], times[k] + dt),
+            samples: &times[k + 1..k + 2],
+        });
+        let mut stepper = Map::new(system, self.held);
+        free_run(&mut stepper, warmup, state, &mut |_: &[f64], _: &[f64]| {})?;
+        record(state, &[]);
+        free_run(&mut stepper, steps, state, record)?;
         Ok(Stats::default())
     }
-}
-
-/// One application of a discrete model's map from time `t` to `t + dt`, refusing
-/// non-finite results (reported at `t + dt`).
-fn map_once(
-    system: &mut ModelSystem,
-    (t, dt): (f64, f64),
-    state: &mut [f64],
-    next: &mut [f64],
-) -> Result<(), SimError> {
-    system.rhs(t, state, next);
-    if next.iter().any(|v| !v.is_finite()) {
-        return Err(super::IntegrationError::non_finite(t + dt).into());
-    }
-    state.copy_from_slice(next);
-    Ok(())
 }
 
 fn check_model(model: &Model, inputs: &[Signal]) -> Result<(), SimError> {
@@ -430,11 +294,12 @@ struct Algebraic {
     lets: Vec<Vec<f64>>,
 }
 
-/// Evaluates the inputs, outputs and lets at every sample.
+/// Evaluates the outputs and lets at every sample, with `inputs` held there (one column
+/// per input).
 fn evaluate_algebraic(
     model: &Model,
     layout: &Layout,
-    signals: &[Signal],
+    inputs: Vec<Vec<f64>>,
     times: &[f64],
     states: &[Vec<f64>],
     hidden: &[Vec<f64>],
@@ -445,13 +310,11 @@ fn evaluate_algebraic(
     let mut scratch = Vec::new();
     let mut values = vec![0.0; set.len()];
     let mut columns = vec![Vec::with_capacity(times.len()); set.len()];
-    let mut inputs = vec![Vec::with_capacity(times.len()); signals.len()];
     let state_slots = layout.state_range();
-    for (k, &t) in times.iter().enumerate() {
+    for k in 0..times.len() {
         let input_slots = &mut slots[layout.input_range()];
-        for ((slot, signal), column) in input_slots.iter_mut().zip(signals).zip(&mut inputs) {
-            *slot = signal.value_at(t);
-            column.push(*slot);
+        for (slot, column) in input_slots.iter_mut().zip(&inputs) {
+            *slot = column[k];
         }
         for (slot, column) in slots[state_slots.clone()]
             .iter_mut()

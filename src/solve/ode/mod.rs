@@ -9,25 +9,37 @@
 //! the fastest balance ([`IntegrationError`], [`Stuck`]). Discrete models (`next`) iterate
 //! their map once per sampling step. [`simulate`] is the entry point; [`OdeSystem`],
 //! [`Integrator`], [`Dopri5`] and [`Radau`] are reusable on their own.
+//!
+//! Every free run — [`simulate`], a mechanistic model's run along a record
+//! (`crate::solve::fit`), a trained grey box's run along a track (`crate::train`) — goes
+//! through the one [`free_run`] ([`run`]): segments over which the inputs hold, a
+//! [`Stepper`] that advances the state over each ([`Adaptive`], [`Map`], the network's
+//! step), and the caller's say before and after each ([`Observer`]).
 
 mod dopri;
 mod dopri_tableau;
 mod driver;
 mod error;
 mod integrator;
+mod model;
 mod radau;
 mod radau_tableau;
+pub mod run;
 pub mod sensitivity;
+mod steppers;
 mod stiffness;
 mod system;
 #[cfg(test)]
 mod tests;
 
 pub use dopri::Dopri5;
-pub use driver::{simulate, simulate_with_progress, ModelSystem};
+pub use driver::{simulate, simulate_with_progress};
 pub use error::{IntegrationError, Stuck};
 pub use integrator::{Integrator, Method};
+pub use model::ModelSystem;
 pub use radau::Radau;
+pub use run::{free_run, Observer, Segment, Stepper};
+pub use steppers::{Adaptive, Map, Renewal};
 pub use system::{OdeSystem, Stats, Tolerances};
 
 use crate::eval::CompileError;
