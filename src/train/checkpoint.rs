@@ -24,7 +24,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::engine::graph::{AdamState, NamedTensor, Network};
 
-use super::fit::EpochEnd;
+use super::fit::epoch_end::EpochEnd;
 use super::tensors::{read_tensors, write_tensors};
 use super::validation::Course;
 use super::{Event, TrainError, TrainOptions};

@@ -11,12 +11,13 @@
 //! trained network.
 
 mod engines;
+pub(super) mod epoch_end;
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::engine::graph::{AdamState, BackendError, NamedTensor, Network, Setup, StepSettings};
+use crate::engine::graph::{Network, Setup, StepSettings};
 use crate::ir;
 
 use super::checkpoint::Safety;
@@ -32,6 +33,7 @@ use crate::engine::pairs::stage_fractions;
 use crate::engine::step::{Optimiser, StepBatch};
 use crate::engine::windows::{rollout_batch_into, shooting_starts};
 use engines::Engines;
+use epoch_end::EpochEnd;
 
 /// What the epochs need besides the network.
 pub(super) struct Fit<'a> {
@@ -509,34 +511,6 @@ pub(super) struct Fitted {
     pub diverged: Option<EpochDivergence>,
     /// Each recovery from a non-finite epoch ([`super::recovery`]).
     pub recoveries: Vec<Recovery>,
-}
-
-/// The state after an epoch, for the run's safety hooks ([`Safety`]).
-pub(super) struct EpochEnd<'e, 'n> {
-    /// 1-based epoch.
-    pub epoch: usize,
-    /// Its rollout length (1: one-step).
-    pub horizon: usize,
-    /// Its mean training loss.
-    pub loss: f64,
-    /// The shuffling generator.
-    pub rng: &'e ChaCha8Rng,
-    /// The training tracks.
-    pub course: &'e Course,
-    engines: &'e mut Engines<'n>,
-}
-
-impl EpochEnd<'_, '_> {
-    /// The graph network with the current weights.
-    pub fn network(&mut self) -> Result<&Network, BackendError> {
-        self.engines.graph_with_weights()
-    }
-
-    /// The current weights and Adam state, from the optimiser (looking changes nothing).
-    pub fn state(&self) -> (Vec<NamedTensor>, AdamState) {
-        let engines = &self.engines;
-        (engines.tensors(), engines.optimiser.adam_state())
-    }
 }
 
 /// Why an epoch stopped.

@@ -41,6 +41,7 @@ mod run;
 pub mod settings;
 pub mod split;
 pub mod stepping;
+mod substeps;
 pub mod tensors;
 #[cfg(test)]
 mod tests;
@@ -166,7 +167,7 @@ pub enum Event<'a> {
     /// share the multi-step objective uses for it ([`coverage`]).
     Coverage(&'a coverage::Coverage, f64),
     /// Before the first epoch: the model's free runs over the training knots need this
-    /// many sub-steps per step, and training takes them ([`stepping::training_substeps`]).
+    /// many sub-steps per step, and training takes them ([`substeps::training_substeps`]).
     Substeps(usize),
     /// Before anything trains: the record is sparse, and the run takes this budget
     /// ([`recipe::SparseBudget`]) for the epochs and learning rate left at their defaults.

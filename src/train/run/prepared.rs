@@ -12,7 +12,7 @@ use crate::solve::fit::MechanismFit;
 use crate::train::balances::{self, BalanceFit};
 use crate::train::coverage::{Coverage, DENSE_SHARE};
 use crate::train::prepare::Layout;
-use crate::train::stepping;
+use crate::train::substeps;
 use crate::train::validation::{refresh, Course};
 use crate::train::{
     analysis, check_options, column_weights, hidden_initial_values, mechanism, with_initial_params,
@@ -254,7 +254,7 @@ impl<'d> Ground<'d> {
             let place = (&layout.tracks[..], &layout.trainings[..]);
             let fractions = stage_fractions(model.dynamics, asked);
             let how = (&fractions[..], &self.hidden_init[..]);
-            stepping::training_substeps((network, model), place, how, asked)
+            substeps::training_substeps((network, model), place, how, asked)
         } else {
             (self.warnings.iter())
                 .filter_map(|w| match w {
@@ -262,7 +262,7 @@ impl<'d> Ground<'d> {
                     _ => None,
                 })
                 .fold(asked, usize::max)
-                .min(stepping::MOST_TRAINING_SUBSTEPS)
+                .min(substeps::MOST_TRAINING_SUBSTEPS)
         }
     }
 }
