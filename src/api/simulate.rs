@@ -174,7 +174,8 @@ pub fn simulate(
     };
     on_event(SimulateEvent::Started);
     let mut progress = |done, total| on_event(SimulateEvent::Samples { done, total });
-    let simulated = crate::solve::ode::simulate_with_progress(&ir, &signals, &options, &mut progress);
+    let simulated =
+        crate::solve::ode::simulate_with_progress(&ir, &signals, &options, &mut progress);
     on_event(SimulateEvent::Finished);
     let mut trajectory = simulated.map_err(ApiError::user)?;
     if let Some(divergence) = range::stop_outside(&ir, &mut trajectory, &range) {

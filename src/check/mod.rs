@@ -14,7 +14,7 @@ pub mod symbols;
 pub mod units;
 
 pub use error::CheckError;
-pub use symbols::{Kind, Scope, Symbol, Symbols};
+pub use symbols::{Kind, Scope, Symbols};
 
 use crate::ast;
 use std::collections::HashMap;
@@ -111,4 +111,4 @@ pub fn suggest<'a>(
     }
 }
 
-pub use crate::suggest::{closest, edit_distance};
+pub use crate::suggest::closest;

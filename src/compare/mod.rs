@@ -27,7 +27,9 @@ mod tests;
 
 pub use error::CompareError;
 pub use run::compare;
-pub use score::{Score, Standing, Verdict};
+#[cfg(test)]
+pub use score::Standing;
+pub use score::{Score, Verdict};
 
 use crate::train::{ErrorSet, Recipe, TrainOptions};
 

@@ -7,7 +7,7 @@ use super::error::DataError;
 use super::set::{check_length, check_times, experiments, load};
 use super::source::Source;
 use super::{Column, Dataset, MinRows, Request, Wanted};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Reads the data file at `path`, keeping the time column and the `required` columns (in
 /// that order): one experiment, every requested cell measured, a uniform time step, and
@@ -26,13 +26,14 @@ pub fn read(
 
 /// Reads a data file from `text`, named `name` in messages; otherwise as [`read`] (and
 /// retired with it).
+#[cfg(test)]
 pub fn read_str(
     name: &str,
     text: &str,
     required: &[&str],
     min_rows: impl Into<MinRows>,
 ) -> Result<Dataset, DataError> {
-    let source = Source::new(name, PathBuf::from(name), text.to_string());
+    let source = Source::new(name, std::path::PathBuf::from(name), text.to_string());
     record(source, required, &min_rows.into())
 }
 

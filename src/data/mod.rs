@@ -64,9 +64,11 @@ mod set;
 mod sniff;
 mod source;
 
-pub use error::{ColumnRef, DataError, DataSource, Location};
-pub use experiment::{DataSet, Experiment, Origin, Series};
-pub use legacy::{read, read_str};
+pub use error::{ColumnRef, DataError, Location};
+pub use experiment::{DataSet, Experiment, Series};
+pub use legacy::read;
+#[cfg(test)]
+pub use legacy::read_str;
 pub use set::{read_set, read_set_str};
 
 use crate::io::{write_atomic, IoError};

@@ -34,7 +34,8 @@ pub(super) fn simulate(truth: &str, program: &str, t_end: f64, seed: u64) -> Sim
             program.generate(input, 0.0, t_end, 1.0).unwrap()
         })
         .collect();
-    let trajectory = crate::solve::ode::simulate(&model, &signals, &SimOptions::new(t_end, 1.0)).unwrap();
+    let trajectory =
+        crate::solve::ode::simulate(&model, &signals, &SimOptions::new(t_end, 1.0)).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noisy = (trajectory.states.iter())
         .map(|values| {

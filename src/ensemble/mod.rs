@@ -31,11 +31,13 @@ mod tests;
 #[cfg(test)]
 mod tests_floor;
 
-pub use calibrate::{Calibration, CellCount, Coverage, ErrorSummary, StateScores};
+#[cfg(test)]
+pub use calibrate::StateScores;
+pub use calibrate::{Calibration, CellCount, Coverage, ErrorSummary};
 pub use error::{check_level, EnsembleError};
 pub use members::{train_ensemble, Keep, MemberEvent, Plan, Trained};
-pub use noise::{NoiseSource, StateNoise};
-pub use predict::{is_ensemble, load, predict_table, BandTable, Loaded};
+pub use noise::StateNoise;
+pub use predict::{is_ensemble, load, predict_table, Loaded};
 
 /// The file that describes an ensemble run, in its run directory.
 pub const ENSEMBLE_FILE: &str = "ensemble.json";

@@ -21,10 +21,12 @@ mod scalar;
 #[cfg(test)]
 mod tests;
 
+#[cfg(test)]
+pub use crate::vocabulary::softplus;
 pub use derivative::JacobianProgram;
 pub use interpret::interpret;
 pub use program::{CompileError, CompiledRhs, Program, ProgramSet};
-pub use scalar::{apply_binary, apply_func, sigmoid, softplus};
+pub use scalar::sigmoid;
 
 use crate::ir::{Model, Var};
 use std::ops::Range;
@@ -107,13 +109,9 @@ impl Layout {
     }
 
     /// Total number of slots.
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.len
-    }
-
-    /// Whether the model has no quantity at all.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
     }
 
     /// Slots of the inputs.

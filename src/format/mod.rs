@@ -91,3 +91,5 @@ pub(crate) use crate::syntax::comment_start;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_properties;

@@ -8,7 +8,7 @@
 
 pub use crate::ast::BinOp;
 pub use crate::units::Unit;
-pub use crate::vocabulary::{sigmoid, softplus, Activation, Func};
+pub use crate::vocabulary::{sigmoid, Activation, Func};
 
 use std::collections::BTreeMap;
 
@@ -19,9 +19,7 @@ pub mod nonnegative;
 mod print;
 
 pub use lower::{effect_violations, lower, lower_reporting, uses_closure, LowerError};
-pub use noise::{
-    merge_noise, parse_noise_spec, sigma_of, Measured, Noise, NoiseSpec, NoiseSpecError,
-};
+pub use noise::{merge_noise, parse_noise_spec, Measured, Noise, NoiseSpec};
 pub use print::{expr_text, print, var_name};
 
 /// A resolved reference to a model quantity.

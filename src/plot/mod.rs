@@ -22,9 +22,11 @@ mod points;
 #[cfg(test)]
 mod tests;
 
-pub use axis::{linear_ticks, log_ticks, tick_label};
+pub use axis::tick_label;
+#[cfg(test)]
+pub use axis::{linear_ticks, log_ticks};
 pub use bar::{Bar, BarChart, Bars};
-pub use line::{Chart, Mark, Series, Style, MARKER_RADIUS};
+pub use line::{Chart, Series, Style, MARKER_RADIUS};
 pub use page::{figure, page};
 pub use points::{clip, thin, titled, widened_range, MAX_POINTS};
 

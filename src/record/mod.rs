@@ -12,7 +12,7 @@ pub mod measure;
 #[cfg(test)]
 mod tests;
 
-pub use bind::{bind, request, BindError};
+pub use bind::{bind, request};
 pub use grid::{GridOptions, Track};
 
 /// One column of cells: `None` where nothing was measured at that row.

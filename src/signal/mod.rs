@@ -44,7 +44,8 @@ mod parse;
 mod program;
 
 pub use error::{ArgumentSource, SignalError};
-pub use generate::{DEFAULT_HOLD_STEPS, MAX_SAMPLES};
+#[cfg(test)]
+pub use generate::DEFAULT_HOLD_STEPS;
 
 use crate::ir::Input;
 use crate::suggest::did_you_mean;
@@ -128,6 +129,7 @@ impl Signal {
     }
 
     /// The values held at each of `times`.
+    #[cfg(test)]
     pub fn sample(&self, times: &[f64]) -> Vec<f64> {
         times.iter().map(|&t| self.value_at(t)).collect()
     }
@@ -137,6 +139,7 @@ impl Signal {
 #[derive(Debug, Clone)]
 pub struct Program {
     source: ArgumentSource,
+    #[cfg(test)]
     span: SourceSpan,
     kind_name: &'static str,
     kind_span: SourceSpan,
@@ -145,6 +148,7 @@ pub struct Program {
 
 impl Program {
     /// The program as written.
+    #[cfg(test)]
     pub fn text(&self) -> &str {
         let start = self.span.offset();
         &self.source.inner()[start..start + self.span.len()]
@@ -261,16 +265,24 @@ fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalEr
     let bound = parse::parse_bound(source, start)?;
     let (kind_name, kind_span) = (bound.name, bound.span);
     let kind = program::typed(source, bound)?;
-    let text = source.inner();
-    let program_start = start + (text.len() - start - text[start..].trim_start().len());
-    let program_end = text.trim_end().len().max(program_start);
     Ok(Program {
         source: source.clone(),
-        span: SourceSpan::new(program_start.into(), program_end - program_start),
+        #[cfg(test)]
+        span: written_span(source, start),
         kind_name,
         kind_span,
         kind,
     })
+}
+
+/// The span of the program written from byte `start` of the argument, without the blanks
+/// around it.
+#[cfg(test)]
+fn written_span(source: &ArgumentSource, start: usize) -> SourceSpan {
+    let text = source.inner();
+    let program_start = start + (text.len() - start - text[start..].trim_start().len());
+    let program_end = text.trim_end().len().max(program_start);
+    SourceSpan::new(program_start.into(), program_end - program_start)
 }
 
 #[cfg(test)]

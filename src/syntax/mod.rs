@@ -7,6 +7,8 @@
 mod build;
 mod error;
 mod guard;
+#[cfg(test)]
+mod tests_properties;
 mod unit;
 
 pub use error::SyntaxError;
@@ -50,7 +52,8 @@ pub fn comment_start(line: &str) -> Option<usize> {
     None
 }
 
-/// Parses one expression (used by tests and tools that take expressions on the command line).
+/// Parses one expression (used by tests).
+#[cfg(test)]
 pub fn parse_expr(source: &str) -> Result<ast::SExpr, SyntaxError> {
     guard::check(source)?;
     let mut pairs = GbmParser::parse(Rule::expr_only, source)

@@ -21,11 +21,11 @@ mod system;
 #[cfg(test)]
 mod tests;
 
+#[cfg(test)]
 pub use dopri::Dopri5;
 pub use driver::{simulate, simulate_with_progress, ModelSystem};
-pub use error::{IntegrationError, Stuck};
+pub use error::IntegrationError;
 pub use integrator::{Integrator, Method};
-pub use radau::Radau;
 pub use system::{OdeSystem, Stats, Tolerances};
 
 use crate::eval::CompileError;
@@ -98,11 +98,6 @@ impl Trajectory {
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.times.len()
-    }
-
-    /// Whether there is no sample.
-    pub fn is_empty(&self) -> bool {
-        self.times.is_empty()
     }
 
     /// Keeps the first `rows` samples.
