@@ -1,4 +1,8 @@
-//! The `gbc` command line: a short dispatch over subcommands (see `gbc::cli`).
+//! The `gbc` command line: a short dispatch over subcommands (`src/cli/`). It is a module of
+//! this binary, not of the library, so it reaches the compiler through `gbc::api` alone.
+
+mod cli;
+
 fn main() {
-    std::process::exit(gbc::cli::main());
+    std::process::exit(cli::main());
 }

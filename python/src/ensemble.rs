@@ -3,13 +3,12 @@
 
 use std::path::PathBuf;
 
-use gbc::api;
-use gbc::cli::binding;
-use gbc::ensemble::MemberEvent;
+use gbc::api::flags as binding;
+use gbc::api::{self, MemberEvent};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use crate::{command_error, raise, records, Model};
+use crate::{note, raise, records, Model};
 
 /// A trained ensemble: its directory, `ensemble.json`, the summary and the report.
 #[pyclass(module = "gbc._gbc", frozen)]
@@ -80,9 +79,9 @@ pub fn train_ensemble(
 ) -> PyResult<Ensemble> {
     let model = &model.inner;
     let (spec, directory) =
-        binding::train_spec(&flags, model, None).map_err(|e| command_error(py, e))?;
+        binding::train_spec(&flags, model, None, &mut note).map_err(|e| raise(py, e))?;
     let plan = binding::ensemble_plan(&flags)
-        .map_err(|e| command_error(py, e))?
+        .map_err(|e| raise(py, e))?
         .ok_or_else(|| pyo3::exceptions::PyValueError::new_err("expected `ensemble=N`"))?;
     let (records, val) = (records(py, model, data)?, records(py, model, val)?);
     let on_event = |event: MemberEvent| tell(&callback, event);

@@ -6,11 +6,8 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use gbc::api::{self, ApiError, Column, Table};
-use gbc::cli::binding;
-use gbc::cli::CommandError;
-use gbc::train::{Event, History};
-use gbc::trained::predict::Mode;
+use gbc::api::flags as binding;
+use gbc::api::{self, ApiError, Column, History, PredictMode as Mode, Table, TrainEvent as Event};
 use pyo3::create_exception;
 
 mod ensemble;
@@ -44,16 +41,6 @@ pub(crate) fn raise(py: Python<'_>, error: ApiError) -> PyErr {
         .collect::<Vec<_>>();
     let _ = value.setattr("diagnostics", all);
     err
-}
-
-pub(crate) fn command_error(py: Python<'_>, error: CommandError) -> PyErr {
-    raise(
-        py,
-        match error {
-            CommandError::User(reports) => ApiError::User(reports),
-            CommandError::Internal(message) => ApiError::Internal(message),
-        },
-    )
 }
 
 /// A compiled `.gbm` model.
@@ -153,7 +140,7 @@ pub(crate) fn records(
     py: Python<'_>,
     model: &api::Model,
     given: &Bound<'_, PyList>,
-) -> PyResult<Vec<gbc::record::Record>> {
+) -> PyResult<Vec<api::Record>> {
     let tables = tables(given)?;
     model.records(&tables, &[]).map_err(|e| raise(py, e))
 }
@@ -225,8 +212,8 @@ fn train(
     resume: Option<PathBuf>,
 ) -> PyResult<Run> {
     let model = &model.inner;
-    let (spec, directory) =
-        binding::train_spec(&flags, model, resume.as_deref()).map_err(|e| command_error(py, e))?;
+    let (spec, directory) = binding::train_spec(&flags, model, resume.as_deref(), &mut note)
+        .map_err(|e| raise(py, e))?;
     let (records, val) = (records(py, model, data)?, records(py, model, val)?);
     let command = serde_json::json!({ "python": flags });
     let checkpoint = match &resume {
@@ -285,7 +272,7 @@ fn train(
 fn folds(
     py: Python<'_>,
     model: &api::Model,
-    records: Vec<gbc::record::Record>,
+    records: Vec<api::Record>,
     (spec, directory): (&api::TrainSpec, &std::path::Path),
     callback: &Option<PyObject>,
 ) -> PyResult<(String, String)> {
@@ -319,9 +306,8 @@ fn checkpoint_of(
     py: Python<'_>,
     directory: &std::path::Path,
     command: &serde_json::Value,
-) -> PyResult<gbc::train::Checkpoint> {
-    let checkpoint =
-        gbc::train::Checkpoint::load(directory).map_err(|e| raise(py, ApiError::from(e)))?;
+) -> PyResult<api::Checkpoint> {
+    let checkpoint = api::Checkpoint::load(directory).map_err(|e| raise(py, ApiError::from(e)))?;
     if &checkpoint.command != command {
         return Err(PyValueError::new_err(format!(
             "the run in {} was trained with other keywords ({}): resume it with the same ones",
@@ -396,7 +382,7 @@ impl Run {
             .inner
             .export_onnx(precision)
             .map_err(|e| raise(py, e))?;
-        gbc::io::write_atomic(&path, &bytes).map_err(|e| raise(py, ApiError::user(e)))
+        api::write_atomic(&path, &bytes).map_err(|e| raise(py, ApiError::user(e)))
     }
 }
 
@@ -437,18 +423,18 @@ fn diagnose(
     callback: Option<PyObject>,
 ) -> PyResult<Diagnosis> {
     let model = &model.inner;
-    let spec = binding::diagnose_spec(&flags).map_err(|e| command_error(py, e))?;
+    let spec = binding::diagnose_spec(&flags).map_err(|e| raise(py, e))?;
     let (records, val) = (records(py, model, data)?, records(py, model, val)?);
-    let on_progress = |event: gbc::diagnose::Progress| {
+    let on_progress = |event: api::DiagnoseProgress| {
         let Some(callback) = &callback else { return };
         Python::with_gil(|py| {
             let dict = PyDict::new(py);
             let _ = match event {
-                gbc::diagnose::Progress::Stage { name, total } => dict
+                api::DiagnoseProgress::Stage { name, total } => dict
                     .set_item("kind", "stage")
                     .and(dict.set_item("name", name))
                     .and(dict.set_item("total", total)),
-                gbc::diagnose::Progress::Done { item, seconds } => dict
+                api::DiagnoseProgress::Done { item, seconds } => dict
                     .set_item("kind", "done")
                     .and(dict.set_item("item", item))
                     .and(dict.set_item("seconds", seconds)),
@@ -470,7 +456,7 @@ fn simulate(
     model: &Model,
     flags: Vec<String>,
 ) -> PyResult<(Vec<String>, Vec<Vec<f64>>, Vec<String>)> {
-    let (spec, effects) = binding::simulate_spec(&flags).map_err(|e| command_error(py, e))?;
+    let (spec, effects) = binding::simulate_spec(&flags).map_err(|e| raise(py, e))?;
     let model = match effects.is_empty() {
         true => model.inner.clone(),
         false => model
@@ -528,7 +514,7 @@ fn compare(
     callback: Option<PyObject>,
 ) -> PyResult<Comparison> {
     let grey_box = &model.inner;
-    let spec = binding::compare_spec(&flags).map_err(|e| command_error(py, e))?;
+    let spec = binding::compare_spec(&flags).map_err(|e| raise(py, e))?;
     let given = mechanism.map(|m| &m.inner);
     let mechanism_ir = api::mechanism_of(grey_box, given).map_err(|e| raise(py, e))?;
     let records = records(py, grey_box, data)?;
@@ -536,9 +522,9 @@ fn compare(
         Some(model) => self::records(py, model, data)?,
         None => records.clone(),
     };
-    let on_event = |event: gbc::compare::Event| {
+    let on_event = |event: api::CompareEvent| {
         let Some(callback) = &callback else { return };
-        if let gbc::compare::Event::Finished {
+        if let api::CompareEvent::Finished {
             member, seconds, ..
         } = event
         {
@@ -565,10 +551,10 @@ fn compare(
 }
 
 /// `f32` or `f64`, as `--precision` spells them.
-pub(crate) fn precision_of(precision: &str) -> PyResult<gbc::engine::graph::Precision> {
+pub(crate) fn precision_of(precision: &str) -> PyResult<api::Precision> {
     match precision {
-        "f32" => Ok(gbc::engine::graph::Precision::F32),
-        "f64" => Ok(gbc::engine::graph::Precision::F64),
+        "f32" => Ok(api::Precision::F32),
+        "f64" => Ok(api::Precision::F64),
         other => Err(PyValueError::new_err(format!(
             "expected precision `f32` or `f64`, found `{other}`"
         ))),
@@ -596,6 +582,12 @@ pub(crate) fn history_of(history: &str) -> PyResult<History> {
             "expected history `held` or `measured`, found `{other}`"
         ))),
     }
+}
+
+/// Prints a note of the flags (the run directory chosen, a deprecated keyword) on stderr,
+/// as the command line does.
+pub(crate) fn note(text: String) {
+    eprintln!("{text}");
 }
 
 /// The native module.

@@ -70,14 +70,8 @@ impl Saved {
         let precision = precision_of(precision)?;
         if self.inner.is_ensemble() {
             let model = self.inner.model();
-            let exported = gbc::export::ensemble::export(
-                model.ir(),
-                &model.source,
-                &self.directory,
-                precision,
-                &path,
-            )
-            .map_err(|e| raise(py, api::ApiError::user(e)))?;
+            let exported = api::export_ensemble(model, &self.directory, precision, &path)
+                .map_err(|e| raise(py, e))?;
             exported
                 .write()
                 .map_err(|e| raise(py, api::ApiError::user(e)))?;

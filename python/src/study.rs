@@ -1,18 +1,18 @@
 //! `gbc.experiment`: a study of `gbc experiment` run from Python, its keywords parsed by the
-//! CLI's own flags, stopped cleanly by a keyboard interrupt.
+//! command line's own flags (`gbc::api::flags`), stopped cleanly by a keyboard interrupt.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::Duration;
 
+use gbc::api::experiment::Progress;
 use gbc::api::experiment::StudyOutcome;
-use gbc::cli::binding;
-use gbc::experiment::Progress;
+use gbc::api::flags as binding;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::{command_error, raise};
+use crate::{note, raise};
 
 /// What a study gave: its directory, the summary `gbc experiment` prints, and whether its
 /// tables, figures and report were written.
@@ -77,7 +77,7 @@ pub fn experiment(
     flags: Vec<String>,
     callback: Option<PyObject>,
 ) -> PyResult<Study> {
-    let plan = binding::experiment_plan(&flags).map_err(|e| command_error(py, e))?;
+    let plan = binding::experiment_plan(&flags, &mut note).map_err(|e| raise(py, e))?;
     let run = plan.prepare().map_err(|e| raise(py, e))?;
     let total = run.selected().len();
     let name = format!("running {total} trainings");

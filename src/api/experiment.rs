@@ -15,13 +15,25 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use super::ApiError;
-use crate::experiment::merge::{publish, weights_in, Merged, Published};
+use crate::experiment::merge::{publish, weights_in};
 use crate::experiment::report::{compare, number};
 use crate::experiment::results::summarise;
-use crate::experiment::{
-    execute_until, grid, prepare, ExperimentFailure, Prepared, Progress, RunResult, RunSpec, Shard,
-    Study,
+use crate::experiment::{execute_until, grid, prepare, ExperimentFailure};
+
+pub use crate::experiment::merge::{Merged, Published};
+pub use crate::experiment::results::read_result;
+pub use crate::experiment::{
+    default_jobs, Prepared, Progress, RunResult, RunSpec, RunStatus, Shard, Study, StudyRecord,
 };
+
+/// The files of an experiment directory as typed values: each run's result (under
+/// [`results::RUNS_DIR`]) and the study record ([`results::STUDY_FILE`]), written and read
+/// back with non-finite numbers by name.
+pub mod results {
+    pub use crate::experiment::results::{
+        read_result, read_study_record, write_result, Measure, RUNS_DIR, STUDY_FILE,
+    };
+}
 
 impl From<ExperimentFailure> for ApiError {
     fn from(failure: ExperimentFailure) -> Self {

@@ -80,6 +80,11 @@ impl Model {
         &self.compiled.model
     }
 
+    /// The canonical text of the compiled model (what `gbc compile --emit ir` prints).
+    pub fn ir_text(&self) -> String {
+        ir::print(self.ir())
+    }
+
     /// The model's name (its `model` line).
     pub fn name(&self) -> &str {
         &self.compiled.model.name

@@ -357,6 +357,20 @@ impl Predictions {
     }
 }
 
+/// The one-step map of every used member of the ensemble run in `directory` (trained with
+/// `model`), each to be written beside `output`, with the band's facts (`NAME.band.json`,
+/// docs/export.md); nothing is written until [`EnsembleExport::write`].
+pub fn export_ensemble(
+    model: &Model,
+    directory: &Path,
+    precision: Precision,
+    output: &Path,
+) -> Result<crate::export::ensemble::EnsembleExport, ApiError> {
+    let (ir, source) = (model.ir(), &model.source);
+    crate::export::ensemble::export(ir, source, directory, precision, output)
+        .map_err(ApiError::user)
+}
+
 /// The file formats a run exports to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportFormat {

@@ -14,9 +14,9 @@ mod structure;
 pub mod symbols;
 pub mod units;
 
-pub use error::{suggest, CheckError};
+pub use error::CheckError;
 pub use sink::Sink;
-pub use symbols::{Kind, Scope, Symbol, Symbols};
+pub use symbols::{Kind, Scope, Symbols};
 
 use crate::ast;
 use std::collections::HashMap;
@@ -86,5 +86,3 @@ fn first_offset(error: &CheckError) -> usize {
         .and_then(|mut labels| labels.next())
         .map_or(0, |label| label.offset())
 }
-
-pub use crate::suggest::{closest, edit_distance};

@@ -6,16 +6,15 @@
 //! `src/fused/`) it prints the median time of one Adam step and of one epoch. It also times
 //! a 3000 h simulation of the bioreactor truth model, the stiff integrations of
 //! `models/stiff/` and, with `--full`, one paper-scale training end to end. `--json FILE`
-//! writes every measurement. The work is [`crate::api::bench`]. Run it from the repository
+//! writes every measurement. The work is [`gbc::api::bench`]. Run it from the repository
 //! root (or pass `--root`); docs/performance.md has the numbers and the peer comparison.
 
 use std::path::PathBuf;
 
-use super::options::TrainingFlags;
 use super::{CommandError, CommandResult};
-use crate::api::bench::{BenchModel, BenchSpec, Measurement, TrainingRow};
-use crate::engine::graph::Precision;
-use crate::train::Engine;
+use gbc::api::bench::{BenchModel, BenchSpec, Measurement, TrainingRow};
+use gbc::api::flags::TrainingFlags;
+use gbc::api::{self, Engine, Precision};
 
 /// Timed epochs per measurement when `--epochs` is left out.
 const BENCH_EPOCHS: usize = 20;
@@ -83,10 +82,10 @@ pub fn run(args: &BenchArgs) -> CommandResult {
         "model", "pairs", "type", "engine", "ms/step", "ms/epoch"
     );
     let spec = spec_of(args)?;
-    let measurements = crate::api::bench::bench(&spec, &mut print_measurement)?;
+    let measurements = api::bench::bench(&spec, &mut print_measurement)?;
     if let Some(path) = &args.json {
         let json = measurements.json()?;
-        crate::io::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
+        api::write_atomic(path, json.as_bytes()).map_err(CommandError::user)?;
     }
     Ok(())
 }

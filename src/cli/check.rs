@@ -1,7 +1,7 @@
 //! `gbc check FILE...`: parse and check model files, reporting every problem at once.
 
 use super::{CommandError, CommandResult};
-use crate::diagnostics::MessageFormat;
+use gbc::api::{self, MessageFormat};
 use std::path::PathBuf;
 
 /// Arguments of `gbc check`.
@@ -17,10 +17,10 @@ pub struct CheckArgs {
 pub fn run(args: &CheckArgs, format: MessageFormat) -> CommandResult {
     let mut reports = Vec::new();
     for path in &args.files {
-        match crate::driver::compile_file(path, &[]) {
+        match api::check_file(path) {
             Ok(compiled) => {
                 if format == MessageFormat::Human {
-                    let model = &compiled.model;
+                    let model = compiled.ir();
                     let outputs: usize = model.closures.iter().map(|c| c.outputs.len()).sum();
                     println!(
                         "ok: {} (model {}: {} states, {} hidden, {} closure outputs, {} params, {} effects)",

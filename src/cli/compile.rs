@@ -1,6 +1,7 @@
 //! `gbc compile FILE --emit ast|ir`: print a stage of the compiled model.
 
 use super::CommandResult;
+use gbc::api;
 use std::path::PathBuf;
 
 /// Which stage `gbc compile` prints.
@@ -28,16 +29,8 @@ pub struct CompileArgs {
 /// Compiles the file and prints the requested stage on stdout.
 pub fn run(args: &CompileArgs) -> CommandResult {
     let text = match args.emit {
-        Emit::Ast => {
-            let source = crate::driver::read_source(&args.file).map_err(|r| vec![r])?;
-            let model = crate::driver::parse(&args.file.display().to_string(), &source)?;
-            format!("{model:#?}\n")
-        }
-        Emit::Ir => {
-            let effects: Vec<&str> = args.effects.iter().map(String::as_str).collect();
-            let compiled = crate::driver::compile_file(&args.file, &effects)?;
-            crate::ir::print(&compiled.model)
-        }
+        Emit::Ast => api::syntax_tree_text(&args.file)?,
+        Emit::Ir => api::Model::from_file_with_effects(&args.file, &args.effects)?.ir_text(),
     };
     print!("{text}");
     Ok(())

@@ -1,11 +1,11 @@
-//! `gbc demo`: the paper's two studies scaled down ([`crate::api::demo`]): parses, calls,
+//! `gbc demo`: the paper's two studies scaled down ([`gbc::api::demo`]): parses, calls,
 //! shows progress and prints each study's summary.
 
 use std::path::PathBuf;
 
-use crate::api::demo::Demo;
 use crate::cli::experiment::{default_jobs, print_summary, ProgressBar};
 use crate::cli::{CommandError, CommandResult};
+use gbc::api::demo::Demo;
 
 /// Arguments of `gbc demo`.
 #[derive(Debug, clap::Args)]

@@ -4,97 +4,11 @@
 //! Data are read as `gbc train` reads them (records spec). Text on stdout, optionally
 //! `--json` and `--html` reports and `--figures` SVG files.
 
-use super::data::ColumnArgs;
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
-use crate::api;
-use crate::diagnose::{DiagnoseError, Options, Progress};
+use gbc::api::flags::DiagnoseArgs;
+use gbc::api::{self, DiagnoseError, DiagnoseProgress as Progress};
 use std::path::PathBuf;
-
-/// Arguments of `gbc diagnose`.
-#[derive(Debug, clap::Args)]
-pub struct DiagnoseArgs {
-    /// The mechanistic model (no closures); its `effect`s are the candidates.
-    pub model: PathBuf,
-    /// The data set: one or more CSV files, each an experiment (or several, with an
-    /// `experiment` column); `t`, the inputs and the measured states, cells may be empty.
-    #[arg(required = true, num_args = 1..)]
-    pub data: Vec<PathBuf>,
-    /// Files of whole experiments that are only scored (repeatable).
-    #[arg(long, value_name = "FILE", num_args = 1.., alias = "test")]
-    pub val: Vec<PathBuf>,
-    /// Experiments of the data set that are only scored (repeatable).
-    #[arg(long, value_name = "NAME", num_args = 1..)]
-    pub holdout: Vec<String>,
-    /// Score the last share of each experiment's measured rows (the free run still starts
-    /// at the experiment's first row). Default: 0.3 when no experiment is held out.
-    #[arg(long, value_name = "SHARE")]
-    pub val_fraction: Option<f64>,
-    /// Fit the initial values of the hidden states in every training experiment (else they
-    /// start from their declared values): for experiments that do not start where the
-    /// model's declarations say, e.g. records cut from one long run.
-    #[arg(long)]
-    pub fit_initial: bool,
-    /// Fit the first row's measured values of every training experiment with the params
-    /// (the cells stay residuals) instead of starting the free runs at them: for sparse,
-    /// noisy first assays (a small inoculum). On a misspecified model the fitted starts
-    /// absorb misfit that the held-out runs, started at their cells, do not have
-    /// (docs/diagnose.md).
-    #[arg(long)]
-    pub fit_starts: bool,
-    /// How data columns are named.
-    #[command(flatten)]
-    pub columns: ColumnArgs,
-    /// Seed of the random restarts (results are deterministic for a given seed).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Most random starts of each fit besides the declared or warm start; a fit runs at
-    /// least four starts and stops at the first round that finds no better basin and has
-    /// its best reached twice.
-    #[arg(long, default_value_t = crate::diagnose::Options::default().restarts)]
-    pub restarts: usize,
-    /// The longest time constant of the history features of the free corrections (model
-    /// time units); by default chosen from the residuals of the fitted model.
-    #[arg(long, value_name = "T")]
-    pub span: Option<f64>,
-    /// Time constants of the history features, from the sampling step to the span.
-    #[arg(long, default_value_t = 5)]
-    pub dim: usize,
-    /// Replaced by --span (the history is no longer a delay embedding).
-    #[arg(long, hide = true)]
-    pub delay: Option<f64>,
-    /// Skip the locus search (the free corrections at every let, group and balance, most
-    /// of the cost): rank and select the effects only.
-    #[arg(long)]
-    pub skip_loci: bool,
-    /// Worker threads for the fits (default: every core).
-    #[arg(long, value_name = "N")]
-    pub jobs: Option<usize>,
-    /// Write the report as JSON (spec section 5 schema) to this file.
-    #[arg(long, value_name = "FILE")]
-    pub json: Option<PathBuf>,
-    /// Write an HTML report with figures to this file.
-    #[arg(long, value_name = "FILE")]
-    pub html: Option<PathBuf>,
-    /// Measured rows the training part and the held-out part each need (a score on a few
-    /// rows is noisy; below the default, say so in what you report).
-    #[arg(long, value_name = "N", default_value_t = crate::diagnose::MIN_ROWS)]
-    pub min_rows: usize,
-    /// Write the report's figures as SVG files into this directory.
-    #[arg(long, value_name = "DIR")]
-    pub figures: Option<PathBuf>,
-    /// Measurement noise of the data, laid over the model's `noise` declarations
-    /// (repeatable): `X=4%+0.01` (a measured state or output: 4 % of the value and 0.01 in
-    /// its unit), `S=0.02`, `3%` (every measured quantity not named), `declared`; `X=0`
-    /// removes one. Used for the noise floor and the fits' weights.
-    #[arg(
-        long = "noise",
-        value_name = "SPEC",
-        allow_negative_numbers = true,
-        value_parser = crate::ir::parse_noise_spec
-    )]
-    pub noise: Vec<crate::ir::NoiseSpec>,
-}
 
 /// Runs the diagnosis and prints (and writes) its report.
 pub fn run(args: &DiagnoseArgs) -> CommandResult {
@@ -102,9 +16,9 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     inputs.extend(args.data.iter().map(PathBuf::as_path));
     inputs.extend(args.val.iter().map(PathBuf::as_path));
     for output in [&args.json, &args.html].into_iter().flatten() {
-        crate::io::ensure_not_input(output, &inputs).map_err(CommandError::user)?;
+        api::ensure_not_input(output, &inputs).map_err(CommandError::user)?;
     }
-    let spec = spec_of(args)?;
+    let spec = args.spec()?;
     let model = api::Model::from_file(&args.model)?;
     spec.noise_of(&model)?;
     let records = model.records_from_files(&args.data, &args.columns.columns)?;
@@ -125,50 +39,18 @@ pub fn run(args: &DiagnoseArgs) -> CommandResult {
     }
 }
 
-/// The diagnosis the flags ask for.
-pub fn spec_of(args: &DiagnoseArgs) -> Result<api::DiagnoseSpec, CommandError> {
-    if let Some(delay) = args.delay {
-        return Err(CommandError::user(crate::solve::fit::FitError::BadOption {
-            option: "--delay".into(),
-            expected: "--span T, the longest time constant of the history".into(),
-            found: delay.to_string(),
-            help: "the history of the free corrections is a fading memory now: --span sets \
-                   its longest time constant and --dim how many it has"
-                .into(),
-        }));
-    }
-    Ok(api::DiagnoseSpec {
-        options: Options {
-            val_fraction: args.val_fraction,
-            restarts: args.restarts,
-            seed: args.seed,
-            span: args.span,
-            dim: args.dim,
-            fit_initial: args.fit_initial,
-            fit_starts: args.fit_starts,
-            locate: !args.skip_loci,
-            min_rows: args.min_rows,
-            ..Options::default()
-        },
-        holdout: args.holdout.clone(),
-        noise: args.noise.clone(),
-        jobs: args.jobs,
-    })
-}
-
+/// Writes the reports `--json`, `--html` and `--figures` ask for.
 fn write_outputs(args: &DiagnoseArgs, diagnosis: &api::Diagnosis) -> CommandResult {
     if let Some(path) = &args.json {
         let json = diagnosis.json()?;
-        crate::io::write_atomic(path, format!("{json}\n").as_bytes())
-            .map_err(CommandError::user)?;
+        api::write_atomic(path, format!("{json}\n").as_bytes()).map_err(CommandError::user)?;
     }
     if let Some(path) = &args.html {
-        crate::io::write_atomic(path, diagnosis.html().as_bytes()).map_err(CommandError::user)?;
+        api::write_atomic(path, diagnosis.html().as_bytes()).map_err(CommandError::user)?;
     }
     if let Some(directory) = &args.figures {
         for (file, svg) in diagnosis.figures() {
-            crate::io::write_atomic(&directory.join(file), svg.as_bytes())
-                .map_err(CommandError::user)?;
+            api::write_atomic(&directory.join(file), svg.as_bytes()).map_err(CommandError::user)?;
         }
     }
     Ok(())

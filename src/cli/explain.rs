@@ -11,7 +11,7 @@ pub struct ExplainArgs {
 
 /// Prints the entry.
 pub fn run(args: &ExplainArgs) -> CommandResult {
-    let text = crate::explain::explain(&args.code).map_err(CommandError::user)?;
+    let text = gbc::api::explain(&args.code).map_err(CommandError::user)?;
     print!("{text}");
     Ok(())
 }

@@ -1,12 +1,13 @@
 //! `gbc export MODEL --weights RUN_DIR --format onnx -o model.onnx`: the one-step map of a
 //! trained model as a file other runtimes read (see `docs/export.md` and
-//! `gbc::export`). The layout (window, step, tensors and their columns) goes to stderr.
+//! `gbc::api::SavedRun::export`). The layout (window, step, tensors and their columns) goes
+//! to stderr.
 
 use std::path::PathBuf;
 
-use super::options::PrecisionArg;
 use super::{CommandError, CommandResult};
-use crate::api::{ExportFormat, SavedRun};
+use gbc::api::flags::PrecisionArg;
+use gbc::api::{self, ExportFormat, SavedRun};
 
 /// The file format written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -36,9 +37,9 @@ pub struct ExportArgs {
 
 /// Exports the trained model and describes the file on stderr.
 pub fn run(args: &ExportArgs) -> CommandResult {
-    crate::io::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
-    let model = crate::api::Model::from_file(&args.model)?;
-    if crate::ensemble::is_ensemble(&args.weights) {
+    api::ensure_not_input(&args.output, &[&args.model]).map_err(CommandError::user)?;
+    let model = api::Model::from_file(&args.model)?;
+    if api::is_ensemble(&args.weights) {
         return ensemble(args, &model);
     }
     let saved = SavedRun::load_single(&model, &args.weights)?;
@@ -54,15 +55,13 @@ pub fn run(args: &ExportArgs) -> CommandResult {
     Ok(())
 }
 
-/// An ensemble run: every used member's map and the band's facts (`gbc::export::ensemble`).
-fn ensemble(args: &ExportArgs, model: &crate::api::Model) -> CommandResult {
-    let (ir, source) = (model.ir(), &model.source);
+/// An ensemble run: every used member's map and the band's facts
+/// ([`api::export_ensemble`]).
+fn ensemble(args: &ExportArgs, model: &api::Model) -> CommandResult {
     let precision = args.precision.into();
-    let exported =
-        crate::export::ensemble::export(ir, source, &args.weights, precision, &args.output)
-            .map_err(CommandError::user)?;
+    let exported = api::export_ensemble(model, &args.weights, precision, &args.output)?;
     for (path, _) in &exported.members {
-        crate::io::ensure_not_input(path, &[&args.model]).map_err(CommandError::user)?;
+        api::ensure_not_input(path, &[&args.model]).map_err(CommandError::user)?;
     }
     exported.write().map_err(CommandError::user)?;
     for (path, member) in &exported.members {

@@ -1,12 +1,11 @@
 //! `gbc fmt FILE... [--check]`: rewrite model files in the canonical layout (see
-//! `gbc::format`), or with `--check` only report the files that are not in it.
+//! `gbc::api::format_source`), or with `--check` only report the files that are not in it.
 //!
 //! Directories are searched recursively for `.gbm` files; `-` formats standard input to
 //! standard output.
 
 use super::{CommandError, CommandResult};
-use crate::ast::Span;
-use crate::format::{format_source, FormatError};
+use gbc::api::{format_source, read_source, write_atomic, FormatError, Span};
 use miette::{Diagnostic, NamedSource, Report};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -134,7 +133,7 @@ fn format_or_report(name: &str, source: &str) -> Result<String, CommandError> {
 /// Formats one file: rewrites it, or (with `check`) reports it when it would change.
 fn format_file(path: &Path, check: bool) -> Result<Option<Report>, CommandError> {
     let name = path.display().to_string();
-    let source = match crate::driver::read_source(path) {
+    let source = match read_source(path) {
         Ok(source) => source,
         Err(report) => return Ok(Some(report)),
     };
@@ -158,7 +157,7 @@ fn format_file(path: &Path, check: bool) -> Result<Option<Report>, CommandError>
             Report::new(error).with_source_code(NamedSource::new(name, source)),
         ));
     }
-    crate::io::write_atomic(path, formatted.as_bytes())
+    write_atomic(path, formatted.as_bytes())
         .map_err(|e| CommandError::User(vec![Report::new(e)]))?;
     println!("formatted {name}");
     Ok(None)

@@ -1,9 +1,9 @@
 //! `gbc init NAME [--template chemostat|bioreactor|batch|fedbatch]`: a new project
-//! directory (see `gbc::init`).
+//! directory (see `gbc::api::new_project`).
 
-use super::options::TemplateArg;
 use super::{CommandError, CommandResult};
-use crate::init::{project, InitError};
+use gbc::api::flags::TemplateArg;
+use gbc::api::{new_project, write_atomic, InitError};
 use std::path::PathBuf;
 
 /// Arguments of `gbc init`.
@@ -25,9 +25,9 @@ pub fn run(args: &InitArgs) -> CommandResult {
             path: args.name.display().to_string(),
         }));
     }
-    let files = project(&args.name, args.template.into()).map_err(CommandError::user)?;
+    let files = new_project(&args.name, args.template.into()).map_err(CommandError::user)?;
     for (path, contents) in &files {
-        crate::io::write_atomic(path, contents.as_bytes()).map_err(CommandError::user)?;
+        write_atomic(path, contents.as_bytes()).map_err(CommandError::user)?;
         println!("created {}", path.display());
     }
     println!("next: read {}", args.name.join("README.md").display());

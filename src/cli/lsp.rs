@@ -1,10 +1,11 @@
 //! `gbc lsp`: a language server on stdin/stdout for any editor with an LSP client
 //! (VS Code, Neovim, Helix, Emacs, Zed, Sublime Text): diagnostics as you type, go to
 //! definition, hover with the kind, unit and doc comment of a name, and formatting.
-//! The analysis itself is `gbc::ide`; this file is the protocol.
+//! The analysis itself is `gbc::api::ide`; this file is the protocol.
 
 use super::{CommandError, CommandResult};
-use crate::ide::{self, LineIndex};
+use gbc::api::ide::{self, LineIndex};
+use gbc::api::{format_source, Span};
 use lsp_server::{Connection, ErrorCode, Message, Notification, Request, Response};
 use lsp_types::{
     Diagnostic, DiagnosticRelatedInformation, DiagnosticSeverity, DidChangeTextDocumentParams,
@@ -218,17 +219,17 @@ impl Server {
 
     fn formatting(&self, params: &DocumentFormattingParams) -> Option<Vec<TextEdit>> {
         let text = self.text(&params.text_document.uri)?;
-        let formatted = crate::format::format_source(text).ok()?;
+        let formatted = format_source(text).ok()?;
         if formatted == text {
             return Some(Vec::new());
         }
         let index = LineIndex::new(text);
-        let whole = range(&index, crate::ast::Span::new(0, text.len()));
+        let whole = range(&index, Span::new(0, text.len()));
         Some(vec![TextEdit::new(whole, formatted)])
     }
 }
 
-fn range(index: &LineIndex, span: crate::ast::Span) -> Range {
+fn range(index: &LineIndex, span: Span) -> Range {
     let (start_line, start_column) = index.position(span.start);
     let (end_line, end_column) = index.position(span.end);
     Range::new(

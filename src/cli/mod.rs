@@ -1,16 +1,16 @@
 //! The command-line edge: argument parsing, dispatch over subcommands, and rendering of
-//! diagnostics. The only part of gbc that prints or chooses colours.
+//! diagnostics. The only part of gbc that prints or chooses colours. A module of the binary:
+//! it reaches the library through `gbc::api` alone, and the flags a binding shares with it
+//! are the API's ([`gbc::api::flags`]).
 //!
 //! Exit codes: 0 success, 1 user error (a coded diagnostic was printed), 2 internal error
 //! (a bug in gbc, including any panic).
 
 mod bench;
-pub mod binding;
 mod check;
 mod compare;
 mod compile;
 mod completions;
-mod data;
 mod demo;
 mod diagnose;
 mod experiment;
@@ -19,14 +19,16 @@ mod export;
 mod fmt;
 mod init;
 mod lsp;
-mod options;
 mod predict;
 mod progress;
 mod simulate;
+#[cfg(test)]
+mod tests_scratch;
 mod train;
 
-use crate::diagnostics::{self, MessageFormat};
 use clap::{Parser, Subcommand};
+use gbc::api::flags::MessageFormatArg;
+use gbc::api::{self, ApiError, MessageFormat};
 use std::io::IsTerminal;
 
 /// Why a command failed.
@@ -41,26 +43,23 @@ pub enum CommandError {
 
 impl CommandError {
     /// The error of one diagnostic: a user error, or an internal one (exit code 2) when it
-    /// is a [`crate::error::Bug`]. The one place that tells the two apart.
+    /// is a bug in gbc ([`ApiError::user`] tells the two apart).
     pub fn user(diagnostic: impl miette::Diagnostic + Send + Sync + 'static) -> Self {
-        CommandError::from(vec![miette::Report::new(diagnostic)])
+        CommandError::from(ApiError::user(diagnostic))
     }
 }
 
 impl From<Vec<miette::Report>> for CommandError {
     fn from(reports: Vec<miette::Report>) -> Self {
-        match reports.iter().find(|r| crate::error::is_bug(r.as_ref())) {
-            Some(bug) => CommandError::Internal(bug.to_string()),
-            None => CommandError::User(reports),
-        }
+        CommandError::from(ApiError::from(reports))
     }
 }
 
-impl From<crate::api::ApiError> for CommandError {
-    fn from(error: crate::api::ApiError) -> Self {
+impl From<ApiError> for CommandError {
+    fn from(error: ApiError) -> Self {
         match error {
-            crate::api::ApiError::User(reports) => CommandError::User(reports),
-            crate::api::ApiError::Internal(message) => CommandError::Internal(message),
+            ApiError::User(reports) => CommandError::User(reports),
+            ApiError::Internal(message) => CommandError::Internal(message),
         }
     }
 }
@@ -73,8 +72,8 @@ pub type CommandResult = Result<(), CommandError>;
 #[command(name = "gbc", version, about, propagate_version = true)]
 pub struct Cli {
     /// How diagnostics are printed.
-    #[arg(long, global = true, value_enum, default_value_t = options::MessageFormatArg::Human)]
-    pub message_format: options::MessageFormatArg,
+    #[arg(long, global = true, value_enum, default_value_t = MessageFormatArg::Human)]
+    pub message_format: MessageFormatArg,
     /// The subcommand.
     #[command(subcommand)]
     pub command: Command,
@@ -89,16 +88,16 @@ pub enum Command {
     Compile(compile::CompileArgs),
     /// Simulate a model without closures (adaptive Dormand–Prince, Radau IIA where stiff), or a trained one
     /// (`--weights`: a what-if run), writing a CSV record.
-    Simulate(simulate::SimulateArgs),
+    Simulate(gbc::api::flags::SimulateArgs),
     /// Train a grey-box (or black-box) model on a data record.
-    Train(Box<train::TrainArgs>),
+    Train(Box<gbc::api::flags::TrainArgs>),
     /// Predict with trained weights: states and every closure output over time.
     Predict(predict::PredictArgs),
     /// Diagnose the gap between a mechanistic model and data: where, which effect, how much.
-    Diagnose(diagnose::DiagnoseArgs),
+    Diagnose(gbc::api::flags::DiagnoseArgs),
     /// Compare a grey box with its fitted mechanism and the naive forecast on held-out
     /// experiments (seeds, table, verdict, report).
-    Compare(Box<compare::CompareArgs>),
+    Compare(Box<gbc::api::flags::CompareArgs>),
     /// Export a trained model's one-step map (ONNX) for other runtimes.
     Export(export::ExportArgs),
     /// Train models over a grid of training sizes and seeds, with results and figures.
@@ -170,7 +169,7 @@ pub fn main() -> i32 {
     };
     let format: MessageFormat = cli.message_format.into();
     if let Some(what) = on_stop(&cli.command) {
-        crate::stop::on_signal(what);
+        api::stop::on_signal(what);
     }
     // Deep but legal models recurse in the front end; a large stack keeps that safe.
     let worker = std::thread::Builder::new()
@@ -221,12 +220,6 @@ pub fn print_reports(reports: &[miette::Report], format: MessageFormat) {
     let color = stderr.is_terminal() && std::env::var_os("NO_COLOR").is_none();
     let width = 100;
     for report in reports {
-        eprint!("{}", diagnostics::render(report, format, color, width));
+        eprint!("{}", api::render_diagnostic(report, format, color, width));
     }
-}
-
-/// Reads, parses, checks and lowers the model file at `path` (no effect applied); every
-/// problem becomes a user error carrying the file's source.
-pub fn load_model(path: &std::path::Path) -> Result<crate::ir::Model, CommandError> {
-    Ok(crate::driver::compile_file(path, &[])?.model)
 }

@@ -4,18 +4,17 @@
 //!
 //! Columns: `experiment` (when the data set has several), `t`, the states (measured, then
 //! hidden), the closure outputs, the model's outputs; one row per data row. Offline rows are one-step predictions from the true history; online rows come
-//! from one free run driven by the data's inputs (see `gbc::trained::predict`). A free run
+//! from one free run driven by the data's inputs (see `gbc::api::SavedRun::predict`). A free run
 //! that leaves the physical range of the training data (the run's `--range-factor`) stops:
 //! the file ends before the offending row and a warning on stderr says where and why. No
 //! value that is not finite is ever written: a table holding one is refused (E0253).
 
 use std::path::PathBuf;
 
-use super::data::{load_records, ColumnArgs, HistoryArg};
 use super::progress::{Announce, Count, Reporter};
 use super::{CommandError, CommandResult};
-use crate::api::{PredictEvent, PredictSpec, SavedRun};
-use crate::trained::predict;
+use gbc::api::flags::{ColumnArgs, HistoryArg};
+use gbc::api::{self, PredictEvent, PredictMode, PredictSpec, SavedRun};
 
 /// How predictions are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -58,7 +57,7 @@ pub struct PredictArgs {
     /// The level of the prediction band of an ensemble run (`gbc train --ensemble N`): each
     /// measured state gets `X_lo` and `X_hi` columns (online mode), and its coverage of the
     /// data's measured cells is printed.
-    #[arg(long, value_name = "LEVEL", default_value_t = crate::ensemble::DEFAULT_LEVEL)]
+    #[arg(long, value_name = "LEVEL", default_value_t = api::DEFAULT_BAND_LEVEL)]
     pub band: f64,
     /// Members of an ensemble run predicting at once (default: the number of cores).
     #[arg(short, long, value_name = "N")]
@@ -69,13 +68,13 @@ pub struct PredictArgs {
 pub fn run(args: &PredictArgs) -> CommandResult {
     let mut inputs: Vec<&std::path::Path> = vec![&args.model];
     inputs.extend(args.data.iter().map(|p| p.as_path()));
-    crate::io::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
-    let model = crate::api::Model::from_file(&args.model)?;
+    api::ensure_not_input(&args.output, &inputs).map_err(CommandError::user)?;
+    let model = api::Model::from_file(&args.model)?;
     let saved = SavedRun::load(&model, &args.weights)?;
     for note in saved.notes() {
         eprintln!("note: {note}");
     }
-    let records = load_records(model.ir(), &args.data, &args.columns)?;
+    let records = api::read_records(model.ir(), &args.data, &args.columns.columns)?;
     let spec = PredictSpec {
         mode: mode_of(args.mode),
         history: args.history.into(),
@@ -114,10 +113,10 @@ fn show(reporter: &Reporter, event: PredictEvent) {
 }
 
 /// The library's mode of a `--mode`.
-fn mode_of(mode: ModeArg) -> predict::Mode {
+fn mode_of(mode: ModeArg) -> PredictMode {
     match mode {
-        ModeArg::Offline => predict::Mode::Offline,
-        ModeArg::Online => predict::Mode::Online,
-        ModeArg::OnlineTrainedStep => predict::Mode::OnlineTrainedStep,
+        ModeArg::Offline => PredictMode::Offline,
+        ModeArg::Online => PredictMode::Online,
+        ModeArg::OnlineTrainedStep => PredictMode::OnlineTrainedStep,
     }
 }

@@ -28,8 +28,11 @@ mod scoring;
 #[cfg(test)]
 mod tests;
 
-pub use comparison::{Comparison, Curve, ExperimentScore, HeldOutRun, MemberRun, SplitResult};
+pub use comparison::Comparison;
+#[cfg(test)]
+pub use comparison::{MemberRun, SplitResult};
 pub use error::CompareError;
-pub use options::{Event, Member, Options, Splits};
+pub use options::{Event, Options, Splits};
 pub use run::compare;
+#[cfg(test)]
 pub use score::{Score, Standing, Verdict};

@@ -18,22 +18,22 @@ pub struct DataSet {
 
 impl DataSet {
     /// The experiment named `name`, if any.
+    #[cfg(test)]
     pub fn experiment(&self, name: &str) -> Option<&Experiment> {
         self.experiments.iter().find(|e| e.name == name)
     }
     /// The experiments' names, in order.
+    #[cfg(test)]
     pub fn names(&self) -> Vec<&str> {
         self.experiments.iter().map(|e| e.name.as_str()).collect()
     }
     /// Number of experiments.
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.experiments.len()
     }
-    /// Whether the set has no experiment (never, for a set that was read).
-    pub fn is_empty(&self) -> bool {
-        self.experiments.is_empty()
-    }
     /// Whether every experiment has a value in every requested cell.
+    #[cfg(test)]
     pub fn is_complete(&self) -> bool {
         self.experiments.iter().all(Experiment::is_complete)
     }
@@ -54,6 +54,7 @@ pub struct Experiment {
     /// The requested columns that the file has, in the order requested.
     pub columns: Vec<Series>,
     /// The unit of the time column, from a header such as `t [h]`.
+    #[cfg(test)]
     pub time_unit: Option<String>,
     /// Where the samples lie in the file, for diagnostics about them.
     pub origin: Origin,
@@ -83,6 +84,7 @@ impl Series {
         }
     }
     /// The samples where it was measured: `(sample index, value)`.
+    #[cfg(test)]
     pub fn measured(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         self.values
             .iter()
@@ -146,15 +148,12 @@ impl Experiment {
     pub fn len(&self) -> usize {
         self.times.len()
     }
-    /// Whether it has no sample (never, for an experiment that was read).
-    pub fn is_empty(&self) -> bool {
-        self.times.is_empty()
-    }
     /// The column the model calls `name`, if the file has it.
     pub fn series(&self, name: &str) -> Option<&Series> {
         self.columns.iter().find(|series| series.name == name)
     }
     /// Whether every requested column present has a value at every sample.
+    #[cfg(test)]
     pub fn is_complete(&self) -> bool {
         self.columns
             .iter()
@@ -164,6 +163,7 @@ impl Experiment {
     /// them ([`crate::numeric::times`]: their printed precision and the scatter of their
     /// steps, at most a small share of the step). `None` for irregular times or fewer than
     /// two samples.
+    #[cfg(test)]
     pub fn uniform_step(&self) -> Option<f64> {
         step_defect(&self.times).ok().flatten()
     }

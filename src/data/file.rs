@@ -340,6 +340,7 @@ impl Reader<'_> {
             times: building.times,
             rows: building.rows,
             columns,
+            #[cfg(test)]
             time_unit: header.cells[self.layout.time].unit.clone(),
             origin: Origin {
                 file: self.source().file.clone(),

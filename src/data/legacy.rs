@@ -67,6 +67,7 @@ pub fn read(
 
 /// Reads a data file from `text`, named `name` in messages; otherwise as [`read`] (and
 /// retired with it).
+#[cfg(test)]
 pub fn read_str(
     name: &str,
     text: &str,

@@ -66,10 +66,12 @@ mod set;
 mod sniff;
 mod source;
 
-pub use error::{ColumnRef, DataError, DataSource, Location};
-pub use experiment::{DataSet, Experiment, Origin, Series};
-pub use legacy::{read, read_str, Column, Dataset};
-pub use request::{parse_mapping, MinRows, Request, Role, Wanted};
+pub use error::DataError;
+pub use experiment::{DataSet, Experiment, Series};
+#[cfg(test)]
+pub use legacy::read_str;
+pub use legacy::{read, Column, Dataset};
+pub use request::{parse_mapping, MinRows, Request, Wanted};
 pub use set::{read_set, read_set_str};
 
 use crate::io::{write_atomic, IoError};

@@ -39,7 +39,9 @@ mod steps;
 mod symbolic;
 
 pub use crate::solve::fit::split::MIN_ROWS;
-pub use context::{Context, Options, Problem, Progress, CREDIT, DEFAULT_TAIL, SIGNIFICANCE};
+pub use context::{Options, Problem, Progress};
+#[cfg(test)]
+pub use context::{DEFAULT_TAIL, SIGNIFICANCE};
 pub use error::DiagnoseError;
 pub use report::*;
 pub use steps::diagnose;

@@ -191,7 +191,9 @@ pub struct Regime {
     pub highest: bool,
 }
 
-pub use crate::solve::fit::{FitSummary, ParamEstimate};
+pub use crate::solve::fit::FitSummary;
+#[cfg(test)]
+pub use crate::solve::fit::ParamEstimate;
 
 /// A candidate effect after fitting.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -181,16 +181,6 @@ impl PairTable {
         self.pairs.is_empty()
     }
 
-    /// The measured target block `pairs x measured`.
-    pub fn targets(&self) -> &[f64] {
-        &self.targets
-    }
-
-    /// The loss weights `pairs x measured` (0 where a target was not measured).
-    pub fn weights(&self) -> &[f64] {
-        &self.weights
-    }
-
     /// Adds the targets of the model outputs `outputs` (the observables, in the
     /// normalisation's order) at each pair's end, with weight 1 where measured and 0 where
     /// not.

@@ -122,16 +122,6 @@ impl Program {
         &self.shape
     }
 
-    /// Number of registers (instructions).
-    pub fn len(&self) -> usize {
-        self.instrs.len()
-    }
-
-    /// Whether the program has no instructions.
-    pub fn is_empty(&self) -> bool {
-        self.instrs.is_empty()
-    }
-
     /// Evaluates every register on a batch; register `r` is `values[r * rows..][..rows]`.
     pub fn forward<E: Real>(&self, inputs: &ProgramInputs<E>) -> Vec<E> {
         let mut values = Vec::new();

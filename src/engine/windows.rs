@@ -216,6 +216,7 @@ impl WindowPlan {
 /// A closure's raw embedding at step `step` (fraction `fraction`) of the window starting at
 /// knot `start` of `track`, batch row `row`, with predicted shares left at zero, and those
 /// shares as feedback entries.
+#[cfg(test)]
 pub fn window_embedding(
     closure: &ir::Closure,
     track: &Track,
@@ -241,6 +242,7 @@ pub type RolloutData<'a> = (&'a [Track], &'a [Vec<Vec<f64>>], &'a [f64], &'a [us
 /// `start + steps` must be a knot of its track); `hidden[track][knot]` holds the
 /// hidden-state estimates; each measured cell weighs its column's `weights[state]` (empty:
 /// 1); `observables` are the measured model outputs (the normalisation's).
+#[cfg(test)]
 pub fn rollout_batch(
     model: &ir::Model,
     data: RolloutData,

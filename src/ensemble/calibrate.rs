@@ -133,8 +133,6 @@ pub fn calibrate(
 pub struct Cell {
     /// The measured state.
     pub state: usize,
-    /// The record row.
-    pub row: usize,
     /// The measured value.
     pub measured: f64,
     /// The runs' base band (`None`: no run reached the cell).
@@ -151,7 +149,6 @@ pub fn cells(record: &Record, runs: &[&Run], noise: &[StateNoise]) -> Vec<Cell> 
             let predictions = (runs.iter()).filter_map(|r| r.states.get(state).map(|v| v[row]));
             found.push(Cell {
                 state,
-                row,
                 measured,
                 base: noise[state].base_band(predictions),
             });

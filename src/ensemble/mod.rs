@@ -34,14 +34,19 @@ mod tests;
 mod tests_floor;
 
 pub use crate::trained::keep::Keep;
-pub use calibrate::{Calibration, CellCount, Coverage, ErrorSummary, StateScores};
+#[cfg(test)]
+pub use calibrate::{Calibration, StateScores};
+pub use calibrate::{CellCount, Coverage};
 pub use error::{check_level, EnsembleError};
-pub use info::{BandRule, EnsembleInfo, MemberInfo, ENSEMBLE_FILE, MEMBERS_DIR, RULE};
+pub use info::EnsembleInfo;
+#[cfg(test)]
+pub use info::ENSEMBLE_FILE;
 pub use members::{train_ensemble, MemberEvent, Plan, Trained};
-pub use noise::{NoiseSource, StateNoise};
-pub use predict::{is_ensemble, load, predict_table, BandTable, Loaded};
+pub use noise::StateNoise;
+pub use predict::{is_ensemble, load, predict_table, Loaded};
 pub use resample::Resample;
-pub use run::{row_at, Run};
+#[cfg(test)]
+pub use run::Run;
 
 /// The band level reported unless `--band` says otherwise.
 pub const DEFAULT_LEVEL: f64 = 0.9;

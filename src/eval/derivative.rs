@@ -68,22 +68,13 @@ impl JacobianProgram {
         JacobianProgram::compile(balance_order(model, layout)?, layout, wrt)
     }
 
-    /// Number of expressions (rows).
-    pub fn rows(&self) -> usize {
-        self.values.len()
-    }
-
     /// Number of slots differentiated by (columns).
     pub fn columns(&self) -> usize {
         self.columns
     }
 
-    /// Number of instructions executed per evaluation.
-    pub fn instruction_count(&self) -> usize {
-        self.code.len()
-    }
-
     /// Number of entries that are not structurally zero.
+    #[cfg(test)]
     pub fn nonzeros(&self) -> usize {
         self.entries.len()
     }

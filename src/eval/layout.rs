@@ -82,13 +82,9 @@ impl Layout {
     }
 
     /// Total number of slots.
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.len
-    }
-
-    /// Whether the model has no quantity at all.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
     }
 
     /// Slots of the inputs.

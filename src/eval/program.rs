@@ -246,6 +246,7 @@ impl Program {
     }
 
     /// The value of the program if it folded to a constant.
+    #[cfg(test)]
     pub fn as_constant(&self) -> Option<f64> {
         match self.result {
             Operand::Value(value) => Some(value),
@@ -254,6 +255,7 @@ impl Program {
     }
 
     /// Number of instructions executed per evaluation.
+    #[cfg(test)]
     pub fn instruction_count(&self) -> usize {
         self.code.len()
     }
@@ -297,16 +299,6 @@ impl ProgramSet {
     pub fn len(&self) -> usize {
         self.results.len()
     }
-
-    /// Whether the set has no expression.
-    pub fn is_empty(&self) -> bool {
-        self.results.is_empty()
-    }
-
-    /// Number of instructions executed per evaluation.
-    pub fn instruction_count(&self) -> usize {
-        self.code.len()
-    }
 }
 
 /// All balances of a model compiled together: the right-hand side `f` of `dx/dt = f`
@@ -333,11 +325,6 @@ impl CompiledRhs {
     /// Evaluates every balance on `slots` into `out` (length [`CompiledRhs::dim`]).
     pub fn eval(&self, slots: &[f64], scratch: &mut Vec<f64>, out: &mut [f64]) {
         self.set.eval_into(slots, scratch, out);
-    }
-
-    /// Number of instructions executed per evaluation.
-    pub fn instruction_count(&self) -> usize {
-        self.set.instruction_count()
     }
 }
 

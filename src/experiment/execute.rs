@@ -54,6 +54,7 @@ pub fn claim_directory(dir: &Path, record: &StudyRecord) -> Result<(), Experimen
 /// Trains the runs of `runs` not finished in `dir` on `jobs` threads and returns every
 /// run's result (read back or new), in the order of `runs`. A run that fails to train is a
 /// result with status `failed`; failing to write a result stops the experiment.
+#[cfg(test)]
 pub fn execute(
     prepared: &Prepared,
     runs: &[&RunSpec],

@@ -38,14 +38,17 @@ mod tests;
 #[cfg(test)]
 mod tests_run;
 
-pub use black_box::is_black_box;
 pub use error::{ExperimentError, ExperimentFailure};
-pub use execute::{execute, execute_until, Progress};
+#[cfg(test)]
+pub use execute::execute;
+pub use execute::{execute_until, Progress};
 pub use grid::{grid, RunSpec, Shard};
 pub use merge::merge;
-pub use prepare::{prepare, LoadedModel, Prepared};
+pub use prepare::{prepare, Prepared};
 pub use results::{RunResult, RunStatus, StudyRecord};
-pub use study::{DataFiles, Study, StudyModel, Validation};
+#[cfg(test)]
+pub use study::StudyModel;
+pub use study::{DataFiles, Study, Validation};
 
 /// The default number of runs at once (trainings, ensemble members): the number of cores.
 pub fn default_jobs() -> usize {

@@ -27,14 +27,6 @@ impl Value {
             _ => Value::Scalar(name),
         }
     }
-
-    /// The tensor's name, if the value is one.
-    pub fn name(&self) -> Option<&str> {
-        match self {
-            Value::Const(_) => None,
-            Value::Scalar(name) | Value::Column(name) => Some(name),
-        }
-    }
 }
 
 /// Nodes and initializers under construction, in one element type.

@@ -15,6 +15,7 @@
 mod expr;
 mod layout;
 
+#[cfg(test)]
 pub use layout::WIDTH;
 
 use crate::ast;
@@ -90,3 +91,5 @@ pub(crate) use crate::syntax::comment_start;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_properties;

@@ -7,8 +7,7 @@
 //! depends on how it is executed.
 
 pub use crate::ast::BinOp;
-pub use crate::units::Unit;
-pub use crate::vocabulary::{sigmoid, softplus, Activation, Func};
+pub use crate::vocabulary::{sigmoid, Activation, Func};
 
 mod lower;
 mod mechanism;
@@ -19,9 +18,10 @@ mod print;
 
 pub use lower::{effect_violations, lower, lower_reporting, LowerError};
 pub use model::{
-    uses_closure, var_name, Balance, Closure, ClosureOutput, Const, Constraint, Definition,
-    Dynamics, Effect, Embedding, Expr, Input, Measured, Model, Network, Noise, Param, Prior,
-    PriorKind, QuantityUnit, State, Units, Var,
+    uses_closure, var_name, Balance, Closure, ClosureOutput, Constraint, Definition, Dynamics,
+    Expr, Input, Measured, Model, Noise, Param, PriorKind, State, Var,
 };
-pub use noise::{merge_noise, parse_noise_spec, sigma_of, NoiseSpec, NoiseSpecError};
+#[cfg(test)]
+pub use model::{Const, Embedding, Network, Prior};
+pub use noise::{merge_noise, parse_noise_spec, NoiseSpec};
 pub use print::{expr_text, print};

@@ -50,6 +50,7 @@ impl Cholesky {
     }
 
     /// The size `n`.
+    #[cfg(test)]
     pub fn size(&self) -> usize {
         self.n
     }

@@ -14,12 +14,14 @@ pub trait Entry:
     + Neg<Output = Self>
 {
     /// Zero.
+    #[cfg(test)]
     const ZERO: Self;
     /// A magnitude for pivoting (`|re| + |im|` for a complex number).
     fn magnitude(self) -> f64;
 }
 
 impl Entry for f64 {
+    #[cfg(test)]
     const ZERO: f64 = 0.0;
     fn magnitude(self) -> f64 {
         self.abs()
@@ -96,6 +98,7 @@ impl Neg for Complex {
 }
 
 impl Entry for Complex {
+    #[cfg(test)]
     const ZERO: Complex = Complex::new(0.0, 0.0);
     fn magnitude(self) -> f64 {
         self.re.abs() + self.im.abs()
@@ -149,11 +152,6 @@ impl<T: Entry> Lu<T> {
             factors: a,
             pivots,
         })
-    }
-
-    /// The size `n`.
-    pub fn size(&self) -> usize {
-        self.n
     }
 
     /// Overwrites `b` (`n` entries) with the solution `x` of `a x = b`.

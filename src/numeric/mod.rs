@@ -31,10 +31,12 @@ mod tests_lm;
 #[cfg(test)]
 mod tests_times;
 
-pub use adam::{clip, Adam, AdamState, Update};
+pub use adam::{Adam, AdamState, Update};
 pub use eigen::symmetric_eigen;
 pub use linalg::{dot, solve_spd, Cholesky, NormalEquations};
-pub use lm::{minimise, Damping, GaussNewton, Linearisation, Outcome, Problem, Settings};
+#[cfg(test)]
+pub use lm::{minimise, Problem};
+pub use lm::{Damping, GaussNewton, Settings};
 pub use lu::{Complex, Lu};
 pub use real::Real;
 pub use stats::{mean_std, median, normal_cdf, order_statistic, root_mean_square};

@@ -34,8 +34,6 @@ pub trait Real:
     fn exp(self) -> Self;
     /// Natural logarithm.
     fn ln(self) -> Self;
-    /// `ln(1 + x)`, accurate for small `x`.
-    fn ln_1p(self) -> Self;
     /// Square root.
     fn sqrt(self) -> Self;
     /// Absolute value.
@@ -44,8 +42,6 @@ pub trait Real:
     fn tanh(self) -> Self;
     /// `self ^ exponent`.
     fn powf(self, exponent: Self) -> Self;
-    /// Whether the value is neither infinite nor NaN.
-    fn is_finite(self) -> bool;
 
     /// `ln(1 + x)` for `x >= 0` through `ln` (much faster than the libm `log1p`) with
     /// Goldberg's correction `ln(u) * x / (u - 1)`, `u = 1 + x`, which keeps it accurate to a
@@ -99,9 +95,6 @@ macro_rules! impl_real {
             fn ln(self) -> Self {
                 <$type>::ln(self)
             }
-            fn ln_1p(self) -> Self {
-                <$type>::ln_1p(self)
-            }
             fn sqrt(self) -> Self {
                 <$type>::sqrt(self)
             }
@@ -113,9 +106,6 @@ macro_rules! impl_real {
             }
             fn powf(self, exponent: Self) -> Self {
                 <$type>::powf(self, exponent)
-            }
-            fn is_finite(self) -> bool {
-                <$type>::is_finite(self)
             }
         }
     };

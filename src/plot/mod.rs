@@ -24,10 +24,12 @@ mod style;
 #[cfg(test)]
 mod tests;
 
-pub use axis::{linear_ticks, log_ticks, tick_label};
+pub use axis::tick_label;
+#[cfg(test)]
+pub use axis::{linear_ticks, log_ticks};
 pub use bar::{Bar, BarChart, Bars};
-pub use line::{Chart, Mark, Series};
+pub use line::{Chart, Series};
 pub use markup::escape;
 pub use page::{figure, page};
 pub use points::{clip, thin, titled, widened_range, MAX_POINTS};
-pub use style::{Style, DATA_COLOR, MARKER_RADIUS, PALETTE, SPLIT_COLOR};
+pub use style::{Style, DATA_COLOR, PALETTE, SPLIT_COLOR};

@@ -13,8 +13,10 @@ pub mod measure;
 #[cfg(test)]
 mod tests;
 
-pub use bind::{bind, request, BindError};
-pub use experiment::{uniform_step, Cells, Observable, Record};
+pub use bind::{bind, request};
+#[cfg(test)]
+pub use experiment::{uniform_step, Observable};
+pub use experiment::{Cells, Record};
 pub use grid::{GridOptions, Track};
 
 /// Per-column normalisation from the training split (records spec, section 3): the mean

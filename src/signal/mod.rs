@@ -45,7 +45,8 @@ mod piecewise;
 mod program;
 
 pub use error::{ArgumentSource, SignalError};
-pub use generate::{DEFAULT_HOLD_STEPS, MAX_SAMPLES};
+#[cfg(test)]
+pub use generate::DEFAULT_HOLD_STEPS;
 pub use piecewise::Signal;
 
 use crate::ir::Input;
@@ -59,6 +60,7 @@ use std::sync::Arc;
 #[derive(Debug, Clone)]
 pub struct Program {
     source: ArgumentSource,
+    #[cfg(test)]
     span: SourceSpan,
     kind_name: &'static str,
     kind_span: SourceSpan,
@@ -67,6 +69,7 @@ pub struct Program {
 
 impl Program {
     /// The program as written.
+    #[cfg(test)]
     pub fn text(&self) -> &str {
         let start = self.span.offset();
         &self.source.inner()[start..start + self.span.len()]
@@ -183,12 +186,10 @@ fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalEr
     let bound = parse::parse_bound(source, start)?;
     let (kind_name, kind_span) = (bound.name, bound.span);
     let kind = program::typed(source, bound)?;
-    let text = source.inner();
-    let program_start = start + (text.len() - start - text[start..].trim_start().len());
-    let program_end = text.trim_end().len().max(program_start);
     Ok(Program {
         source: source.clone(),
-        span: SourceSpan::new(program_start.into(), program_end - program_start),
+        #[cfg(test)]
+        span: written_span(source, start),
         kind_name,
         kind_span,
         kind,
@@ -199,3 +200,12 @@ fn program_at(source: &ArgumentSource, start: usize) -> Result<Program, SignalEr
 mod tests;
 #[cfg(test)]
 mod tests_csv;
+
+/// Where the program starting at `start` lies in the argument, blanks around it left out.
+#[cfg(test)]
+fn written_span(source: &ArgumentSource, start: usize) -> SourceSpan {
+    let text = source.inner();
+    let program_start = start + (text.len() - start - text[start..].trim_start().len());
+    let program_end = text.trim_end().len().max(program_start);
+    SourceSpan::new(program_start.into(), program_end - program_start)
+}

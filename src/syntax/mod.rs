@@ -8,6 +8,8 @@ mod build;
 mod error;
 mod guard;
 mod span;
+#[cfg(test)]
+mod tests_properties;
 mod unit;
 
 pub use error::SyntaxError;
@@ -52,6 +54,7 @@ pub fn comment_start(line: &str) -> Option<usize> {
 }
 
 /// Parses one expression (used by tests and tools that take expressions on the command line).
+#[cfg(test)]
 pub fn parse_expr(source: &str) -> Result<ast::SExpr, SyntaxError> {
     guard::check(source)?;
     let mut pairs = GbmParser::parse(Rule::expr_only, source)

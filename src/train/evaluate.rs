@@ -22,7 +22,9 @@ use crate::engine::pairs::PairTable;
 
 mod range;
 
-pub use range::{Divergence, PhysicalRange, UNDERSHOOT};
+#[cfg(test)]
+pub use range::UNDERSHOOT;
+pub use range::{Divergence, PhysicalRange};
 
 /// Rows per prediction batch when evaluating many pairs at once.
 const EVALUATION_CHUNK: usize = 512;
@@ -243,21 +245,6 @@ pub fn run_in(
         .map(|index| run.states.iter().map(|s| s[index]).collect())
         .collect();
     Ok(RunIn { hidden, states })
-}
-
-/// Hidden-state estimates at every knot of `track` (see [`run_in`]). Empty rows for models
-/// without hidden states.
-pub fn run_in_hidden(
-    network: &Network,
-    model: &ir::Model,
-    track: &Track,
-    fractions: &[f64],
-    initial: &[f64],
-) -> Result<Vec<Vec<f64>>, BackendError> {
-    if model.hidden.is_empty() {
-        return Ok(vec![Vec::new(); track.len()]);
-    }
-    Ok(run_in(network, model, track, fractions, initial)?.hidden)
 }
 
 /// Squared z-scored errors summed per measured state and observable, with their cell

@@ -55,7 +55,6 @@ pub(crate) mod fixtures;
 use crate::engine::graph::{Network, Precision, Setup};
 use crate::ir;
 
-pub use analysis::StiffnessWarning;
 pub use balances::BalanceFit;
 pub use checkpoint::{Checkpoint, RunControl};
 pub use error::TrainError;
@@ -65,11 +64,11 @@ pub use initial::{InitialState, Origin};
 pub use polish::{ParamEstimate, PolishSummary};
 pub use recipe::{Engine, Objective, ParamSource, Recipe, SparseBudget};
 pub use recovery::Recovery;
-pub use run::{settle, train_run, train_with, Settled, EVALUATING, TRAINING, VALIDATING};
-pub use settings::{BadSetting, Settings};
-pub use split::{History, Part, TrainingData, DEFAULT_TRAIN_SHARE};
+pub use run::{settle, train_run, train_with, Settled, TRAINING};
+pub use settings::Settings;
+pub use split::{History, Part, TrainingData};
 pub use toward::{StopChoice, TowardMechanism};
-pub use warnings::{DropCause, DroppedPairs, Warning};
+pub use warnings::Warning;
 
 /// Epochs between refreshes of the model's fill of unknown stretches.
 pub const FILL_REFRESH: usize = 10;
@@ -333,6 +332,7 @@ pub struct Trained {
 
 /// Trains `model` on `data` with the default [`Recipe`]; `on_event` hears of warnings and
 /// of every epoch.
+#[cfg(test)]
 pub fn train(
     model: &ir::Model,
     data: &TrainingData,

@@ -24,7 +24,7 @@ use crate::ir;
 use crate::numeric::lm::{self, central_difference, difference_step, standard_errors};
 use crate::numeric::{Damping, GaussNewton, Settings};
 
-pub use crate::solve::fit::{ParamEstimate, IDENTIFIABILITY_LIMIT};
+pub use crate::solve::fit::ParamEstimate;
 
 use super::TrainError;
 use crate::engine::pairs::PairTable;

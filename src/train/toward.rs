@@ -27,7 +27,7 @@ pub use crate::engine::penalty::Penalty;
 
 mod choice;
 mod distance;
-pub use choice::{choose, Candidate, ChoiceEvent, StopChoice};
+pub use choice::{choose, ChoiceEvent, StopChoice};
 pub use distance::{output_distances, param_distances, OutputDistance, ParamDistance};
 
 /// What a run reports of its distance from the mechanism (`run.json` under

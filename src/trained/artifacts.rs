@@ -11,7 +11,7 @@ mod structure;
 
 use std::path::Path;
 
-pub use structure::{compare, differences, fingerprint, structure, Change, Structure};
+pub use structure::{compare, differences, fingerprint, structure, Structure};
 
 use sha2::{Digest, Sha256};
 

@@ -16,7 +16,9 @@
 
 mod symbols;
 
-pub use symbols::{Base, Prefix, Symbol, SYMBOL_NAMES};
+#[cfg(test)]
+pub use symbols::{Base, Prefix};
+pub use symbols::{Symbol, SYMBOL_NAMES};
 
 use crate::ast::{SUnit, Span, UnitExpr};
 use std::fmt;

@@ -4,11 +4,10 @@
 
 use std::path::Path;
 
-use gbc::experiment::results::{self, Measure};
-use gbc::experiment::{RunResult, RunStatus, Study, StudyRecord};
-use gbc::train::{BalanceFit, Divergence, ErrorSet, ParamEstimate};
-use gbc::trained::artifacts;
-use gbc::trained::cv::{CrossValidation, Fold};
+use gbc::api::artifacts::{self, BalanceFit, Divergence, ErrorSet, ParamEstimate};
+use gbc::api::experiment::results::{self, Measure};
+use gbc::api::experiment::{RunResult, RunStatus, Study, StudyRecord};
+use gbc::api::{CrossValidation, CvFold as Fold};
 
 use crate::cli::{gbc, scratch};
 
@@ -74,11 +73,9 @@ fn a_run_with_unidentified_params_and_a_diverged_free_run_reads_back_and_predict
         "{}",
         String::from_utf8_lossy(&trained.stderr)
     );
-    let model = gbc::driver::compile_file(Path::new(model_path), &[])
-        .unwrap()
-        .model;
+    let model = gbc::api::Model::from_file(Path::new(model_path)).unwrap();
     let source = std::fs::read_to_string(model_path).unwrap();
-    let (network, _, mut info) = artifacts::restore(&model, &source, &run).unwrap();
+    let (network, _, mut info) = artifacts::restore(model.ir(), &source, &run).unwrap();
     info.estimates = vec![
         unidentified("Y_X"),
         unidentified("Y_A"),
@@ -239,7 +236,7 @@ fn a_diagnosis_json_reads_back_into_its_report() {
         String::from_utf8_lossy(&diagnosed.stderr)
     );
     let written = std::fs::read_to_string(&json).unwrap();
-    let report: gbc::diagnose::Report = serde_json::from_str(&written).unwrap();
+    let report: gbc::api::DiagnosisReport = serde_json::from_str(&written).unwrap();
     assert!(!report.effects.is_empty() && !report.locus.is_empty());
     assert_eq!(format!("{}\n", text(&report)), written);
 
@@ -247,7 +244,7 @@ fn a_diagnosis_json_reads_back_into_its_report() {
     let mut count = 0;
     name_every_float(&mut value, &mut count);
     assert!(count > 100, "{count} floats");
-    let named: gbc::diagnose::Report = serde_json::from_value(value.clone()).unwrap();
+    let named: gbc::api::DiagnosisReport = serde_json::from_value(value.clone()).unwrap();
     // Which name each float gets depends on the fields' (sorted) order: both are named.
     assert!(!named.gap_before.is_finite() && !named.noise_floor.is_finite());
     assert_eq!(serde_json::to_value(&named).unwrap(), value);

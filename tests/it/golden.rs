@@ -2,7 +2,7 @@
 //! `tests/golden/<name>.ir`; error cases `tests/golden/errors/E0xxx_<slug>.gbm` → `.stderr`
 //! with the source echoed above the rendered diagnostics. `UPDATE_GOLDEN=1` rewrites them.
 
-use gbc::diagnostics::{render, MessageFormat};
+use gbc::api::{render_diagnostic as render, ApiError, MessageFormat, Model};
 use std::path::{Path, PathBuf};
 
 const HEADER: &str =
@@ -92,21 +92,14 @@ fn compiled_ir_matches_golden_files() {
     );
     let mut failures = Vec::new();
     for (model, expected) in cases {
-        match gbc::driver::compile_file(&model, &[]) {
+        match Model::from_file(&model) {
             Ok(compiled) => {
-                if let Some(failure) = compare(&expected, &gbc::ir::print(&compiled.model)) {
+                if let Some(failure) = compare(&expected, &compiled.ir_text()) {
                     failures.push(failure);
                 }
             }
-            Err(reports) => failures.push(format!(
-                "{} does not compile: {}",
-                model.display(),
-                reports
-                    .iter()
-                    .map(|r| r.to_string())
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            )),
+            // An error's text: its diagnostics' messages joined by "; ".
+            Err(error) => failures.push(format!("{} does not compile: {error}", model.display())),
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -114,9 +107,10 @@ fn compiled_ir_matches_golden_files() {
 
 /// Renders every diagnostic of `source` as a user would see it (no colour, fixed width).
 pub fn rendered_errors(name: &str, source: &str) -> Option<String> {
-    let reports = match gbc::driver::compile(name, source, &[]) {
+    let reports = match Model::from_text(source, name) {
         Ok(_) => return None,
-        Err(reports) => reports,
+        Err(ApiError::User(reports)) => reports,
+        Err(ApiError::Internal(message)) => return Some(format!("internal error: {message}")),
     };
     Some(
         reports

@@ -487,7 +487,7 @@ fn a_run_that_goes_non_finite_exits_1_keeping_finite_weights_that_predict() {
         message.contains("--lr"),
         "the help says what to try: {message}"
     );
-    let weights = gbc::train::tensors::read_tensors(&run.join("weights.safetensors")).unwrap();
+    let weights = gbc::api::artifacts::read_tensors(&run.join("weights.safetensors")).unwrap();
     assert!(!weights.is_empty());
     for tensor in &weights {
         assert!(
@@ -519,7 +519,7 @@ fn a_run_that_goes_non_finite_exits_1_keeping_finite_weights_that_predict() {
     // A run directory with a NaN weight (as gbc wrote before this check) is refused.
     let mut broken = weights.clone();
     broken[0].values[2] = f64::NAN;
-    gbc::train::tensors::write_tensors(&run.join("weights.safetensors"), &broken).unwrap();
+    gbc::api::artifacts::write_tensors(&run.join("weights.safetensors"), &broken).unwrap();
     std::fs::remove_file(&predicted).unwrap();
     let output = gbc(&args);
     let message = stderr(&output);

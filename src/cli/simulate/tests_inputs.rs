@@ -3,7 +3,7 @@
 //! and checked against the exact integral of the piecewise-constant feed.
 
 use super::{run, SimulateArgs};
-use crate::io::ScratchDir;
+use crate::cli::tests_scratch::ScratchDir;
 use clap::Parser;
 use std::path::Path;
 

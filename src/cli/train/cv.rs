@@ -1,4 +1,4 @@
-//! `gbc train --cv`: runs the leave-one-experiment-out folds ([`crate::trained::cv`]), each
+//! `gbc train --cv`: runs the leave-one-experiment-out folds ([`api::cross_validate`]), each
 //! kept under the run directory, and prints per fold and pooled the error per state and
 //! overall, which folds' free runs diverged and where, and why a fold validates nothing.
 
@@ -7,10 +7,8 @@ use std::path::Path;
 
 use super::progress::Progress;
 use super::CommandResult;
-use crate::api::summary::cv_table;
-use crate::api::{Model, TrainSpec};
-use crate::record::Record;
-use crate::train::Event;
+use gbc::api::summary::cv_table;
+use gbc::api::{self, Model, Record, TrainEvent as Event, TrainSpec};
 
 /// Runs the folds, keeping each under `directory`, and prints the table.
 pub(super) fn cross_validate(
@@ -30,7 +28,7 @@ pub(super) fn cross_validate(
     };
     let mut on_event = |event: Event| progress.borrow_mut().observe(event, epochs);
     let listeners = (&mut on_fold as _, &mut on_event as _);
-    let result = crate::api::cross_validate(model, records, spec, directory, listeners);
+    let result = api::cross_validate(model, records, spec, directory, listeners);
     progress.borrow_mut().finish();
     let result = result?;
     print!("{}", cv_table(model.ir(), &result, directory));

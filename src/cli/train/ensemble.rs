@@ -7,31 +7,12 @@ use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use super::{ResampleArg, TrainArgs};
-use crate::api;
 use crate::cli::{CommandError, CommandResult};
-use crate::ensemble::{MemberEvent, Plan, Resample};
-use crate::record::Record;
+use gbc::api::flags::TrainArgs;
+use gbc::api::{self, EnsemblePlan as Plan, MemberEvent, Record};
 
 /// Seconds between progress lines of the members' epochs.
 const HEARTBEAT: f64 = 5.0;
-
-/// The ensemble the flags ask for (`--ensemble N`, `--resample`, `--jobs`, `--band`).
-pub fn plan_of(args: &TrainArgs) -> Option<Plan> {
-    let members = args.ensemble?;
-    Some(Plan {
-        members,
-        resample: match args.resample.unwrap_or(ResampleArg::Experiments) {
-            ResampleArg::Experiments => Resample::Experiments,
-            ResampleArg::None => Resample::None,
-        },
-        jobs: args
-            .jobs
-            .unwrap_or_else(crate::experiment::default_jobs)
-            .max(1),
-        level: args.band,
-    })
-}
 
 /// Trains the ensemble of `plan` into `directory` and reports.
 pub(super) fn run(
@@ -49,9 +30,9 @@ pub(super) fn run(
     if let Some(note) = &trained.note {
         eprintln!("{note}");
     }
-    let json_to_stdout = (args.json.as_ref()).is_some_and(|p| p.as_os_str() == crate::io::STDOUT);
+    let json_to_stdout = (args.json.as_ref()).is_some_and(|p| p.as_os_str() == api::STDOUT);
     if let Some(path) = &args.json {
-        crate::io::write_atomic(path, trained.json()?.as_bytes()).map_err(CommandError::user)?;
+        api::write_atomic(path, trained.json()?.as_bytes()).map_err(CommandError::user)?;
     }
     let text = trained.summary_text(model);
     if json_to_stdout {
@@ -92,7 +73,7 @@ impl MemberProgress {
                 "member {member}/{members}: seed {seed}, training on {}",
                 trained_on.join(" ")
             ),
-            MemberEvent::Phase { member, phase } if phase != crate::train::TRAINING => {
+            MemberEvent::Phase { member, phase } if phase != api::TRAINING_PHASE => {
                 eprintln!("member {member}/{members}: {phase}");
             }
             MemberEvent::Phase { .. } => {}

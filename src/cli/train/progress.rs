@@ -5,9 +5,10 @@
 use std::time::Instant;
 
 use crate::cli::progress::{Announce, Count, Reporter};
-use crate::train::checkpoint::EpochRow;
-use crate::train::toward::ChoiceEvent;
-use crate::train::{self, ErrorSet, Event};
+use gbc::api::{
+    format_number, Checkpoint, ChoiceEvent, EpochRow, ErrorSet, SparseBudget, TrainEvent as Event,
+    TrainReport, TrainingCoverage, DENSE_ONE_STEP_SHARE, TRAINING_PHASE,
+};
 
 /// The stage of `--toward-mechanism auto`'s folds.
 const CHOOSING: &str = "choosing the stop";
@@ -36,11 +37,13 @@ pub(super) struct Progress {
 
 impl Progress {
     /// Continues the log of a checkpoint.
-    pub(super) fn resume_from(&mut self, checkpoint: &train::Checkpoint) {
+    pub(super) fn resume_from(&mut self, checkpoint: &Checkpoint) {
         self.resumed.clone_from(&checkpoint.log);
         self.before = checkpoint.log.last().map_or(0.0, |row| row.seconds);
     }
 
+    /// Shows one event of the training (`epochs`: the epochs planned) and keeps its epoch
+    /// for the log.
     pub(super) fn observe(&mut self, event: Event, epochs: usize) {
         match event {
             Event::Warning(warning) => self.reporter.println(&format!("warning: {warning}")),
@@ -48,95 +51,27 @@ impl Progress {
                 self.reporter.println(&format!("warning: {recovery}"));
             }
             Event::Started {
-                epochs: 0,
-                validation_pairs,
-                ..
-            } => {
-                self.fitted_only = true;
-                self.reporter.println(&format!(
-                    "no epoch runs; validating on {validation_pairs} pairs"
-                ));
-            }
-            Event::Started {
+                epochs,
                 train_pairs,
                 validation_pairs,
-                ..
-            } => {
-                self.started = Some(Instant::now());
-                self.rows.clone_from(&self.resumed);
-                self.reporter.println(&format!(
-                    "training on {train_pairs} pairs, validating on {validation_pairs}"
-                ));
-            }
-            Event::Coverage(coverage, warmup) => {
-                let share = coverage.one_step_share();
-                if share < train::coverage::DENSE_SHARE {
-                    for record in &coverage.records {
-                        self.reporter.println(&format!("note: {record}"));
-                    }
-                    self.reporter.println(&format!(
-                        "note: one-step pairs reach {:.0} % of the measured cells; the one-step \
-                         warm-up is shortened to {:.0} % of the epochs and free-run windows \
-                         train on every cell (help: --objective one-step would train on the \
-                         pairs alone)",
-                        100.0 * share,
-                        100.0 * warmup
-                    ));
-                }
-            }
-            Event::Budget(budget) => {
-                self.epochs = Some(budget.epochs);
-                self.reporter.println(&format!(
-                    "note: a sparse record takes one Adam step per epoch: training {} epochs \
-                     at learning rate {} (as --epochs {} --lr {} would)",
-                    budget.epochs, budget.learning_rate, budget.epochs, budget.learning_rate
-                ));
-            }
+            } => self.started(epochs, train_pairs, validation_pairs),
+            Event::Coverage(coverage, warmup) => self.coverage(coverage, warmup),
+            Event::Budget(budget) => self.budget(&budget),
             Event::Substeps(substeps) => self.reporter.println(&format!(
                 "note: the model turns stiff along the training records: training takes \
                  {substeps} RK4 sub-steps per step (as --substeps {substeps} would)"
             )),
-            Event::Phase(train::TRAINING) if self.fitted_only => {}
-            Event::Phase(train::TRAINING) => {
-                let count = Count::Items("epochs");
-                let epochs = self.epochs.unwrap_or(epochs);
-                self.reporter
-                    .stage(train::TRAINING, epochs as u64, count, Announce::Now);
-                self.reporter.update(self.rows.len() as u64, String::new());
-            }
-            Event::Phase(name) => self.reporter.stage(name, 0, Count::Time, Announce::IfSlow),
+            Event::Phase(name) => self.phase(name, epochs),
             Event::Batch {
                 epoch,
                 done,
                 batches,
-            } => {
-                let within = format!("epoch {epoch} at batch {done}/{batches}");
-                let message = match self.last_loss.as_str() {
-                    "" => within,
-                    loss => format!("{loss}; {within}"),
-                };
-                self.reporter.update(epoch as u64 - 1, message);
-            }
+            } => self.batch(epoch, done, batches),
             Event::Epoch {
                 epoch,
                 loss,
                 horizon,
-            } => {
-                let elapsed = self.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
-                self.rows.push(EpochRow {
-                    epoch,
-                    horizon,
-                    loss,
-                    seconds: self.before + elapsed,
-                    offline: None,
-                    online: None,
-                });
-                self.last_loss = format!("{horizon}-step loss {loss:.4e}");
-                self.reporter.update(epoch as u64, self.last_loss.clone());
-                if epoch == epochs {
-                    self.reporter.report_now();
-                }
-            }
+            } => self.epoch(epoch, loss, horizon, epochs),
             Event::Validation {
                 epoch,
                 offline,
@@ -151,14 +86,105 @@ impl Progress {
                 epoch,
                 best_epoch,
                 best_loss,
-            } => {
-                self.reporter.println(&format!(
-                    "early stop after epoch {epoch}: no better validation loss for {} epochs; \
-                     keeping the weights of epoch {best_epoch} (validation loss {best_loss:.4e})",
-                    epoch - best_epoch
-                ));
-            }
+            } => self.early_stop(epoch, best_epoch, best_loss),
         }
+    }
+
+    /// Training starts: `epochs` (none: the run is fitted only), on `train_pairs`.
+    fn started(&mut self, epochs: usize, train_pairs: usize, validation_pairs: usize) {
+        if epochs == 0 {
+            self.fitted_only = true;
+            self.reporter.println(&format!(
+                "no epoch runs; validating on {validation_pairs} pairs"
+            ));
+            return;
+        }
+        self.started = Some(Instant::now());
+        self.rows.clone_from(&self.resumed);
+        self.reporter.println(&format!(
+            "training on {train_pairs} pairs, validating on {validation_pairs}"
+        ));
+    }
+
+    /// A sparse record's coverage by one-step pairs, and the warm-up share it trains with.
+    fn coverage(&self, coverage: &TrainingCoverage, warmup: f64) {
+        let share = coverage.one_step_share();
+        if share < DENSE_ONE_STEP_SHARE {
+            for record in &coverage.records {
+                self.reporter.println(&format!("note: {record}"));
+            }
+            self.reporter.println(&format!(
+                "note: one-step pairs reach {:.0} % of the measured cells; the one-step \
+                 warm-up is shortened to {:.0} % of the epochs and free-run windows \
+                 train on every cell (help: --objective one-step would train on the \
+                 pairs alone)",
+                100.0 * share,
+                100.0 * warmup
+            ));
+        }
+    }
+
+    /// A sparse record's budget of epochs and learning rate.
+    fn budget(&mut self, budget: &SparseBudget) {
+        self.epochs = Some(budget.epochs);
+        self.reporter.println(&format!(
+            "note: a sparse record takes one Adam step per epoch: training {} epochs \
+             at learning rate {} (as --epochs {} --lr {} would)",
+            budget.epochs, budget.learning_rate, budget.epochs, budget.learning_rate
+        ));
+    }
+
+    /// A phase starts: the epochs as a stage counting them, any other shown once it is slow.
+    fn phase(&mut self, name: &'static str, epochs: usize) {
+        match name {
+            TRAINING_PHASE if self.fitted_only => {}
+            TRAINING_PHASE => {
+                let count = Count::Items("epochs");
+                let epochs = self.epochs.unwrap_or(epochs);
+                self.reporter
+                    .stage(TRAINING_PHASE, epochs as u64, count, Announce::Now);
+                self.reporter.update(self.rows.len() as u64, String::new());
+            }
+            name => self.reporter.stage(name, 0, Count::Time, Announce::IfSlow),
+        }
+    }
+
+    /// Within an epoch: where it is, after the last epoch's loss.
+    fn batch(&self, epoch: usize, done: usize, batches: usize) {
+        let within = format!("epoch {epoch} at batch {done}/{batches}");
+        let message = match self.last_loss.as_str() {
+            "" => within,
+            loss => format!("{loss}; {within}"),
+        };
+        self.reporter.update(epoch as u64 - 1, message);
+    }
+
+    /// An epoch ended with `loss` over windows of `horizon` steps: its row of the log, and
+    /// a progress line now after the last of `epochs`.
+    fn epoch(&mut self, epoch: usize, loss: f64, horizon: usize, epochs: usize) {
+        let elapsed = self.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
+        self.rows.push(EpochRow {
+            epoch,
+            horizon,
+            loss,
+            seconds: self.before + elapsed,
+            offline: None,
+            online: None,
+        });
+        self.last_loss = format!("{horizon}-step loss {loss:.4e}");
+        self.reporter.update(epoch as u64, self.last_loss.clone());
+        if epoch == epochs {
+            self.reporter.report_now();
+        }
+    }
+
+    /// Early stopping ended training after `epoch`, keeping `best_epoch`'s weights.
+    fn early_stop(&self, epoch: usize, best_epoch: usize, best_loss: f64) {
+        self.reporter.println(&format!(
+            "early stop after epoch {epoch}: no better validation loss for {} epochs; \
+             keeping the weights of epoch {best_epoch} (validation loss {best_loss:.4e})",
+            epoch - best_epoch
+        ));
     }
 
     /// `--toward-mechanism auto`, as it goes: the folds' epochs as one stage, each fold's
@@ -217,11 +243,10 @@ impl Progress {
     /// The run's training log as CSV: one row per epoch (phase, loss, learning rate,
     /// seconds) and the validation errors where they were computed (before the first
     /// epoch, after every epoch with --early-stop, and after the last).
-    pub(super) fn log(&self, report: Option<&train::TrainReport>, learning_rate: f64) -> String {
-        let overall = |set: Option<&ErrorSet>| {
-            set.map_or(String::new(), |s| crate::data::format_number(s.overall))
-        };
-        let number = |value: Option<f64>| value.map_or(String::new(), crate::data::format_number);
+    pub(super) fn log(&self, report: Option<&TrainReport>, learning_rate: f64) -> String {
+        let overall =
+            |set: Option<&ErrorSet>| set.map_or(String::new(), |s| format_number(s.overall));
+        let number = |value: Option<f64>| value.map_or(String::new(), format_number);
         let mut text = String::from(
             "epoch,phase,horizon,train_loss,validation_offline,validation_online,learning_rate,seconds\n",
         );
@@ -232,7 +257,7 @@ impl Progress {
             overall(metrics.and_then(|m| m.initial_online.as_ref()))
         ));
         let last = self.rows.len();
-        let rate = crate::data::format_number(learning_rate);
+        let rate = format_number(learning_rate);
         for (index, row) in self.rows.iter().enumerate() {
             let phase = if row.horizon > 1 {
                 "multi-step"
@@ -248,8 +273,8 @@ impl Progress {
                 "{},{phase},{},{},{offline},{online},{rate},{}\n",
                 row.epoch,
                 row.horizon,
-                crate::data::format_number(row.loss),
-                crate::data::format_number(row.seconds)
+                format_number(row.loss),
+                format_number(row.seconds)
             ));
         }
         text

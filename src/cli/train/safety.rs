@@ -1,5 +1,5 @@
 //! `gbc train`'s run safety at the edge: the command line kept in the run directory for
-//! `--resume` (Ctrl-C and SIGTERM are [`crate::stop`]'s).
+//! `--resume` (Ctrl-C and SIGTERM are [`gbc::api::stop`]'s).
 //!
 //! Every checkpoint keeps the command line (its `command`): the arguments after `train`,
 //! the working directory they were given in, and the sha256 of every model and data file.
@@ -13,9 +13,10 @@ use std::path::{Path, PathBuf};
 use clap::Parser;
 use sha2::{Digest, Sha256};
 
-use super::{train_error, TrainArgs};
+use super::train_error;
 use crate::cli::{Cli, Command, CommandError};
-use crate::train::{Checkpoint, TrainError};
+use gbc::api::flags::TrainArgs;
+use gbc::api::{Checkpoint, TrainError};
 
 /// The command line a checkpoint keeps.
 #[derive(Debug, serde::Serialize, serde::Deserialize)]

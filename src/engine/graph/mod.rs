@@ -42,7 +42,6 @@ use std::ops::Range;
 use crate::ir;
 
 pub use crate::numeric::AdamState;
-pub use net::INIT_LAST_LAYER;
 
 /// The unconstrained starting values of the model's params (their transforms give the
 /// declared initial guesses), as [`program::Program`] reads them.

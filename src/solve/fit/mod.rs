@@ -27,7 +27,7 @@ pub mod unknowns;
 
 pub use error::FitError;
 pub use mechanism::{check_fittable, fit_mechanism, MechanismFit};
-pub use summary::{FitSummary, ParamEstimate, IDENTIFIABILITY_LIMIT, ROUNDING_LEVEL};
+pub use summary::{FitSummary, ParamEstimate};
 
 /// How to fit: the options a fit by free runs shares between `gbc train` and
 /// `gbc diagnose` (the same flags).

@@ -113,6 +113,7 @@ impl Dopri5 {
     /// `samples` are increasing times in `[t0, t1]`; `record(k, y)` is called once for each
     /// `samples[k]`, in order, with the solution there (from the dense output, or the exact
     /// step end when a sample coincides with one).
+    #[cfg(test)]
     pub fn integrate<S: OdeSystem>(
         &mut self,
         system: &mut S,

@@ -32,12 +32,12 @@ mod system;
 #[cfg(test)]
 mod tests;
 
+#[cfg(test)]
 pub use dopri::Dopri5;
 pub use driver::{simulate, simulate_with_progress};
-pub use error::{IntegrationError, Stuck};
+pub use error::IntegrationError;
 pub use integrator::{Integrator, Method};
 pub use model::ModelSystem;
-pub use radau::Radau;
 pub use run::{free_run, Observer, Segment, Stepper};
 pub use steppers::{Adaptive, Map, Renewal};
 pub use system::{OdeSystem, Stats, Tolerances};
@@ -112,11 +112,6 @@ impl Trajectory {
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.times.len()
-    }
-
-    /// Whether there is no sample.
-    pub fn is_empty(&self) -> bool {
-        self.times.is_empty()
     }
 
     /// Keeps the first `rows` samples.

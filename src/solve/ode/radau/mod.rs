@@ -107,11 +107,6 @@ impl Radau {
         self.taken.as_ref().map_or(0.0, |taken| taken.h)
     }
 
-    /// The Jacobian the Newton iterations use (`n x n`, row-major).
-    pub fn jacobian(&self) -> &[f64] {
-        self.newton.jacobian()
-    }
-
     /// Starts a stretch ending at `t_end` from `(t, y)`: a fresh right-hand side and
     /// Jacobian; the step is `step` where given (continuing after an input switch or a
     /// hand-over), else chosen as SciPy's `select_initial_step` does for order 3.

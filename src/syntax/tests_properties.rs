@@ -1,8 +1,8 @@
 //! Parser properties: printed expressions re-parse to the same tree, precedence is right,
 //! doc comments attach, and hostile input ends in a diagnostic, never a panic.
 
-use gbc::ast::{BinOp, Expr, SExpr, Span, Spanned};
-use gbc::syntax::{parse, parse_expr, SyntaxError};
+use crate::ast::{BinOp, Expr, SExpr, Span, Spanned};
+use crate::syntax::{parse, parse_expr, SyntaxError};
 use proptest::prelude::*;
 
 /// Removes spans so trees from different texts compare by structure.
@@ -144,7 +144,7 @@ proptest! {
         )
     ) {
         let text = lines.join("\n");
-        let _ = gbc::driver::compile("fuzz.gbm", &text, &[]);
+        let _ = crate::driver::compile("fuzz.gbm", &text, &[]);
     }
 }
 
@@ -190,7 +190,7 @@ fn hostile_inputs_end_in_diagnostics() {
     let powers = format!("model m\nstate X = 1\nder X = X{}\n", "^X".repeat(300_000));
     assert!(matches!(expect_error(&powers), SyntaxError::TooLong { .. }));
     let long_line = format!("model m\nstate X = 1\nder X = {}\n", "a".repeat(1 << 20));
-    let _ = gbc::driver::compile("long.gbm", &long_line, &[]).expect_err("unknown name");
+    let _ = crate::driver::compile("long.gbm", &long_line, &[]).expect_err("unknown name");
     let garbage: String = (0..100_000u32)
         .map(|i| char::from_u32(33 + (i * 7919) % 90).unwrap_or('x'))
         .collect();
@@ -249,7 +249,7 @@ fn syntax_error_points_at_the_offending_token() {
 
 #[test]
 fn noise_declarations_parse_with_their_terms_in_order() {
-    use gbc::ast::{ItemKind, NoiseKind};
+    use crate::ast::{ItemKind, NoiseKind};
     let source = "model m\nstate X = 1, S = 2\nder X = -X\nder S = -S\n\
                   ## assay precision\nnoise X, \n  S = 0.01 [g/L] +\n 4%\nnoise X=1e-3;noise S = - 2 %\n";
     let model = parse(source).expect("parses");
@@ -309,7 +309,7 @@ fn malformed_noise_declarations_say_what_was_expected() {
 
 #[test]
 fn nonnegative_ends_state_and_hidden_entries_only() {
-    use gbc::ast::ItemKind;
+    use crate::ast::ItemKind;
     let source = "model m\nstate S [g/L] = 8 nonnegative, X nonnegative, P = 1 [g/L]\n\
                   hidden E = 0 [g/L] nonnegative\nder S = -S\nder X = -X\nder P = -P\nder E = -E\n";
     let model = parse(source).expect("parses");

@@ -1,12 +1,7 @@
-//! Reading data sets on the command line: one reader for every command (records spec,
-//! section 1), `--column NAME=HEADER` mappings, and the choice of held-out experiments.
+//! How every command that reads data names its columns (`--column NAME=HEADER`), and where
+//! free runs start (`--history`).
 
-use std::path::PathBuf;
-
-use super::CommandError;
 use crate::data::parse_mapping;
-use crate::ir::Model;
-use crate::record::Record;
 
 /// How data columns are named, shared by every command that reads data.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -15,15 +10,6 @@ pub struct ColumnArgs {
     /// `--column experiment=batch` (repeatable).
     #[arg(long = "column", value_name = "NAME=HEADER", value_parser = parse_mapping)]
     pub columns: Vec<(String, String)>,
-}
-
-/// Reads `files` as one data set and binds it to `model` ([`crate::api::read_records`]).
-pub fn load_records(
-    model: &Model,
-    files: &[PathBuf],
-    columns: &ColumnArgs,
-) -> Result<Vec<Record>, CommandError> {
-    Ok(crate::api::read_records(model, files, &columns.columns)?)
 }
 
 /// Where whole-experiment free runs and training windows start.

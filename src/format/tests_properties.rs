@@ -2,15 +2,15 @@
 //! generated models with random layouts (spacing, `;`, continuation lines, `\`, comments,
 //! doc comments, blank lines, extra parentheses, unit placement).
 
-use gbc::format::{comments, format_source};
+use crate::format::{comments, format_source};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::{Path, PathBuf};
 
 fn compiled_ir(name: &str, source: &str) -> Result<String, String> {
-    gbc::driver::compile(name, source, &[])
-        .map(|compiled| gbc::ir::print(&compiled.model))
+    crate::driver::compile(name, source, &[])
+        .map(|compiled| crate::ir::print(&compiled.model))
         .map_err(|reports| {
             reports
                 .iter()

@@ -1,13 +1,13 @@
-//! The training flags `gbc train`, `gbc experiment` and `gbc bench` share: one clap struct
-//! over [`Settings`] (whose `Default` is the one default table), and the one mapping from a
-//! setting's field to the flag that sets it, so that a bad value is reported as the flag the
-//! user typed. Beside them, the clap mirrors of the library's choices (element type,
-//! engine, template, message format), so that no clap type lives below `cli/`.
+//! The training flags `gbc train`, `gbc experiment`, `gbc compare` and `gbc bench` share:
+//! one clap struct over [`Settings`] (whose `Default` is the one default table), checked so
+//! that a bad value is reported as the flag the user typed ([`crate::train::flag_of`], the
+//! one mapping from a setting's field to its flag). Beside them, the clap mirrors of the
+//! library's choices (element type, engine, template, message format), so that every clap
+//! type of a library choice lives in [`crate::api::flags`].
 
+use crate::api::ApiError;
 use crate::engine::graph::Precision;
-use crate::train::{Engine, Settings, TowardMechanism, TrainError};
-
-use super::CommandError;
+use crate::train::{flag_of, Engine, Settings, TowardMechanism, TrainError};
 
 /// The shared training flags; each left out keeps the value it overrides (the study file's,
 /// or the default of [`Settings`]).
@@ -54,7 +54,7 @@ impl TrainingFlags {
     }
 
     /// The default settings with the flags applied, checked; a bad value names its flag.
-    pub fn settings(&self) -> Result<Settings, CommandError> {
+    pub fn settings(&self) -> Result<Settings, ApiError> {
         let mut settings = Settings::default();
         self.apply(&mut settings);
         self.check(&settings)?;
@@ -64,9 +64,9 @@ impl TrainingFlags {
     /// Checks `settings` (with these flags applied) and names a bad value by the flag when
     /// the user gave it; the caller reports a value from elsewhere (a study file) by its
     /// field.
-    pub fn check(&self, settings: &Settings) -> Result<(), CommandError> {
+    pub fn check(&self, settings: &Settings) -> Result<(), ApiError> {
         match settings.check() {
-            Err(bad) if self.gave(bad.field) => Err(CommandError::user(TrainError::BadOption {
+            Err(bad) if self.gave(bad.field) => Err(ApiError::user(TrainError::BadOption {
                 option: flag_of(bad.field).unwrap_or(bad.field).to_string(),
                 expected: bad.expected.into(),
                 found: bad.found,
@@ -165,11 +165,10 @@ mirror! {
     }
 }
 
-pub use crate::train::{flag_of, with_flag};
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::with_flag;
 
     #[test]
     fn flags_override_and_bad_flags_are_named_as_typed() {
@@ -178,7 +177,7 @@ mod tests {
             ..TrainingFlags::default()
         };
         let message: String = match flags.settings() {
-            Err(CommandError::User(reports)) => reports.iter().map(|r| r.to_string()).collect(),
+            Err(ApiError::User(reports)) => reports.iter().map(|r| r.to_string()).collect(),
             other => panic!("expected a user error, found {other:?}"),
         };
         assert!(message.contains("--batch") && !message.contains("batch_size"));
@@ -203,14 +202,14 @@ mod tests {
     fn a_bug_from_any_stage_is_an_internal_error_and_bad_input_is_not() {
         let bug = crate::engine::graph::BackendError::internal("rows differ");
         assert!(
-            matches!(CommandError::user(TrainError::from(bug)), CommandError::Internal(m) if m.contains("rows differ"))
+            matches!(ApiError::user(TrainError::from(bug)), ApiError::Internal(m) if m.contains("rows differ"))
         );
         let input = TrainError::BadOption {
             option: "--batch".into(),
             expected: "a positive batch size".into(),
             found: "0".into(),
         };
-        assert!(matches!(CommandError::user(input), CommandError::User(_)));
+        assert!(matches!(ApiError::user(input), ApiError::User(_)));
     }
 
     #[test]
