@@ -18,7 +18,7 @@ pub enum MessageFormat {
 
 /// A diagnostic reduced to plain, serialisable facts.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Record {
+pub struct PlainDiagnostic {
     /// Code such as `gbm::E0101`.
     pub code: Option<String>,
     /// The message.
@@ -34,9 +34,9 @@ pub struct Record {
 }
 
 /// Extracts the plain facts of a report.
-pub fn record(report: &Report) -> Record {
+pub fn record(report: &Report) -> PlainDiagnostic {
     let diagnostic: &dyn Diagnostic = report.as_ref();
-    let mut record = Record {
+    let mut record = PlainDiagnostic {
         code: diagnostic.code().map(|c| c.to_string()),
         message: diagnostic.to_string(),
         file: None,

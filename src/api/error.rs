@@ -21,10 +21,10 @@ impl ApiError {
 
     /// The plain facts of each diagnostic (code, message, file, line, column, help); one
     /// record with the message alone for an internal error.
-    pub fn records(&self) -> Vec<diagnostics::Record> {
+    pub fn records(&self) -> Vec<diagnostics::PlainDiagnostic> {
         match self {
             ApiError::User(reports) => reports.iter().map(diagnostics::record).collect(),
-            ApiError::Internal(message) => vec![diagnostics::Record {
+            ApiError::Internal(message) => vec![diagnostics::PlainDiagnostic {
                 code: Some("gbc::internal".into()),
                 message: message.clone(),
                 file: None,
