@@ -9,6 +9,10 @@
 //! the fastest balance ([`IntegrationError`], [`Stuck`]). Discrete models (`next`) iterate
 //! their map once per sampling step. [`simulate`] is the entry point; [`OdeSystem`],
 //! [`Integrator`], [`Dopri5`] and [`Radau`] are reusable on their own.
+//!
+//! [`tableau`] holds the fixed-step explicit Runge–Kutta schemes as Butcher tableaux: the
+//! [`tableau::RK4`] that training's engines and the ONNX export step with, its stage times
+//! and its stability limit.
 
 mod dopri;
 mod driver;
@@ -18,6 +22,7 @@ mod radau;
 pub mod sensitivity;
 mod stiffness;
 mod system;
+pub mod tableau;
 #[cfg(test)]
 mod tests;
 
