@@ -3,44 +3,77 @@
 
 use crate::numeric::Real;
 
-/// A one-argument operation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Unary {
-    /// `-x`
-    Neg,
-    /// `e^x`
-    Exp,
-    /// `ln x`
-    Log,
-    /// `sqrt x`
-    Sqrt,
-    /// `|x|`
-    Abs,
-    /// `tanh x`
-    Tanh,
-    /// `1 / (1 + e^-x)`
-    Sigmoid,
-    /// `ln(1 + e^x)`, safe for large |x|
-    Softplus,
+/// Declares an operation enum from one list of its variants, and the macro `$with` that
+/// runs a body with a constant of the variant a value holds (so that a loop over a column
+/// evaluates one operation without matching it row by row). `$d` is `$`, passed in to
+/// write the inner macro's own variables.
+macro_rules! operations {
+    (
+        $(#[$meta:meta])*
+        enum $name:ident, with $with:ident, $d:tt {
+            $($(#[$doc:meta])* $variant:ident,)*
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum $name {
+            $($(#[$doc])* $variant,)*
+        }
+
+        /// Runs `$body` with `$op` bound to a constant of the variant `$value` holds.
+        macro_rules! $with {
+            ($d value:expr, $d op:ident => $d body:expr) => {
+                match $d value {
+                    $($name::$variant => {
+                        const $d op: $name = $name::$variant;
+                        $d body
+                    })*
+                }
+            };
+        }
+    };
 }
 
-/// A two-argument operation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Binary {
-    /// `a + b`
-    Add,
-    /// `a - b`
-    Sub,
-    /// `a * b`
-    Mul,
-    /// `a / b`
-    Div,
-    /// `a ^ b`
-    Pow,
-    /// `min(a, b)`
-    Min,
-    /// `max(a, b)`
-    Max,
+operations! {
+    /// A one-argument operation.
+    enum Unary, with with_unary, $ {
+        /// `-x`
+        Neg,
+        /// `e^x`
+        Exp,
+        /// `ln x`
+        Log,
+        /// `sqrt x`
+        Sqrt,
+        /// `|x|`
+        Abs,
+        /// `tanh x`
+        Tanh,
+        /// `1 / (1 + e^-x)`
+        Sigmoid,
+        /// `ln(1 + e^x)`, safe for large |x|
+        Softplus,
+    }
+}
+
+operations! {
+    /// A two-argument operation.
+    enum Binary, with with_binary, $ {
+        /// `a + b`
+        Add,
+        /// `a - b`
+        Sub,
+        /// `a * b`
+        Mul,
+        /// `a / b`
+        Div,
+        /// `a ^ b`
+        Pow,
+        /// `min(a, b)`
+        Min,
+        /// `max(a, b)`
+        Max,
+    }
 }
 
 /// `op(x)`.
@@ -138,83 +171,6 @@ pub fn binary_derivatives<E: Real>(op: Binary, a: E, b: E, y: E) -> (E, E) {
             }
         }
     }
-}
-
-/// Runs `$body` with `$op` bound to a constant of the variant `$value` holds, so that a
-/// loop over a column evaluates one operation without matching it row by row.
-macro_rules! with_unary {
-    ($value:expr, $op:ident => $body:expr) => {
-        match $value {
-            Unary::Neg => {
-                const $op: Unary = Unary::Neg;
-                $body
-            }
-            Unary::Exp => {
-                const $op: Unary = Unary::Exp;
-                $body
-            }
-            Unary::Log => {
-                const $op: Unary = Unary::Log;
-                $body
-            }
-            Unary::Sqrt => {
-                const $op: Unary = Unary::Sqrt;
-                $body
-            }
-            Unary::Abs => {
-                const $op: Unary = Unary::Abs;
-                $body
-            }
-            Unary::Tanh => {
-                const $op: Unary = Unary::Tanh;
-                $body
-            }
-            Unary::Sigmoid => {
-                const $op: Unary = Unary::Sigmoid;
-                $body
-            }
-            Unary::Softplus => {
-                const $op: Unary = Unary::Softplus;
-                $body
-            }
-        }
-    };
-}
-
-/// [`with_unary`] for binary operations.
-macro_rules! with_binary {
-    ($value:expr, $op:ident => $body:expr) => {
-        match $value {
-            Binary::Add => {
-                const $op: Binary = Binary::Add;
-                $body
-            }
-            Binary::Sub => {
-                const $op: Binary = Binary::Sub;
-                $body
-            }
-            Binary::Mul => {
-                const $op: Binary = Binary::Mul;
-                $body
-            }
-            Binary::Div => {
-                const $op: Binary = Binary::Div;
-                $body
-            }
-            Binary::Pow => {
-                const $op: Binary = Binary::Pow;
-                $body
-            }
-            Binary::Min => {
-                const $op: Binary = Binary::Min;
-                $body
-            }
-            Binary::Max => {
-                const $op: Binary = Binary::Max;
-                $body
-            }
-        }
-    };
 }
 
 /// `out[i] = op(x[i])` over a column.

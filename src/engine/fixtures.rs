@@ -11,11 +11,13 @@ use std::collections::HashMap;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::engine::graph::{Batch, Setup};
+use crate::engine::batch::Batch;
+use crate::engine::setup::Setup;
 use crate::ir::{
     self, Activation, BinOp, Closure, ClosureOutput, Constraint, Dynamics, Embedding, Expr, Func,
     Network, Prior, PriorKind, Var,
 };
+use crate::solve::ode::tableau::{Combination, RK4};
 
 /// Builds an [`ir::Model`] declaration by declaration.
 pub struct ModelBuilder {
@@ -351,7 +353,7 @@ impl Reader<'_> {
 }
 
 /// `substeps` classical RK4 steps of `rhs` over `step` from `start` (a reference
-/// integrator written independently of the backend).
+/// integrator written independently of the backend, on RK4's tableau).
 pub fn rk4_reference(
     rhs: impl Fn(&[f64]) -> Vec<f64>,
     start: &[f64],
@@ -359,18 +361,30 @@ pub fn rk4_reference(
     substeps: usize,
 ) -> Vec<f64> {
     let dt = step / substeps as f64;
-    let shifted = |x: &[f64], k: &[f64], factor: f64| -> Vec<f64> {
-        x.iter().zip(k).map(|(a, b)| a + factor * b).collect()
+    // `x + (dt / d) (n_0 k_0 + n_1 k_1 + ...)`, the sum left to right.
+    let shifted = |x: &[f64], slopes: &[Vec<f64>], combination: &Combination<4>| -> Vec<f64> {
+        let factor = dt / combination.divisor();
+        let combined = |i: usize| {
+            let mut terms = combination.terms();
+            let first = terms.next().map_or(0.0, |(j, n)| n * slopes[j][i]);
+            terms.fold(first, |sum, (j, n)| sum + n * slopes[j][i])
+        };
+        x.iter()
+            .enumerate()
+            .map(|(i, a)| a + factor * combined(i))
+            .collect()
     };
     let mut x = start.to_vec();
     for _ in 0..substeps {
-        let k1 = rhs(&x);
-        let k2 = rhs(&shifted(&x, &k1, dt / 2.0));
-        let k3 = rhs(&shifted(&x, &k2, dt / 2.0));
-        let k4 = rhs(&shifted(&x, &k3, dt));
-        for i in 0..x.len() {
-            x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        let mut slopes: Vec<Vec<f64>> = Vec::with_capacity(RK4.stages.len());
+        for coupling in &RK4.stages {
+            let estimate = match coupling.is_empty() {
+                true => x.clone(),
+                false => shifted(&x, &slopes, coupling),
+            };
+            slopes.push(rhs(&estimate));
         }
+        x = shifted(&x, &slopes, &RK4.weights);
     }
     x
 }

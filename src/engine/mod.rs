@@ -1,6 +1,9 @@
 //! The engines wing: the two engines that compute training's gradients and what they
 //! share, behind one interface.
 //!
+//! - [`batch`], [`setup`], [`settings`] and [`error`]: what both engines take, are built
+//!   from and fail with (batches, the setup and element type, Adam's settings, the one
+//!   error type), below everything else here;
 //! - [`graph`]: the graph engine, the only module that names `dfdx` (the trainable network
 //!   of the paper, its predictions, the ONNX-exportable weights);
 //! - [`fused`]: the hand-fused engine (forward and reverse by hand, same results up to
@@ -14,12 +17,16 @@
 //!
 //! Training (`crate::train`) stands on this wing; nothing here imports it.
 
+pub mod batch;
 pub mod elementwise;
+pub mod error;
 pub mod fused;
 pub mod graph;
 pub mod pairs;
 pub mod penalty;
 pub mod program;
+pub mod settings;
+pub mod setup;
 pub mod step;
 pub mod windows;
 

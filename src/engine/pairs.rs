@@ -20,22 +20,22 @@
 //! the record and every state it reads (the start state included) is known from data there:
 //! the one-step objective and the offline error use only such pairs.
 
-use crate::engine::graph::Batch;
+use crate::engine::batch::Batch;
 use crate::ir::{self, Var};
 use crate::record::grid::{hold, interpolate, Track};
+use crate::solve::ode::tableau::RK4;
 
 /// Positions this far before the first knot still count as inside the record (rounding).
 const INSIDE: f64 = -1e-9;
 
-/// The stage times of one step, as fractions of `h`: `m / 2K` for `m = 0..=2K` (`der`
-/// models), or only `0` (`next` models).
+/// The stage times of one step, as fractions of `h`: RK4's for `K` sub-steps, `m / 2K` for
+/// `m = 0..=2K` ([`Tableau::stage_fractions`], `der` models), or only `0` (`next` models).
+///
+/// [`Tableau::stage_fractions`]: crate::solve::ode::tableau::Tableau::stage_fractions
 pub fn stage_fractions(dynamics: ir::Dynamics, substeps: usize) -> Vec<f64> {
     match dynamics {
         ir::Dynamics::Discrete => vec![0.0],
-        ir::Dynamics::Continuous => {
-            let halves = 2 * substeps.max(1);
-            (0..=halves).map(|m| m as f64 / halves as f64).collect()
-        }
+        ir::Dynamics::Continuous => RK4.stage_fractions(substeps),
     }
 }
 

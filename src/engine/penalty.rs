@@ -4,8 +4,8 @@
 
 use std::ops::Range;
 
-use super::graph::NamedTensor;
 use crate::ir;
+use crate::numeric::NamedTensor;
 
 /// The penalty of a strength over a network's flat weight vector.
 #[derive(Debug, Clone, PartialEq)]

@@ -8,53 +8,22 @@
 //! a param or a network output take part in the reverse sweep. The graph backend wraps
 //! [`Program::forward`] and [`Program::backward`] as one fused operation.
 
+mod code;
 mod compile;
 pub mod outputs;
 
-use compile::Compiler;
+pub use code::{state_index, Program, ProgramShape};
 
-use std::collections::HashMap;
+use code::Instr;
+use compile::Compiler;
 
 use super::elementwise::{
     binary, binary_column, binary_column_reverse, binary_derivatives, unary, unary_column,
-    unary_column_reverse, unary_derivative, Binary, Operands, Unary,
+    unary_column_reverse, unary_derivative, Operands,
 };
-use super::graph::BackendError;
-use crate::ir::{self, BinOp, Constraint, Func, Var};
+use super::error::BackendError;
+use crate::ir;
 use crate::numeric::Real;
-
-/// One instruction; operands are earlier registers.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-enum Instr {
-    /// A literal, stored as its bit pattern so instructions can be hashed.
-    Const(u64),
-    /// Entry `i` of the state vector (measured states, then hidden states).
-    State(usize),
-    /// Held input `i`.
-    Input(usize),
-    /// Unconstrained (raw) value of param `i`.
-    RawParam(usize),
-    /// Network output `output` of closure `closure` (before prior and scale).
-    Net {
-        closure: usize,
-        output: usize,
-    },
-    Unary(Unary, usize),
-    Binary(Binary, usize, usize),
-}
-
-/// How many values of each kind a program reads per row.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ProgramShape {
-    /// Length of the state vector (measured + hidden).
-    pub states: usize,
-    /// Number of inputs.
-    pub inputs: usize,
-    /// Number of params.
-    pub params: usize,
-    /// Number of network outputs of each closure.
-    pub nets: Vec<usize>,
-}
 
 /// The values a program reads: row-major `rows x width` blocks.
 #[derive(Debug, Clone, Copy)]
@@ -80,26 +49,6 @@ pub struct ProgramGradients<E> {
     pub params: Vec<E>,
     /// Per closure, `rows x shape.nets[c]`.
     pub nets: Vec<Vec<E>>,
-}
-
-/// The compiled physics of a model.
-#[derive(Debug, Clone)]
-pub struct Program {
-    instrs: Vec<Instr>,
-    /// Whether register `r` depends on a state, a raw param or a network output.
-    active: Vec<bool>,
-    /// Whether register `r` holds the same value on every row (literals, raw params and
-    /// what is computed from them alone): evaluated once per batch, not per row.
-    uniform: Vec<bool>,
-    shape: ProgramShape,
-    /// Per state-vector entry, the register of its balance (derivative or next value).
-    pub balances: Vec<usize>,
-    /// Registers of every closure output, closures in order, outputs in order.
-    pub closure_outputs: Vec<usize>,
-    /// Registers of the constrained param values.
-    pub param_values: Vec<usize>,
-    /// Registers of the model's `output`s.
-    pub outputs: Vec<usize>,
 }
 
 impl Program {
@@ -317,17 +266,6 @@ fn operand_adjoints<E>(adjoint: &mut [E], rows: usize, a: usize, b: usize) -> Op
         Operands::Distinct(low_column, high_column)
     } else {
         Operands::Distinct(high_column, low_column)
-    }
-}
-
-/// Position of a state or hidden state in the state vector (measured first).
-pub fn state_index(model: &ir::Model, var: Var) -> Result<usize, BackendError> {
-    match var {
-        Var::State(i) if i < model.states.len() => Ok(i),
-        Var::Hidden(j) if j < model.hidden.len() => Ok(model.states.len() + j),
-        other => Err(BackendError::internal(format!(
-            "{other:?} is not a state of the model"
-        ))),
     }
 }
 

@@ -12,10 +12,13 @@
 
 use std::ops::Range;
 
+pub use crate::engine::batch::StepBatch;
+use crate::engine::error::BackendError;
 use crate::engine::fused::FusedNetwork;
-pub use crate::engine::graph::StepBatch;
-use crate::engine::graph::{BackendError, Network, Precision, StepSettings};
-use crate::numeric::{Adam, Real, Update};
+use crate::engine::graph::Network;
+use crate::engine::settings::StepSettings;
+use crate::engine::setup::Precision;
+use crate::numeric::{Adam, Real};
 
 use super::penalty::Penalty;
 
@@ -187,18 +190,14 @@ fn update<E: Real>(
     params: &Option<Range<usize>>,
 ) {
     let mut gradient: Vec<E> = gradient.iter().map(|&g| E::from_double(g)).collect();
-    let groups = settings.groups(weights.len(), params.clone());
-    let update = Update {
-        groups: &groups,
-        max_gradient_norm: settings.max_gradient_norm,
-    };
-    adam.step(weights, &mut gradient, &update);
+    settings.adam_step(adam, weights, &mut gradient, params.clone());
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::engine::fixtures::{kitchen_sink, random_batch, setup};
+    use crate::engine::settings::TrainStep;
     use crate::ir::Activation;
 
     fn settings() -> StepSettings {

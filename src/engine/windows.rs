@@ -22,7 +22,7 @@
 //! order): a batch of `W` windows on one uniform track carries one window's feedback, not
 //! `W` copies.
 
-use crate::engine::graph::{Feedback, RolloutBatch};
+use crate::engine::batch::{Feedback, RolloutBatch};
 use crate::ir::{self, Var};
 use crate::numeric::rounding;
 use crate::record::grid::{interpolate_at, Track};
@@ -264,38 +264,10 @@ pub fn rollout_batch_into(
     starts: &[PairAt],
     (steps, fractions): (usize, &[f64]),
 ) {
-    let rows = starts.len();
-    let layouts: Vec<_> = (model.closures.iter())
+    let layouts: Layouts = (model.closures.iter())
         .map(|c| (c.embedding.layout(), c.embedding.delay))
         .collect();
-    batch.rows = rows;
-    batch.steps = steps;
-    batch.states.clear();
-    for lists in [
-        &mut batch.inputs,
-        &mut batch.targets,
-        &mut batch.step_sizes,
-        &mut batch.weights,
-        &mut batch.observed,
-        &mut batch.observed_weights,
-    ] {
-        cleared(lists, steps);
-    }
-    batch.embeddings.resize_with(steps, Vec::new);
-    batch.feedback.resize_with(steps, Vec::new);
-    for (embeddings, feedback) in batch.embeddings.iter_mut().zip(&mut batch.feedback) {
-        embeddings.resize_with(layouts.len(), Vec::new);
-        feedback.resize_with(layouts.len(), Vec::new);
-        for ((embedding, feedback), (layout, _)) in
-            embeddings.iter_mut().zip(feedback.iter_mut()).zip(&layouts)
-        {
-            cleared(embedding, fractions.len());
-            cleared(feedback, fractions.len());
-            for block in embedding.iter_mut() {
-                block.reserve(rows * layout.len());
-            }
-        }
-    }
+    reset(batch, (starts.len(), steps), &layouts, fractions.len());
     // One plan per uniform track (kept for the batch); an irregular track's per window.
     // A run of consecutive windows with one plan shares its feedback entries.
     let mut plans: Vec<Option<WindowPlan>> = vec![None; tracks.len()];
@@ -318,32 +290,98 @@ pub fn rollout_batch_into(
             shared_until = window + alike;
             plan.feed(&layouts, window..shared_until, &mut batch.feedback);
         }
-        let mut sources = plan.sources.iter();
         batch.states.extend(track.states.iter().map(|s| s[start]));
         let estimates = hidden.get(index).and_then(|h| h.get(start));
         batch.states.extend(estimates.into_iter().flatten());
-        for step in 0..steps {
-            let knot = start + step;
-            batch.inputs[step].extend(track.inputs.iter().map(|u| u[knot]));
-            batch.targets[step].extend(track.states.iter().map(|s| s[knot + 1]));
-            (batch.weights[step]).extend(
-                track
-                    .measured
-                    .iter()
-                    .enumerate()
-                    .map(|(i, m)| f64::from(m[knot + 1]) * weights.get(i).copied().unwrap_or(1.0)),
-            );
-            batch.step_sizes[step].push(track.steps[knot]);
-            for &output in observables {
-                let cell = track.observed_cell(output, knot + 1);
-                batch.observed[step].push(cell.unwrap_or(0.0));
-                batch.observed_weights[step].push(f64::from(cell.is_some()));
+        push_data(batch, track, start, (weights, observables));
+        push_embeddings(batch, plan, (track, start), &layouts);
+    }
+}
+
+/// Each closure's embedding layout and delay.
+type Layouts = Vec<(Vec<(Var, usize)>, f64)>;
+
+/// Empties `batch` for `rows` windows of `steps` steps (buffers kept), with one embedding
+/// block and feedback list per closure of `layouts` and stage fraction.
+fn reset(
+    batch: &mut RolloutBatch,
+    (rows, steps): (usize, usize),
+    layouts: &Layouts,
+    fractions: usize,
+) {
+    batch.rows = rows;
+    batch.steps = steps;
+    batch.states.clear();
+    for lists in [
+        &mut batch.inputs,
+        &mut batch.targets,
+        &mut batch.step_sizes,
+        &mut batch.weights,
+        &mut batch.observed,
+        &mut batch.observed_weights,
+    ] {
+        cleared(lists, steps);
+    }
+    batch.embeddings.resize_with(steps, Vec::new);
+    batch.feedback.resize_with(steps, Vec::new);
+    for (embeddings, feedback) in batch.embeddings.iter_mut().zip(&mut batch.feedback) {
+        embeddings.resize_with(layouts.len(), Vec::new);
+        feedback.resize_with(layouts.len(), Vec::new);
+        for ((embedding, feedback), (layout, _)) in
+            embeddings.iter_mut().zip(feedback.iter_mut()).zip(layouts)
+        {
+            cleared(embedding, fractions);
+            cleared(feedback, fractions);
+            for block in embedding.iter_mut() {
+                block.reserve(rows * layout.len());
             }
-            for (closure, (layout, _)) in layouts.iter().enumerate() {
-                for raw in &mut batch.embeddings[step][closure] {
-                    let block = sources.by_ref().take(layout.len());
-                    raw.extend(block.map(|source| source.value(track, start)));
-                }
+        }
+    }
+}
+
+/// Appends what each step of the window from knot `start` of `track` reads from the data:
+/// held inputs, targets and their weights (each measured cell its column's `weights`, 1
+/// where none is given), step sizes, and the measured `observables`.
+fn push_data(
+    batch: &mut RolloutBatch,
+    track: &Track,
+    start: usize,
+    (weights, observables): (&[f64], &[usize]),
+) {
+    for step in 0..batch.steps {
+        let knot = start + step;
+        batch.inputs[step].extend(track.inputs.iter().map(|u| u[knot]));
+        batch.targets[step].extend(track.states.iter().map(|s| s[knot + 1]));
+        (batch.weights[step]).extend(
+            track
+                .measured
+                .iter()
+                .enumerate()
+                .map(|(i, m)| f64::from(m[knot + 1]) * weights.get(i).copied().unwrap_or(1.0)),
+        );
+        batch.step_sizes[step].push(track.steps[knot]);
+        for &output in observables {
+            let cell = track.observed_cell(output, knot + 1);
+            batch.observed[step].push(cell.unwrap_or(0.0));
+            batch.observed_weights[step].push(f64::from(cell.is_some()));
+        }
+    }
+}
+
+/// Appends the data shares of the window's embeddings, read off `track` from knot `start`
+/// as `plan` lays them out (step, closure, stage fraction, column).
+fn push_embeddings(
+    batch: &mut RolloutBatch,
+    plan: &WindowPlan,
+    (track, start): (&Track, usize),
+    layouts: &Layouts,
+) {
+    let mut sources = plan.sources.iter();
+    for per_step in &mut batch.embeddings {
+        for (per_closure, (layout, _)) in per_step.iter_mut().zip(layouts) {
+            for raw in per_closure {
+                let block = sources.by_ref().take(layout.len());
+                raw.extend(block.map(|source| source.value(track, start)));
             }
         }
     }

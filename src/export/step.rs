@@ -11,6 +11,7 @@ use super::graph::Builder;
 use super::window::WindowMap;
 use crate::engine::graph::{NamedTensor, Setup};
 use crate::ir::{self, Activation, Var};
+use crate::solve::ode::tableau::{Combination, RK4};
 
 /// Graph input: the measured states at the window's knots.
 pub const STATE_WINDOW: &str = "state_window";
@@ -172,35 +173,100 @@ fn advance(
     }
     let substeps = parts.setup.substeps.max(1);
     let dt = parts.setup.step / substeps as f64;
-    let (half, whole, sixth) = (
-        graph.scalar(dt / 2.0),
-        graph.scalar(dt),
-        graph.scalar(dt / 6.0),
-    );
-    let two = graph.scalar(2.0);
-    let axpy = |graph: &mut Builder, x: &str, factor: &str, k: &str| {
-        let scaled = graph.node("Mul", &[k, factor], &[]);
-        graph.node("Add", &[x, &scaled], &[])
-    };
-    let mut state = start.to_string();
-    let mut k1 = k1;
+    let factors = Factors::new(graph, dt);
+    let (mut state, mut first_slope) = (start.to_string(), Some(k1));
     for substep in 0..substeps {
-        let offset = 2 * substep;
-        if substep > 0 {
-            k1 = stage(graph, parts, (frame, layers), physics, (&state, offset)).0;
+        let mut slopes = Vec::with_capacity(RK4.stages.len());
+        for (index, coupling) in RK4.stages.iter().enumerate() {
+            let offset = RK4.stage_offset(substep, index);
+            let slope = match first_slope.take() {
+                Some(slope) => slope,
+                None if coupling.is_empty() => {
+                    stage(graph, parts, (frame, layers), physics, (&state, offset)).0
+                }
+                None => {
+                    let slope = factors.combine(graph, coupling, &slopes);
+                    let estimate = axpy(graph, &state, &factors.stages[index], &slope);
+                    stage(graph, parts, (frame, layers), physics, (&estimate, offset)).0
+                }
+            };
+            slopes.push(slope);
         }
-        let x2 = axpy(graph, &state, &half, &k1);
-        let k2 = stage(graph, parts, (frame, layers), physics, (&x2, offset + 1)).0;
-        let x3 = axpy(graph, &state, &half, &k2);
-        let k3 = stage(graph, parts, (frame, layers), physics, (&x3, offset + 1)).0;
-        let x4 = axpy(graph, &state, &whole, &k3);
-        let k4 = stage(graph, parts, (frame, layers), physics, (&x4, offset + 2)).0;
-        let sum = axpy(graph, &k1, &two, &k2);
-        let sum = axpy(graph, &sum, &two, &k3);
-        let sum = graph.node("Add", &[&sum, &k4], &[]);
-        state = axpy(graph, &state, &sixth, &sum);
+        let sum = factors.combine(graph, &RK4.weights, &slopes);
+        state = axpy(graph, &state, &factors.weights, &sum);
     }
     (state, first)
+}
+
+/// `x + factor * k` as nodes.
+fn axpy(graph: &mut Builder, x: &str, factor: &str, k: &str) -> String {
+    let scaled = graph.node("Mul", &[k, factor], &[]);
+    graph.node("Add", &[x, &scaled], &[])
+}
+
+/// The scalars of a sub-step of `dt`, made once before the first (in this order: the
+/// stages' `dt / d_i`, the weights' `dt / d_b`, then every numerator other than 1).
+struct Factors {
+    /// `dt / d_i` of each stage (none for the first, which reads no slope).
+    stages: Vec<String>,
+    /// `dt / d_b` of the weights.
+    weights: String,
+    /// The scalar of each numerator other than 1.
+    numerators: Vec<(i32, String)>,
+}
+
+impl Factors {
+    fn new(graph: &mut Builder, dt: f64) -> Factors {
+        let stages = (RK4.stages.iter())
+            .map(|row| match row.is_empty() {
+                true => String::new(),
+                false => graph.scalar(dt / row.divisor()),
+            })
+            .collect();
+        let weights = graph.scalar(dt / RK4.weights.divisor());
+        let rows = RK4.stages.iter().chain([&RK4.weights]);
+        let numerators = (rows.flat_map(|row| row.numerators))
+            .filter(|&numerator| numerator != 0 && numerator != 1)
+            .map(|numerator| (numerator, graph.scalar(f64::from(numerator))))
+            .collect();
+        Factors {
+            stages,
+            weights,
+            numerators,
+        }
+    }
+
+    /// The scalar of `numerator`.
+    fn numerator(&self, numerator: f64) -> &str {
+        let found = self
+            .numerators
+            .iter()
+            .find(|(n, _)| f64::from(*n) == numerator);
+        found.map_or("", |(_, name)| name.as_str())
+    }
+
+    /// `n_0 k_0 + n_1 k_1 + ...` over the stages that enter `combination`, left to right,
+    /// as nodes (a numerator of 1 multiplies nothing).
+    fn combine<const S: usize>(
+        &self,
+        graph: &mut Builder,
+        combination: &Combination<S>,
+        slopes: &[String],
+    ) -> String {
+        let mut sum: Option<String> = None;
+        for (stage, numerator) in combination.terms() {
+            let term = if numerator == 1.0 {
+                slopes[stage].clone()
+            } else {
+                graph.node("Mul", &[&slopes[stage], self.numerator(numerator)], &[])
+            };
+            sum = Some(match sum {
+                None => term,
+                Some(sum) => graph.node("Add", &[&sum, &term], &[]),
+            });
+        }
+        sum.unwrap_or_default()
+    }
 }
 
 /// The balances at the stage state `state`, stage offset `offset`.

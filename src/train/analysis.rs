@@ -18,7 +18,7 @@
 //! `s_o` is the root mean square of that, from the balances with the fewest sharers (the
 //! smallest when several tie). Without any estimate `s_o = 1`.
 //!
-//! **Stiffness**: RK4 is stable for `h * lambda >= -2.785` on the negative real axis. For
+//! **Stiffness**: RK4 is stable for `h * lambda >= -2.7853` on the negative real axis. For
 //! each balance the local rate is the diagonal Jacobian `d f_X / d X` of the known part
 //! (central difference) plus, for a measured balance whose residual is a consumption at
 //! most rows (median below 0), what the unknown part would add if it were a first-order
@@ -38,9 +38,11 @@ use crate::numeric::order_statistic;
 use crate::record::Track;
 
 use crate::engine::pairs::PairAt;
+use crate::solve::ode::tableau::RK4;
 
-/// The RK4 stability limit of `h * lambda` on the negative real axis.
-pub const RK4_STABILITY_LIMIT: f64 = 2.785;
+/// The RK4 stability limit of `h * lambda` on the negative real axis (about 2.7853),
+/// derived from its tableau ([`crate::solve::ode::tableau::Tableau::stability_limit`]).
+pub const RK4_STABILITY_LIMIT: f64 = RK4.stability_limit();
 
 /// A balance too stiff for RK4 at the chosen step.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::engine::graph::{Network, Precision, Setup, StepSettings};
 use crate::ir;
 
-use crate::engine::pairs::stage_fractions;
+use crate::engine::pairs::{stage_fractions, PairTable};
 use crate::engine::step::{Optimiser, Step, StepBatch};
 use crate::train::prepare::Layout;
 use crate::train::validation::{refresh, Course};
@@ -55,55 +55,14 @@ pub fn bench(
     data: &TrainingData,
     options: &TrainOptions,
 ) -> Result<BenchReport, TrainError> {
-    let part = options
-        .train_points
-        .map_or(Part::All, |n| Part::FirstPairs(Some(n)));
-    if options.train_points == Some(0) {
-        return Err(TrainError::TooManyTrainPoints {
-            available: 0,
-            requested: 0,
-        });
-    }
-    let train_options = TrainOptions {
-        substeps: options.substeps.max(1),
-        ..TrainOptions::default()
-    };
-    let layout = Layout::new(model, &TrainingData { part, ..*data }, &train_options)?;
-    let learning_rate = options.learning_rate;
-    let hidden_init = hidden_initial_values(model)?;
-    let setup = Setup {
-        step: layout.grid.max_step,
-        substeps: options.substeps.max(1),
-        precision: options.precision,
-        seed: options.seed,
-        normalisation: layout.normalisation.clone(),
-        scales: analysis::closure_scales(model, &layout.tracks, &layout.intervals, &hidden_init)?,
-    };
-    let network = Network::build(model, &setup)?;
-    let fractions = stage_fractions(model.dynamics, setup.substeps);
-    let weights = vec![1.0; model.states.len()];
-    let observables = layout.normalisation.observables.clone();
-    let pairs = (
-        layout.pairs.as_slice(),
-        weights.as_slice(),
-        observables.as_slice(),
-    );
-    let mut course = Course::new(model, layout.tracks, pairs, &fractions);
-    refresh(
-        &network,
-        model,
-        &mut course,
-        (&fractions, false),
-        &hidden_init,
-    )?;
-    let table = course.table;
+    let (setup, network, table) = prepare(model, data, options)?;
     // What `gbc train` runs: the engine under the one optimiser.
     let mut optimiser = Optimiser::new(&network, options.precision);
     let mut step: Box<dyn Step> = match options.engine.fused_step(model, &setup)? {
         Some(fused) => Box::new(fused),
         None => Box::new(network),
     };
-    let settings = StepSettings::plain(learning_rate);
+    let settings = StepSettings::plain(options.learning_rate);
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let mut order: Vec<usize> = (0..table.len()).collect();
     let batch_size = options.batch_size.max(1);
@@ -125,19 +84,95 @@ pub fn bench(
         final_loss = epoch(&mut step)?;
         epoch_seconds.push(started.elapsed().as_secs_f64());
     }
-    let steps_per_epoch = table.len().div_ceil(batch_size);
+    Ok(report(
+        options,
+        (table.len(), batch_size),
+        epoch_seconds,
+        final_loss,
+    ))
+}
+
+/// The training pairs of `bench` built as training builds them (with the network's setup
+/// and the initial network that fills their hidden states).
+fn prepare(
+    model: &ir::Model,
+    data: &TrainingData,
+    options: &TrainOptions,
+) -> Result<(Setup, Network, PairTable), TrainError> {
+    let part = options
+        .train_points
+        .map_or(Part::All, |n| Part::FirstPairs(Some(n)));
+    if options.train_points == Some(0) {
+        return Err(TrainError::TooManyTrainPoints {
+            available: 0,
+            requested: 0,
+        });
+    }
+    let train_options = TrainOptions {
+        substeps: options.substeps.max(1),
+        ..TrainOptions::default()
+    };
+    let layout = Layout::new(model, &TrainingData { part, ..*data }, &train_options)?;
+    let hidden_init = hidden_initial_values(model)?;
+    let setup = setup_of(model, &layout, options, &hidden_init)?;
+    let network = Network::build(model, &setup)?;
+    let fractions = stage_fractions(model.dynamics, setup.substeps);
+    let weights = vec![1.0; model.states.len()];
+    let observables = layout.normalisation.observables.clone();
+    let pairs = (
+        layout.pairs.as_slice(),
+        weights.as_slice(),
+        observables.as_slice(),
+    );
+    let mut course = Course::new(model, layout.tracks, pairs, &fractions);
+    refresh(
+        &network,
+        model,
+        &mut course,
+        (&fractions, false),
+        &hidden_init,
+    )?;
+    Ok((setup, network, course.table))
+}
+
+/// The network's setup on the pairs of `layout`, as training sets it up.
+fn setup_of(
+    model: &ir::Model,
+    layout: &Layout,
+    options: &TrainOptions,
+    hidden_init: &[f64],
+) -> Result<Setup, TrainError> {
+    Ok(Setup {
+        step: layout.grid.max_step,
+        substeps: options.substeps.max(1),
+        precision: options.precision,
+        seed: options.seed,
+        normalisation: layout.normalisation.clone(),
+        scales: analysis::closure_scales(model, &layout.tracks, &layout.intervals, hidden_init)?,
+    })
+}
+
+/// The report of `epoch_seconds` timed epochs over `points` pairs in batches of
+/// `batch_size`.
+fn report(
+    options: &TrainOptions,
+    (points, batch_size): (usize, usize),
+    epoch_seconds: Vec<f64>,
+    final_loss: f64,
+) -> BenchReport {
+    let steps_per_epoch = points.div_ceil(batch_size);
     let median_epoch_seconds = crate::numeric::median(&epoch_seconds).unwrap_or(f64::NAN);
-    Ok(BenchReport {
+    BenchReport {
         engine: options.engine,
         precision: options.precision,
-        train_points: table.len(),
+        train_points: points,
         batch_size,
         steps_per_epoch,
         epoch_seconds,
         median_epoch_seconds,
         median_step_seconds: median_epoch_seconds / steps_per_epoch as f64,
         final_loss,
-    })
+    }
 }
 
 #[cfg(test)]

@@ -17,37 +17,24 @@
 //! saves two of the eight large products of a GB2 step. (A rollout's predicted states fed
 //! back into the embedding are part of that constant part: they are known before the step.)
 
-use crate::engine::graph::{BackendError, Batch, Setup, StepSettings};
+#[cfg(test)]
+use crate::engine::batch::Batch;
+use crate::engine::error::BackendError;
 use crate::engine::program::{Program, ProgramInputs};
+#[cfg(test)]
+use crate::engine::settings::StepSettings;
+use crate::engine::setup::Setup;
 use crate::ir::{self, Dynamics};
-use crate::numeric::Real;
+use crate::numeric::{Adam, AdamState, Real};
+use crate::solve::ode::tableau::RK4;
 
 use super::activation::{activate, Lane};
+use super::buffers::{Scratch, Stage, StepData};
 use super::dense::{Gemm, View};
 use super::plan::{ClosurePlan, Plan};
-use super::reverse::Scratch;
-use super::rollout::StepData;
-use crate::numeric::{Adam, AdamState, Update};
-
-/// What one stage evaluation keeps for the reverse pass.
-#[derive(Debug, Default)]
-pub(super) struct Stage<E> {
-    /// The step of the window the stage belongs to.
-    pub step: usize,
-    /// Index of the stage time (into each closure's embeddings).
-    pub offset: usize,
-    /// `rows x states`: the state estimate the stage is evaluated at.
-    pub state: Vec<E>,
-    /// `layers[closure][l]`: the activations leaving layer `l` (`l >= 1`; entry 0 unused);
-    /// the last entry is the network output.
-    pub layers: Vec<Vec<Vec<E>>>,
-    /// `slopes[closure][l]`: the activation's slope at hidden layer `l + 1`.
-    pub slopes: Vec<Vec<Vec<E>>>,
-    /// Register values of the physics program.
-    pub values: Vec<E>,
-    /// `rows x states`: the balances (or next values of a `next` model).
-    pub balances: Vec<E>,
-}
+use super::rows::{
+    add_scaled, add_scaled_rows, advance_rows, scaled_rows_into, stage_estimate_into,
+};
 
 /// The fused step's weights, optimiser state and reusable buffers.
 pub struct Kernel<E: Lane> {
@@ -127,6 +114,7 @@ impl<E: Lane> Kernel<E> {
 
     /// One Adam step on the batch (clipped and with the params' own learning rate as
     /// `settings` ask); returns the loss before it.
+    #[cfg(test)]
     pub fn train_step(
         &mut self,
         batch: &Batch,
@@ -134,13 +122,13 @@ impl<E: Lane> Kernel<E> {
     ) -> Result<f64, BackendError> {
         let loss = self.loss_and_gradient(batch)?;
         let (start, length) = self.plan.params;
-        let groups = settings.groups(self.weights.len(), Some(start..start + length));
-        let update = Update {
-            groups: &groups,
-            max_gradient_norm: settings.max_gradient_norm,
-        };
-        self.adam
-            .step(&mut self.weights, &mut self.gradient, &update);
+        let params = Some(start..start + length);
+        settings.adam_step(
+            &mut self.adam,
+            &mut self.weights,
+            &mut self.gradient,
+            params,
+        );
         Ok(loss)
     }
 
@@ -158,19 +146,20 @@ impl<E: Lane> Kernel<E> {
         (self.adam.set_state(state, &self.lengths())).map_err(BackendError::WeightsMismatch)
     }
 
-    /// Distinct stage times of a step: `2K + 1` for `der` models, 1 for `next` models.
+    /// Distinct stage times of a step: RK4's (`2K + 1`) for `der` models, 1 for `next`
+    /// models.
     pub(super) fn stage_offsets(&self) -> usize {
         match self.dynamics {
             Dynamics::Discrete => 1,
-            Dynamics::Continuous => 2 * self.substeps + 1,
+            Dynamics::Continuous => RK4.stage_times(self.substeps),
         }
     }
 
-    /// Stages of a step: `4K` for `der` models, 1 for `next` models.
+    /// Stages of a step: RK4's per sub-step (`4K`) for `der` models, 1 for `next` models.
     pub(super) fn stages_per_step(&self) -> usize {
         match self.dynamics {
             Dynamics::Discrete => 1,
-            Dynamics::Continuous => 4 * self.substeps,
+            Dynamics::Continuous => RK4.stages.len() * self.substeps,
         }
     }
 
@@ -193,43 +182,33 @@ impl<E: Lane> Kernel<E> {
             self.trajectory[step + 1] = state;
             return;
         }
-        let width = self.states;
         for substep in 0..self.substeps {
-            let (first, offset) = (base + 4 * substep, 2 * substep);
-            let fractions = [
-                (0.0, offset),
-                (0.5, offset + 1),
-                (0.5, offset + 1),
-                (1.0, offset + 2),
-            ];
-            for (index, &(fraction, offset)) in fractions.iter().enumerate() {
-                let (before, after) = self.stages.split_at_mut(first + index);
-                let stage = &mut after[0];
-                (stage.step, stage.offset) = (step, offset);
-                stage.state.clear();
-                if index == 0 {
-                    stage.state.extend_from_slice(&state);
-                } else {
-                    let sizes = (self.window[step].substep_sizes.as_slice(), fraction, 1.0);
-                    let previous = &before[first + index - 1].balances;
-                    axpy_rows_into(&mut stage.state, &state, sizes, previous, width);
-                }
-                self.evaluate(first + index);
-            }
-            // x += dt / 6 (k1 + 2 k2 + 2 k3 + k4), row by row.
-            let k = |index: usize| self.stages[first + index].balances.as_slice();
-            let (k1, k2, k3, k4) = (k(0), k(1), k(2), k(3));
-            let two = E::from_double(2.0);
-            let sizes = &self.window[step].substep_sizes;
-            for (row, &dt) in sizes.iter().enumerate() {
-                let factor = E::from_double(dt / 6.0);
-                for i in row * width..(row + 1) * width {
-                    let sum = k1[i] + two * k2[i] + two * k3[i] + k4[i];
-                    state[i] += factor * sum;
-                }
-            }
+            self.forward_substep(step, substep, &mut state);
         }
         self.trajectory[step + 1] = state;
+    }
+
+    /// Sub-step `substep` of step `step` from `state`: every stage of the tableau at its
+    /// estimate (kept), then the step along the weights.
+    fn forward_substep(&mut self, step: usize, substep: usize, state: &mut [E]) {
+        let width = self.states;
+        let first = step * self.stages_per_step() + RK4.stages.len() * substep;
+        for (index, coupling) in RK4.stages.iter().enumerate() {
+            let (before, after) = self.stages.split_at_mut(first + index);
+            let stage = &mut after[0];
+            (stage.step, stage.offset) = (step, RK4.stage_offset(substep, index));
+            stage.state.clear();
+            if coupling.is_empty() {
+                stage.state.extend_from_slice(state);
+            } else {
+                let sizes = (self.window[step].substep_sizes.as_slice(), coupling);
+                stage_estimate_into(&mut stage.state, state, sizes, &before[first..], width);
+            }
+            self.evaluate(first + index);
+        }
+        let sizes = (self.window[step].substep_sizes.as_slice(), &RK4.weights);
+        let stages = &self.stages[first..first + RK4.stages.len()];
+        advance_rows(state, sizes, stages, width);
     }
 
     /// `constants @ W0 + b0` for every closure and stage time of step `step`.
@@ -327,34 +306,42 @@ impl<E: Lane> Kernel<E> {
             let gradient = self.reverse_stage(base, upstream);
             upstream.copy_from_slice(&gradient);
         } else {
-            let width = self.states;
             let mut seeds = std::mem::take(&mut self.scratch.stage_seeds);
-            seeds.resize_with(4, Vec::new);
+            seeds.resize_with(RK4.stages.len(), Vec::new);
             for substep in (0..self.substeps).rev() {
-                let first = base + 4 * substep;
-                let sizes = &self.window[step].substep_sizes;
-                for (seed, weight) in seeds.iter_mut().zip([1.0, 2.0, 2.0, 1.0]) {
-                    scaled_rows_into(seed, upstream, (sizes, weight, 6.0), width);
-                }
-                // The start state reaches x(t + h) directly and through every estimate.
-                for index in (0..4).rev() {
-                    let estimate_gradient = self.reverse_stage(first + index, &seeds[index]);
-                    if index > 0 {
-                        let fraction = if index == 3 { 1.0 } else { 0.5 };
-                        let sizes = self.window[step].substep_sizes.as_slice();
-                        add_scaled_rows(
-                            &mut seeds[index - 1],
-                            (sizes, fraction, 1.0),
-                            &estimate_gradient,
-                            width,
-                        );
-                    }
-                    add_scaled(upstream, 1.0, &estimate_gradient);
-                }
+                self.backward_substep(step, substep, upstream, &mut seeds);
             }
             self.scratch.stage_seeds = seeds;
         }
         self.first_layer_gradients(step);
+    }
+
+    /// The reverse of sub-step `substep` of step `step`: `upstream` holds the adjoint of
+    /// its end state and leaves with that of its start, which reaches the end directly and
+    /// through every stage estimate (`seeds`: the stages' adjoints, one buffer a stage).
+    fn backward_substep(
+        &mut self,
+        step: usize,
+        substep: usize,
+        upstream: &mut [E],
+        seeds: &mut [Vec<E>],
+    ) {
+        let width = self.states;
+        let first = step * self.stages_per_step() + RK4.stages.len() * substep;
+        let (weights, divisor) = (&RK4.weights.numerators, RK4.weights.divisor());
+        let sizes = &self.window[step].substep_sizes;
+        for (seed, &weight) in seeds.iter_mut().zip(weights) {
+            scaled_rows_into(seed, upstream, (sizes, f64::from(weight), divisor), width);
+        }
+        for (index, coupling) in RK4.stages.iter().enumerate().rev() {
+            let estimate_gradient = self.reverse_stage(first + index, &seeds[index]);
+            let sizes = self.window[step].substep_sizes.as_slice();
+            for (earlier, numerator) in coupling.terms() {
+                let factors = (sizes, numerator, coupling.divisor());
+                add_scaled_rows(&mut seeds[earlier], factors, &estimate_gradient, width);
+            }
+            add_scaled(upstream, 1.0, &estimate_gradient);
+        }
     }
 
     /// `dW0 += constants^T delta` per closure and stage time of step `step`, `delta`
@@ -414,64 +401,5 @@ fn add_stage_state<E: Real>(
                 *slot += scale * w;
             }
         }
-    }
-}
-
-/// Row `i`'s sub-step `dt_i` times `multiple / divisor`, as `dt * multiple / divisor`.
-type RowFactors<'a> = (&'a [f64], f64, f64);
-
-/// `out = a + (dt_i * multiple / divisor) b` row by row (`width` values a row; `out`
-/// empty on entry).
-fn axpy_rows_into<E: Real>(
-    out: &mut Vec<E>,
-    a: &[E],
-    (substeps, multiple, divisor): RowFactors,
-    b: &[E],
-    width: usize,
-) {
-    for ((a_row, b_row), &dt) in a.chunks(width).zip(b.chunks(width)).zip(substeps) {
-        let factor = E::from_double(dt * multiple / divisor);
-        out.extend(a_row.iter().zip(b_row).map(|(&x, &y)| x + factor * y));
-    }
-}
-
-/// `out = (dt_i * multiple / divisor) values` row by row.
-fn scaled_rows_into<E: Real>(
-    out: &mut Vec<E>,
-    values: &[E],
-    (substeps, multiple, divisor): RowFactors,
-    width: usize,
-) {
-    out.clear();
-    for (row, &dt) in values.chunks(width).zip(substeps) {
-        let factor = E::from_double(dt * multiple / divisor);
-        out.extend(row.iter().map(|&v| v * factor));
-    }
-}
-
-/// `target += (dt_i * multiple / divisor) values` row by row.
-fn add_scaled_rows<E: Real>(
-    target: &mut [E],
-    (substeps, multiple, divisor): RowFactors,
-    values: &[E],
-    width: usize,
-) {
-    for ((slot_row, row), &dt) in target
-        .chunks_mut(width)
-        .zip(values.chunks(width))
-        .zip(substeps)
-    {
-        let factor = E::from_double(dt * multiple / divisor);
-        for (slot, &value) in slot_row.iter_mut().zip(row) {
-            *slot += factor * value;
-        }
-    }
-}
-
-/// `target += factor * values`.
-pub(super) fn add_scaled<E: Real>(target: &mut [E], factor: f64, values: &[E]) {
-    let factor = E::from_double(factor);
-    for (slot, &value) in target.iter_mut().zip(values) {
-        *slot += factor * value;
     }
 }

@@ -26,18 +26,20 @@
 //! weights as [`crate::engine::graph::Network::build`] and reads and writes the same
 //! [`NamedTensor`] lists, so training runs it under the one optimiser of
 //! training's step interface (`--engine fused`, and `auto` wherever it supports the model: all
-//! but measured outputs). Its own Adam step ([`FusedNetwork::train_step_with`], with
-//! [`StepSettings`] and [`AdamState`] as the graph backend's) serves `gbc bench`.
+//! but measured outputs). Its own Adam step ([`TrainStep`], with [`StepSettings`] and
+//! [`AdamState`] as the graph backend's) serves the comparisons of the two engines.
 //!
 //! [`Program`]: crate::engine::program::Program
 //! [`dense::multiply_add`]: dense::Gemm::multiply_add
 
 pub mod activation;
+mod buffers;
 pub mod dense;
 mod kernel;
 mod plan;
 mod reverse;
 mod rollout;
+mod rows;
 mod wide;
 
 #[cfg(test)]
@@ -45,12 +47,16 @@ mod tests;
 #[cfg(test)]
 mod tests_rollout;
 
-use crate::engine::graph::{
-    dispatch, AdamState, BackendError, Batch, NamedTensor, Network, Precision, RolloutBatch, Setup,
-    StepBatch, StepSettings,
-};
+use crate::engine::batch::{Batch, RolloutBatch, StepBatch};
+use crate::engine::error::BackendError;
+use crate::engine::graph::Network;
+#[cfg(test)]
+use crate::engine::settings::StepSettings;
+#[cfg(test)]
+use crate::engine::settings::TrainStep;
+use crate::engine::setup::{dispatch, Precision, Setup};
 use crate::ir;
-use crate::numeric::Real;
+use crate::numeric::{AdamState, NamedTensor, Real};
 
 use kernel::Kernel;
 use plan::Plan;
@@ -83,22 +89,6 @@ impl FusedNetwork {
             Precision::F64 => Inner::Double(Kernel::new(model, setup, plan, &flat)?),
         };
         Ok(FusedNetwork { inner })
-    }
-
-    /// One Adam step on the batch's loss; returns the loss before the step.
-    pub fn train_step(&mut self, batch: &Batch, learning_rate: f64) -> Result<f64, BackendError> {
-        self.train_step_with(batch, &StepSettings::plain(learning_rate))
-    }
-
-    /// One Adam step on the batch's loss with the params at their own learning rate and
-    /// optional global-norm clipping, as [`Network::train_step_with`]; returns the loss
-    /// before the step.
-    pub fn train_step_with(
-        &mut self,
-        batch: &Batch,
-        settings: &StepSettings,
-    ) -> Result<f64, BackendError> {
-        dispatch!(mut self, kernel => kernel.train_step(batch, settings))
     }
 
     /// Adam's step count and moments, per tensor of [`FusedNetwork::weights`].
@@ -203,6 +193,17 @@ impl FusedNetwork {
             }
             Ok(())
         })
+    }
+}
+
+#[cfg(test)]
+impl TrainStep for FusedNetwork {
+    fn train_step_with(
+        &mut self,
+        batch: &Batch,
+        settings: &StepSettings,
+    ) -> Result<f64, BackendError> {
+        dispatch!(mut self, kernel => kernel.train_step(batch, settings))
     }
 }
 

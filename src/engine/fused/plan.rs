@@ -3,9 +3,11 @@
 //! estimate. Built once from the model and the [`Setup`], the same way the graph backend
 //! builds its network, so the two read the same [`NamedTensor`] lists.
 
+use crate::engine::error::BackendError;
 use crate::engine::graph::layout::{closure_layout, ClosureLayout};
-use crate::engine::graph::{BackendError, NamedTensor, Setup};
+use crate::engine::setup::Setup;
 use crate::ir::{self, Activation};
+use crate::numeric::NamedTensor;
 
 /// One closure network's place in the step.
 #[derive(Debug, Clone)]

@@ -2,36 +2,13 @@
 //! network's layers from the output down to the first, whose weight gradient is completed
 //! per stage time by the kernel (see [`super::kernel`]).
 
-use crate::engine::program::{ProgramInputs, ReverseScratch};
+use crate::engine::program::ProgramInputs;
 
 use super::activation::Lane;
+use super::buffers::Scratch;
 use super::dense::{add_column_sums, Gemm, View};
 use super::kernel::Kernel;
 use super::plan::ClosurePlan;
-
-/// Buffers of the reverse pass, kept from step to step.
-#[derive(Debug, Default)]
-pub(super) struct Scratch<E> {
-    /// `offset_deltas[closure][stage time]`: first-layer deltas summed over the stages at
-    /// that time (`rows x widths[1]`).
-    pub offset_deltas: Vec<Vec<Vec<E>>>,
-    /// The adjoints of the four stages' balances of the sub-step being reversed.
-    pub stage_seeds: Vec<Vec<E>>,
-    /// `rows x widths[0]`: the gradient of one closure's network input at one stage time
-    /// (for the predictions a rollout feeds back).
-    pub input_gradient: Vec<E>,
-    /// The gradient being passed down a network, and the layer below it.
-    delta: Vec<E>,
-    below: Vec<E>,
-    /// The stage estimate in the lag-0 state columns (`rows x columns`), the first-layer
-    /// weights of those columns (`columns x widths[1]`), and the gradients of both.
-    estimate: Vec<E>,
-    estimate_weights: Vec<E>,
-    estimate_gradient: Vec<E>,
-    estimate_weight_gradient: Vec<E>,
-    /// The physics program's reverse sweep.
-    physics: ReverseScratch<E>,
-}
 
 impl<E: Lane> Kernel<E> {
     /// Reverse of stage `index` given the adjoint of its balances: accumulates the weight

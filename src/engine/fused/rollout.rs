@@ -21,45 +21,14 @@
 //! the adjoint of its end state into that of its start state, accumulating the weight and
 //! param gradients.
 
-use crate::engine::graph::{BackendError, Batch, Feedback, RolloutBatch};
+use crate::engine::batch::{Batch, Feedback, RolloutBatch};
+use crate::engine::error::BackendError;
 
 use super::activation::Lane;
+use super::buffers::{FedBack, StepData};
 use super::dense::View;
-use super::kernel::{add_scaled, Kernel};
-
-/// What one step of a loaded window reads.
-#[derive(Debug, Default)]
-pub(super) struct StepData<E> {
-    /// `rows x inputs` held over the step.
-    pub inputs: Vec<E>,
-    /// `constants[closure][offset]`: the normalised embedding (lag-0 state entries
-    /// `-mean/std`), plus the fed-back predictions once the step has run.
-    pub constants: Vec<Vec<Vec<E>>>,
-    /// The sub-step `h / K` of each row.
-    pub substep_sizes: Vec<f64>,
-    /// `rows x measured` targets.
-    targets: Vec<E>,
-    /// `rows x measured` loss weights (empty: every cell weighs 1).
-    loss_weights: Vec<E>,
-    /// The predicted states fed into the step's embeddings.
-    feedback: Vec<FedBack<E>>,
-}
-
-/// A checked [`Feedback`] entry of one step.
-#[derive(Debug, Clone, Copy)]
-struct FedBack<E> {
-    closure: usize,
-    offset: usize,
-    /// Its batch rows, `first..end`.
-    first: usize,
-    end: usize,
-    column: usize,
-    /// Index into the trajectory (`1..=step`).
-    sample: usize,
-    state: usize,
-    /// `weight / std` of the column.
-    factor: E,
-}
+use super::kernel::Kernel;
+use super::rows::add_scaled;
 
 /// One step's share of a batch, before it is checked.
 struct StepSource<'a> {

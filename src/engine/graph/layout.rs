@@ -9,8 +9,10 @@ use dfdx::tensor::Cpu;
 use dfdx::tensor_ops::Device;
 
 use super::tape::{Element, EmbedColumns, EmbedEntry, GradientBuffer, Graph, Matrix};
-use super::{BackendError, Batch, RolloutBatch, Setup};
+use crate::engine::batch::{Batch, Feedback, RolloutBatch};
+use crate::engine::error::BackendError;
 use crate::engine::program::state_index;
+use crate::engine::setup::Setup;
 use crate::ir::{self, Activation, Constraint, Var};
 use crate::numeric::real::{inverse_softplus, logit, Real};
 
@@ -108,7 +110,7 @@ impl ClosureLayout {
     /// rows), each scaled by its column's `1 / std`.
     fn with_feedback(
         &self,
-        feedback: &[super::Feedback],
+        feedback: &[Feedback],
         rows: usize,
     ) -> Result<EmbedColumns, BackendError> {
         let mut columns = (*self.state_columns).clone();
@@ -398,6 +400,12 @@ pub fn check_setup(model: &ir::Model, setup: &Setup) -> Result<(), BackendError>
             model.name
         )))
     }
+}
+
+/// The unconstrained starting values of the model's params (their transforms give the
+/// declared initial guesses), as [`crate::engine::program::Program`] reads them.
+pub fn initial_raw_params(model: &ir::Model) -> Vec<f64> {
+    model.params.iter().map(raw_initial_value::<f64>).collect()
 }
 
 /// The unconstrained starting value of a param, so that its transform gives the guess.

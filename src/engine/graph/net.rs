@@ -15,12 +15,13 @@ use super::layout::{
     Prepared, PreparedStep,
 };
 use super::tape::{gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix, Scalar, Vector};
-use super::{
-    BackendError, Batch, NamedTensor, Network, Prediction, RolloutBatch, Setup, StepSettings,
-};
+use crate::engine::batch::{Batch, Prediction, RolloutBatch};
+use crate::engine::error::BackendError;
 use crate::engine::program::Program;
+use crate::engine::settings::StepSettings;
+use crate::engine::setup::Setup;
 use crate::ir::{self, Dynamics};
-use crate::numeric::{Adam, AdamState, Update};
+use crate::numeric::{Adam, AdamState, NamedTensor};
 
 mod forward;
 
@@ -174,6 +175,7 @@ where
     }
 
     /// One Adam step on a one-step batch; returns the loss before it.
+    #[cfg(test)]
     pub fn train_step(
         &mut self,
         batch: &Batch,
@@ -204,14 +206,9 @@ where
             .filter(|n| *n == crate::vocabulary::PARAMS_TENSOR)
             .and_then(|_| self.weights.last())
             .map(|p| size - p.len()..size);
-        let groups = settings.groups(size, params);
         let mut flat = self.weights.concat();
         let mut gradient = gradients.concat();
-        let update = Update {
-            groups: &groups,
-            max_gradient_norm: settings.max_gradient_norm,
-        };
-        self.adam.step(&mut flat, &mut gradient, &update);
+        settings.adam_step(&mut self.adam, &mut flat, &mut gradient, params);
         let mut values = flat.into_iter();
         for tensor in &mut self.weights {
             tensor.iter_mut().zip(&mut values).for_each(|(w, v)| *w = v);
@@ -445,25 +442,6 @@ where
             .into_iter())
         .map(|v| v.to_double())
         .collect()
-    }
-}
-
-impl Network {
-    /// Adam's step count and moments, per tensor of [`Network::weights`] (to hand training
-    /// over to [`crate::engine::fused::FusedNetwork`] and back).
-    pub fn adam_state(&self) -> AdamState {
-        match &self.inner {
-            super::Inner::Single(net) => net.adam_state(),
-            super::Inner::Double(net) => net.adam_state(),
-        }
-    }
-
-    /// Replaces Adam's step count and moments (sizes must match [`Network::weights`]).
-    pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
-        match &mut self.inner {
-            super::Inner::Single(net) => net.set_adam_state(state),
-            super::Inner::Double(net) => net.set_adam_state(state),
-        }
     }
 }
 

@@ -20,7 +20,7 @@ use dfdx::tensor::{
 };
 use dfdx::tensor_ops::{Backward, BroadcastTo, Device, TryAdd, TryMatMul, TryMul};
 
-use super::BackendError;
+use crate::engine::error::BackendError;
 use crate::engine::program::{Program, ProgramInputs};
 use crate::ir::Activation;
 use crate::numeric::Real;

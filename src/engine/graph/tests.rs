@@ -9,7 +9,7 @@ use super::*;
 use crate::engine::fixtures::{
     kitchen_sink, random_batch, rk4_reference, ClosureSpec, ModelBuilder, OutputSpec,
 };
-use crate::ir::{Activation, Constraint};
+use crate::ir::{self, Activation, Constraint};
 
 fn setup(precision: Precision, step: f64, substeps: usize, scales: Vec<Vec<f64>>) -> Setup {
     Setup {

@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::engine::fixtures::{kitchen_sink, random_batch};
-use crate::ir::Activation;
+use crate::ir::{self, Activation};
 
 fn setup(step: f64, substeps: usize) -> Setup {
     Setup {

@@ -6,7 +6,7 @@ use super::*;
 use crate::engine::fixtures::{ClosureSpec, ModelBuilder, OutputSpec};
 use crate::engine::pairs::stage_fractions;
 use crate::engine::windows::rollout_batch;
-use crate::ir::{Activation, Constraint};
+use crate::ir::{self, Activation, Constraint};
 use crate::record::{GridOptions, Record, Track};
 
 /// Two states, a bounded param, a delay of 1.5 samples (stage times between samples).

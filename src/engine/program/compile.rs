@@ -2,7 +2,12 @@
 //! shared sub-expressions interned, constants folded, and the registers that take part in
 //! the reverse sweep marked.
 
-use super::*;
+use std::collections::HashMap;
+
+use super::code::{state_index, Instr, Program, ProgramShape};
+use crate::engine::elementwise::{binary, unary, Binary, Unary};
+use crate::engine::error::BackendError;
+use crate::ir::{self, BinOp, Constraint, Func, Var};
 
 /// Builds a [`Program`] from a model; `scales[c][k]` is the magnitude `s_o` of output `k`
 /// of closure `c` (already resolved from `~` or the data-driven default).

@@ -33,7 +33,9 @@
 //! Every output is thus exactly its prior (or 0) at `n = 0`, clamped into its range. An
 //! unconstrained output is the plain form of spec section 3.
 
-use super::{Binary, Compiler, Unary};
+use super::code::Instr;
+use super::compile::Compiler;
+use crate::engine::elementwise::{Binary, Unary};
 
 /// Where the linear part of a positive factor under `*=` joins its exponential tail:
 /// `n = -JOIN`, the factor there `TAIL = 1 - JOIN`.
@@ -43,7 +45,7 @@ pub const TAIL: f64 = 1.0 - JOIN;
 /// How far inside each end of its range an output `in [lo, hi]` starts at most, as a
 /// share of `hi - lo` (module documentation).
 pub const BOUNDED_MARGIN: f64 = 1.0 / 16.0;
-use crate::engine::graph::BackendError;
+use crate::engine::error::BackendError;
 use crate::ir::{ClosureOutput, Constraint, PriorKind};
 
 impl Compiler<'_> {
@@ -67,7 +69,7 @@ impl Compiler<'_> {
             .ok_or_else(|| {
                 BackendError::internal(format!("no closure output {closure}.{output}"))
             })?;
-        let net = self.push(super::Instr::Net { closure, output });
+        let net = self.push(Instr::Net { closure, output });
         self.in_progress.push((closure, output));
         let reg = if self.free_outputs {
             self.known_part_plus(spec, net)

@@ -15,6 +15,10 @@
 //! through the one [`free_run`] ([`run`]): segments over which the inputs hold, a
 //! [`Stepper`] that advances the state over each ([`Adaptive`], [`Map`], the network's
 //! step), and the caller's say before and after each ([`Observer`]).
+//!
+//! [`tableau`] holds the fixed-step explicit Runge–Kutta schemes as Butcher tableaux: the
+//! [`tableau::RK4`] that training's engines and the ONNX export step with, its stage times
+//! and its stability limit.
 
 mod dopri;
 mod dopri_tableau;
@@ -29,6 +33,7 @@ pub mod sensitivity;
 mod steppers;
 mod stiffness;
 mod system;
+pub mod tableau;
 #[cfg(test)]
 mod tests;
 

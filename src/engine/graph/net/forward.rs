@@ -1,13 +1,16 @@
 //! The recorded forward pass of [`GreyBox`]: a batch's tensors on the graph, each step's
 //! RK4 stages (or discrete update) through the closure networks and the physics program,
-//! and the observables at each predicted state.
+//! in the order of its tableau ([`crate::solve::ode::tableau`]), and the observables at
+//! each predicted state.
 
 use std::ops::DerefMut;
 
+use dfdx::shapes::HasShape;
 use dfdx::tensor::Cpu;
 use dfdx::tensor_ops::Device;
 
 use super::*;
+use crate::solve::ode::tableau::{Combination, RK4};
 
 impl<E: Element> GreyBox<E>
 where
@@ -102,65 +105,60 @@ where
         if self.dynamics == Dynamics::Discrete {
             return Ok((first, values));
         }
-        // Each row's sub-step `dt = h / K` and the RK4 multiples of it.
-        let substeps = self.substeps as f64;
-        let scaled = |divisor: f64| -> Vec<E> {
-            (batch.step_sizes.iter())
-                .map(|&h| E::from_double(h / substeps / divisor))
-                .collect()
-        };
-        let (half, whole, sixth) = (scaled(2.0), scaled(1.0), scaled(6.0));
         let mut state = start.clone();
-        let mut k1 = first;
+        let mut first = Some(first);
         for substep in 0..self.substeps {
-            let offset = 2 * substep;
-            if substep > 0 {
-                k1 = self
-                    .stage(
-                        graph,
-                        tensors,
-                        batch,
-                        (&state, history),
-                        (offset, &self.balances),
-                    )?
-                    .0;
-            }
-            let x2 = graph.axpy_rows(&state, &half, &k1)?;
-            let k2 = self
-                .stage(
-                    graph,
-                    tensors,
-                    batch,
-                    (&x2, history),
-                    (offset + 1, &self.balances),
-                )?
-                .0;
-            let x3 = graph.axpy_rows(&state, &half, &k2)?;
-            let k3 = self
-                .stage(
-                    graph,
-                    tensors,
-                    batch,
-                    (&x3, history),
-                    (offset + 1, &self.balances),
-                )?
-                .0;
-            let x4 = graph.axpy_rows(&state, &whole, &k3)?;
-            let k4 = self
-                .stage(
-                    graph,
-                    tensors,
-                    batch,
-                    (&x4, history),
-                    (offset + 2, &self.balances),
-                )?
-                .0;
-            let sum = graph.axpy(&k1, 2.0, &k2)?;
-            let sum = graph.axpy(&sum, 2.0, &k3)?;
-            let sum = graph.axpy(&sum, 1.0, &k4)?;
-            state = graph.axpy_rows(&state, &sixth, &sum)?;
+            state = self.substep(
+                graph,
+                tensors,
+                batch,
+                (&state, history),
+                (substep, &mut first),
+            )?;
         }
         Ok((state, values))
+    }
+
+    /// Each row's sub-step `dt = h / K` divided by `divisor` (a denominator of the tableau).
+    fn substep_factors(&self, batch: &PreparedStep<E>, divisor: f64) -> Vec<E> {
+        let substeps = self.substeps as f64;
+        (batch.step_sizes.iter())
+            .map(|&h| E::from_double(h / substeps / divisor))
+            .collect()
+    }
+
+    /// Sub-step `substep` from `state`: RK4's stages at their estimates, then the step along
+    /// its weights. The first stage of the first sub-step is `first`, already evaluated.
+    fn substep(
+        &self,
+        graph: &mut Graph<E>,
+        tensors: &Tensors<E>,
+        batch: &PreparedStep<E>,
+        (state, history): (&Matrix<E>, &[Matrix<E>]),
+        (substep, first): (usize, &mut Option<Matrix<E>>),
+    ) -> Result<Matrix<E>, BackendError> {
+        let mut slopes = Vec::with_capacity(RK4.stages.len());
+        for (index, coupling) in RK4.stages.iter().enumerate() {
+            let offset = (RK4.stage_offset(substep, index), &self.balances);
+            let slope = match first.take() {
+                Some(slope) => slope,
+                None if coupling.is_empty() => {
+                    self.stage(graph, tensors, batch, (state, history), offset)?
+                        .0
+                }
+                None => {
+                    let factors = self.substep_factors(batch, coupling.divisor());
+                    let slope = combine(graph, coupling, &slopes)?;
+                    let estimate = graph.axpy_rows(state, &factors, &slope)?;
+                    self.stage(graph, tensors, batch, (&estimate, history), offset)?
+                        .0
+                }
+            };
+            slopes.push(slope);
+        }
+        let factors = self.substep_factors(batch, RK4.weights.divisor());
+        let sum = combine(graph, &RK4.weights, &slopes)?;
+        graph.axpy_rows(state, &factors, &sum)
     }
 
     /// The observables at the end of a step: the model's measured outputs at the predicted
@@ -220,4 +218,31 @@ where
             &nets,
         )
     }
+}
+
+/// `n_0 k_0 + n_1 k_1 + ...` over the stages that enter `combination`, left to right (a
+/// numerator of 1 on the first is that slope itself).
+fn combine<E: Element, const S: usize>(
+    graph: &mut Graph<E>,
+    combination: &Combination<S>,
+    slopes: &[Matrix<E>],
+) -> Result<Matrix<E>, BackendError>
+where
+    Cpu: Device<E>,
+    GradientBuffer<E>: DerefMut<Target = Vec<E>>,
+{
+    let mut terms = combination.terms();
+    let (first, numerator) = (terms.next())
+        .ok_or_else(|| BackendError::internal("a stage combination without a slope"))?;
+    let mut sum = if numerator == 1.0 {
+        slopes[first].clone()
+    } else {
+        let (rows, columns) = *slopes[first].shape();
+        let zero = graph.matrix(rows, columns, vec![E::ZERO; rows * columns]);
+        graph.axpy(&zero, numerator, &slopes[first])?
+    };
+    for (stage, numerator) in terms {
+        sum = graph.axpy(&sum, numerator, &slopes[stage])?;
+    }
+    Ok(sum)
 }
