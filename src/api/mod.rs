@@ -97,6 +97,7 @@ pub use crate::train::checkpoint::EpochRow;
 pub use crate::train::coverage::{
     Coverage as TrainingCoverage, DENSE_SHARE as DENSE_ONE_STEP_SHARE,
 };
+pub use crate::train::recovery::EpochPhase;
 pub use crate::train::toward::ChoiceEvent;
 pub use crate::train::{
     Checkpoint, Engine, EpochDivergence, ErrorSet, Event as TrainEvent, History, SparseBudget,
@@ -104,6 +105,7 @@ pub use crate::train::{
 };
 pub use crate::trained::cv::{CrossValidation, Fold as CvFold};
 pub use crate::trained::predict::Mode as PredictMode;
+pub use crate::trained::status::TrainingStatus;
 
 /// The process's request to stop the running job (Ctrl-C, SIGTERM, or a caller), which every
 /// long phase polls: a training between its batches, a fit between its trials.

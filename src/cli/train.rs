@@ -215,7 +215,8 @@ fn diverged_run(diverged: &EpochDivergence, directory: &Path) -> CommandError {
     if !diverged.advice.is_empty() {
         eprintln!("try {}", diverged.advice);
     }
-    let what = match diverged.phase.as_str() {
+    let phase = diverged.phase.to_string();
+    let what = match phase.as_str() {
         "" => diverged.what.clone(),
         phase => format!("{} ({phase})", diverged.what),
     };

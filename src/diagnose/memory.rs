@@ -193,6 +193,7 @@ pub fn correlation_time(samples: &[(f64, f64)]) -> Option<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::solve::ode::tableau::RK4;
 
     /// The exact update of a filter agrees with a fine fourth-order Runge–Kutta
     /// integration, for a held and a ramping signal, over a short and a long step.
@@ -205,16 +206,12 @@ mod tests {
                 let steps = 2000;
                 let dt = h / steps as f64;
                 let f = |t: f64, y: f64| (x(t) - y) / tau;
-                let mut y = y0;
+                let mut y = vec![y0];
                 for i in 0..steps {
-                    let t = i as f64 * dt;
-                    let k1 = f(t, y);
-                    let k2 = f(t + dt / 2.0, y + dt / 2.0 * k1);
-                    let k3 = f(t + dt / 2.0, y + dt / 2.0 * k2);
-                    let k4 = f(t + dt, y + dt * k3);
-                    y += dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+                    let mut slope = |t: f64, y: &[f64]| vec![f(t, y[0])];
+                    y = RK4.step(&mut slope, i as f64 * dt, &y, dt);
                 }
-                y
+                y[0]
             };
             let held = integrate(0.2, &|_| 0.5);
             let ramp = integrate(1.0, &|t| 1.0 + 2.0 * t / h);

@@ -116,17 +116,21 @@ impl Optimiser {
         self
     }
 
-    /// Starts from `network`'s weights and Adam state (a resumed run's moments).
-    pub fn from_network(network: &Network, precision: Precision) -> Result<Self, BackendError> {
-        let mut optimiser = Optimiser::new(network, precision);
-        let state = network.adam_state();
-        let lengths = optimiser.lengths.clone();
-        let set = match &mut optimiser.state {
-            State::Single(_, adam) => adam.set_state(&state, &lengths),
-            State::Double(_, adam) => adam.set_state(&state, &lengths),
+    /// Continues from a resumed run's Adam step count and moments (none: a fresh start);
+    /// their sizes must match the network's tensors.
+    pub fn resumed(
+        mut self,
+        state: Option<&crate::numeric::AdamState>,
+    ) -> Result<Self, BackendError> {
+        let Some(state) = state else {
+            return Ok(self);
+        };
+        let set = match &mut self.state {
+            State::Single(_, adam) => adam.set_state(state, &self.lengths),
+            State::Double(_, adam) => adam.set_state(state, &self.lengths),
         };
         set.map_err(BackendError::WeightsMismatch)?;
-        Ok(optimiser)
+        Ok(self)
     }
 
     /// Adam's step count and moments, per tensor.

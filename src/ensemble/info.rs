@@ -64,7 +64,7 @@ pub struct MemberInfo {
     /// The training experiments it did not draw (out of bag).
     pub out_of_bag: Vec<String>,
     /// `finished`, `diverged: ...` or `failed: ...`.
-    pub status: String,
+    pub status: crate::trained::status::TrainingStatus,
     /// Whether it makes up the ensemble (a member that failed or diverged does not).
     pub used: bool,
     /// Its error on the held-out experiments (the members' common measure, see

@@ -4,6 +4,8 @@
 
 use std::path::Path;
 use std::sync::Mutex;
+
+use crate::trained::status::TrainingStatus;
 use std::time::Instant;
 
 use super::calibrate::{self, MemberRuns};
@@ -138,7 +140,7 @@ pub fn train_ensemble(
             keep,
             on_event,
         )?;
-        let status = outcome.info.status.clone();
+        let status = outcome.info.status.to_string();
         on_event(MemberEvent::Finished {
             member: member + 1,
             status: &status,
@@ -275,7 +277,7 @@ fn train_member(
         Ok(trained) => trained,
         Err(error @ (TrainError::Io(_) | TrainError::Backend(_))) => return Err(error.into()),
         Err(error) => {
-            info.status = format!("failed: {error}");
+            info.status = TrainingStatus::Failed(Some(error.to_string()));
             info.seconds = started.elapsed().as_secs_f64();
             return Ok(Outcome {
                 info,
@@ -286,7 +288,10 @@ fn train_member(
     let run_info = artifacts::run_info(model, keep.model, keep.data, &member_options, &trained);
     artifacts::save(&keep.directory.join(&info.run), &run_info, &trained.network)?;
     if let Some(diverged) = &trained.report.diverged {
-        info.status = format!("diverged: epoch {}, {}", diverged.epoch, diverged.what);
+        info.status = TrainingStatus::Diverged {
+            epoch: diverged.epoch,
+            what: diverged.what.clone(),
+        };
     }
     on_event(MemberEvent::Phase {
         member: member + 1,
@@ -310,7 +315,7 @@ fn member_info(train: &[Record], draws: &[usize], member: usize, seed: u64) -> M
         run: member_directory(member),
         trained_on: names(draws),
         out_of_bag: names(&resample::out_of_bag(draws, train.len())),
-        status: "finished".into(),
+        status: TrainingStatus::Finished,
         used: false,
         validation_error: None,
         seconds: 0.0,

@@ -180,7 +180,7 @@ fn members_section(info: &EnsembleInfo) -> String {
             member.seed,
             escape(&member.trained_on.join(" ")),
             escape(&member.out_of_bag.join(" ")),
-            escape(&member.status),
+            escape(&member.status.to_string()),
             member.validation_error.map_or("–".into(), tick_label),
             tick_label(member.seconds.round())
         );

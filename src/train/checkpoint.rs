@@ -341,6 +341,14 @@ impl<'a> Safety<'a> {
         self.count_from = epoch.max(1);
     }
 
+    /// The Adam state of the checkpoint a run resumes from (none: a fresh start).
+    pub fn resumed_adam(&self) -> Option<&AdamState> {
+        self.control
+            .resume
+            .as_ref()
+            .map(|checkpoint| &checkpoint.adam)
+    }
+
     /// Before the first epoch: with a checkpoint, sets the network, the training tracks,
     /// the generator and the losses back to it; returns the first epoch to run.
     pub fn resume(
@@ -367,7 +375,6 @@ impl<'a> Safety<'a> {
             return changed("other training experiments".into());
         }
         network.set_weights(&checkpoint.weights)?;
-        network.set_adam_state(&checkpoint.adam)?;
         for (track, states) in course.tracks.iter_mut().zip(&checkpoint.references) {
             if (track.states.iter().zip(states)).any(|(a, b)| a.len() != b.len()) {
                 return changed("other training experiments".into());

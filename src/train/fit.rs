@@ -86,12 +86,13 @@ impl Fit<'_> {
         let options = self.options;
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed.wrapping_add(0x5eed));
         let mut losses = Vec::with_capacity(options.epochs);
-        // A checkpoint puts its weights and Adam state into `network`; the optimiser starts
-        // from them.
+        // A checkpoint puts its weights into `network`; the optimiser starts from them and
+        // from its Adam state.
         let first = safety.resume(network, training, &mut rng, &mut losses)?;
         let mut engines = Engines {
             fused: options.engine.fused_step(self.model, self.setup)?,
-            optimiser: Optimiser::from_network(network, options.precision)?
+            optimiser: Optimiser::new(network, options.precision)
+                .resumed(safety.resumed_adam())?
                 .with_penalty(self.penalty(network)),
             network,
             windows: RolloutBatch::default(),
@@ -126,7 +127,7 @@ impl Fit<'_> {
             None => Engine::Graph,
         };
         let diverged = settle(diverged, epochs.kept, &mut engines, safety)?;
-        engines.graph_with_state()?;
+        engines.graph_with_weights()?;
         let best = safety.finish(network)?;
         Ok(Fitted {
             losses: epochs.losses,
@@ -212,7 +213,7 @@ impl Fit<'_> {
         safety: &Safety,
     ) -> Result<Recovery, Failure> {
         let multi_step = self.recipe.objective == Objective::MultiStep;
-        let phase = recovery::phase(horizon, multi_step);
+        let phase = recovery::EpochPhase::of_epoch(horizon, multi_step);
         let learning_rate = self.options.learning_rate * engines.scale;
         if engines.recovered >= safety.recoveries() {
             let advice = recovery::advice(&phase, learning_rate);
@@ -469,7 +470,7 @@ enum After {
 struct Failure {
     epoch: usize,
     what: String,
-    phase: String,
+    phase: recovery::EpochPhase,
     advice: String,
 }
 

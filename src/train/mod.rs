@@ -258,10 +258,9 @@ pub struct EpochDivergence {
     /// The epoch whose weights were kept: the last one whose weights were all finite (the
     /// best one with early stopping; 0: the initial weights).
     pub kept_epoch: usize,
-    /// The phase it went non-finite in: "one-step warm-up", "one-step", "rollouts of K
-    /// steps" ([`recovery::phase`]; empty in runs saved before it was recorded).
+    /// The phase it went non-finite in (unrecorded in runs saved before it was).
     #[serde(default)]
-    pub phase: String,
+    pub phase: recovery::EpochPhase,
     /// What to try ([`recovery::advice`]).
     #[serde(default)]
     pub advice: String,

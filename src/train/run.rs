@@ -116,7 +116,7 @@ pub fn train_run(
         let recovery = super::Recovery {
             epoch,
             what,
-            phase: "polish".into(),
+            phase: super::recovery::EpochPhase::Polish,
             back_to: epoch,
             learning_rate: options.learning_rate,
             horizon: recipe.horizon_at(epoch.max(1), options.epochs),

@@ -18,6 +18,7 @@ use sha2::{Digest, Sha256};
 use crate::engine::graph::{NamedTensor, Network, Normalisation, Precision, Setup};
 use crate::ir;
 
+use super::status::TrainingStatus;
 use crate::train::evaluate::PhysicalRange;
 use crate::train::recipe::DEFAULT_RANGE_FACTOR;
 use crate::train::tensors::{bad_run, read_tensors, write_tensors, NOT_FINITE_HELP};
@@ -96,8 +97,8 @@ pub struct RunInfo {
     pub diverged: Option<crate::train::EpochDivergence>,
     /// `finished`, or `failed` when training went non-finite and no recovery was left
     /// (then [`RunInfo::diverged`] says where, in which phase, why and what to try).
-    #[serde(default = "finished")]
-    pub status: String,
+    #[serde(default)]
+    pub status: super::status::TrainingStatus,
     /// Each time training went back to its last finite epoch and continued, with a lower
     /// learning rate ([`crate::train::recovery`]); warnings, the run went on.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -116,11 +117,6 @@ impl RunInfo {
         let factor = (self.recipe.as_ref()).map_or(DEFAULT_RANGE_FACTOR, |r| r.range_factor);
         PhysicalRange::new(&self.normalisation, factor)
     }
-}
-
-/// The status of a run saved before [`RunInfo::status`] was recorded.
-fn finished() -> String {
-    "finished".into()
 }
 
 /// The model a run belongs to.
@@ -250,9 +246,9 @@ pub fn run_info(
         weights: WEIGHTS_FILE.to_string(),
         diverged: report.diverged.clone(),
         status: if report.diverged.is_some() {
-            "failed".into()
+            TrainingStatus::Failed(None)
         } else {
-            finished()
+            TrainingStatus::Finished
         },
         recoveries: report.recoveries.clone(),
         toward_mechanism: report.toward_mechanism.clone(),

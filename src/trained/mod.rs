@@ -12,3 +12,4 @@ pub mod cv;
 pub mod keep;
 pub mod page;
 pub mod predict;
+pub mod status;

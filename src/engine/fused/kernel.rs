@@ -25,7 +25,9 @@ use crate::engine::program::{Program, ProgramInputs};
 use crate::engine::settings::StepSettings;
 use crate::engine::setup::Setup;
 use crate::ir::{self, Dynamics};
-use crate::numeric::{Adam, AdamState, Real};
+use crate::numeric::Real;
+#[cfg(test)]
+use crate::numeric::{Adam, AdamState};
 use crate::solve::ode::tableau::RK4;
 
 use super::activation::{activate, Lane};
@@ -51,6 +53,9 @@ pub struct Kernel<E: Lane> {
     pub weights: Vec<E>,
     /// The gradient of the last [`Kernel::loss_and_gradient`], same layout.
     pub gradient: Vec<E>,
+    /// The kernel's own optimiser, for its tests (training steps through
+    /// [`crate::engine::step::Optimiser`]).
+    #[cfg(test)]
     adam: Adam<E>,
     pub(super) rows: usize,
     /// Steps of the loaded window (1 for one-step pairs).
@@ -93,6 +98,7 @@ impl<E: Lane> Kernel<E> {
             inverse_std,
             weights,
             gradient: vec![E::ZERO; size],
+            #[cfg(test)]
             adam: Adam::new(size),
             rows: 0,
             steps: 0,
@@ -132,16 +138,19 @@ impl<E: Lane> Kernel<E> {
         Ok(loss)
     }
 
+    #[cfg(test)]
     fn lengths(&self) -> Vec<usize> {
         self.plan.tensors.iter().map(|&(_, n)| n).collect()
     }
 
     /// Adam's step count and moments, cut into the plan's tensors.
+    #[cfg(test)]
     pub fn adam_state(&self) -> AdamState {
         self.adam.state(&self.lengths())
     }
 
     /// Replaces Adam's step count and moments.
+    #[cfg(test)]
     pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
         (self.adam.set_state(state, &self.lengths())).map_err(BackendError::WeightsMismatch)
     }

@@ -56,7 +56,9 @@ use crate::engine::settings::StepSettings;
 use crate::engine::settings::TrainStep;
 use crate::engine::setup::{dispatch, Precision, Setup};
 use crate::ir;
-use crate::numeric::{AdamState, NamedTensor, Real};
+#[cfg(test)]
+use crate::numeric::AdamState;
+use crate::numeric::{NamedTensor, Real};
 
 use kernel::Kernel;
 use plan::Plan;
@@ -92,12 +94,14 @@ impl FusedNetwork {
     }
 
     /// Adam's step count and moments, per tensor of [`FusedNetwork::weights`].
+    #[cfg(test)]
     pub fn adam_state(&self) -> AdamState {
         dispatch!(self, kernel => kernel.adam_state())
     }
 
     /// Replaces Adam's step count and moments (sizes must match
     /// [`FusedNetwork::weights`]).
+    #[cfg(test)]
     pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
         dispatch!(mut self, kernel => kernel.set_adam_state(state))
     }

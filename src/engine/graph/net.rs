@@ -18,10 +18,13 @@ use super::tape::{gradient_of, Element, GradientBuffer, Graph, LossBlock, Matrix
 use crate::engine::batch::{Batch, Prediction, RolloutBatch};
 use crate::engine::error::BackendError;
 use crate::engine::program::Program;
+#[cfg(test)]
 use crate::engine::settings::StepSettings;
 use crate::engine::setup::Setup;
 use crate::ir::{self, Dynamics};
-use crate::numeric::{Adam, AdamState, NamedTensor};
+use crate::numeric::NamedTensor;
+#[cfg(test)]
+use crate::numeric::{Adam, AdamState};
 
 mod forward;
 
@@ -48,6 +51,9 @@ pub struct GreyBox<E: Element> {
     names: Vec<String>,
     shapes: Vec<Vec<usize>>,
     weights: Vec<Vec<E>>,
+    /// The engine's own optimiser, for its tests (training steps through
+    /// [`crate::engine::step::Optimiser`]).
+    #[cfg(test)]
     adam: Adam<E>,
 }
 
@@ -125,7 +131,6 @@ where
             shapes.push(vec![model.params.len()]);
             weights.push(model.params.iter().map(raw_initial_value::<E>).collect());
         }
-        let adam = Adam::new(weights.iter().map(Vec::len).sum());
         let inverse_std = (setup.normalisation.state_std.iter())
             .map(|&s| E::from_double(1.0 / s))
             .collect();
@@ -142,8 +147,9 @@ where
             inverse_std,
             names,
             shapes,
+            #[cfg(test)]
+            adam: Adam::new(weights.iter().map(Vec::len).sum()),
             weights,
-            adam,
         })
     }
 
@@ -169,8 +175,9 @@ where
             inverse_std: self.inverse_std.clone(),
             names: self.names.clone(),
             shapes: self.shapes.clone(),
-            weights: self.weights.clone(),
+            #[cfg(test)]
             adam: Adam::new(self.weights.iter().map(Vec::len).sum()),
+            weights: self.weights.clone(),
         }
     }
 
@@ -187,6 +194,7 @@ where
     }
 
     /// One Adam step on a rollout batch; returns the loss before it.
+    #[cfg(test)]
     pub fn rollout_step(
         &mut self,
         batch: &RolloutBatch,
@@ -200,6 +208,7 @@ where
 
     /// Clips the gradient's global norm (when asked) and takes the Adam step, params at
     /// their own learning rate ([`crate::numeric::Adam`], on the tensors back to back).
+    #[cfg(test)]
     fn update(&mut self, gradients: Vec<Vec<E>>, settings: &StepSettings) {
         let size: usize = self.weights.iter().map(Vec::len).sum();
         let params = (self.names.last())
@@ -402,15 +411,18 @@ where
     }
 
     /// Adam's step count and moments.
+    #[cfg(test)]
     pub fn adam_state(&self) -> AdamState {
         self.adam.state(&self.lengths())
     }
 
+    #[cfg(test)]
     fn lengths(&self) -> Vec<usize> {
         self.weights.iter().map(Vec::len).collect()
     }
 
     /// Replaces Adam's step count and moments.
+    #[cfg(test)]
     pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
         (self.adam.set_state(state, &self.lengths())).map_err(BackendError::WeightsMismatch)
     }

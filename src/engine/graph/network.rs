@@ -3,12 +3,15 @@
 
 use crate::engine::batch::{Batch, Prediction, RolloutBatch};
 use crate::engine::error::BackendError;
+#[cfg(test)]
 use crate::engine::settings::StepSettings;
 #[cfg(test)]
 use crate::engine::settings::TrainStep;
 use crate::engine::setup::{dispatch, Precision, Setup};
 use crate::ir;
-use crate::numeric::{AdamState, NamedTensor};
+#[cfg(test)]
+use crate::numeric::AdamState;
+use crate::numeric::NamedTensor;
 
 use super::net::GreyBox;
 
@@ -35,6 +38,7 @@ impl Network {
     /// One Adam step on the mean normalised squared error over every step of every
     /// window of a rollout batch (gradients through the whole rollout); returns the loss
     /// before the step.
+    #[cfg(test)]
     pub fn rollout_step(
         &mut self,
         batch: &RolloutBatch,
@@ -115,11 +119,13 @@ impl Network {
 
     /// Adam's step count and moments, per tensor of [`Network::weights`] (to hand training
     /// over to [`crate::engine::fused::FusedNetwork`] and back).
+    #[cfg(test)]
     pub fn adam_state(&self) -> AdamState {
         dispatch!(self, net => net.adam_state())
     }
 
     /// Replaces Adam's step count and moments (sizes must match [`Network::weights`]).
+    #[cfg(test)]
     pub fn set_adam_state(&mut self, state: &AdamState) -> Result<(), BackendError> {
         dispatch!(mut self, net => net.set_adam_state(state))
     }

@@ -139,6 +139,34 @@ impl<const S: usize> Tableau<S> {
         substep * self.times_before(self.time_denominator) + self.times_before(self.times[stage])
     }
 
+    /// One step of `y' = f(t, y)` from `(t, y)` by `h`: the reference stepper tests take
+    /// their fine integrations with (the engines loop over the tableau themselves).
+    #[cfg(test)]
+    pub fn step(
+        &self,
+        f: &mut dyn FnMut(f64, &[f64]) -> Vec<f64>,
+        t: f64,
+        y: &[f64],
+        h: f64,
+    ) -> Vec<f64> {
+        let combine = |slopes: &[Vec<f64>], row: &Combination<S>| -> Vec<f64> {
+            let mut state = y.to_vec();
+            for (stage, numerator) in row.terms() {
+                for (value, slope) in state.iter_mut().zip(&slopes[stage]) {
+                    *value += h * numerator / row.divisor() * slope;
+                }
+            }
+            state
+        };
+        let mut slopes: Vec<Vec<f64>> = Vec::with_capacity(S);
+        for stage in 0..S {
+            let time = t + h * f64::from(self.times[stage]) / f64::from(self.time_denominator);
+            let state = combine(&slopes, &self.stages[stage]);
+            slopes.push(f(time, &state));
+        }
+        combine(&slopes, &self.weights)
+    }
+
     /// The stability function `R(z) = 1 + z b^T (I - z A)^-1 1`: one step of
     /// `y' = lambda y` from `y = 1` with `h lambda = z`, by forward substitution (the
     /// a-matrix is strictly lower triangular).

@@ -64,12 +64,4 @@ impl Engines<'_> {
         self.network.set_flat_weights(&self.optimiser.weights())?;
         Ok(self.network)
     }
-
-    /// The graph network with the optimiser's weights and Adam state (what a checkpoint or
-    /// the saved run keeps).
-    pub fn graph_with_state(&mut self) -> Result<&Network, BackendError> {
-        self.network.set_flat_weights(&self.optimiser.weights())?;
-        self.network.set_adam_state(&self.optimiser.adam_state())?;
-        Ok(self.network)
-    }
 }

@@ -4,6 +4,7 @@
 use crate::eval::interpret;
 use crate::ir::{Model, Var};
 use crate::signal::Signal;
+use crate::solve::ode::tableau::RK4;
 
 /// The balances of `model` at state `y` with inputs `u`, in state order.
 fn rhs(model: &Model, u: &[f64], y: &[f64]) -> Vec<f64> {
@@ -28,10 +29,6 @@ fn rhs(model: &Model, u: &[f64], y: &[f64]) -> Vec<f64> {
     dydt
 }
 
-fn axpy(y: &[f64], h: f64, k: &[f64]) -> Vec<f64> {
-    y.iter().zip(k).map(|(a, b)| a + h * b).collect()
-}
-
 /// RK4 with step `h` from `(0, y0)`; returns the state at each time in `samples`.
 ///
 /// Every sample and every input switch must be a multiple of `h`, so inputs are constant
@@ -51,13 +48,7 @@ pub fn rk4(
         while step < target {
             let t = step as f64 * h;
             let u: Vec<f64> = signals.iter().map(|s| s.value_at(t)).collect();
-            let k1 = rhs(model, &u, &y);
-            let k2 = rhs(model, &u, &axpy(&y, h / 2.0, &k1));
-            let k3 = rhs(model, &u, &axpy(&y, h / 2.0, &k2));
-            let k4 = rhs(model, &u, &axpy(&y, h, &k3));
-            for i in 0..y.len() {
-                y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
+            y = RK4.step(&mut |_, state| rhs(model, &u, state), t, &y, h);
             step += 1;
         }
         out.push(y.clone());
