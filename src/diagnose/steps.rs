@@ -110,7 +110,7 @@ pub fn diagnose(
     for step in &STEPS {
         findings.take(step)?;
     }
-    Ok(findings.report(started.elapsed().as_secs_f64()))
+    findings.report(started.elapsed().as_secs_f64())
 }
 
 /// A diagnosis under way: the context the steps share and what they have found so far.
@@ -197,25 +197,25 @@ impl<'a> Findings<'a> {
         Ok(())
     }
 
-    /// The model's own fit (every step after the first has it).
-    fn before(&self) -> &Scored {
-        self.before
-            .as_ref()
-            .expect("the model is fitted by the first step")
+    /// The model's own fit (every step after the first has it; without it, a step list
+    /// out of order, an internal error).
+    fn before(&self) -> Result<&Scored, DiagnoseError> {
+        (self.before.as_ref())
+            .ok_or_else(|| DiagnoseError::internal("a step ran before the model was fitted"))
     }
 
     /// The gap before and the noise floor (from [`Findings::measure_gap`] on).
-    fn levels(&self) -> Levels {
-        Levels {
-            gap_before: self.before().gap,
+    fn levels(&self) -> Result<Levels, DiagnoseError> {
+        Ok(Levels {
+            gap_before: self.before()?.gap,
             noise_floor: self.noise_floor,
-        }
+        })
     }
 
     /// Whether the gap exceeds the noise floor significantly.
-    fn significant(&self) -> bool {
-        let gap_before = self.before().gap;
-        gap_before.is_finite() && gap_before > SIGNIFICANCE * self.noise_floor
+    fn significant(&self) -> Result<bool, DiagnoseError> {
+        let gap_before = self.before()?.gap;
+        Ok(gap_before.is_finite() && gap_before > SIGNIFICANCE * self.noise_floor)
     }
 
     /// Fits the model's params (and starts) and scores it.
@@ -234,7 +234,7 @@ impl<'a> Findings<'a> {
 
     /// Fits every effect alone and ranks them.
     fn rank_effects(&mut self) -> Result<(), DiagnoseError> {
-        let before = self.before();
+        let before = self.before()?;
         let ranking =
             effects::rank_effects(&self.context, &before.named, before.gap, self.progress)?;
         self.ranking = ranking;
@@ -243,7 +243,7 @@ impl<'a> Findings<'a> {
 
     /// Each measured state's share of the gap and its noise, and the noise floor.
     fn measure_gap(&mut self) -> Result<(), DiagnoseError> {
-        let (context, before) = (&self.context, self.before());
+        let (context, before) = (&self.context, self.before()?);
         let noise = assemble::noise_estimates(context, before, &self.ranking);
         let states = assemble::state_gaps(context, &self.base, before, &noise);
         self.noise_floor = assemble::noise_floor(&states);
@@ -253,7 +253,7 @@ impl<'a> Findings<'a> {
 
     /// Credits a set of effects by forward selection.
     fn select(&mut self) -> Result<(), DiagnoseError> {
-        let (levels, before) = (self.levels(), self.before());
+        let (levels, before) = (self.levels()?, self.before()?);
         let context = &self.context;
         (self.selection, self.credited_fit) =
             selection::select(context, before, &self.ranking, levels, self.progress)?;
@@ -268,22 +268,22 @@ impl<'a> Findings<'a> {
     /// Searches the loci, when asked and the gap is significant (else there is nothing to
     /// locate).
     fn locate(&mut self) -> Result<(), DiagnoseError> {
-        if !(self.context.options.locate && self.significant()) {
+        if !(self.context.options.locate && self.significant()?) {
             return Ok(());
         }
-        let x = &self.before().fitted.x;
+        let x = &self.before()?.fitted.x;
         let taus = memory_time_constants(&self.context, &self.base, x);
-        let gaps = (self.before().gap, self.noise_floor);
+        let gaps = (self.before()?.gap, self.noise_floor);
         self.located = locus::locate(&self.context, x, &taus, gaps, self.progress)?;
         self.taus = taus;
         Ok(())
     }
 
     /// The report of what the steps found, the diagnosis having taken `seconds`.
-    fn report(self, seconds: f64) -> Report {
+    fn report(self, seconds: f64) -> Result<Report, DiagnoseError> {
         let context = &self.context;
-        let before = self.before();
-        let (levels, significant) = (self.levels(), self.significant());
+        let before = self.before()?;
+        let (levels, significant) = (self.levels()?, self.significant()?);
         let memory = assemble::memory(
             &self.located,
             &self.ranking,
@@ -300,7 +300,7 @@ impl<'a> Findings<'a> {
         let (windows, regime) = assemble::where_and_when(context, before);
         let mut states = self.states.clone();
         states.sort_by(|a, b| b.share.total_cmp(&a.share));
-        Report {
+        Ok(Report {
             model: context.model.name.clone(),
             gap_before: before.gap,
             gap_before_per_state: assemble::mean_over_states(&states),
@@ -328,7 +328,7 @@ impl<'a> Findings<'a> {
             },
             series,
             partial: self.partial.clone(),
-        }
+        })
     }
 
     /// The fit the series show after the model's: the credited set's, else the best
