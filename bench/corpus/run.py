@@ -54,6 +54,8 @@ CAP_FACTOR = 10
 TOLERANCE = 1.1
 # Identified params: right when within this many standard errors of the truth.
 WITHIN = 3.0
+# How a diagnosis names a constant it refits among the credited candidates.
+REFIT = "refit "
 
 
 def number(value):
@@ -369,11 +371,13 @@ def judge_diagnosis(report, answer):
     if answer is None:
         return judged
     withheld = sorted(answer.get("withheld") or [])
+    guessed = guessed_consts(answer)
     if undecided:
-        judged["right"] = withheld in [sorted(s.split(" + ")) for s in undecided]
+        judged["right"] = withheld in [effects_of(s.split(" + "), guessed) for s in undecided]
     else:
-        judged["right"] = credited == withheld
-    truth = answer.get("params") or {}
+        judged["right"] = effects_of(credited, guessed) == withheld
+    # A constant the diagnosis refits is judged against its truth where the case knows it.
+    truth = {**guessed, **(answer.get("params") or {})}
     totals = [0, 0, 0]
     fits = verdict_fits(report)
     for estimates in fits:
@@ -383,6 +387,27 @@ def judge_diagnosis(report, answer):
                   params_within_3se=totals[2],
                   fits_unreported=sum(1 for e in fits if e is None))
     return judged
+
+
+def guessed_consts(answer):
+    """The constants a case declares as a modeller's guesses, with their truth: a guessed
+    `const`, or the `const` a guessed start reads."""
+    guesses = answer.get("guesses") or {}
+    truth = {name: g.get("truth") for name, g in (guesses.get("consts") or {}).items()}
+    for guess in (guesses.get("starts") or {}).values():
+        if guess.get("const"):
+            truth[guess["const"]] = guess.get("truth")
+    return truth
+
+
+def effects_of(names, guessed):
+    """The effects among a credited set's names, sorted. A constant the diagnosis refits
+    (`refit NAME`) that the case declares a guess is a recalibration, not an effect, and
+    drops out; a refit of a constant the case holds exact stays in, so the verdict is
+    wrong (the data contradict nothing there)."""
+    names = [n.strip() for n in names]
+    return sorted(n for n in names
+                  if not (n.startswith(REFIT) and n[len(REFIT):] in guessed))
 
 
 def verdict_fits(report):

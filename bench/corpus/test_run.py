@@ -240,6 +240,27 @@ class VerdictColumns(Folder):
                                      {"withheld": ["c", "b"], "params": {}})
         self.assertTrue(judged["right"] and judged["undecided"])
 
+    def test_a_refitted_constant_is_not_an_effect_and_is_checked_against_its_truth(self):
+        fit = {"estimates": [estimate("mu_max", 0.7, 0.01), estimate("X0", 0.5, 0.01)]}
+        step = {"effects": ["refit mu_max", "growth_lag", "refit X0"], "fit": fit}
+        report = diagnosis(credited=["refit mu_max", "growth_lag", "refit X0"], steps=[step])
+        answer = {"withheld": ["growth_lag"], "params": {},
+                  "guesses": {"consts": {"mu_max": {"declared": 0.38, "truth": 0.71}},
+                              "starts": {"X": {"const": "X0", "declared": 1.0,
+                                               "truth": 0.8}}}}
+        judged = run.judge_diagnosis(report, answer)
+        self.assertTrue(judged["right"])
+        self.assertEqual((judged["params_identified"], judged["params_within_3se"]), (2, 1))
+        nothing = run.judge_diagnosis(diagnosis(credited=["refit mu_max"], steps=[step]),
+                                      {"withheld": [], "params": {}, "guesses": answer["guesses"]})
+        self.assertTrue(nothing["right"])
+        wrong = run.judge_diagnosis(diagnosis(credited=["refit mu_max"], steps=[step]),
+                                    {"withheld": ["growth_lag"], "params": {}})
+        self.assertFalse(wrong["right"])
+        exact = run.judge_diagnosis(diagnosis(credited=["refit mu_max"], steps=[step]),
+                                    {"withheld": [], "params": {}})
+        self.assertFalse(exact["right"], "mu_max is exact here: its refit is a wrong credit")
+
     def test_real_record_shows_the_credited_set_without_right(self):
         case = {**scenario(self.dir), "kind": "real", "answer": None}
         (self.dir / "diagnose.json").write_text(json.dumps(diagnosis(credited=["b", "a"])))

@@ -71,6 +71,9 @@ pub struct Options {
     pub noise: Option<Vec<crate::ir::Noise>>,
     /// Measured rows each part (training, held-out) needs; default [`MIN_ROWS`].
     pub min_rows: usize,
+    /// Whether the constants a free run reads compete with the effects as candidates,
+    /// each refitted as a param (`--hold-constants` turns it off).
+    pub refit_constants: bool,
 }
 
 impl Default for Options {
@@ -87,6 +90,7 @@ impl Default for Options {
             locate: true,
             noise: None,
             min_rows: MIN_ROWS,
+            refit_constants: true,
         }
     }
 }
@@ -170,10 +174,11 @@ impl<'a> Context<'a> {
         };
         let parts = (holdout, options.fit_initial);
         let mut split = Split::with_min_rows(model, (train, held), parts, options.min_rows)?;
+        split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
         if options.fit_starts {
             split.fit_measured_starts(model);
+            crate::solve::fit::noise::bound_fitted_starts(&mut split);
         }
-        split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
         Ok(Context {
             problem: *problem,
             options,

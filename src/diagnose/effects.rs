@@ -2,16 +2,16 @@
 //! alone, each candidate effect alone (ranked, with a block-bootstrap confidence), and
 //! forward selection of several effects ([`super::selection`]).
 
+use super::candidates::{candidates, lower};
 use super::context::{Context, Progress};
 use super::error::DiagnoseError;
 use super::evaluate::{scored_errors, Errors};
 use super::ranking::{compare, Comparison, RESAMPLES};
 use super::report::{Confidence, EffectScore, FitSummary};
-use crate::ir::{self, Model};
+use crate::ir::Model;
 use crate::solve::fit::fitter::{Fitted, Starts};
 use crate::solve::fit::model::{fit_model, ModelFit};
 use crate::solve::fit::simulate::{Run, Simulator};
-use crate::solve::fit::FitError;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -101,7 +101,7 @@ pub fn named(model: &Model, x: &[f64]) -> BTreeMap<String, f64> {
         .collect()
 }
 
-/// Every candidate effect applied alone and fitted, ranked by held-out gap.
+/// Every candidate (effect or refitted constant) applied alone and fitted, ranked by BIC.
 #[derive(Default)]
 pub struct Ranking {
     /// Scores, best first.
@@ -112,16 +112,16 @@ pub struct Ranking {
     pub confidence: Confidence,
 }
 
-/// Fits every effect of the model alone, from the model's fitted unknowns `base` (by name).
+/// Fits every candidate of the model alone ([`candidates`]), from the model's fitted
+/// unknowns `base` (by name).
 pub fn rank_effects(
     context: &Context,
     base: &BTreeMap<String, f64>,
     gap_before: f64,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Ranking, DiagnoseError> {
-    let names: Vec<String> = (context.model.effects.iter())
-        .map(|e| e.name.clone())
-        .collect();
+    let candidates = candidates(context.model, context.options.refit_constants);
+    let names: Vec<String> = candidates.iter().map(|c| c.name.clone()).collect();
     let fits = names
         .par_iter()
         .enumerate()
@@ -151,7 +151,7 @@ pub fn rank_effects(
         };
         scores.push(EffectScore {
             name: names[index].clone(),
-            description: context.model.effects[index].description.clone(),
+            description: candidates[index].description.clone(),
             gap_after: scored.gap,
             shrink: 1.0 - scored.gap / gap_before,
             params: named(&model, &scored.fitted.x),
@@ -220,14 +220,4 @@ pub fn added_hidden(model: &Model, with: &Model) -> Vec<String> {
 /// The block sums of a scored fit, for comparisons.
 pub fn block_sums(context: &Context, scored: &Scored) -> Vec<(f64, usize)> {
     context.blocks.sums(&scored.errors)
-}
-
-/// The model with the named effects applied.
-pub fn lower(context: &Context, effects: &[&str]) -> Result<Model, DiagnoseError> {
-    let lowered = ir::lower(context.problem.checked, effects);
-    lowered.map_err(|error| {
-        DiagnoseError::Fit(FitError::Unsimulable {
-            reason: format!("effect {}: {error}", effects.join(" + ")),
-        })
-    })
 }

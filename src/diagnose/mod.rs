@@ -20,6 +20,7 @@
 //!    params on held-out data.
 
 mod assemble;
+mod candidates;
 mod context;
 mod correction;
 mod effects;
@@ -56,5 +57,7 @@ mod tests_jacobian;
 mod tests_json;
 #[cfg(test)]
 mod tests_lab;
+#[cfg(test)]
+mod tests_refit;
 #[cfg(test)]
 mod tests_sets;

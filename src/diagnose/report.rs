@@ -273,8 +273,11 @@ pub struct SelectionStep {
 pub struct Selection {
     /// Every set of effects fitted (alone, pairs, triples), best criterion first.
     pub steps: Vec<SelectionStep>,
-    /// The effects credited together.
+    /// The candidates credited together: effects, and constants refitted (`refit NAME`).
     pub credited: Vec<String>,
+    /// The constants among [`Selection::credited`] the data contradict (refitted), by name.
+    #[serde(default)]
+    pub refitted: Vec<String>,
     /// Held-out gap of the credited set (the gap before when none).
     #[serde(with = "crate::json")]
     pub gap_after: f64,

@@ -2,23 +2,28 @@
 //!
 //! The candidates are sets of effects: every effect alone (the ranking,
 //! [`super::effects::rank_effects`]), and, unless one effect alone already leaves no
-//! significant gap, every pair (and, for at most [`TRIPLES_UP_TO`] candidates, every
-//! triple), each fitted with all its params, warm-started from its members' single fits.
+//! significant gap, every pair among the best [`PAIRS_AMONG`] (and every triple among the
+//! best [`TRIPLES_AMONG`]), each fitted with all its params, warm-started from its members' single fits.
 //! Effects that only act together (a source of a species and its sink) are found this way;
 //! greedy forward selection stops at the first step, where neither alone helps.
 //!
 //! The choice uses the training fits only: Schwarz's criterion (BIC) on the training cells,
 //! and how much of the training gap above the noise floor a set removes. Free-run errors
 //! are correlated in time, so BIC alone overstates the evidence of thousands of cells: a
-//! set is preferred to one of its subsets only when BIC falls by [`EVIDENCE`] *and* it
-//! removes at least [`MARGINAL`] of what the subset leaves above the floor (each effect
-//! of a set must earn its place). The set with the lowest BIC, trimmed that way, is
+//! set is preferred to one of its subsets only when the subset leaves a significant
+//! training gap, BIC falls by [`EVIDENCE`] *and* the set removes at least [`MARGINAL`] of
+//! what the subset leaves above the floor (each effect of a set must earn its place).
+//! A candidate that refits a held constant pays a prior penalty
+//! ([`super::candidates::REFIT_PRIOR`] per constant) on top of its BIC: the modeller's
+//! declared values are knowledge, and a refitted design setting fits many gaps that a
+//! missing effect causes. The set with the lowest penalised BIC, trimmed that way, is
 //! credited when:
 //!
 //! 1. the model's training gap is significant (above [`super::SIGNIFICANCE`] times the
 //!    noise floor);
 //! 2. the set removes at least [`super::CREDIT`] of the training gap above the floor;
-//! 3. BIC falls by at least [`EVIDENCE`] ("strong" evidence on Kass and Raftery's scale);
+//! 3. its penalised BIC falls by at least [`EVIDENCE`] ("strong" evidence on Kass and
+//!    Raftery's scale);
 //! 4. no other set that is not its subset or superset (and earns each of its effects)
 //!    comes within [`TIE`] of its BIC: else the verdict is "undecided between" them, with
 //!    the evidence for each.
@@ -27,8 +32,9 @@
 //! and the block-bootstrap spread of its decrease ([`super::ranking`]) are reported, and a
 //! credited set that does worse on the held-out data than the model is flagged.
 
+use super::candidates::{lower, prior_penalty};
 use super::context::{Context, Progress, CREDIT, SIGNIFICANCE};
-use super::effects::{block_sums, fit_and_score, fit_and_score_with, lower, Ranking, Scored};
+use super::effects::{block_sums, fit_and_score, fit_and_score_with, Ranking, Scored};
 use super::error::DiagnoseError;
 use super::ranking::compare;
 use super::render::num;
@@ -46,8 +52,8 @@ pub const TIE: f64 = 2.0;
 pub const MARGINAL: f64 = 0.25;
 /// The fits that decide a verdict are searched again with this many times the restarts.
 pub const CONFIRM_RESTARTS: usize = 2;
-/// Triples are tried when the model has at most this many candidate effects.
-pub const TRIPLES_UP_TO: usize = 5;
+/// Triples are tried among at most this many candidates (the best by BIC alone).
+pub const TRIPLES_AMONG: usize = 5;
 /// Pairs are tried among at most this many candidates (the best by BIC alone).
 pub const PAIRS_AMONG: usize = 8;
 
@@ -64,6 +70,14 @@ pub struct Levels {
 struct Candidate {
     effects: Vec<String>,
     fit: Scored,
+}
+
+impl Candidate {
+    /// What the selection ranks by: BIC plus the prior penalty of the constants the set
+    /// refits ([`super::candidates::prior_penalty`]).
+    fn criterion(&self) -> f64 {
+        self.fit.summary.bic + prior_penalty(&self.effects)
+    }
 }
 
 /// Chooses the credited effects (see the module documentation); returns the selection and
@@ -84,19 +98,19 @@ pub fn select(
         .collect();
     let settled = |candidates: &[Candidate]| {
         best(candidates).is_some_and(|set| {
-            credible(base, &set.fit, levels) && !significant(set.fit.summary.gap_train, levels)
+            credible(base, set, levels) && !significant(set.fit.summary.gap_train, levels)
         })
     };
     for size in [2, 3] {
-        if settled(&candidates) || (size == 3 && ranking.scores.len() > TRIPLES_UP_TO) {
+        if settled(&candidates) {
             break;
         }
         candidates.extend(combinations(context, ranking, size, progress)?);
     }
-    candidates.sort_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic));
+    candidates.sort_by(|a, b| a.criterion().total_cmp(&b.criterion()));
     let (selection, _) = decide(context, base, &candidates, levels);
     if confirm(context, &mut candidates, &selection, progress)? {
-        candidates.sort_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic));
+        candidates.sort_by(|a, b| a.criterion().total_cmp(&b.criterion()));
     }
     Ok(decide(context, base, &candidates, levels))
 }
@@ -172,7 +186,7 @@ fn confirm(
 fn best(candidates: &[Candidate]) -> Option<&Candidate> {
     candidates
         .iter()
-        .min_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic))
+        .min_by(|a, b| a.criterion().total_cmp(&b.criterion()))
 }
 
 /// Whether a training gap is significant against the noise floor.
@@ -180,18 +194,18 @@ fn significant(gap_train: f64, levels: Levels) -> bool {
     gap_train > SIGNIFICANCE * levels.noise_floor
 }
 
-/// Whether `fit` passes rules 1-3 against `base`.
-fn credible(base: &Scored, fit: &Scored, levels: Levels) -> bool {
-    reason_refused(base, fit, levels).is_none()
+/// Whether `set` passes rules 1-3 against `base`.
+fn credible(base: &Scored, set: &Candidate, levels: Levels) -> bool {
+    reason_refused(base, set, levels).is_none()
 }
 
 /// Why `fit` is not credited over `base` by rules 1-3 (`None`: it is). Every test is false
 /// for a NaN, which is then refused.
-fn reason_refused(base: &Scored, fit: &Scored, levels: Levels) -> Option<String> {
-    let (before, after) = (base.summary.gap_train, fit.summary.gap_train);
+fn reason_refused(base: &Scored, set: &Candidate, levels: Levels) -> Option<String> {
+    let (before, after) = (base.summary.gap_train, set.fit.summary.gap_train);
     let excess = before - levels.noise_floor;
     let removed = before - after;
-    let falls = base.summary.bic - fit.summary.bic;
+    let falls = base.summary.bic - set.criterion();
     if !significant(before, levels) {
         Some(format!(
             "the training gap ({}) is within {SIGNIFICANCE}x the noise floor ({})",
@@ -208,14 +222,18 @@ fn reason_refused(base: &Scored, fit: &Scored, levels: Levels) -> Option<String>
             percent(CREDIT)
         ))
     } else if falls.partial_cmp(&EVIDENCE).is_none_or(|o| o.is_lt()) {
-        Some(format!("BIC falls by {}, less than {EVIDENCE}", num(falls)))
+        Some(format!(
+            "BIC falls by {}{}, less than {EVIDENCE}",
+            num(falls),
+            penalty_words(&set.effects)
+        ))
     } else {
         None
     }
 }
 
-/// Every set of `size` effects among the best [`PAIRS_AMONG`] single effects (by BIC),
-/// fitted side by side.
+/// Every set of `size` candidates among the best [`PAIRS_AMONG`] (pairs) or
+/// [`TRIPLES_AMONG`] (triples) single candidates by BIC, fitted side by side.
 fn combinations(
     context: &Context,
     ranking: &Ranking,
@@ -223,13 +241,15 @@ fn combinations(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Vec<Candidate>, DiagnoseError> {
     let mut singles: Vec<usize> = (0..ranking.scores.len()).collect();
-    singles.sort_by(|&a, &b| {
-        ranking.fits[a]
-            .summary
-            .bic
-            .total_cmp(&ranking.fits[b].summary.bic)
+    let criterion = |i: usize| {
+        ranking.fits[i].summary.bic + prior_penalty(std::slice::from_ref(&ranking.scores[i].name))
+    };
+    singles.sort_by(|&a, &b| criterion(a).total_cmp(&criterion(b)));
+    singles.truncate(if size == 2 {
+        PAIRS_AMONG
+    } else {
+        TRIPLES_AMONG
     });
-    singles.truncate(PAIRS_AMONG);
     let sets = subsets(&singles, size);
     progress(Progress::Stage {
         name: if size == 2 {
@@ -283,11 +303,11 @@ fn decide(
         selection.stop = "no candidate effects".into();
         return (selection, None);
     };
-    let refused = reason_refused(base, &winner.fit, levels);
+    let refused = reason_refused(base, winner, levels);
     let rivals: Vec<&Candidate> = (candidates.iter())
         .filter(|c| !nested(&c.effects, &winner.effects))
         .filter(|c| earns_every_effect(c, candidates, levels))
-        .filter(|c| c.fit.summary.bic - winner.fit.summary.bic < TIE)
+        .filter(|c| c.criterion() - winner.criterion() < TIE)
         .collect();
     let unconfirmed = winner.fit.fitted.agreeing < 2;
     selection.steps = candidates
@@ -323,6 +343,9 @@ fn decide(
         return (selection, None);
     }
     selection.credited = winner.effects.clone();
+    selection.refitted = (winner.effects.iter())
+        .filter_map(|name| super::candidates::refitted(name).map(str::to_string))
+        .collect();
     selection.gap_after = winner.fit.gap;
     selection.stop = held_out_note(base, &winner.fit, levels);
     if unconfirmed {
@@ -340,8 +363,8 @@ fn parsimonious(candidates: &[Candidate], levels: Levels) -> Option<&Candidate> 
     while let Some(subset) = (candidates.iter())
         .filter(|c| c.effects.len() < winner.effects.len())
         .filter(|c| c.effects.iter().all(|e| winner.effects.contains(e)))
-        .filter(|c| !beats(&winner.fit, &c.fit, levels))
-        .min_by(|a, b| a.fit.summary.bic.total_cmp(&b.fit.summary.bic))
+        .filter(|c| !beats(winner, c, levels))
+        .min_by(|a, b| a.criterion().total_cmp(&b.criterion()))
     {
         winner = subset;
     }
@@ -368,16 +391,33 @@ fn earns_every_effect(set: &Candidate, candidates: &[Candidate], levels: Levels)
     (candidates.iter())
         .filter(|c| c.effects.len() < set.effects.len())
         .filter(|c| c.effects.iter().all(|e| set.effects.contains(e)))
-        .all(|c| beats(&set.fit, &c.fit, levels))
+        .all(|c| beats(set, c, levels))
 }
 
-/// Whether the set fitted as `larger` earns its place over its subset fitted as `smaller`:
-/// BIC falls by [`EVIDENCE`] and it removes [`MARGINAL`] of what `smaller` leaves above the
-/// noise floor.
-fn beats(larger: &Scored, smaller: &Scored, levels: Levels) -> bool {
-    let left = smaller.summary.gap_train - levels.noise_floor;
-    let removed = smaller.summary.gap_train - larger.summary.gap_train;
-    smaller.summary.bic - larger.summary.bic >= EVIDENCE && removed >= MARGINAL * left
+/// Whether the set `larger` earns its place over its subset `smaller`: `smaller` leaves a
+/// significant training gap (an effect added to a set that already explains the cells
+/// down to the noise fits noise), the criterion falls by [`EVIDENCE`], and it removes
+/// [`MARGINAL`] of what `smaller` leaves above the noise floor.
+fn beats(larger: &Candidate, smaller: &Candidate, levels: Levels) -> bool {
+    let (larger_gap, smaller_gap) = (larger.fit.summary.gap_train, smaller.fit.summary.gap_train);
+    let left = smaller_gap - levels.noise_floor;
+    let removed = smaller_gap - larger_gap;
+    significant(smaller_gap, levels)
+        && smaller.criterion() - larger.criterion() >= EVIDENCE
+        && removed >= MARGINAL * left
+}
+
+/// The prior penalty a set pays, in words (empty when it refits no constant).
+fn penalty_words(effects: &[String]) -> String {
+    let penalty = prior_penalty(effects);
+    if penalty > 0.0 {
+        format!(
+            " after the penalty of {} for refitted constants",
+            num(penalty)
+        )
+    } else {
+        String::new()
+    }
 }
 
 /// Whether one of two sets contains the other.
@@ -390,9 +430,13 @@ fn evidence<'a>(candidates: impl Iterator<Item = &'a Candidate>) -> String {
     candidates
         .map(|c| {
             format!(
-                "{}: BIC {}, held-out gap {}",
+                "{}: BIC {}{}, held-out gap {}",
                 c.effects.join(" + "),
                 num(c.fit.summary.bic),
+                match prior_penalty(&c.effects) {
+                    p if p > 0.0 => format!(" (+{} for refitted constants)", num(p)),
+                    _ => String::new(),
+                },
                 num(c.fit.gap)
             )
         })
@@ -433,14 +477,15 @@ fn step(
         &[block_sums(context, base), block_sums(context, fit)],
         context.seed(4000),
     );
-    let reason = reason_refused(base, fit, levels).unwrap_or_else(|| {
+    let reason = reason_refused(base, candidate, levels).unwrap_or_else(|| {
         format!(
-            "removes {} of the training gap above the noise floor; BIC falls by {}",
+            "removes {} of the training gap above the noise floor; BIC falls by {}{}",
             percent(
                 (base.summary.gap_train - fit.summary.gap_train)
                     / (base.summary.gap_train - levels.noise_floor)
             ),
-            num(base.summary.bic - fit.summary.bic)
+            num(base.summary.bic - candidate.criterion()),
+            penalty_words(&candidate.effects)
         )
     });
     SelectionStep {

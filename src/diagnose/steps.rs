@@ -6,6 +6,7 @@
 //! the later ones do not run, and the report says so ([`Report::partial`]).
 
 use super::assemble;
+use super::candidates::candidates;
 use super::context::{Context, Options, Problem, Progress, SIGNIFICANCE};
 use super::effects::{self, Ranking, Scored};
 use super::error::DiagnoseError;
@@ -14,7 +15,6 @@ use super::memory;
 use super::report::{Locus, LocusKind, Report, Selection, StateGap, Timing};
 use super::selection::{self, Levels};
 use super::symbolic;
-use crate::ir::Model;
 use crate::solve::fit::simulate::{tolerances, Simulator};
 use crate::solve::fit::FitError;
 use crate::solve::ode::Method;
@@ -38,7 +38,7 @@ struct Stage {
     /// What it does.
     name: &'static str,
     /// Its number of items, for the model.
-    total: fn(&Model) -> usize,
+    total: fn(&Context) -> usize,
 }
 
 /// What a stop asked for does to a step.
@@ -68,7 +68,7 @@ const STEPS: [Step; 5] = [
     Step {
         stage: Some(Stage {
             name: "fitting effects",
-            total: |model| model.effects.len(),
+            total: |context| candidates(context.model, context.options.refit_constants).len(),
         }),
         stop: Stop::Keeps("fitting the effects"),
         run: |findings| findings.rank_effects(),
@@ -83,7 +83,9 @@ const STEPS: [Step; 5] = [
     Step {
         stage: Some(Stage {
             name: "selecting effects",
-            total: |model| model.effects.len().saturating_sub(1),
+            total: |context| {
+                (candidates(context.model, context.options.refit_constants).len()).saturating_sub(1)
+            },
         }),
         stop: Stop::Discards("selecting effects", |findings| findings.forget_selection()),
         run: |findings| findings.select(),
@@ -174,7 +176,7 @@ impl<'a> Findings<'a> {
         if let Some(stage) = &step.stage {
             (self.progress)(Progress::Stage {
                 name: stage.name,
-                total: (stage.total)(self.context.model),
+                total: (stage.total)(&self.context),
             });
         }
         let started = Instant::now();

@@ -142,10 +142,17 @@ pub(super) fn param(report: &Report, name: &str) -> f64 {
 pub(super) fn check_credited(report: &Report, noise: f64, effects: &[&str], tolerance: f64) {
     let text = render::text(report);
     assert!(report.significant, "{text}");
-    assert_eq!(report.effects[0].name, effects[0], "{text}");
+    // A refitted constant may fit better alone than any one effect (the ranking says so);
+    // the best effect alone is the first credited, told apart from the rest when it leads.
+    let best_effect = (report.effects.iter())
+        .find(|e| super::candidates::refitted(&e.name).is_none())
+        .unwrap();
+    assert_eq!(best_effect.name, effects[0], "{text}");
     assert_eq!(report.credited.as_deref(), Some(effects[0]), "{text}");
     assert_eq!(report.selection.credited, effects, "{text}");
-    assert!(report.confidence.separated, "{text}");
+    if report.effects[0].name == effects[0] {
+        assert!(report.confidence.separated, "{text}");
+    }
     let after = report.selection.gap_after;
     assert!(
         (after / noise - 1.0).abs() < tolerance,

@@ -132,6 +132,7 @@ fn every_number_non_finite() -> Report {
                 fit: Some(fit()),
             }],
             credited: vec!["product_decay".into()],
+            refitted: Vec::new(),
             gap_after: INF,
             stop: "no effect left".into(),
             criterion: "BIC".into(),

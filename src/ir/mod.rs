@@ -15,6 +15,7 @@ mod model;
 mod noise;
 pub mod nonnegative;
 mod print;
+mod release;
 
 pub use lower::{effect_violations, lower, lower_reporting, LowerError};
 pub use model::{
@@ -25,3 +26,4 @@ pub use model::{
 pub use model::{Const, Embedding, Network, Prior};
 pub use noise::{merge_noise, parse_noise_spec, NoiseSpec};
 pub use print::{expr_text, print};
+pub use release::{releasable, release};

@@ -86,6 +86,9 @@ fn diagnose_reads_a_data_set_and_writes_its_reports() {
         &figures,
         "--restarts",
         "1",
+        // Cut from one run: the hidden enzyme of e2 and e3 does not start where the model
+        // declares (docs/diagnose.md, "Data sets").
+        "--fit-initial",
     ]);
     let out = gbc(&args);
     let stdout = text(&out.stdout);

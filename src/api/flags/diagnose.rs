@@ -37,6 +37,12 @@ pub struct DiagnoseArgs {
     /// (docs/diagnose.md).
     #[arg(long)]
     pub fit_starts: bool,
+    /// Hold every `const` at its declared value: only the model's effects are candidates.
+    /// By default each constant a free run reads also competes, refitted as a param
+    /// (`refit NAME`), so that a literature value or a guessed inoculum the data contradict
+    /// is named rather than a look-alike effect credited.
+    #[arg(long)]
+    pub hold_constants: bool,
     /// How data columns are named.
     #[command(flatten)]
     pub columns: ColumnArgs,
@@ -115,6 +121,7 @@ impl DiagnoseArgs {
                 fit_starts: self.fit_starts,
                 locate: !self.skip_loci,
                 min_rows: self.min_rows,
+                refit_constants: !self.hold_constants,
                 ..Options::default()
             },
             holdout: self.holdout.clone(),

@@ -40,10 +40,11 @@ pub fn fit_mechanism(
         options.fit_initial,
         options.min_rows,
     )?;
+    split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     if options.fit_starts {
         split.fit_measured_starts(model);
+        super::noise::bound_fitted_starts(&mut split);
     }
-    split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     let declared = BTreeMap::new();
     let starts = Starts::new(options.restarts);
     let fit = fit_model(&split, model, (&declared, starts), options.task_seed(0))?;

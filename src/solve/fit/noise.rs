@@ -232,6 +232,31 @@ fn declared_text(noise: &crate::ir::Noise) -> String {
         .join(" + ")
 }
 
+/// How many standard deviations of its noise a fitted start may move from its measured
+/// cell: a measurement is a value with its noise, and a start 3 standard deviations off its
+/// cell is no longer that measurement (a fitted start unbounded takes the place of a
+/// missing lag or a wrong inoculum the model should be blamed for).
+pub const START_WIDTH: f64 = 3.0;
+
+/// Bounds every fitted start that has a measured first cell ([`Split::fitted_starts`] with
+/// `--fit-starts`) to the cell plus or minus [`START_WIDTH`] standard deviations of its
+/// noise: the declared noise at the cell's value, else the state's noise estimated from
+/// the data ([`noise_floors`]). A start whose noise is zero or unknown stays free.
+pub fn bound_fitted_starts(split: &mut Split) {
+    let floors = noise_floors(split);
+    split.start_bounds = (split.fitted_starts.iter())
+        .map(|&(record, k)| {
+            let cell = split.records[record].states[k].first().copied().flatten()?;
+            let sigma = match &split.declared[k] {
+                Some((noise, _)) => noise.sigma(cell),
+                None => floors[k].variance.sqrt() * split.normalisation.state_std[k],
+            };
+            (sigma > 0.0 && sigma.is_finite())
+                .then(|| (cell - START_WIDTH * sigma, cell + START_WIDTH * sigma))
+        })
+        .collect();
+}
+
 /// Per measured state, the noise estimate in normalised units (variance divided by the
 /// training variance), pooled over the training parts of every experiment.
 pub fn noise_floors(split: &Split) -> Vec<NoiseEstimate> {

@@ -72,6 +72,10 @@ pub struct Split {
     pub starts: Vec<Vec<Start>>,
     /// The fitted starts: `(record, state)` of each, in order.
     pub fitted_starts: Vec<(usize, usize)>,
+    /// Per fitted start (in the order of [`Split::fitted_starts`]), the range a fit may
+    /// move it in: a measured first cell's plausible values given its noise
+    /// ([`super::noise::bound_fitted_starts`]); `None`: free.
+    pub start_bounds: Vec<Option<(f64, f64)>>,
     /// How the held-out part was chosen.
     pub holdout: Holdout,
     /// Whether hidden states start from values fitted per training experiment.
@@ -193,6 +197,7 @@ impl Split {
             parts,
             starts: Vec::new(),
             fitted_starts: Vec::new(),
+            start_bounds: Vec::new(),
             holdout,
             fit_hidden,
             normalisation,
@@ -262,6 +267,7 @@ impl Split {
     pub fn fit_measured_starts(&mut self, model: &Model) {
         self.starts.clear();
         self.fitted_starts.clear();
+        self.start_bounds.clear();
         self.plan_starts(model, true);
     }
 

@@ -12,7 +12,8 @@ use std::collections::BTreeMap;
 pub struct Unknowns {
     /// Names: params, then `STATE@EXPERIMENT` for fitted starts.
     pub names: Vec<String>,
-    /// Constraints (fitted starts are free).
+    /// Constraints (a fitted start is bounded by its cell's noise, [`Split::start_bounds`],
+    /// else free).
     pub constraints: Vec<Constraint>,
     /// Default values.
     pub defaults: Vec<f64>,
@@ -29,12 +30,16 @@ impl Unknowns {
             unknowns.push(param.name.clone(), param.constraint, param.init);
         }
         let guesses = initial_guesses(split);
-        for (&(record, state), guess) in split.fitted_starts.iter().zip(guesses) {
+        for (i, (&(record, state), guess)) in split.fitted_starts.iter().zip(guesses).enumerate() {
             let name = format!(
                 "{}@{}",
                 model.states[state].name, split.records[record].name
             );
-            unknowns.push(name, Constraint::Free, guess);
+            let constraint = match split.start_bounds.get(i).copied().flatten() {
+                Some((lo, hi)) => Constraint::Bounds(lo, hi),
+                None => Constraint::Free,
+            };
+            unknowns.push(name, constraint, guess);
         }
         if split.fit_hidden {
             unknowns.push_hidden_starts(split, model, simulator);
