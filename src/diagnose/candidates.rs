@@ -28,20 +28,23 @@ pub fn candidates(model: &Model, refits: bool) -> Vec<Candidate> {
         name: effect.name.clone(),
         description: effect.description.clone(),
     });
-    let constants = (refits.then(|| ir::releasable(model)).unwrap_or_default())
-        .into_iter()
-        .map(|name| {
-            let value = (model.consts.iter())
-                .find(|c| c.name == name)
-                .map(|c| c.value);
-            Candidate {
-                description: Some(format!(
-                    "the held constant `{name}` ({}) is not what the data say",
-                    value.map_or(String::new(), super::render::num)
-                )),
-                name: format!("{REFIT}{name}"),
-            }
-        });
+    let released = if refits {
+        ir::releasable(model)
+    } else {
+        Vec::new()
+    };
+    let constants = released.into_iter().map(|name| {
+        let value = (model.consts.iter())
+            .find(|c| c.name == name)
+            .map(|c| c.value);
+        Candidate {
+            description: Some(format!(
+                "the held constant `{name}` ({}) is not what the data say",
+                value.map_or(String::new(), super::render::num)
+            )),
+            name: format!("{REFIT}{name}"),
+        }
+    });
     effects.chain(constants).collect()
 }
 

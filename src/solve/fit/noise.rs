@@ -252,7 +252,7 @@ pub fn bound_fitted_starts(split: &mut Split) {
                 None => floors[k].variance.sqrt() * split.normalisation.state_std[k],
             };
             (sigma > 0.0 && sigma.is_finite())
-                .then(|| (cell - START_WIDTH * sigma, cell + START_WIDTH * sigma))
+                .then_some((cell - START_WIDTH * sigma, cell + START_WIDTH * sigma))
         })
         .collect();
 }
