@@ -191,6 +191,8 @@ def blank_row(case, command, source="run"):
         "greybox_error": None, "naive_error": None, "right": None, "undecided": False,
         "params_estimated": 0, "params_identified": 0, "params_within_3se": 0,
         "fits_unreported": 0, "message": None,
+        "withheld": (len((case.get("answer") or {}).get("withheld") or [])
+                     if case["kind"] != "real" else None),
     }
 
 
@@ -541,7 +543,20 @@ def tally(rows):
         "identified": sum(r["params_identified"] for r in ran),
         "within": sum(r["params_within_3se"] for r in ran),
         "unreported": sum(r["fits_unreported"] for r in ran),
+        "classes": {size: (count(judged, lambda r, s=size: ok(r) and r["right"] and not r["undecided"]
+                                 and class_of(r) == s),
+                           count(judged, lambda r, s=size: class_of(r) == s))
+                    for size in ("nothing", "one", "two")},
+        "nothing_significant": (count(judged, lambda r: class_of(r) == "nothing"
+                                      and r["significant"] is True),
+                                count(judged, lambda r: class_of(r) == "nothing")),
     }
+
+
+def class_of(row):
+    """`nothing`, `one` or `two` (or more) effects withheld from a scenario's model."""
+    withheld = row.get("withheld") or 0
+    return ("nothing", "one")[withheld] if withheld < 2 else "two"
 
 
 def summary_line(command, t):
@@ -555,6 +570,12 @@ def summary_line(command, t):
             + (f", {t['not_applicable']} not applicable" if t["not_applicable"] else "") + ")")
     if command in JUDGED:
         line += f"; right {t['right']} of {t['scenarios']} scenarios ({', '.join(apart)})"
+    if command == "diagnose" and t["scenarios"]:
+        classes = ", ".join(f"{name} withheld {right}/{total}"
+                            for name, (right, total) in t["classes"].items() if total)
+        significant, nothing = t["nothing_significant"]
+        line += (f"; right by class: {classes}; a gap called significant where nothing is "
+                 f"withheld: {significant} of {nothing}")
     if t["estimated"] or t["unreported"]:
         line += (f"; params identified {t['identified']} of {t['estimated']} estimated "
                  f"(truth known), within 3 SE of the truth {t['within']}")

@@ -117,6 +117,19 @@ class MissingReport(Folder):
                       run.summary([row, ok]))
         self.assertEqual(run.failures([row, ok]), [row])
 
+    def test_classes_and_significance_where_nothing_is_withheld(self):
+        case = scenario(self.dir)  # nothing withheld
+        (self.dir / "diagnose.json").write_text(json.dumps(diagnosis()))
+        quiet = run.row_for(case, "diagnose", 0, 1.0, 50, self.dir, self.log)
+        quiet["significant"] = False
+        loud = dict(quiet, significant=True)
+        wrong_pair = dict(quiet, withheld=2, right=False)
+        tally = run.tally([quiet, loud, wrong_pair])
+        self.assertEqual(tally["classes"], {"nothing": (2, 2), "one": (0, 0), "two": (0, 1)})
+        self.assertEqual(tally["nothing_significant"], (1, 2))
+        self.assertIn("nothing withheld 2/2, two withheld 0/1; a gap called significant where "
+                      "nothing is withheld: 1 of 2", run.summary([quiet, loud, wrong_pair]))
+
     def test_unreadable_or_partial_report_is_a_failure(self):
         case = scenario(self.dir)
         (self.dir / "diagnose.json").write_text("{not json")

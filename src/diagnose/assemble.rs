@@ -10,9 +10,9 @@ use super::render::num;
 use super::report::*;
 use super::selection::Levels;
 use crate::record::measure;
-use crate::solve::fit::noise;
 use crate::solve::fit::simulate::Simulator;
 use crate::solve::fit::split::{measured_rows, Holdout, Start};
+use crate::solve::fit::{noise, predictive};
 
 /// Per measured state, its noise: estimated from the data ([`noise::noise_floors`]), at
 /// most the training residual of the model's fit and of the best effect's (by BIC).
@@ -27,6 +27,32 @@ pub fn noise_estimates(
         noise::cap_by_fit(&mut estimates, &fit.training_squares, fit.fitted.x.len());
     }
     estimates
+}
+
+/// What a correct model's held-out runs add to the noise floor: the spread of the model's
+/// fit `before` (its params' covariance and the noise of the measured starts, each state's
+/// as `states` give it) at the scored cells ([`predictive::held_out_spread`]). Params the
+/// fit held or could not identify stay at their values: a direction the training data
+/// leave free has no spread to draw from (its linearised variance is unbounded), and a
+/// param driven there is a symptom of a misfit, not of a correct model's noise.
+pub fn held_out_spread(
+    context: &Context,
+    base: &Simulator,
+    before: &Scored,
+    states: &[StateGap],
+) -> Option<f64> {
+    let split = &context.split;
+    let unknowns = context.unknowns(context.model, base);
+    let x = &before.fitted.x;
+    let held = |name: &String| {
+        (before.summary.estimates.iter())
+            .find(|e| &e.name == name)
+            .is_some_and(|e| e.held || !e.identified)
+    };
+    let fixed: Vec<bool> = unknowns.names.iter().map(held).collect();
+    let noise: Vec<f64> = states.iter().map(|s| s.noise).collect();
+    let seed = context.seed(7000);
+    predictive::held_out_spread((split, base), (&unknowns, x, &fixed), (&noise, seed))
 }
 
 /// Per measured state: its share of the held-out error, online and offline errors, noise.
@@ -103,7 +129,7 @@ pub fn memory(
         time_constants: taus.to_vec(),
         reason: String::new(),
     };
-    let significant = levels.gap_before > SIGNIFICANCE * levels.noise_floor;
+    let significant = levels.gap_before > SIGNIFICANCE * levels.held_out_floor;
     let Some(first) = located.loci.first().filter(|_| significant) else {
         memory.reason = if significant {
             "not probed: the free corrections were not tried".into()
@@ -329,6 +355,7 @@ pub fn split_summary(context: &Context) -> SplitSummary {
             Holdout::Tail(share) => Some(share),
             Holdout::Experiments => None,
         },
+        min_rows: context.options.min_rows,
     }
 }
 

@@ -69,7 +69,8 @@ pub struct Options {
     /// The measurement noise (`ir::merge_noise` of the model's declarations and the
     /// command line's `--noise`); `None`: the model's declarations.
     pub noise: Option<Vec<crate::ir::Noise>>,
-    /// Measured rows each part (training, held-out) needs; default [`MIN_ROWS`].
+    /// Measured rows the training part needs, and below which a held-out score is said to
+    /// rest on few rows; default [`MIN_ROWS`].
     pub min_rows: usize,
     /// Whether the constants a free run reads compete with the effects as candidates,
     /// each refitted as a param (`--hold-constants` turns it off).

@@ -38,15 +38,18 @@ pub fn page(report: &Report) -> String {
             &bars(report),
             "The held-out gap (the free run's normalised MSE over the held-out part) before any \
              effect, after the credited effects (or the best effect, when none is credited), \
-             with the best free correction, and the noise floor; percentages are changes from \
+             with the best free correction, the noise floor and what a correct model would \
+             show (the floor plus the spread of its fitted params and noisy starts; the gap \
+             is significant above twice that); percentages are changes from \
              before."
         )
     );
     if !report.selection.steps.is_empty() {
         gap.push_str(&figure(
             &selection_chart(report),
-            "The sets of effects fitted on the training data, best training BIC first (the \
-             first twelve): the held-out gap of each scores the choice, it does not make it.",
+            "The sets of effects fitted on the training data, best training BIC first (a set \
+             that refits a held constant pays a prior penalty on top; the first twelve): the \
+             held-out gap of each scores the choice, it does not make it.",
         ));
     }
     let mut sections = Vec::new();
@@ -221,8 +224,8 @@ fn gap_bars(title: &str, rows: Vec<(String, f64, &str, String)>) -> String {
     chart.to_svg(WIDTH)
 }
 
-/// The gap before, after the credited effects (or the best one), at the best locus, and the
-/// noise floor.
+/// The gap before, after the credited effects (or the best one), at the best locus, the
+/// noise floor and what a correct model would show (the floor plus the held-out spread).
 fn bars(report: &Report) -> String {
     let change = |gap: f64| percent(-(1.0 - gap / report.gap_before));
     let mut rows = vec![(
@@ -251,6 +254,10 @@ fn bars(report: &Report) -> String {
     }
     let floor = report.noise_floor;
     rows.push(("noise floor".into(), floor, DATA, change(floor)));
+    if let Some(spread) = report.held_out_spread {
+        let label = "a correct model: the floor + its params' and starts' spread".to_string();
+        rows.push((label, floor + spread, DATA, change(floor + spread)));
+    }
     gap_bars("held-out gap before and after", rows)
 }
 
@@ -298,7 +305,16 @@ fn selection_chart(report: &Report) -> String {
         } else {
             ("not credited", REJECTED)
         };
-        let note = format!("{verdict}, BIC {}", num(step.bic));
+        let penalty = super::candidates::prior_penalty(&step.effects);
+        let note = if penalty > 0.0 {
+            format!(
+                "{verdict}, BIC {} (+{} for refitted constants)",
+                num(step.bic),
+                num(penalty)
+            )
+        } else {
+            format!("{verdict}, BIC {}", num(step.bic))
+        };
         rows.push((step.effects.join(" + "), step.gap_after, colour, note));
     }
     let floor = report.noise_floor;

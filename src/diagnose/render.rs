@@ -46,9 +46,17 @@ fn header(out: &mut String, report: &Report) {
         (false, true) => held,
         (true, _) => format!("experiments {}", whole.join(", ")),
     };
+    let sparse = if split.sparse() {
+        format!(
+            "; fewer than {} rows: the held-out score is noisy",
+            split.min_rows
+        )
+    } else {
+        String::new()
+    };
     let _ = writeln!(
         out,
-        "model {}: fitted on {} measured rows ({}), scored on {} ({held})\n",
+        "model {}: fitted on {} measured rows ({}), scored on {} ({held}{sparse})\n",
         report.model,
         split.train_rows,
         split.train_experiments.join(", "),
@@ -84,12 +92,27 @@ fn where_section(out: &mut String, report: &Report) {
 
 /// The gap before against the noise floor, with its verdict, and the mean error per state.
 fn gap_lines(out: &mut String, report: &Report) {
+    let spread = report.held_out_spread.unwrap_or(0.0);
+    let expected = report.noise_floor + spread;
     let ratio = if !report.gap_before.is_finite() {
         "-".to_string()
-    } else if report.noise_floor > 0.0 {
-        format!("{}x", num(report.gap_before / report.noise_floor))
+    } else if expected > 0.0 {
+        format!("{}x", num(report.gap_before / expected))
     } else {
         "noise-free data".to_string()
+    };
+    let floor = match report.held_out_spread {
+        Some(spread) => format!(
+            "noise floor {} + {} from the fitted params' uncertainty and the noisy first rows \
+             the runs start from = {} for a correct model",
+            num(report.noise_floor),
+            num(spread),
+            num(expected)
+        ),
+        None => format!(
+            "noise floor {} (the spread of the fitted params and starts could not be computed)",
+            num(report.noise_floor)
+        ),
     };
     let verdict = if !report.gap_before.is_finite() {
         "the fitted model's free run diverges on the held-out part, so the gap cannot be \
@@ -97,13 +120,12 @@ fn gap_lines(out: &mut String, report: &Report) {
     } else if report.significant {
         "significant"
     } else {
-        "not significant: the model explains the data to the noise level"
+        "not significant: the model explains the held-out data as well as a correct model would"
     };
     let _ = writeln!(
         out,
-        "   gap before {} (held-out free run, normalised MSE); noise floor {} ({ratio}): {verdict}",
+        "   gap before {} (held-out free run, normalised MSE); {floor} ({ratio}): {verdict}",
         num(report.gap_before),
-        num(report.noise_floor),
     );
     let _ = writeln!(
         out,

@@ -18,7 +18,14 @@ pub struct Report {
     /// Gap a perfect model would show: the measurement noise in normalised units.
     #[serde(with = "crate::json")]
     pub noise_floor: f64,
-    /// Whether the gap clearly exceeds the noise (see [`super::SIGNIFICANCE`]).
+    /// What a correct model's held-out runs add to the noise floor (mean squared
+    /// normalised deviation): the fitted params' uncertainty and the noise of the measured
+    /// first rows they start from, carried by the runs' sensitivities
+    /// ([`crate::solve::fit::predictive`]). `None`: it could not be computed.
+    #[serde(default, with = "crate::json")]
+    pub held_out_spread: Option<f64>,
+    /// Whether the gap clearly exceeds what a correct model would show: the noise floor
+    /// plus the held-out spread (see [`super::SIGNIFICANCE`]).
     pub significant: bool,
     /// The same held-out errors as `gbc train` and `gbc predict` pool them: the mean over
     /// measured states of each state's normalised MSE (`StateGap::online`), where the gap
@@ -375,6 +382,17 @@ pub struct SplitSummary {
     /// The share of a tail split.
     #[serde(with = "crate::json")]
     pub share: Option<f64>,
+    /// The measured rows a part should have (`--min-rows`): a held-out part with fewer is
+    /// scored, and its score said to rest on few rows.
+    #[serde(default)]
+    pub min_rows: usize,
+}
+
+impl SplitSummary {
+    /// Whether the held-out score rests on fewer rows than [`SplitSummary::min_rows`].
+    pub fn sparse(&self) -> bool {
+        self.test_rows < self.min_rows
+    }
 }
 
 /// Where the time went, in seconds of wall time.

@@ -64,6 +64,9 @@ pub struct Levels {
     pub gap_before: f64,
     /// The noise floor.
     pub noise_floor: f64,
+    /// What a correct model's held-out gap would be: the noise floor plus the spread its
+    /// fitted params and noisy starts add ([`crate::solve::fit::predictive`]).
+    pub held_out_floor: f64,
 }
 
 /// One fitted set of effects.

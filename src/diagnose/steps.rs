@@ -127,6 +127,8 @@ struct Findings<'a> {
     /// Each measured state's share of the gap, and the noise floor they give.
     states: Vec<StateGap>,
     noise_floor: f64,
+    /// What a correct model's held-out runs add to the noise floor (`None`: unknown).
+    held_out_spread: Option<f64>,
     selection: Selection,
     /// The fit of the credited set of effects, if any.
     credited_fit: Option<Scored>,
@@ -162,6 +164,7 @@ impl<'a> Findings<'a> {
             ranking: Ranking::default(),
             states: Vec::new(),
             noise_floor: f64::NAN,
+            held_out_spread: None,
             selection: Selection::default(),
             credited_fit: None,
             taus: Vec::new(),
@@ -211,13 +214,15 @@ impl<'a> Findings<'a> {
         Ok(Levels {
             gap_before: self.before()?.gap,
             noise_floor: self.noise_floor,
+            held_out_floor: self.noise_floor + self.held_out_spread.unwrap_or(0.0),
         })
     }
 
     /// Whether the gap exceeds the noise floor significantly.
     fn significant(&self) -> Result<bool, DiagnoseError> {
-        let gap_before = self.before()?.gap;
-        Ok(gap_before.is_finite() && gap_before > SIGNIFICANCE * self.noise_floor)
+        let levels = self.levels()?;
+        Ok(levels.gap_before.is_finite()
+            && levels.gap_before > SIGNIFICANCE * levels.held_out_floor)
     }
 
     /// Fits the model's params (and starts) and scores it.
@@ -248,7 +253,9 @@ impl<'a> Findings<'a> {
         let (context, before) = (&self.context, self.before()?);
         let noise = assemble::noise_estimates(context, before, &self.ranking);
         let states = assemble::state_gaps(context, &self.base, before, &noise);
+        let spread = assemble::held_out_spread(context, &self.base, before, &states);
         self.noise_floor = assemble::noise_floor(&states);
+        self.held_out_spread = spread;
         self.states = states;
         Ok(())
     }
@@ -307,6 +314,7 @@ impl<'a> Findings<'a> {
             gap_before: before.gap,
             gap_before_per_state: assemble::mean_over_states(&states),
             noise_floor: self.noise_floor,
+            held_out_spread: self.held_out_spread,
             significant,
             states,
             history_dependent: memory.history_needed,

@@ -415,13 +415,34 @@ fn models_with_closures_or_too_little_data_are_refused() {
         Err(DiagnoseError::Fit(FitError::HasClosures { .. }))
     ));
     let mut short = sets[0].clone();
-    short.record = short.record.rows(0..20);
+    short.record = short.record.rows(0..12);
     let refused = try_run(CHEMOSTAT_MODEL, &[short], &Options::default()).unwrap_err();
-    // 20 measured rows: 14 train, 6 held out.
+    // 12 measured rows: 8 train, 4 held out; the training part is too small to fit.
     assert_eq!(
         refused.to_string(),
-        "expected at least 10 measured rows in the training part and 10 in the held-out part, \
-         found 14 and 6 (the last 30 % of each experiment held out)"
+        "expected at least 10 measured rows in the training part and one in the held-out part, \
+         found 8 and 4 (the last 30 % of each experiment held out)"
+    );
+}
+
+/// A held-out part of a few rows is scored, not refused: the report says how few.
+#[test]
+fn a_sparse_held_out_part_is_scored_and_said_to_be_few_rows() {
+    let mut short = chemostat("truth.gbm");
+    short.record = short.record.rows(0..20);
+    let options = Options {
+        locate: false,
+        ..Options::default()
+    };
+    // 20 measured rows: 14 train, 6 held out (fewer than the 10 of --min-rows).
+    let report = run(CHEMOSTAT_MODEL, &[short], &options);
+    assert_eq!((report.split.train_rows, report.split.test_rows), (14, 6));
+    assert!(report.split.sparse());
+    assert!(report.gap_before.is_finite() && report.gap_before > 0.0);
+    let text = render::text(&report);
+    assert!(
+        text.contains("fewer than 10 rows: the held-out score is noisy"),
+        "{text}"
     );
 }
 

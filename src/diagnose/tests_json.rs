@@ -52,6 +52,7 @@ fn every_number_non_finite() -> Report {
         gap_before: INF,
         gap_before_per_state: NAN,
         noise_floor: NAN,
+        held_out_spread: Some(NAN),
         significant: true,
         states: vec![StateGap {
             name: "S".into(),
@@ -174,6 +175,7 @@ fn every_number_non_finite() -> Report {
             }],
             holdout: "tail".into(),
             share: Some(NAN),
+            min_rows: 10,
         },
         partial: None,
         timing: Timing {

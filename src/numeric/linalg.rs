@@ -49,6 +49,14 @@ impl Cholesky {
         Some(Cholesky { n, lower })
     }
 
+    /// `L z`: with `z` standard normal, a draw of zero mean and covariance `a`.
+    pub fn times(&self, z: &[f64]) -> Vec<f64> {
+        let n = self.n;
+        (0..n)
+            .map(|i| (0..=i).map(|k| self.lower[i * n + k] * z[k]).sum())
+            .collect()
+    }
+
     /// The size `n`.
     #[cfg(test)]
     pub fn size(&self) -> usize {

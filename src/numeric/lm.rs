@@ -385,29 +385,53 @@ pub fn grouped_standard_errors(
     count: usize,
 ) -> Vec<f64> {
     let unknowns = columns.len();
-    let (normal, _) = gauss_newton_system(columns, residuals);
-    let variances = group_variances(residuals, groups, unknowns);
-    let factor = Cholesky::factor(&normal, unknowns);
+    let covariance = grouped_covariance(columns, residuals, groups);
     (0..count.min(unknowns))
         .map(|i| {
-            let Some(factor) = factor.as_ref() else {
-                return f64::INFINITY;
-            };
-            // Row `j` of `J (J'J)^-1 e_i`, weighted by its group's variance.
-            let direction = factor.inverse_column(i);
-            let variance: f64 = (0..residuals.len())
-                .map(|j| {
-                    let lever: f64 = (columns.iter().zip(&direction))
-                        .map(|(column, d)| column[j] * d)
-                        .sum();
-                    variances[groups[j]] * lever * lever
-                })
-                .sum();
-            Some(variance)
+            (covariance.as_ref())
+                .map(|c| c[i * unknowns + i])
                 .filter(|v| v.is_finite() && *v >= 0.0)
                 .map_or(f64::INFINITY, f64::sqrt)
         })
         .collect()
+}
+
+/// The covariance of the unknowns whose standard errors [`grouped_standard_errors`] gives:
+/// the sandwich `(J'J)^-1 (sum_g s_g^2 J_g'J_g) (J'J)^-1` (`n x n`, row-major, for `n`
+/// columns); `None` when `J'J` is not numerically positive definite.
+pub fn grouped_covariance(
+    columns: &[Vec<f64>],
+    residuals: &[f64],
+    groups: &[usize],
+) -> Option<Vec<f64>> {
+    let variances = group_variances(residuals, groups, columns.len());
+    sandwich(columns, |j| variances[groups[j]])
+}
+
+/// The covariance `(J'J)^-1 (J' D J) (J'J)^-1` of a least-squares fit with Jacobian
+/// `columns` whose residual `j` has variance `variance(j)` (`D` diagonal): `n x n`,
+/// row-major, for `n` columns; `None` when `J'J` is not numerically positive definite.
+pub fn sandwich(columns: &[Vec<f64>], variance: impl Fn(usize) -> f64) -> Option<Vec<f64>> {
+    let n = columns.len();
+    let rows = columns.first().map_or(0, Vec::len);
+    let (normal, _) = gauss_newton_system(columns, &vec![0.0; rows]);
+    let factor = Cholesky::factor(&normal, n)?;
+    // Column `i` of `(J'J)^-1` (symmetric: also its row `i`).
+    let inverse: Vec<Vec<f64>> = (0..n).map(|i| factor.inverse_column(i)).collect();
+    let mut covariance = vec![0.0; n * n];
+    for j in 0..rows {
+        // Row `j` of `J (J'J)^-1`, weighted by its residual's variance.
+        let lever: Vec<f64> = (inverse.iter())
+            .map(|row| (columns.iter().zip(row)).map(|(c, d)| c[j] * d).sum())
+            .collect();
+        let weight = variance(j);
+        for a in 0..n {
+            for b in 0..n {
+                covariance[a * n + b] += weight * lever[a] * lever[b];
+            }
+        }
+    }
+    Some(covariance)
 }
 
 /// Per group, `|r_g|^2 / max(m_g - q m_g / m, 1)`.

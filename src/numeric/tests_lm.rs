@@ -2,8 +2,8 @@
 //! Jacobians against analytic ones, and its standard errors against closed forms.
 
 use super::lm::{
-    central_difference, forward_differences, grouped_standard_errors, standard_errors, Function,
-    Jacobian,
+    central_difference, forward_differences, grouped_covariance, grouped_standard_errors,
+    standard_errors, Function, Jacobian,
 };
 use super::*;
 use rand::SeedableRng;
@@ -227,6 +227,33 @@ fn grouped_standard_errors_match_the_spread_of_refits_under_unequal_noise() {
     for (a, b) in one.iter().zip(&plain) {
         assert!((a / b - 1.0).abs() < 1e-9, "{one:?} {plain:?}");
     }
+}
+
+/// With one noise group the sandwich is `s^2 (J'J)^-1`: for a straight line `a + b t`, the
+/// closed forms `var b = s^2 / Sxx`, `cov(a, b) = -s^2 mean / Sxx` and
+/// `var a = s^2 (1 / n + mean^2 / Sxx)`.
+#[test]
+fn the_grouped_covariance_of_a_line_is_its_closed_form() {
+    let t: Vec<f64> = (0..25).map(|k| 0.3 * k as f64 + 1.0).collect();
+    let residuals: Vec<f64> = t.iter().map(|t| (t * 5.0).cos() * 0.2).collect();
+    let columns = vec![vec![1.0; t.len()], t.clone()];
+    let n = t.len() as f64;
+    let mean = t.iter().sum::<f64>() / n;
+    let sxx: f64 = t.iter().map(|t| (t - mean).powi(2)).sum();
+    let s2 = residuals.iter().map(|r| r * r).sum::<f64>() / (n - 2.0);
+    let c = grouped_covariance(&columns, &residuals, &vec![0; t.len()]).unwrap();
+    let expected = [
+        s2 * (1.0 / n + mean * mean / sxx),
+        -s2 * mean / sxx,
+        -s2 * mean / sxx,
+        s2 / sxx,
+    ];
+    for (got, want) in c.iter().zip(expected) {
+        assert!((got / want - 1.0).abs() < 1e-9, "{c:?} {expected:?}");
+    }
+    // Two identical columns leave J'J singular: no covariance.
+    let twins = vec![t.clone(), t.clone()];
+    assert!(grouped_covariance(&twins, &residuals, &vec![0; t.len()]).is_none());
 }
 
 #[test]

@@ -158,21 +158,25 @@ fn bad_diagnose_input_is_a_coded_error_with_exit_one() {
         "gbm::E0805",
         &["--span"],
     );
-    // A held-out experiment too small: the message says what each part needs and got.
+    // A held-out experiment with nothing to score (its first row is its start, its second
+    // row measures nothing): the message says what each part needs and got.
     let tiny = dir.join("tiny.csv");
-    let rows: Vec<String> = std::fs::read_to_string(e3)
+    let mut rows: Vec<String> = std::fs::read_to_string(e3)
         .expect("e3")
         .lines()
-        .take(7)
+        .take(3)
         .map(str::to_string)
         .collect();
+    // t, the input E0, then the states S and P left blank.
+    let second: Vec<&str> = rows[2].split(',').take(2).collect();
+    rows[2] = format!("{},,", second.join(","));
     std::fs::write(&tiny, rows.join("\n") + "\n").expect("write");
     let tiny = tiny.display().to_string();
     refused(
         &["diagnose", MODEL, e1, e2, "--val", &tiny],
         "gbm::E0803",
         &[
-            "expected at least 10 measured rows in the training part and 10 in the held-out part",
+            "expected at least 10 measured rows in the training part and one in the held-out part",
             "(experiment `tiny` held out)",
         ],
     );

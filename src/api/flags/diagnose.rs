@@ -77,8 +77,8 @@ pub struct DiagnoseArgs {
     /// Write an HTML report with figures to this file.
     #[arg(long, value_name = "FILE")]
     pub html: Option<PathBuf>,
-    /// Measured rows the training part and the held-out part each need (a score on a few
-    /// rows is noisy; below the default, say so in what you report).
+    /// Measured rows the training part needs; a held-out part with fewer is still scored,
+    /// and the report says its score rests on few rows (a score of a few rows is noisy).
     #[arg(long, value_name = "N", default_value_t = crate::diagnose::MIN_ROWS)]
     pub min_rows: usize,
     /// Write the report's figures as SVG files into this directory.

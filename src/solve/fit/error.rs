@@ -29,9 +29,9 @@ pub enum FitError {
         /// The hidden state.
         state: String,
     },
-    /// Too few measured rows to fit on one part and score on the other.
+    /// Too few measured rows to fit on one part, or none to score on the other.
     #[error(
-        "expected at least {needed} measured rows in the training part and {needed} in the \
+        "expected at least {needed} measured rows in the training part and one in the \
          held-out part, found {train} and {test} ({how})"
     )]
     #[diagnostic(
@@ -44,7 +44,7 @@ pub enum FitError {
         )
     )]
     TooFewRows {
-        /// Measured rows each part needs.
+        /// Measured rows the training part needs.
         needed: usize,
         /// Measured rows in the training part.
         train: usize,

@@ -129,7 +129,7 @@ impl Objective<'_> {
     /// `value(row, k) * weight / std_k / sqrt(cells)` at every measured training cell of `record`
     /// in `rows` (the residuals' order: row by row, state by state); with `value` the
     /// simulation's deviation that gives the residuals, and its derivative their Jacobian.
-    fn record_residuals(
+    pub(super) fn record_residuals(
         &self,
         record: &crate::record::Record,
         rows: std::ops::Range<usize>,

@@ -9,7 +9,8 @@
 //!   transformed coordinates; [`model`]: a model fitted on a split, held along a free
 //!   direction; [`unknowns`]: what a fit solves for.
 //! - [`uncertainty`]: standard errors, identifiability and the free direction, reported
-//!   as a [`FitSummary`]; [`noise`]: the measurement noise from the data alone.
+//!   as a [`FitSummary`]; [`noise`]: the measurement noise from the data alone;
+//!   [`predictive`]: the spread a correct model's held-out runs add to the noise.
 //! - [`mechanism`]: a model without closures fitted to whole training experiments
 //!   (`gbc train`'s mechanism fit).
 
@@ -18,6 +19,7 @@ pub mod fitter;
 pub mod mechanism;
 pub mod model;
 pub mod noise;
+pub mod predictive;
 pub mod sensitivity;
 pub mod simulate;
 pub mod split;

@@ -22,8 +22,11 @@ use crate::ir::Model;
 use crate::record::{Normalisation, Record};
 use std::ops::Range;
 
-/// The fewest measured rows in the training part and in the held-out part.
+/// The fewest measured rows in the training part (`--min-rows`); a held-out part with
+/// fewer is still scored, and the report says its score rests on few rows.
 pub const MIN_ROWS: usize = 10;
+/// The fewest measured rows a held-out part is scored on.
+pub const MIN_SCORED_ROWS: usize = 1;
 
 /// One experiment's place in the diagnosis.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -89,7 +92,7 @@ pub struct Split {
 
 impl Split {
     /// The split of `train` (experiments that fit; with `Tail`, their tails are scored) and
-    /// `held` (experiments that are only scored), each part needing [`MIN_ROWS`].
+    /// `held` (experiments that are only scored), the training part needing [`MIN_ROWS`].
     #[cfg(test)]
     pub fn new(
         model: &Model,
@@ -100,7 +103,9 @@ impl Split {
         Split::with_min_rows(model, (train, held), (holdout, fit_hidden), MIN_ROWS)
     }
 
-    /// [`Split::new`], each part needing `min_rows` measured rows (`--min-rows`).
+    /// [`Split::new`], the training part needing `min_rows` measured rows (`--min-rows`) and
+    /// the held-out part [`MIN_SCORED_ROWS`]: sparse assays are the norm, and a held-out
+    /// experiment of a few rows is scored (the report says how few), not refused.
     pub fn with_min_rows(
         model: &Model,
         (train, held): (Vec<Record>, Vec<Record>),
@@ -132,7 +137,7 @@ impl Split {
                 .sum()
         };
         let (fit, scored) = (count(&|p| p.train.clone()), count(&|p| p.test.clone()));
-        if fit < min_rows || scored < min_rows {
+        if fit < min_rows || scored < MIN_SCORED_ROWS {
             return Err(FitError::TooFewRows {
                 needed: min_rows,
                 train: fit,

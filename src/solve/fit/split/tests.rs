@@ -84,17 +84,27 @@ fn held_out_experiments_are_scored_after_their_start_row() {
 
 #[test]
 fn too_small_parts_say_what_each_needs_and_got() {
-    let error = Split::new(
+    // A sparse held-out experiment is scored: 5 rows after its start.
+    let sparse = Split::new(
         &model(),
         vec![record("a", 34)],
         vec![record("b", 6)],
         (Holdout::Experiments, false),
     )
+    .unwrap();
+    assert_eq!(sparse.measured_rows(), (34, 5));
+    // One with nothing after its start is not, nor a training part under 10 rows.
+    let error = Split::new(
+        &model(),
+        vec![record("a", 9)],
+        vec![record("b", 1)],
+        (Holdout::Experiments, false),
+    )
     .unwrap_err();
     assert_eq!(
         error.to_string(),
-        "expected at least 10 measured rows in the training part and 10 in the held-out \
-         part, found 34 and 5 (experiment `b` held out)"
+        "expected at least 10 measured rows in the training part and one in the held-out \
+         part, found 9 and 0 (experiment `b` held out)"
     );
     let error = Split::new(
         &model(),
