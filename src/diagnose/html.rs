@@ -308,7 +308,7 @@ fn selection_chart(report: &Report) -> String {
         let penalty = super::candidates::prior_penalty(&step.effects);
         let note = if penalty > 0.0 {
             format!(
-                "{verdict}, BIC {} (+{} for refitted constants)",
+                "{verdict}, BIC {} + {} (refits)",
                 num(step.bic),
                 num(penalty)
             )

@@ -35,6 +35,11 @@ pub fn linear_ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
 /// Ticks covering `[lo, hi]` (both > 0) on a log axis: the decades, or where fewer than
 /// two fall inside, 1, 2 and 5 times the decades, or failing that round linear steps.
 pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    // A range that is not positive and finite has no decades to tick (log10(0) would ask
+    // for 2^31 of them).
+    if !(lo > 0.0 && lo.is_finite() && hi.is_finite() && hi >= lo) {
+        return Vec::new();
+    }
     let inside = |t: &f64| (lo..=hi).contains(t);
     let (first, last) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
     let decades: Vec<f64> = (first..=last).map(|k| 10f64.powi(k)).collect();

@@ -111,6 +111,9 @@ impl Bar {
     }
 }
 
+/// The largest share of the plot's width the texts after the bars may take.
+const TEXT_SHARE: f64 = 0.6;
+
 /// Horizontal bars, one row each, from the left end of the value axis (log) or from zero
 /// (linear); the figure's height follows from the number of rows.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -199,8 +202,10 @@ impl Bars {
 
     /// The value axis from `start` to `end` pixels, its largest value `text_room` pixels
     /// short of `end` (the texts after the bars stay inside the plot); on a log axis the
-    /// smallest value still gets a visible bar.
+    /// smallest value still gets a visible bar. The texts get at most [`TEXT_SHARE`] of the
+    /// width: a long text would otherwise stretch the axis past any number.
     fn value_axis(&self, (start, end): (f64, f64), text_room: f64) -> Axis {
+        let text_room = text_room.min(TEXT_SHARE * (end - start));
         let values = self.rows.iter().map(|r| r.value);
         let data = if self.log {
             let lowest = (values.clone())

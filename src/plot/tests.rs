@@ -46,6 +46,8 @@ fn linear_ticks_are_round_and_cover_the_range() {
 #[test]
 fn log_ticks_are_decades() {
     assert_eq!(log_ticks(0.003, 20.0), vec![0.01, 0.1, 1.0, 10.0]);
+    // No range, no ticks (not 2^31 decades).
+    assert!(log_ticks(0.0, 1.0).is_empty() && log_ticks(1.0, f64::INFINITY).is_empty());
     // Within about a decade: 1, 2 and 5 times the decades.
     assert_eq!(log_ticks(2.1, 42.6), vec![5.0, 10.0, 20.0]);
     let narrow = log_ticks(3.1, 3.9);
@@ -401,4 +403,23 @@ fn a_named_band_is_keyed_by_a_shaded_box_in_the_legend() {
         1,
         "the band itself only"
     );
+}
+
+/// A text after a bar as long as the plot is wide leaves the bars their share of it: the
+/// axis stays finite (it once stretched to infinity and asked for 2^31 ticks).
+#[test]
+fn a_very_long_bar_text_keeps_a_finite_axis() {
+    let long = "0.155 not credited, BIC -279 + 6 (refits) ".repeat(4);
+    let bars = Bars {
+        title: String::new(),
+        value_label: "gap (log)".into(),
+        log: true,
+        rows: vec![
+            Bar::new("before", 0.248, "#c0392b", &long),
+            Bar::new("after", 0.0044, "#2471a3", &long),
+        ],
+    };
+    let svg = bars.to_svg(640.0);
+    assert!(!svg.contains("inf") && !svg.contains("NaN"), "{svg}");
+    assert!(svg.contains(">0.01<") || svg.contains(">0.1<"), "{svg}");
 }
