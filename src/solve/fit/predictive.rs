@@ -130,7 +130,7 @@ fn params_covariance(
     }
     // Under a correct model each residual is its cell's noise (a misfit's residuals would
     // take the misfit for noise and the params for uncertain).
-    let variances = residual_variances(split, noise);
+    let variances = residual_variances(&objective, noise);
     if variances.len() != residuals.len() {
         return None;
     }
@@ -216,22 +216,20 @@ fn cell_variance(split: &Split, k: usize, value: f64, noise: &[f64]) -> f64 {
 }
 
 /// Per training residual (in the fits' order), its variance were the model correct: its
-/// cell's noise ([`cell_variance`]) weighted and z-scored as the residual is.
-fn residual_variances(split: &Split, noise: &[f64]) -> Vec<f64> {
-    let norm = &split.normalisation;
-    let cells = split.training_cells().max(1) as f64;
-    let mut out = Vec::with_capacity(split.training_cells());
-    for (_, record, rows) in split.training() {
-        for row in rows {
-            for (k, column) in record.states.iter().enumerate() {
-                if let Some(value) = column[row] {
-                    let scale = split.weight(k, value) / norm.state_std[k];
-                    out.push(cell_variance(split, k, value, noise) * scale * scale / cells);
-                }
-            }
-        }
-    }
-    out
+/// cell's noise ([`cell_variance`]) weighted and z-scored as the residual is
+/// ([`Objective::record_residuals`] of the noise's standard deviation, squared).
+fn residual_variances(objective: &Objective, noise: &[f64]) -> Vec<f64> {
+    let split = objective.split;
+    let sigma = |record: &crate::record::Record, row: usize, k: usize| {
+        let value = record.states[k][row].unwrap_or(0.0);
+        cell_variance(split, k, value, noise).sqrt()
+    };
+    (split.training())
+        .flat_map(|(_, record, rows)| {
+            objective.record_residuals(record, rows, |row, k| sigma(record, row, k))
+        })
+        .map(|r| r * r)
+        .collect()
 }
 
 /// The leading `m x m` block of the `n x n` matrix `c`.
