@@ -343,16 +343,18 @@ pub(super) fn synthesise(
         outputs.join(", "),
         target.patches().join("\n  ")
     );
-    let compiled =
-        crate::driver::compile(context.problem.name, &source, &[EFFECT]).map_err(|reports| {
-            let messages: Vec<String> = reports.iter().map(|r| r.to_string()).collect();
-            DiagnoseError::internal(format!(
-                "correction at `{}` does not compile: {}",
-                target.name,
-                messages.join("; ")
-            ))
-        })?;
-    let model = compiled.model;
+    let fails = |messages: Vec<String>| {
+        DiagnoseError::internal(format!(
+            "correction at `{}` does not compile: {}",
+            target.name,
+            messages.join("; ")
+        ))
+    };
+    let checked = crate::driver::check(context.problem.name, &source)
+        .map_err(|reports| fails(reports.iter().map(|r| r.to_string()).collect()))?;
+    // A probe, fitted and thrown away: not held to the guard of `nonnegative` states.
+    let model = ir::lower_unguarded(&checked, &[EFFECT])
+        .map_err(|errors| fails(errors.iter().map(|e| e.to_string()).collect()))?;
     let Some(closure) = model.closures.iter().position(|c| c.name == CLOSURE) else {
         return Err(DiagnoseError::internal("synthesised closure missing"));
     };

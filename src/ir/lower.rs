@@ -25,6 +25,29 @@ pub fn lower(checked: &Checked, effects: &[&str]) -> Result<Model, LowerError> {
 /// [`lower`], with every error found: every term of a `nonnegative` state's balance that
 /// is not proven (E0136) is reported, in source order (other errors stop lowering).
 pub fn lower_reporting(checked: &Checked, effects: &[&str]) -> Result<Model, Vec<LowerError>> {
+    let (model, errors) = lower_with_violations(checked, effects)?;
+    if errors.is_empty() {
+        Ok(model)
+    } else {
+        Err(errors)
+    }
+}
+
+/// [`lower`] without the guard of `nonnegative` states: the model even where a learned
+/// term is not proven to keep such a state at or above zero (E0136). For probes that are
+/// fitted and thrown away, never trained or saved: the diagnosis's free corrections at a
+/// locus (a correction of `mu` in `der S = -mu * X / Y` is not proven, and its fit simply
+/// fails where a run leaves the model's range).
+pub fn lower_unguarded(checked: &Checked, effects: &[&str]) -> Result<Model, Vec<LowerError>> {
+    lower_with_violations(checked, effects).map(|(model, _)| model)
+}
+
+/// The lowered model and its E0136 violations, in source order (other errors stop
+/// lowering).
+fn lower_with_violations(
+    checked: &Checked,
+    effects: &[&str],
+) -> Result<(Model, Vec<LowerError>), Vec<LowerError>> {
     let effect_decls: Vec<&ast::EffectDecl> =
         crate::check::symbols::effect_items(&checked.ast).collect();
     let mut applied = Vec::new();
@@ -63,11 +86,7 @@ pub fn lower_reporting(checked: &Checked, effects: &[&str]) -> Result<Model, Vec
             }
         }
     }
-    if errors.is_empty() {
-        Ok(model)
-    } else {
-        Err(errors)
-    }
+    Ok((model, errors))
 }
 
 /// The E0136 errors of each effect applied alone, for a model that lowers cleanly without

@@ -17,7 +17,7 @@ pub mod nonnegative;
 mod print;
 mod release;
 
-pub use lower::{effect_violations, lower, lower_reporting, LowerError};
+pub use lower::{effect_violations, lower, lower_reporting, lower_unguarded, LowerError};
 pub use model::{
     uses_closure, var_name, Balance, Closure, ClosureOutput, Constraint, Definition, Dynamics,
     Expr, Input, Measured, Model, Noise, Param, PriorKind, State, Var,

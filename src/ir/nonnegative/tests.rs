@@ -79,6 +79,36 @@ fn first_order_and_vanishing_forms_pass() {
     }
 }
 
+/// A probe lowered unguarded (the diagnosis's free corrections) is the very model the
+/// guard refuses: the same balances, only the E0136 verdict dropped; other errors still stop.
+#[test]
+fn a_probe_lowered_unguarded_is_the_model_the_guard_refuses() {
+    let source = chemostat("  outputs mu ~ 0.1 positive, q ~ 0.1", "q * X", "");
+    let refused = refused(&source);
+    assert_eq!(refused.len(), 1);
+    let probe = crate::ir::lower_unguarded(&checked(&source), &[]).expect("lowers");
+    // At S = 0, X = 2, D = 0.1 and q = 0.5: dS/dt = 0.1 * 10 - 0.5 * 2 = 0, and with
+    // D = 0 it is -1: the learned consumption the guard refuses, kept as written.
+    let value = |d: f64| {
+        move |var: Var| match var {
+            Var::Input(0) => d,
+            Var::State(0) => 2.0,
+            Var::State(1) => 0.0,
+            Var::Const(0) => 10.0,
+            Var::ClosureOutput { output: 1, .. } => 0.5,
+            _ => 0.3,
+        }
+    };
+    let balance = &probe.balances[1].expr;
+    assert!(crate::eval::interpret(balance, &value(0.1)).abs() < 1e-12);
+    assert!((crate::eval::interpret(balance, &value(0.0)) + 1.0).abs() < 1e-12);
+    let unknown = crate::ir::lower_unguarded(&checked(&source), &["nowhere"]);
+    assert!(matches!(
+        unknown.as_ref().map_err(Vec::as_slice),
+        Err([LowerError::UnknownEffect { .. }])
+    ));
+}
+
 #[test]
 fn a_learned_consumption_without_a_prior_is_refused_at_its_term() {
     let source = chemostat("  outputs mu ~ 0.1 positive, q ~ 0.1", "q * X", "");
