@@ -109,6 +109,9 @@ def _progress(total_hint: Optional[int], desc: str, progress: Union[bool, Callab
         elif kind == "stage":
             bar.reset(total=event["total"])
             bar.set_description(event["name"])
+        elif kind == "round":
+            bar.set_postfix_str(f"{event['fit']}: start {event['done']} of at most "
+                                f"{event['max']}, best {event['best']:.4g}")
         elif kind == "done":
             bar.update(1)
 

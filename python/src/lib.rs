@@ -434,6 +434,19 @@ fn diagnose(
                     .set_item("kind", "stage")
                     .and(dict.set_item("name", name))
                     .and(dict.set_item("total", total)),
+                api::DiagnoseProgress::Round {
+                    fit,
+                    done,
+                    max,
+                    best,
+                    seconds,
+                } => dict
+                    .set_item("kind", "round")
+                    .and(dict.set_item("fit", fit))
+                    .and(dict.set_item("done", done))
+                    .and(dict.set_item("max", max))
+                    .and(dict.set_item("best", best))
+                    .and(dict.set_item("seconds", seconds)),
                 api::DiagnoseProgress::Done { item, seconds } => dict
                     .set_item("kind", "done")
                     .and(dict.set_item("item", item))

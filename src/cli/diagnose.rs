@@ -63,8 +63,33 @@ fn report(reporter: &Reporter, event: Progress) {
         Progress::Stage { name, total } => {
             reporter.stage(name, total as u64, Count::Items("fits"), Announce::Now)
         }
+        Progress::Round {
+            fit,
+            done,
+            max,
+            best,
+            seconds,
+        } => reporter.message(round_message(&fit, (done, max), best, seconds)),
         Progress::Done { item, seconds } => {
             reporter.advance(1, format!("`{item}` done in {seconds:.1} s"))
         }
     }
+}
+
+/// "`overflow`: start 6 of at most 13, best training gap 0.0123, at most 40 s more": a fit
+/// under way (its search may stop sooner than its budget; the bound is its pace so far).
+fn round_message(fit: &str, (done, max): (usize, usize), best: f64, seconds: f64) -> String {
+    let best = match best.is_finite() {
+        true => format!("best training gap {best:.4}"),
+        false => "no start has run through yet".to_string(),
+    };
+    let left = match done {
+        0 => String::new(),
+        _ if done >= max => String::new(),
+        _ => {
+            let rest = seconds / done as f64 * (max - done) as f64;
+            format!(", at most {} more", super::progress::duration(rest))
+        }
+    };
+    format!("`{fit}`: start {done} of at most {max}, {best}{left}")
 }

@@ -129,6 +129,17 @@ impl Reporter {
         }
     }
 
+    /// Sets the current stage's message, its position unchanged (news within an item).
+    pub fn message(&self, message: String) {
+        let mut state = self.shared.lock();
+        if let Some(bar) = &state.bar {
+            bar.set_message(message.clone());
+        }
+        if let Some(stage) = state.stage.as_mut() {
+            stage.message = message;
+        }
+    }
+
     /// Sets the current stage's total (known only once it runs).
     pub fn set_total(&self, total: u64) {
         let mut state = self.shared.lock();

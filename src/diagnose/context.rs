@@ -120,6 +120,20 @@ pub enum Progress {
         /// Number of items.
         total: usize,
     },
+    /// A fit of the current stage ran a round of its starts.
+    Round {
+        /// Which fit (the model's name, or its effects joined by ` + `).
+        fit: String,
+        /// Starts run so far.
+        done: usize,
+        /// Starts its budget allows at most (it may stop sooner: once a round finds
+        /// nothing new).
+        max: usize,
+        /// The best training gap so far (infinite while every start failed).
+        best: f64,
+        /// Seconds the fit has run.
+        seconds: f64,
+    },
     /// One item of the current stage is done.
     Done {
         /// What it was (a candidate effect, a locus).
@@ -146,6 +160,8 @@ pub struct Context<'a> {
     /// they should, instead of being integrated implicitly at great cost), automatically
     /// where they did.
     pub(super) corrections: Method,
+    /// Told how the diagnosis goes (down to each fit's rounds of starts).
+    pub(super) progress: &'a (dyn Fn(Progress) + Sync),
 }
 
 impl<'a> Context<'a> {
@@ -162,7 +178,11 @@ impl<'a> Context<'a> {
     /// The context of diagnosing `problem` with `options`: the options checked, the model
     /// checked fittable, the records split; corrections integrate automatically until the
     /// model's own free runs say otherwise.
-    pub(super) fn new(problem: &Problem<'a>, options: &'a Options) -> Result<Self, DiagnoseError> {
+    pub(super) fn new(
+        problem: &Problem<'a>,
+        options: &'a Options,
+        progress: &'a (dyn Fn(Progress) + Sync),
+    ) -> Result<Self, DiagnoseError> {
         let model = problem.model;
         check_options(options)?;
         check_fittable(model, problem.records.iter().chain(problem.held_out))?;
@@ -187,6 +207,7 @@ impl<'a> Context<'a> {
             blocks: Blocks::new(&split),
             split,
             corrections: Method::Auto,
+            progress,
         })
     }
 }

@@ -9,7 +9,7 @@ use super::evaluate::{scored_errors, Errors};
 use super::ranking::{compare, Comparison, RESAMPLES};
 use super::report::{Confidence, EffectScore, FitSummary};
 use crate::ir::Model;
-use crate::solve::fit::fitter::{Fitted, Starts};
+use crate::solve::fit::fitter::{Fitted, Round, Starts};
 use crate::solve::fit::model::{fit_model, ModelFit};
 use crate::solve::fit::simulate::{Run, Simulator};
 use rayon::prelude::*;
@@ -36,27 +36,38 @@ pub struct Scored {
     pub training_squares: Vec<(f64, usize)>,
 }
 
-/// Fits `model` from the unknowns `start` (by name: params and `STATE@EXPERIMENT` starts;
-/// others from their defaults), and scores it on the held-out parts.
+/// Fits `model` (named `fit` in the progress it reports) from the unknowns `start` (by
+/// name: params and `STATE@EXPERIMENT` starts; others from their defaults), and scores it
+/// on the held-out parts.
 pub fn fit_and_score(
     context: &Context,
-    model: &Model,
+    (fit, model): (&str, &Model),
     start: &BTreeMap<String, f64>,
     seed: u64,
 ) -> Result<Scored, DiagnoseError> {
     let starts = Starts::new(context.options.restarts);
-    fit_and_score_with(context, model, (start, starts), seed)
+    fit_and_score_with(context, (fit, model), (start, starts), seed)
 }
 
 /// [`fit_and_score`] with its own budget of starts (the fits that decide a verdict get
-/// more).
+/// more); every round of starts is reported as [`Progress::Round`].
 pub fn fit_and_score_with(
     context: &Context,
-    model: &Model,
+    (name, model): (&str, &Model),
     (start, starts): (&BTreeMap<String, f64>, Starts),
     seed: u64,
 ) -> Result<Scored, DiagnoseError> {
     let started = Instant::now();
+    let watch = |round: Round| {
+        (context.progress)(Progress::Round {
+            fit: name.to_string(),
+            done: round.done,
+            max: round.max,
+            best: round.best,
+            seconds: started.elapsed().as_secs_f64(),
+        })
+    };
+    let starts = starts.watched(&watch);
     let fit = fit_model(&context.split, model, (start, starts), seed)?;
     let (errors, runs) = held_out(context, &fit.simulator, &fit.fitted.x);
     let named = fit.named();
@@ -127,7 +138,8 @@ pub fn rank_effects(
         .enumerate()
         .map(|(index, name)| {
             let model = lower(context, &[name.as_str()])?;
-            let scored = fit_and_score(context, &model, base, context.seed(index as u64 + 1))?;
+            let seed = context.seed(index as u64 + 1);
+            let scored = fit_and_score(context, (name, &model), base, seed)?;
             progress(Progress::Done {
                 item: name.clone(),
                 seconds: scored.summary.seconds,

@@ -162,9 +162,11 @@ fn confirm(
             let model = lower(context, &names)?;
             let starts = crate::solve::fit::fitter::Starts::new(restarts);
             let seed = context.seed(6000 + i as u64);
-            let fit = fit_and_score_with(context, &model, (&candidate.fit.named, starts), seed)?;
+            let label = names.join(" + ");
+            let start = &candidate.fit.named;
+            let fit = fit_and_score_with(context, (&label, &model), (start, starts), seed)?;
             progress(Progress::Done {
-                item: names.join(" + "),
+                item: label,
                 seconds: fit.summary.seconds,
             });
             Ok((i, fit))
@@ -275,9 +277,10 @@ fn combinations(
                 start.extend(ranking.fits[i].named.clone());
             }
             let seed = context.seed(1000 * size as u64 + index as u64);
-            let fit = fit_and_score(context, &model, &start, seed)?;
+            let label = names.join(" + ");
+            let fit = fit_and_score(context, (&label, &model), &start, seed)?;
             progress(Progress::Done {
-                item: names.join(" + "),
+                item: label,
                 seconds: fit.summary.seconds,
             });
             Ok(Candidate {

@@ -148,7 +148,7 @@ impl<'a> Findings<'a> {
         options: &'a Options,
         progress: &'a (dyn Fn(Progress) + Sync),
     ) -> Result<Self, DiagnoseError> {
-        let mut context = Context::new(problem, options)?;
+        let mut context = Context::new(problem, options, progress)?;
         let base = Simulator::new(context.model, &[], tolerances())?;
         let stiff = check_runs(&context, &base)?;
         context.corrections = if stiff {
@@ -229,7 +229,8 @@ impl<'a> Findings<'a> {
     fn fit_model(&mut self) -> Result<(), DiagnoseError> {
         let context = &self.context;
         let declared = BTreeMap::new();
-        let before = effects::fit_and_score(context, context.model, &declared, context.seed(0))?;
+        let model = (context.model.name.as_str(), context.model);
+        let before = effects::fit_and_score(context, model, &declared, context.seed(0))?;
         (self.progress)(Progress::Done {
             item: context.model.name.clone(),
             seconds: before.summary.seconds,

@@ -215,26 +215,62 @@ pub struct Fitted {
     pub basins: Vec<f64>,
 }
 
-/// How many starts a fit spends.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Starts {
+/// Where a fit's search stands after a round of starts, for a progress line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Round {
+    /// Starts run so far.
+    pub done: usize,
+    /// Starts the budget allows at most (the search may stop sooner).
+    pub max: usize,
+    /// The best training gap so far (infinite while every start failed).
+    pub best: f64,
+}
+
+/// Told after every round of starts of a fit.
+pub type Watch<'a> = &'a (dyn Fn(Round) + Sync);
+
+/// How many starts a fit spends, and who is told how it goes.
+#[derive(Clone, Copy)]
+pub struct Starts<'a> {
     /// Starts always run.
     pub min: usize,
     /// Starts at most.
     pub max: usize,
     /// Starts run side by side in one round.
     pub round: usize,
+    /// Told after every round (none: nobody asks).
+    pub watch: Option<Watch<'a>>,
 }
 
-impl Starts {
+impl std::fmt::Debug for Starts<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Starts")
+            .field("min", &self.min)
+            .field("max", &self.max)
+            .field("round", &self.round)
+            .field("watched", &self.watch.is_some())
+            .finish()
+    }
+}
+
+impl<'a> Starts<'a> {
     /// At least four starts, at most `1 + restarts`, rounds of one start per thread (two at
-    /// least).
+    /// least), told to nobody.
     pub fn new(restarts: usize) -> Self {
         let max = restarts + 1;
         Starts {
             min: MIN_STARTS.min(max),
             max,
             round: rayon::current_num_threads().max(2),
+            watch: None,
+        }
+    }
+
+    /// These starts, each round told to `watch`.
+    pub fn watched(self, watch: Watch<'a>) -> Self {
+        Starts {
+            watch: Some(watch),
+            ..self
         }
     }
 }
@@ -378,6 +414,13 @@ fn search(
         let round: Vec<(Vec<f64>, f64)> = thetas.into_par_iter().map(minimise).collect();
         results.extend(round);
         let best = best_gap(&results);
+        if let Some(watch) = starts.watch {
+            watch(Round {
+                done: results.len(),
+                max: starts.max,
+                best,
+            });
+        }
         let improved = best < before - AGREE * before.abs();
         if results.len() >= starts.min && !improved && agreeing(&results) >= 2 {
             break;

@@ -122,3 +122,27 @@ fn a_correct_models_held_out_gap_is_the_noise_plus_the_predicted_spread() {
         );
     }
 }
+
+/// A watched fit tells every round: starts counted up to the number it ran, within its
+/// budget, the best gap never rising and the last one the fit's own.
+#[test]
+fn a_watched_fit_tells_every_round_of_its_starts() {
+    let model = crate::driver::compile("m", SOURCE, &[]).unwrap().model;
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let train = batch("a", (0.2, 8), Noise::Relative, &mut rng);
+    let parts = (vec![train], vec![]);
+    let split = Split::with_min_rows(&model, parts, (Holdout::Tail(0.3), false), 5).unwrap();
+    let rounds = std::sync::Mutex::new(Vec::new());
+    let watch = |round: crate::solve::fit::fitter::Round| rounds.lock().unwrap().push(round);
+    let starts = Starts::new(9).watched(&watch);
+    let fit = fit_model(&split, &model, (&BTreeMap::new(), starts), 1).unwrap();
+    let rounds = rounds.into_inner().unwrap();
+    assert!(!rounds.is_empty());
+    for pair in rounds.windows(2) {
+        assert!(pair[1].done > pair[0].done && pair[1].best <= pair[0].best);
+    }
+    let last = rounds.last().unwrap();
+    assert!(rounds.iter().all(|r| r.max == 10 && r.done <= r.max));
+    assert_eq!(last.done, fit.fitted.starts);
+    assert!((last.best - fit.fitted.gap).abs() <= 1e-12 * fit.fitted.gap.max(1e-300));
+}
