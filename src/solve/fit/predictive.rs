@@ -3,17 +3,19 @@
 //! fitted on a few noisy training cells, and it starts from a measured first row that is
 //! as noisy as any other cell.
 //!
-//! The params' covariance `C` is the one they would have were the model correct: every
-//! training residual its cell's noise ([`crate::numeric::lm::sandwich`]; the residuals of a
-//! misfit would take the misfit for noise), plus what the noise of the measured first rows
-//! the training runs start from moves the fit by (`G diag(sigma^2) G'`, `G = (J'J)^-1 J' S`
-//! for `S` the residuals' derivatives by those starts). The params are then drawn from it
-//! (Gaussian in the fit's transformed coordinates), the scored runs' measured first cells
-//! from their noise, and the drawn runs compared with the fitted ones: the mean squared
+//! The params' spread is the one they would have were the model correct: every training
+//! residual its cell's noise ([`crate::numeric::lm::sandwich`]; the residuals of a misfit
+//! would take the misfit for noise), plus what the noise of the measured first rows the
+//! training runs start from moves the fit by (`G = -(J'J)^-1 J' S` per start, for `S` the
+//! residuals' derivatives by it; over the starts' noise, `G diag(sigma^2) G'`). The params
+//! are then drawn (Gaussian in the fit's transformed coordinates, the training starts' noise
+//! drawn with them), the scored runs' measured first cells from their noise, and the drawn
+//! runs compared with the fitted ones: the mean squared
 //! z-scored deviation over the scored cells is the *spread* a correct model adds to the
 //! noise floor. Drawn rather than linearised: near a switch (a sugar running out) a start
-//! moves a run far more than its derivative says. Fitted starts of a training experiment
-//! scored on its tail keep their fitted values, as declared starts keep theirs.
+//! moves a run far more than its derivative says. A tail scored after its own training part
+//! starts from the same drawn first cells the drawn fit was fitted from (drawn jointly:
+//! counted once); fitted starts keep their fitted values, as declared starts keep theirs.
 
 use super::fitter::{from_theta, thetas, Objective};
 use super::simulate::{Run, Simulator};
@@ -46,15 +48,16 @@ pub fn held_out_spread(
 ) -> Option<f64> {
     let params = simulator.params().min(x.len());
     let free: Vec<usize> = (0..x.len()).filter(|&i| !fixed[i]).collect();
-    let covariance = params_covariance(split, simulator, (unknowns, x), (&free, noise))?;
+    let (covariance, starts) = params_covariance(split, simulator, (unknowns, x), (&free, noise))?;
     let free_params: Vec<usize> = free.iter().copied().filter(|&i| i < params).collect();
     let block = leading_block(&covariance, free.len(), free_params.len());
     let factor = Cholesky::factor(&block, free_params.len())?;
-    let nominal = scored_runs((split, simulator), x, (&[], noise))?;
+    let nominal = scored_runs((split, simulator), x, None)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let theta = thetas(&unknowns.constraints, x);
+    let measured = split.normalisation.state_std.len();
     let (mut total, mut draws) = (0.0, 0usize);
-    let count = free_params.len() + split.records.len() * noise.len();
+    let count = free_params.len() + starts.len() + split.records.len() * measured;
     let mut z: Vec<f64> = Vec::new();
     for draw in 0..DRAWS {
         // Antithetic pairs: every second draw is the one before it mirrored, which cancels
@@ -64,12 +67,28 @@ pub fn held_out_spread(
         } else {
             z.iter().map(|v| -v).collect()
         };
-        let (params_z, starts) = z.split_at(free_params.len());
+        let (params_z, rest) = z.split_at(free_params.len());
+        let (starts_z, held_z) = rest.split_at(starts.len());
+        let mut shift = factor.times(params_z);
+        // The first cells of every run: each training start's noise moves the params (and
+        // is where a tail scored on after it starts); a held-out run's own, independently.
+        let mut offsets: Vec<f64> = (0..split.records.len() * measured)
+            .map(|i| {
+                held_z[i] * first_cell_variance(split, i / measured, i % measured, noise).sqrt()
+            })
+            .collect();
+        for (start, &zs) in starts.iter().zip(starts_z) {
+            let delta = zs * start.variance.sqrt();
+            offsets[start.record * measured + start.state] = delta;
+            for (s, g) in shift.iter_mut().zip(&start.response) {
+                *s += g * delta;
+            }
+        }
         let mut drawn = x.to_vec();
-        for (&i, shift) in free_params.iter().zip(factor.times(params_z)) {
+        for (&i, shift) in free_params.iter().zip(shift) {
             drawn[i] = from_theta(unknowns.constraints[i], theta[i] + shift);
         }
-        let Some(runs) = scored_runs((split, simulator), &drawn, (starts, noise)) else {
+        let Some(runs) = scored_runs((split, simulator), &drawn, Some(&offsets)) else {
             continue;
         };
         total += squared_deviation(split, &nominal, &runs);
@@ -79,13 +98,13 @@ pub fn held_out_spread(
     (draws > 0 && spread.is_finite()).then_some(spread)
 }
 
-/// The free runs of every scored part with the unknowns `x`, their measured first cells
-/// shifted by their noise times `shifts` (one standard normal per record and measured
-/// state; none: the cells as measured); `None` when a run fails.
+/// The free runs of every scored part with the unknowns `x`, the measured first cells they
+/// start from moved by `offsets` (in the state's unit, per record and measured state; none:
+/// the cells as measured); `None` when a run fails.
 fn scored_runs(
     (split, simulator): (&Split, &Simulator),
     x: &[f64],
-    (shifts, noise): (&[f64], &[f64]),
+    offsets: Option<&[f64]>,
 ) -> Option<Vec<Run>> {
     let mut simulator = simulator.clone();
     simulator.set_params(x);
@@ -96,12 +115,12 @@ fn scored_runs(
         .map(|(index, record, rows)| {
             let mut overrides = split.overrides(index, &x[params..], hidden);
             for (k, start) in overrides.iter_mut().enumerate().take(measured) {
-                let shift = shifts.get(index * measured + k).copied();
+                let offset = offsets.and_then(|o| o.get(index * measured + k)).copied();
                 let cell = record.states[k].first().copied().flatten();
-                if let (Start::Cell, Some(cell), Some(shift)) =
-                    (split.starts[index][k], cell, shift)
+                if let (Start::Cell, Some(cell), Some(offset)) =
+                    (split.starts[index][k], cell, offset)
                 {
-                    *start = Some(cell + shift * start_variance(split, record, k, noise).sqrt());
+                    *start = Some(cell + offset);
                 }
             }
             simulator.free_run(record, &overrides, rows.end).ok()
@@ -109,17 +128,32 @@ fn scored_runs(
         .collect()
 }
 
+/// A measured first cell a training run starts from ([`Start::Cell`]): whose it is, its
+/// noise variance, and how its noise moves the fitted free unknowns.
+struct TrainingStart {
+    /// The record.
+    record: usize,
+    /// The measured state.
+    state: usize,
+    /// Its noise variance, in the state's unit squared.
+    variance: f64,
+    /// The derivative of the fitted free unknowns (transformed) by the cell:
+    /// `-(J'J)^-1 J' s` for `s` the training residuals' derivatives by it.
+    response: Vec<f64>,
+}
+
 /// The covariance of the free unknowns `free` in transformed coordinates (`n x n` for
-/// `n = free.len()`, the free params first as `free` lists them): the sandwich of the
-/// training residuals, plus what the noise of the measured first rows the training runs
-/// start from moves the fit by (`G diag(sigma^2) G'`, `G = (J'J)^-1 J' S` for `S` the
-/// residuals' derivatives by those starts). `noise` as in [`held_out_spread`].
+/// `n = free.len()`, the free params first as `free` lists them) from the noise of the
+/// training cells (the sandwich of the training residuals), and the training starts with
+/// how their noise moves the fit (`G = -(J'J)^-1 J' S` for `S` the residuals' derivatives
+/// by those starts: drawn with the starts, so that a tail scored after its own training
+/// part starts where the drawn fit started). `noise` as in [`held_out_spread`].
 fn params_covariance(
     split: &Split,
     simulator: &Simulator,
     (unknowns, x): (&Unknowns, &[f64]),
     (free, noise): (&[usize], &[f64]),
-) -> Option<Vec<f64>> {
+) -> Option<(Vec<f64>, Vec<TrainingStart>)> {
     let objective = Objective { simulator, split };
     let theta = thetas(&unknowns.constraints, x);
     let residuals = objective.residuals(x)?;
@@ -134,29 +168,29 @@ fn params_covariance(
     if variances.len() != residuals.len() {
         return None;
     }
-    let mut covariance = sandwich(&columns, |j| variances[j])?;
+    let covariance = sandwich(&columns, |j| variances[j])?;
     let n = columns.len();
     let (normal, _) = gauss_newton_system(&columns, &residuals);
     let factor = Cholesky::factor(&normal, n)?;
-    for (start, variance) in start_columns(&objective, x, noise)? {
-        let projected: Vec<f64> = columns.iter().map(|c| dot(c, &start)).collect();
-        let g = factor.solve(&projected);
-        for a in 0..n {
-            for b in 0..n {
-                covariance[a * n + b] += variance * g[a] * g[b];
-            }
-        }
+    let mut starts = start_columns(&objective, x, noise)?;
+    for start in &mut starts {
+        let projected: Vec<f64> = columns.iter().map(|c| dot(c, &start.response)).collect();
+        start.response = factor.solve(&projected).iter().map(|g| -g).collect();
     }
-    covariance
+    let finite = covariance
         .iter()
+        .chain(starts.iter().flat_map(|s| &s.response));
+    finite
+        .into_iter()
         .all(|v| v.is_finite())
-        .then_some(covariance)
+        .then_some((covariance, starts))
 }
 
 /// Per measured first cell a training run starts from ([`Start::Cell`]): the derivatives
-/// of the training residuals by it (zero outside its experiment) and its noise variance
-/// in the state's unit squared.
-fn start_columns(objective: &Objective, x: &[f64], noise: &[f64]) -> Option<Vec<(Vec<f64>, f64)>> {
+/// of the training residuals by it (zero outside its experiment; in
+/// [`TrainingStart::response`], until [`params_covariance`] turns them into the fit's) and
+/// its noise variance in the state's unit squared.
+fn start_columns(objective: &Objective, x: &[f64], noise: &[f64]) -> Option<Vec<TrainingStart>> {
     let split = objective.split;
     let mut simulator = objective.simulator.clone();
     simulator.set_params(x);
@@ -177,18 +211,23 @@ fn start_columns(objective: &Objective, x: &[f64], noise: &[f64]) -> Option<Vec<
                 objective.record_residuals(record, rows.clone(), |row, j| s.at(row, j)[params + c]);
             let mut column = vec![0.0; total];
             column[offset..offset + cells].copy_from_slice(&block);
-            out.push((column, start_variance(split, record, k, noise)));
+            out.push(TrainingStart {
+                record: index,
+                state: k,
+                variance: first_cell_variance(split, index, k, noise),
+                response: column,
+            });
         }
         offset += cells;
     }
     Some(out)
 }
 
-/// The noise variance of state `k`'s first cell in `record`, in its unit squared
+/// The noise variance of state `k`'s first cell in record `index`, in its unit squared
 /// ([`cell_variance`]; an unmeasured first cell is not a start read from the data).
-fn start_variance(split: &Split, record: &crate::record::Record, k: usize, noise: &[f64]) -> f64 {
-    let cell = record.states[k].first().copied().flatten().unwrap_or(0.0);
-    cell_variance(split, k, cell, noise)
+fn first_cell_variance(split: &Split, index: usize, k: usize, noise: &[f64]) -> f64 {
+    let cell = split.records[index].states[k].first().copied().flatten();
+    cell_variance(split, k, cell.unwrap_or(0.0), noise)
 }
 
 /// The noise variance of a cell of state `k` reading `value`, in its unit squared: the
