@@ -378,6 +378,7 @@ pub fn standard_errors(columns: &[Vec<f64>], residuals: &[f64], count: usize) ->
 /// variance `s_g^2 = |r_g|^2 / max(m_g - q m_g / m, 1)` (its share of the degrees of
 /// freedom), and the covariance the sandwich `(J'J)^-1 (sum_g s_g^2 J_g'J_g) (J'J)^-1`.
 /// With one group it is [`standard_errors`]. `groups[i]` is residual `i`'s group.
+#[cfg(test)]
 pub fn grouped_standard_errors(
     columns: &[Vec<f64>],
     residuals: &[f64],
@@ -399,6 +400,7 @@ pub fn grouped_standard_errors(
 /// The covariance of the unknowns whose standard errors [`grouped_standard_errors`] gives:
 /// the sandwich `(J'J)^-1 (sum_g s_g^2 J_g'J_g) (J'J)^-1` (`n x n`, row-major, for `n`
 /// columns); `None` when `J'J` is not numerically positive definite.
+#[cfg(test)]
 pub fn grouped_covariance(
     columns: &[Vec<f64>],
     residuals: &[f64],
@@ -406,6 +408,78 @@ pub fn grouped_covariance(
 ) -> Option<Vec<f64>> {
     let variances = group_variances(residuals, groups, columns.len());
     sandwich(columns, |j| variances[groups[j]])
+}
+
+/// [`grouped_covariance`] where the noise within a group may grow with what a cell reads:
+/// residual `j`'s variance is its group's `s_g^2` times `shapes[j]` ([`variance_shapes`],
+/// mean 1 over each group).
+pub fn shaped_covariance(
+    columns: &[Vec<f64>],
+    residuals: &[f64],
+    (groups, shapes): (&[usize], &[f64]),
+) -> Option<Vec<f64>> {
+    let variances = group_variances(residuals, groups, columns.len());
+    sandwich(columns, |j| variances[groups[j]] * shapes[j])
+}
+
+/// Per residual, the share of its group's variance its cell carries when the variance
+/// within a group is `a + b v^2` for `v` what the cell reads (`values[j]`): `a, b >= 0`
+/// fitted to the squared residuals by least squares, so the data decide between absolute
+/// noise (`b = 0`), relative noise (`a = 0`) and a mix; scaled to mean 1 over the group.
+/// Residuals without a value (`None`: noise declared and already weighted out) and groups
+/// whose fit leaves no variance get 1.
+pub fn variance_shapes(residuals: &[f64], groups: &[usize], values: &[Option<f64>]) -> Vec<f64> {
+    let count = groups.iter().copied().max().map_or(0, |g| g + 1);
+    let mut shapes = vec![1.0; residuals.len()];
+    for group in 0..count {
+        let members: Vec<usize> = (0..residuals.len())
+            .filter(|&j| groups[j] == group && values[j].is_some_and(f64::is_finite))
+            .collect();
+        let points: Vec<(f64, f64)> = (members.iter())
+            .map(|&j| (values[j].unwrap_or(0.0).powi(2), residuals[j].powi(2)))
+            .collect();
+        let (a, b) = variance_line(&points);
+        let raw: Vec<f64> = points.iter().map(|(x, _)| a + b * x).collect();
+        let mean = raw.iter().sum::<f64>() / raw.len().max(1) as f64;
+        if mean > 0.0 && mean.is_finite() {
+            for (&j, v) in members.iter().zip(raw) {
+                shapes[j] = v / mean;
+            }
+        }
+    }
+    shapes
+}
+
+/// The line `y = a + b x` through `(x, y)` points by least squares with `a, b >= 0` (the
+/// better of the two one-sided fits where the free fit breaks a bound).
+fn variance_line(points: &[(f64, f64)]) -> (f64, f64) {
+    let n = points.len() as f64;
+    if points.len() < 3 {
+        return (1.0, 0.0);
+    }
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let sxx: f64 = points.iter().map(|(x, _)| (x - mx).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
+    let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    let a = my - b * mx;
+    if a >= 0.0 && b >= 0.0 {
+        return (a, b);
+    }
+    let cost =
+        |(a, b): (f64, f64)| -> f64 { points.iter().map(|(x, y)| (y - a - b * x).powi(2)).sum() };
+    let x4: f64 = points.iter().map(|(x, _)| x * x).sum();
+    let through_zero = (
+        0.0,
+        points.iter().map(|(x, y)| x * y).sum::<f64>().max(0.0) / x4.max(f64::MIN_POSITIVE),
+    );
+    let flat = (my.max(0.0), 0.0);
+    if cost(through_zero) < cost(flat) {
+        through_zero
+    } else {
+        flat
+    }
 }
 
 /// The covariance `(J'J)^-1 (J' D J) (J'J)^-1` of a least-squares fit with Jacobian

@@ -3,13 +3,15 @@
 //!
 //! At the fit's minimum, with `J` the Jacobian of the training residuals in transformed
 //! coordinates (`theta`, from the free runs' forward sensitivities), the linearised covariance
-//! is the sandwich `(J'J)^-1 (sum_k s_k^2 J_k'J_k) (J'J)^-1` over the measured states `k`,
-//! `s_k^2` each state's residual variance with its share of the degrees of freedom
-//! ([`crate::numeric::lm::grouped_standard_errors`]): each state's cells are z-scored by
-//! its spread, not by its noise, so the states' noise levels differ in the fit's units and
-//! one pooled `s^2` would mis-state every error. The unknowns are the params and every
-//! fitted start, the measured first cells of the training experiments among them
-//! ([`super::split::Start::CellFitted`]), so a param's error counts the starts' noise. An
+//! is the sandwich `(J'J)^-1 (J' D J) (J'J)^-1`: `D` each cell's noise variance, its
+//! state's residual variance `s_k^2` (with its share of the degrees of freedom; each
+//! state's cells are z-scored by its spread, not by its noise, so one pooled `s^2` would
+//! mis-state every error) spread over the state's cells as `a + b v^2` for `v` what a cell
+//! reads, fitted to the squared residuals ([`crate::numeric::lm::variance_shapes`]:
+//! relative noise puts most of it on the largest cells, which carry most of the weight);
+//! the measured first cells the training runs start from are taken as exact and their
+//! noise is not counted (fitted starts, [`super::split::Start::CellFitted`], are unknowns
+//! with their noise in the sandwich). An
 //! unknown's standard
 //! error is its marginal one times the slope of its transform. It is *identified* when the
 //! error is below [`super::IDENTIFIABILITY_LIMIT`] of its value (the rule `gbc train` applies to
@@ -23,7 +25,7 @@ use super::fitter::{slope, thetas, values, Objective};
 use super::summary::{FitSummary, ParamEstimate};
 use crate::ir::Constraint;
 use crate::numeric::linalg::gauss_newton_system;
-use crate::numeric::lm::grouped_standard_errors;
+use crate::numeric::lm::{shaped_covariance, variance_shapes};
 use crate::numeric::symmetric_eigen;
 
 /// Components of the free direction below this (of the largest) are left out.
@@ -63,8 +65,7 @@ pub fn summarise(
     let (aic, bic) = criteria(gap, cells, free.len());
     let all = objective.theta_jacobian(constraints, &theta);
     let columns: Vec<Vec<f64>> = free.iter().map(|&i| all[i].clone()).collect();
-    let states = objective.split.training_cell_states();
-    let free_errors = grouped_standard_errors(&columns, &r, &states, free.len());
+    let free_errors = standard_errors(objective, (&columns, &r));
     let mut errors = vec![f64::NAN; x.len()];
     for (&i, &e) in free.iter().zip(&free_errors) {
         errors[i] = e;
@@ -139,6 +140,38 @@ pub fn free_direction(columns: &[Vec<f64>], names: &[String]) -> Vec<(String, f6
         .collect();
     direction.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
     direction
+}
+
+/// The standard errors of the free unknowns (transformed coordinates) at `x`: the sandwich
+/// of the training residuals `r` with Jacobian `columns` (each measured state's residual
+/// variance spread over its cells as their noise grows with what they read where it is not
+/// declared, [`variance_shapes`]: relative, absolute or a mix, as the residuals say);
+/// infinite where the covariance is undetermined.
+fn standard_errors(objective: &Objective, (columns, r): (&[Vec<f64>], &[f64])) -> Vec<f64> {
+    let split = objective.split;
+    let states = split.training_cell_states();
+    let cells: Vec<(usize, usize, usize, f64)> = (split.training())
+        .flat_map(|(index, record, rows)| {
+            rows.flat_map(move |row| {
+                (record.states.iter().enumerate())
+                    .filter_map(move |(k, cells)| cells[row].map(|v| (index, row, k, v)))
+            })
+        })
+        .collect();
+    let values: Vec<Option<f64>> = (cells.iter())
+        .map(|&(_, _, k, v)| split.declared[k].is_none().then_some(v))
+        .collect();
+    let shapes = variance_shapes(r, &states, &values);
+    let n = columns.len();
+    let covariance = shaped_covariance(columns, r, (&states, &shapes));
+    (0..n)
+        .map(|i| {
+            (covariance.as_ref())
+                .map(|c| c[i * n + i])
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .map_or(f64::INFINITY, f64::sqrt)
+        })
+        .collect()
 }
 
 #[cfg(test)]
