@@ -385,12 +385,20 @@ pub fn grouped_standard_errors(
     groups: &[usize],
     count: usize,
 ) -> Vec<f64> {
-    let unknowns = columns.len();
     let covariance = grouped_covariance(columns, residuals, groups);
-    (0..count.min(unknowns))
+    let mut errors = marginal_errors(covariance.as_deref(), columns.len());
+    errors.truncate(count);
+    errors
+}
+
+/// The square roots of the diagonal of an `n x n` covariance (row-major): the marginal
+/// standard errors; infinite where the covariance is missing (undetermined) or an entry is
+/// not a finite non-negative number.
+pub fn marginal_errors(covariance: Option<&[f64]>, n: usize) -> Vec<f64> {
+    (0..n)
         .map(|i| {
-            (covariance.as_ref())
-                .map(|c| c[i * unknowns + i])
+            covariance
+                .map(|c| c[i * n + i])
                 .filter(|v| v.is_finite() && *v >= 0.0)
                 .map_or(f64::INFINITY, f64::sqrt)
         })

@@ -172,6 +172,30 @@ fn standard_errors_match_linear_regression_and_are_infinite_where_undetermined()
     assert!(errors.iter().all(|e| e.is_infinite()), "{errors:?}");
 }
 
+/// The sample standard deviation of `values`.
+fn sample_deviation(values: &[f64]) -> f64 {
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
+    let squares: f64 = values.iter().map(|v| (v - mean).powi(2)).sum();
+    (squares / (values.len() - 1) as f64).sqrt()
+}
+
+/// The least-squares line through `(t, y)`: its slope and its residuals (fit minus data).
+fn line_fit(t: &[f64], y: &[f64]) -> (f64, Vec<f64>) {
+    let n = t.len() as f64;
+    let mean = t.iter().sum::<f64>() / n;
+    let spread: f64 = t.iter().map(|t| (t - mean).powi(2)).sum();
+    let y_mean = y.iter().sum::<f64>() / n;
+    let slope = (t.iter().zip(y))
+        .map(|(t, y)| (t - mean) * (y - y_mean))
+        .sum::<f64>()
+        / spread;
+    let intercept = y_mean - slope * mean;
+    let residuals = (t.iter().zip(y))
+        .map(|(t, y)| intercept + slope * t - y)
+        .collect();
+    (slope, residuals)
+}
+
 /// A line fitted to two groups of points, those at both ends 20x noisier (where they weigh
 /// most on the slope): the grouped errors
 /// match the spread of the slope over many simulated data sets (an independent Monte Carlo),
@@ -186,9 +210,6 @@ fn grouped_standard_errors_match_the_spread_of_refits_under_unequal_noise() {
         .collect();
     let sigma = [0.05, 1.0];
     let columns = vec![vec![1.0; t.len()], t.clone()];
-    let n = t.len() as f64;
-    let mean = t.iter().sum::<f64>() / n;
-    let spread: f64 = t.iter().map(|t| (t - mean).powi(2)).sum();
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let unit = Gaussian::new(0.0, 1.0).unwrap();
     let (mut slopes, mut grouped, mut pooled) = (Vec::new(), 0.0, 0.0);
@@ -197,22 +218,12 @@ fn grouped_standard_errors_match_the_spread_of_refits_under_unequal_noise() {
         let y: Vec<f64> = (t.iter().zip(&groups))
             .map(|(t, &g)| 1.0 + 0.5 * t + sigma[g] * unit.sample(&mut rng))
             .collect();
-        let y_mean = y.iter().sum::<f64>() / n;
-        let slope = (t.iter().zip(&y))
-            .map(|(t, y)| (t - mean) * (y - y_mean))
-            .sum::<f64>()
-            / spread;
-        let intercept = y_mean - slope * mean;
-        let residuals: Vec<f64> = (t.iter().zip(&y))
-            .map(|(t, y)| intercept + slope * t - y)
-            .collect();
+        let (slope, residuals) = line_fit(&t, &y);
         slopes.push(slope);
         grouped += grouped_standard_errors(&columns, &residuals, &groups, 2)[1] / draws as f64;
         pooled += standard_errors(&columns, &residuals, 2)[1] / draws as f64;
     }
-    let average = slopes.iter().sum::<f64>() / draws as f64;
-    let spread_of_slopes =
-        (slopes.iter().map(|s| (s - average).powi(2)).sum::<f64>() / (draws - 1) as f64).sqrt();
+    let spread_of_slopes = sample_deviation(&slopes);
     assert!(
         (grouped / spread_of_slopes - 1.0).abs() < 0.05,
         "{grouped} {spread_of_slopes}"
@@ -435,9 +446,6 @@ fn shaped_standard_errors_match_the_refits_under_relative_noise() {
     let t: Vec<f64> = (0..40).map(|k| k as f64 * 0.25).collect();
     let columns = vec![vec![1.0; t.len()], t.clone()];
     let groups = vec![0; t.len()];
-    let n = t.len() as f64;
-    let mean = t.iter().sum::<f64>() / n;
-    let spread: f64 = t.iter().map(|t| (t - mean).powi(2)).sum();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let unit = Gaussian::new(0.0, 1.0).unwrap();
     let (mut slopes, mut shaped, mut pooled) = (Vec::new(), 0.0, 0.0);
@@ -447,15 +455,7 @@ fn shaped_standard_errors_match_the_refits_under_relative_noise() {
         let y: Vec<f64> = (t.iter())
             .map(|t| (0.2 + t) * (1.0 + 0.1 * unit.sample(&mut rng)))
             .collect();
-        let y_mean = y.iter().sum::<f64>() / n;
-        let slope = (t.iter().zip(&y))
-            .map(|(t, y)| (t - mean) * (y - y_mean))
-            .sum::<f64>()
-            / spread;
-        let intercept = y_mean - slope * mean;
-        let residuals: Vec<f64> = (t.iter().zip(&y))
-            .map(|(t, y)| intercept + slope * t - y)
-            .collect();
+        let (slope, residuals) = line_fit(&t, &y);
         slopes.push(slope);
         let values: Vec<Option<f64>> = y.iter().map(|&v| Some(v)).collect();
         let shapes = variance_shapes(&residuals, &groups, &values);
@@ -463,9 +463,7 @@ fn shaped_standard_errors_match_the_refits_under_relative_noise() {
         shaped += slope_error(covariance) / draws as f64;
         pooled += slope_error(grouped_covariance(&columns, &residuals, &groups)) / draws as f64;
     }
-    let average = slopes.iter().sum::<f64>() / draws as f64;
-    let spread_of_slopes =
-        (slopes.iter().map(|s| (s - average).powi(2)).sum::<f64>() / (draws - 1) as f64).sqrt();
+    let spread_of_slopes = sample_deviation(&slopes);
     let (shaped, pooled) = (shaped / spread_of_slopes, pooled / spread_of_slopes);
     assert!(
         (shaped - 1.0).abs() < 0.06,

@@ -25,7 +25,7 @@ use super::fitter::{slope, thetas, values, Objective};
 use super::summary::{FitSummary, ParamEstimate};
 use crate::ir::Constraint;
 use crate::numeric::linalg::gauss_newton_system;
-use crate::numeric::lm::{shaped_covariance, variance_shapes};
+use crate::numeric::lm::{marginal_errors, shaped_covariance, variance_shapes};
 use crate::numeric::symmetric_eigen;
 
 /// Components of the free direction below this (of the largest) are left out.
@@ -162,16 +162,8 @@ fn standard_errors(objective: &Objective, (columns, r): (&[Vec<f64>], &[f64])) -
         .map(|&(_, _, k, v)| split.declared[k].is_none().then_some(v))
         .collect();
     let shapes = variance_shapes(r, &states, &values);
-    let n = columns.len();
     let covariance = shaped_covariance(columns, r, (&states, &shapes));
-    (0..n)
-        .map(|i| {
-            (covariance.as_ref())
-                .map(|c| c[i * n + i])
-                .filter(|v| v.is_finite() && *v >= 0.0)
-                .map_or(f64::INFINITY, f64::sqrt)
-        })
-        .collect()
+    marginal_errors(covariance.as_deref(), columns.len())
 }
 
 #[cfg(test)]
