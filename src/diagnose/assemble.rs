@@ -55,7 +55,18 @@ pub fn held_out_spread(
     predictive::held_out_spread((split, base), (&unknowns, x, &fixed), (&noise, seed))
 }
 
-/// Per measured state: its share of the held-out error, online and offline errors, noise.
+/// The names of the measured columns: the measured states, then the observables (the
+/// model outputs the data measure, [`crate::record::Record::columns`]).
+pub fn column_names(context: &Context) -> Vec<String> {
+    let model = context.model;
+    let observables = context.split.normalisation.observables.iter();
+    (model.states.iter().map(|s| s.name.clone()))
+        .chain(observables.map(|&o| model.outputs[o].name.clone()))
+        .collect()
+}
+
+/// Per measured column (state, then observable): its share of the held-out error, online
+/// and offline errors, noise.
 pub fn state_gaps(
     context: &Context,
     base: &Simulator,
@@ -64,25 +75,26 @@ pub fn state_gaps(
 ) -> Vec<StateGap> {
     let model = context.model;
     let split = &context.split;
-    let online = before.errors.per_state(model.states.len());
+    let names = column_names(context);
+    let online = before.errors.per_state(names.len());
     let mut simulator = base.clone();
     simulator.set_params(&before.fitted.x);
     let fitted = &before.fitted.x[model.params.len()..];
     let offline = offline_errors(&mut simulator, split, fitted);
-    let cells: Vec<usize> = (0..model.states.len())
+    let cells: Vec<usize> = (0..names.len())
         .map(|k| {
             (split.scored())
-                .map(|(_, record, rows)| record.states[k][rows].iter().flatten().count())
+                .map(|(_, record, rows)| record.column(k)[rows].iter().flatten().count())
                 .sum()
         })
         .collect();
-    let squares: Vec<f64> = (0..model.states.len())
+    let squares: Vec<f64> = (0..names.len())
         .map(|k| online[k].map_or(0.0, |e| e * cells[k] as f64))
         .collect();
     let total: f64 = squares.iter().sum();
-    (model.states.iter().enumerate())
-        .map(|(k, state)| StateGap {
-            name: state.name.clone(),
+    (names.into_iter().enumerate())
+        .map(|(k, name)| StateGap {
+            name,
             share: if total > 0.0 && total.is_finite() {
                 squares[k] / total
             } else {
@@ -227,7 +239,7 @@ pub fn where_and_when(context: &Context, before: &Scored) -> (Vec<Window>, Vec<R
 fn variables(context: &Context, before: &Scored) -> Vec<Variable> {
     let model = context.model;
     let mut variables: Vec<Variable> = (model.inputs.iter().map(|i| i.name.clone()))
-        .chain(model.states.iter().map(|s| s.name.clone()))
+        .chain(column_names(context))
         .map(|name| (name, Vec::new(), Vec::new()))
         .collect();
     for ((_, record, rows), errors) in context.split.scored().zip(&before.errors.records) {
@@ -241,7 +253,7 @@ fn variables(context: &Context, before: &Scored) -> Vec<Variable> {
                 variables[i].1.push(column[row]);
                 variables[i].2.push(error);
             }
-            for (k, cells) in record.states.iter().enumerate() {
+            for (k, cells) in record.columns().enumerate() {
                 if let Some(value) = cells[row] {
                     let variable = &mut variables[model.inputs.len() + k];
                     variable.1.push(value);
@@ -260,10 +272,10 @@ pub fn series(
     after: Option<(&Scored, String)>,
 ) -> Vec<ExperimentSeries> {
     let model = context.model;
-    let measured = model.states.len();
+    let names = column_names(context);
     let columns = |run: &crate::solve::fit::simulate::Run, end: usize| -> Vec<Vec<f64>> {
-        (0..measured)
-            .map(|k| (0..end).map(|row| run.row(row)[k]).collect())
+        (0..names.len())
+            .map(|k| (0..end).map(|row| run.column(row, k)).collect())
             .collect()
     };
     let unit = |name: &str| model.unit(name).map(|u| u.text.clone());
@@ -274,10 +286,10 @@ pub fn series(
                 name: record.name.clone(),
                 times: record.times[..rows.end].to_vec(),
                 first_scored: rows.start,
-                names: model.states.iter().map(|s| s.name.clone()).collect(),
-                units: model.states.iter().map(|s| unit(&s.name)).collect(),
+                names: names.clone(),
+                units: names.iter().map(|name| unit(name)).collect(),
                 time_unit: model.time_unit.clone(),
-                data: (record.states.iter())
+                data: (record.columns())
                     .map(|cells| cells[..rows.end].to_vec())
                     .collect(),
                 before: (before.runs[slot].as_ref())

@@ -101,9 +101,9 @@ pub fn cell_errors(
     norm: &Normalisation,
 ) -> Vec<Vec<Option<f64>>> {
     rows.map(|row| {
-        (record.states.iter().enumerate())
+        (record.columns().enumerate())
             .map(|(k, cells)| {
-                cells[row].map(|value| cell_error(run.row(row)[k], value, norm.state_std[k]))
+                cells[row].map(|value| cell_error(run.column(row, k), value, norm.column_std(k)))
             })
             .collect()
     })
@@ -123,7 +123,7 @@ pub fn scored_errors(split: &Split, runs: &[Option<Run>]) -> Errors {
             None => {
                 errors.diverged = true;
                 rows.clone()
-                    .map(|_| vec![None; record.states.len()])
+                    .map(|_| vec![None; record.columns().count()])
                     .collect()
             }
         };
@@ -136,21 +136,21 @@ pub fn scored_errors(split: &Split, runs: &[Option<Run>]) -> Errors {
     errors
 }
 
-/// Per measured state, the mean squared z-scored error of one-step predictions at the
-/// scored cells whose previous row has a cell of the same state (one step from measured
-/// history); `None` for a state with no such cell. Each prediction starts from the
+/// Per measured column (state, then observable), the mean squared z-scored error of
+/// one-step predictions at the scored cells whose previous row has a cell of the same
+/// column (one step from measured history); `None` for a column with no such cell. Each prediction starts from the
 /// previous row's cells (unmeasured states and hidden ones carried from the run's start).
 pub fn offline_errors(
     simulator: &mut Simulator,
     split: &Split,
     fitted_starts: &[f64],
 ) -> Vec<Option<f64>> {
-    let states = split.normalisation.state_std.len();
-    let mut sums = vec![(0.0, 0usize, false); states];
+    let columns = split.normalisation.columns();
+    let mut sums = vec![(0.0, 0usize, false); columns];
     for (index, record, rows) in split.scored() {
         let overrides = split.overrides(index, fitted_starts, simulator.hidden_count());
         let predictions = simulator.one_step(record, &overrides, rows.end);
-        for (k, cells) in record.states.iter().enumerate() {
+        for (k, cells) in record.columns().enumerate() {
             for row in rows.start.max(1)..rows.end {
                 let (Some(value), Some(_)) = (cells[row], cells[row - 1]) else {
                     continue;
@@ -158,8 +158,8 @@ pub fn offline_errors(
                 let slot = &mut sums[k];
                 match &predictions {
                     Ok((_, predicted)) => {
-                        let z =
-                            (predicted.row(row - 1)[k] - value) / split.normalisation.state_std[k];
+                        let z = (predicted.column(row - 1, k) - value)
+                            / split.normalisation.column_std(k);
                         slot.0 += z * z;
                         slot.1 += 1;
                     }

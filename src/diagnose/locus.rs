@@ -366,6 +366,7 @@ pub(super) fn synthesise(
         .collect();
     let mut simulator = Simulator::new(&model, &vars, tolerances())?;
     simulator.set_method(context.corrections);
+    simulator.observe(&model, &context.split.normalisation.observables)?;
     let mut loci = Vec::new();
     for member in &target.members {
         loci.push(match target.kind {

@@ -113,13 +113,13 @@ pub fn span_from_residuals(split: &Split, runs: &[Option<Run>]) -> f64 {
     let (mut weighted, mut weights) = (0.0, 0.0);
     for ((_, record, rows), run) in split.training().zip(runs) {
         let Some(run) = run else { continue };
-        for (k, cells) in record.states.iter().enumerate() {
+        for (k, cells) in record.columns().enumerate() {
             let samples: Vec<(f64, f64)> = (rows.clone())
                 .filter_map(|row| {
                     let value = cells[row]?;
                     Some((
                         record.times[row],
-                        (run.row(row)[k] - value) / split.normalisation.state_std[k],
+                        (run.column(row, k) - value) / split.normalisation.column_std(k),
                     ))
                 })
                 .collect();

@@ -150,10 +150,10 @@ impl Problem<'_> {
             )
             .ok()?;
             for row in rows {
-                for (k, cells) in record.states.iter().enumerate() {
+                for (k, cells) in record.columns().enumerate() {
                     if let Some(value) = cells[row] {
-                        let weight = split.weight(k, value) / split.normalisation.state_std[k];
-                        out.push((run.row(row)[k] - value) * weight / scale);
+                        let weight = split.weight(k, value) / split.normalisation.column_std(k);
+                        out.push((run.column(row, k) - value) * weight / scale);
                     }
                 }
             }
@@ -255,7 +255,9 @@ fn run_with(
         locus = next;
     }
     corrected.simulator.clear_corrections();
-    Ok(Run { dim, values })
+    let mut run = Run::of_states(dim, values);
+    corrected.simulator.observe_run(record, &mut run, 0);
+    Ok(run)
 }
 
 /// The errors at the scored cells of `split` of free runs with the correction in the loop.

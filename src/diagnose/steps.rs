@@ -149,7 +149,8 @@ impl<'a> Findings<'a> {
         progress: &'a (dyn Fn(Progress) + Sync),
     ) -> Result<Self, DiagnoseError> {
         let mut context = Context::new(problem, options, progress)?;
-        let base = Simulator::new(context.model, &[], tolerances())?;
+        let mut base = Simulator::new(context.model, &[], tolerances())?;
+        base.observe(context.model, &context.split.normalisation.observables)?;
         let stiff = check_runs(&context, &base)?;
         context.corrections = if stiff {
             Method::Auto

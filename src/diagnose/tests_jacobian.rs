@@ -1,7 +1,7 @@
 //! The fits' Jacobian from forward sensitivities against central differences of the
 //! residuals, with every kind of unknown: params in the balances and in a declared initial
 //! value, a fitted start of a measured state, and fitted hidden starts; on a stiff stretch
-//! and across input switches.
+//! and across input switches; and with measured outputs (observables) among the columns.
 
 use crate::record::Record;
 use crate::solve::fit::fitter::Objective;
@@ -65,8 +65,48 @@ fn records(model: &crate::ir::Model) -> Vec<Record> {
         .collect()
 }
 
+/// The culture read through two outputs: an optical density of X that depends on the
+/// input and on a param of its own, and a saturation of S through the balances' `K`.
+const OBSERVED: &str = "param c = 0.8 positive
+output OD = 0.4 + c * X * (1 + u)
+output R = S / (K + S)
+";
+
+/// The records of [`records`] with X read only through `OD` and S also through `R`
+/// (every third cell of each missing, staggered).
+fn observed_records(model: &crate::ir::Model) -> Vec<Record> {
+    let mut records = records(model);
+    for record in &mut records {
+        let rows = record.len();
+        let x = std::mem::replace(&mut record.states[0], vec![None; rows]);
+        let od = (x.iter().enumerate())
+            .map(|(row, cell)| cell.map(|v| 0.4 + 0.8 * v * (1.0 + record.inputs[0][row])))
+            .collect();
+        let r = (record.states[1].iter().enumerate())
+            .map(|(row, cell)| cell.filter(|_| row % 4 != 1).map(|v| v / (0.02 + v)))
+            .collect();
+        record.observables = vec![
+            crate::record::Observable {
+                output: 0,
+                name: "OD".into(),
+                cells: od,
+            },
+            crate::record::Observable {
+                output: 1,
+                name: "R".into(),
+                cells: r,
+            },
+        ];
+    }
+    records
+}
+
 fn check(fit_hidden: bool) {
-    let model = crate::driver::compile("culture", MODEL, &[]).unwrap().model;
+    check_model(MODEL, records, fit_hidden);
+}
+
+fn check_model(text: &str, records: impl Fn(&crate::ir::Model) -> Vec<Record>, fit_hidden: bool) {
+    let model = crate::driver::compile("culture", text, &[]).unwrap().model;
     let split = Split::new(
         &model,
         records(&model),
@@ -78,14 +118,18 @@ fn check(fit_hidden: bool) {
         rtol: 1e-12,
         atol: 1e-14,
     };
-    let simulator = Simulator::new(&model, &[], tight).unwrap();
+    let mut simulator = Simulator::new(&model, &[], tight).unwrap();
+    simulator
+        .observe(&model, &split.normalisation.observables)
+        .unwrap();
     let objective = Objective {
         simulator: &simulator,
         split: &split,
     };
     let fitted = split.fitted_count(simulator.hidden_count());
     assert_eq!(fitted, 1 + if fit_hidden { 2 } else { 0 });
-    let mut x = vec![0.35, 1.1, 0.03];
+    let mut x = vec![0.35, 1.1, 0.03, 0.7];
+    x.truncate(model.params.len());
     x.extend((0..fitted).map(|i| 0.4 + 0.3 * i as f64));
     let exact = objective.jacobian(&x).unwrap();
     let residuals = objective.residuals(&x).unwrap();
@@ -119,4 +163,18 @@ fn jacobian_from_sensitivities_matches_central_differences() {
 #[test]
 fn jacobian_covers_fitted_hidden_starts() {
     check(true);
+}
+
+/// Observables' columns: their derivatives by the states through the sensitivities, by
+/// their own param directly, and by the input they read (held, so no column).
+#[test]
+fn jacobian_covers_measured_outputs() {
+    let text = format!("{MODEL}{OBSERVED}");
+    let model = crate::driver::compile("culture", &text, &[]).unwrap().model;
+    let records = observed_records(&model);
+    assert!(records
+        .iter()
+        .all(|r| r.states[0].iter().all(Option::is_none)));
+    check_model(&text, observed_records, false);
+    check_model(&text, observed_records, true);
 }

@@ -337,19 +337,56 @@ fn bad_options_and_data_are_refused_with_their_codes() {
         ),
         "{error}"
     );
-    // A data set that measures a model output.
-    let mut observed = sets.clone();
-    let rows = observed[0].record.len();
-    observed[0]
-        .record
-        .observables
-        .push(crate::record::Observable {
-            output: 0,
-            name: "OD".into(),
-            cells: vec![Some(1.0); rows],
-        });
-    assert!(matches!(
-        try_run(CHEMOSTAT_MODEL, &observed, &Options::default()),
-        Err(DiagnoseError::Fit(FitError::MeasuredOutput { .. }))
-    ));
+}
+
+/// The product read only through an absorbance, `A = 2 P + 0.01` (an `output` named as the
+/// data's column, records spec 4): the diagnosis fits and scores it like the state and
+/// credits the missing decay, as it does with P measured (thinned, one experiment from the
+/// run's start, whose declared P is the truth's).
+#[test]
+fn a_gap_read_through_a_measured_output_is_found_as_through_its_state() {
+    let sets = split_and_thin(&chemostat("truth_decay.gbm"), 1, 0.3, 17);
+    let source = crate::driver::read_source(&root().join(CHEMOSTAT_MODEL)).unwrap();
+    let source =
+        format!("{source}\n## Absorbance of the product.\noutput A [mol/L] = 2 * P + 0.01\n");
+    let compiled = crate::driver::compile("observed", &source, &[]).unwrap();
+    let mut record = sets[0].record.clone();
+    let rows = record.len();
+    let p = std::mem::replace(&mut record.states[1], vec![None; rows]);
+    record.observables = vec![crate::record::Observable {
+        output: 0,
+        name: "A".into(),
+        cells: p.iter().map(|cell| cell.map(|v| 2.0 * v + 0.01)).collect(),
+    }];
+    let problem = Problem {
+        name: "observed",
+        source: &source,
+        checked: &compiled.checked,
+        model: &compiled.model,
+        records: &[record],
+        held_out: &[],
+    };
+    let report = diagnose(&problem, &Options::default(), &|_| {}).unwrap();
+    let text = render::text(&report);
+    assert!(report.significant, "{text}");
+    assert_eq!(report.selection.credited, ["product_decay"], "{text}");
+    let cells = |name: &str| {
+        report
+            .states
+            .iter()
+            .find(|s| s.name == name)
+            .map(|s| s.cells)
+    };
+    assert_eq!(report.states.len(), 3, "{text}");
+    assert_eq!(cells("P"), Some(0), "P is not measured: {text}");
+    assert!(cells("A").is_some_and(|c| c > 0), "{text}");
+    assert!(
+        report
+            .states
+            .iter()
+            .all(|s| s.online.is_none_or(f64::is_finite)),
+        "{text}"
+    );
+    let k_p = param(&report, "k_P");
+    assert!((k_p / 0.01 - 1.0).abs() < 0.2, "k_P {k_p}\n{text}");
 }

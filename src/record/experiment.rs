@@ -112,6 +112,38 @@ impl Record {
             .map(|o| &o.cells)
     }
 
+    /// The measured columns: every state's cells (model order), then every observable's
+    /// (in [`Record::observables`] order; [`Record::align_observables`] makes that order
+    /// the same in every record of a fit).
+    pub fn columns(&self) -> impl Iterator<Item = &Cells> + Clone {
+        (self.states.iter()).chain(self.observables.iter().map(|o| &o.cells))
+    }
+
+    /// The cells of column `k` ([`Record::columns`] order).
+    pub fn column(&self, k: usize) -> &Cells {
+        match k.checked_sub(self.states.len()) {
+            None => &self.states[k],
+            Some(j) => &self.observables[j].cells,
+        }
+    }
+
+    /// Lays the observables out as `outputs` lists them (model output indices): one per
+    /// entry, with no measured cell where this record does not measure it; an output
+    /// measured here but not listed is dropped.
+    pub fn align_observables(&mut self, outputs: &[usize], names: &[String]) {
+        let rows = self.len();
+        let mut aligned = Vec::with_capacity(outputs.len());
+        for &output in outputs {
+            let cells = (self.observable(output).cloned()).unwrap_or_else(|| vec![None; rows]);
+            aligned.push(Observable {
+                output,
+                name: names[output].clone(),
+                cells,
+            });
+        }
+        self.observables = aligned;
+    }
+
     /// The number of measured state cells.
     pub fn measured_cells(&self) -> usize {
         self.states.iter().flatten().filter(|c| c.is_some()).count()

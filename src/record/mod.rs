@@ -109,4 +109,25 @@ impl Normalisation {
         norm.observables = observables;
         norm
     }
+
+    /// The measured columns a fit scores: the measured states, then the observables.
+    pub fn columns(&self) -> usize {
+        self.state_std.len() + self.observables.len()
+    }
+
+    /// The standard deviation of column `k` ([`Normalisation::columns`] order).
+    pub fn column_std(&self, k: usize) -> f64 {
+        match k.checked_sub(self.state_std.len()) {
+            None => self.state_std[k],
+            Some(j) => self.observable_std[j],
+        }
+    }
+
+    /// The mean of column `k` ([`Normalisation::columns`] order).
+    pub fn column_mean(&self, k: usize) -> f64 {
+        match k.checked_sub(self.state_mean.len()) {
+            None => self.state_mean[k],
+            Some(j) => self.observable_mean[j],
+        }
+    }
 }

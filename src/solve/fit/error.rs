@@ -96,18 +96,6 @@ pub enum FitError {
         /// Measured rows that would be held out.
         test: usize,
     },
-    /// The data measure a model `output`, which the diagnosis does not score.
-    #[error("the data measure output `{output}` of model `{model}`: the diagnosis compares measured states only")]
-    #[diagnostic(
-        code(gbm::E0807),
-        help("give the states the output is computed from as columns, or rename the column so that it does not name the output")
-    )]
-    MeasuredOutput {
-        /// The model.
-        model: String,
-        /// The output.
-        output: String,
-    },
     /// A discrete map on rows that are not uniformly spaced.
     #[error("expected uniformly spaced rows for a `next` model, found irregular times in experiment `{experiment}`")]
     #[diagnostic(

@@ -80,8 +80,9 @@ impl Objective<'_> {
     pub fn residuals(&self, x: &[f64]) -> Option<Vec<f64>> {
         let per_record = self.per_record(x, |simulator, (_, record, rows), overrides| {
             let run = simulator.free_run(record, overrides, rows.end).ok()?;
-            let deviation =
-                |row: usize, k: usize| run.row(row)[k] - record.states[k][row].unwrap_or(f64::NAN);
+            let deviation = |row: usize, k: usize| {
+                run.column(row, k) - record.column(k)[row].unwrap_or(f64::NAN)
+            };
             Some(self.record_residuals(record, rows, deviation))
         })?;
         let residuals: Vec<f64> = per_record.into_iter().flatten().collect();
@@ -110,7 +111,7 @@ impl Objective<'_> {
                 .map(|unknown| {
                     let column = column(unknown);
                     self.record_residuals(record, rows.clone(), |row, k| {
-                        column.map_or(0.0, |c| sensitivities.at(row, k)[c])
+                        column.map_or(0.0, |c| sensitivities.column_at(row, k)[c])
                     })
                 })
                 .collect();
@@ -127,7 +128,8 @@ impl Objective<'_> {
     }
 
     /// `value(row, k) * weight / std_k / sqrt(cells)` at every measured training cell of `record`
-    /// in `rows` (the residuals' order: row by row, state by state); with `value` the
+    /// in `rows` (the residuals' order: row by row, column by column: the measured states,
+    /// then the observables); with `value` the
     /// simulation's deviation that gives the residuals, and its derivative their Jacobian.
     pub(super) fn record_residuals(
         &self,
@@ -139,10 +141,10 @@ impl Objective<'_> {
         let scale = (self.split.training_cells().max(1) as f64).sqrt();
         let mut out = Vec::new();
         for row in rows {
-            for (k, cells) in record.states.iter().enumerate() {
+            for (k, cells) in record.columns().enumerate() {
                 if let Some(measured) = cells[row] {
                     let weight = self.split.weight(k, measured);
-                    out.push(value(row, k) * weight / norm.state_std[k] / scale);
+                    out.push(value(row, k) * weight / norm.column_std(k) / scale);
                 }
             }
         }

@@ -55,8 +55,9 @@ pub fn fit_mechanism(
     })
 }
 
-/// What a fit by free runs needs of a model and its records: no closures, no measured
-/// outputs, and for a discrete map one uniform step.
+/// What a fit by free runs needs of a model and its records: no closures, and for a
+/// discrete map one uniform step (measured outputs are fitted and scored like measured
+/// states).
 pub fn check_fittable<'r>(
     model: &Model,
     records: impl Iterator<Item = &'r Record> + Clone,
@@ -67,14 +68,6 @@ pub fn check_fittable<'r>(
             model: model.name.clone(),
             closures: names.join(", "),
         });
-    }
-    for record in records.clone() {
-        if let Some(observable) = record.observables.first() {
-            return Err(FitError::MeasuredOutput {
-                model: model.name.clone(),
-                output: observable.name.clone(),
-            });
-        }
     }
     if model.dynamics == Dynamics::Discrete {
         let steps: Vec<Option<f64>> = records.clone().map(Record::uniform_step).collect();

@@ -56,7 +56,8 @@ pub fn fit_model(
     seed: u64,
 ) -> Result<ModelFit, FitError> {
     let started = Instant::now();
-    let simulator = Simulator::new(model, &[], tolerances())?;
+    let mut simulator = Simulator::new(model, &[], tolerances())?;
+    simulator.observe(model, &split.normalisation.observables)?;
     let unknowns = Unknowns::of(split, model, &simulator);
     let x = unknowns.values(start);
     let constraints = &unknowns.constraints;

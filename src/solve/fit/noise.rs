@@ -177,18 +177,18 @@ fn trimmed_mean(mut squares: Vec<f64>) -> (f64, f64) {
     )
 }
 
-/// Per measured state, the sum of the squares of its cells' residuals (rescaled to
+/// Per measured column (state, then observable), the sum of the squares of its cells' residuals (rescaled to
 /// normalised units) and their count, from the residuals as
 /// [`super::fitter::Objective::residuals`] gives them (row by row, state by state, scaled by
 /// the square root of the training cells).
 pub fn by_state(split: &Split, residuals: &[f64]) -> Vec<(f64, usize)> {
-    let states = split.normalisation.state_std.len();
-    let mut sums = vec![(0.0, 0usize); states];
+    let columns = split.normalisation.columns();
+    let mut sums = vec![(0.0, 0usize); columns];
     let mut cells = residuals.iter();
     let total = residuals.len() as f64;
     for (_, record, rows) in split.training() {
         for row in rows {
-            for (sum, column) in sums.iter_mut().zip(&record.states) {
+            for (sum, column) in sums.iter_mut().zip(record.columns()) {
                 if column[row].is_some() {
                     let r = cells.next().copied().unwrap_or(f64::NAN);
                     sum.0 += r * r * total;
@@ -257,16 +257,17 @@ pub fn bound_fitted_starts(split: &mut Split) {
         .collect();
 }
 
-/// Per measured state, the noise estimate in normalised units (variance divided by the
-/// training variance), pooled over the training parts of every experiment.
+/// Per measured column (state, then observable), the noise estimate in normalised units
+/// (variance divided by the training variance), pooled over the training parts of every
+/// experiment.
 pub fn noise_floors(split: &Split) -> Vec<NoiseEstimate> {
     let norm = &split.normalisation;
-    (0..norm.state_std.len())
+    (0..norm.columns())
         .map(|k| {
             let experiments: Vec<Vec<(f64, f64)>> = (split.training())
                 .map(|(_, record, rows)| {
                     (rows.clone())
-                        .filter_map(|row| record.states[k][row].map(|v| (record.times[row], v)))
+                        .filter_map(|row| record.column(k)[row].map(|v| (record.times[row], v)))
                         .collect()
                 })
                 .collect();
@@ -278,7 +279,7 @@ pub fn noise_floors(split: &Split) -> Vec<NoiseEstimate> {
                 },
                 None => estimate(&experiments),
             };
-            estimate.variance /= norm.state_std[k].powi(2);
+            estimate.variance /= norm.column_std(k).powi(2);
             estimate
         })
         .collect()

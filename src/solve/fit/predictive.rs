@@ -207,8 +207,9 @@ fn start_columns(objective: &Objective, x: &[f64], noise: &[f64]) -> Option<Vec<
         let run = simulator.sensitive_run(record, &overrides, rows.end, &from_cells);
         let (_, s) = run.ok()?;
         for (c, &k) in from_cells.iter().enumerate() {
-            let block =
-                objective.record_residuals(record, rows.clone(), |row, j| s.at(row, j)[params + c]);
+            let block = objective.record_residuals(record, rows.clone(), |row, j| {
+                s.column_at(row, j)[params + c]
+            });
             let mut column = vec![0.0; total];
             column[offset..offset + cells].copy_from_slice(&block);
             out.push(TrainingStart {
@@ -230,7 +231,7 @@ fn first_cell_variance(split: &Split, index: usize, k: usize, noise: &[f64]) -> 
     cell_variance(split, k, cell.unwrap_or(0.0), noise)
 }
 
-/// The noise variance of a cell of state `k` reading `value`, in its unit squared: the
+/// The noise variance of a cell of column `k` (a measured state or an observable) reading `value`, in its unit squared: the
 /// declared noise at that value; else the level estimated from the data (`noise`,
 /// z-scored, pooled over the state's training cells) taken as relative: spread over the
 /// cells in proportion to their squares (on the training cells it averages the pooled
@@ -243,8 +244,9 @@ fn cell_variance(split: &Split, k: usize, value: f64, noise: &[f64]) -> f64 {
     match &split.declared[k] {
         Some((declared, _)) => declared.sigma(value).powi(2),
         None => {
-            let pooled = noise[k] * norm.state_std[k].powi(2);
-            let mean_square = norm.state_mean[k].powi(2) + norm.state_std[k].powi(2);
+            let (mean, std) = (norm.column_mean(k), norm.column_std(k));
+            let pooled = noise[k] * std.powi(2);
+            let mean_square = mean.powi(2) + std.powi(2);
             if mean_square > 0.0 {
                 pooled * value * value / mean_square
             } else {
@@ -260,7 +262,7 @@ fn cell_variance(split: &Split, k: usize, value: f64, noise: &[f64]) -> f64 {
 fn residual_variances(objective: &Objective, noise: &[f64]) -> Vec<f64> {
     let split = objective.split;
     let sigma = |record: &crate::record::Record, row: usize, k: usize| {
-        let value = record.states[k][row].unwrap_or(0.0);
+        let value = record.column(k)[row].unwrap_or(0.0);
         cell_variance(split, k, value, noise).sqrt()
     };
     (split.training())
@@ -279,13 +281,14 @@ fn leading_block(c: &[f64], n: usize, m: usize) -> Vec<f64> {
 /// The sum over the scored cells of the squared z-scored deviation of `runs` from
 /// `nominal`, divided by the number of scored cells.
 fn squared_deviation(split: &Split, nominal: &[Run], runs: &[Run]) -> f64 {
-    let std = &split.normalisation.state_std;
+    let norm = &split.normalisation;
     let (mut sum, mut cells) = (0.0, 0usize);
     for ((_, record, rows), (nominal, run)) in split.scored().zip(nominal.iter().zip(runs)) {
         for row in rows {
-            for (k, column) in record.states.iter().enumerate() {
+            for (k, column) in record.columns().enumerate() {
                 if column[row].is_some() {
-                    sum += ((run.row(row)[k] - nominal.row(row)[k]) / std[k]).powi(2);
+                    let deviation = run.column(row, k) - nominal.column(row, k);
+                    sum += (deviation / norm.column_std(k)).powi(2);
                     cells += 1;
                 }
             }

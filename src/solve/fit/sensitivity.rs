@@ -22,6 +22,11 @@ pub struct RunSensitivities {
     pub columns: usize,
     /// `values[(row * dim + state) * columns + column]`.
     pub values: Vec<f64>,
+    /// Measured states per row (the data columns before the observables).
+    pub measured: usize,
+    /// The observables' derivatives, `observed[(row * observables + j) * columns + column]`
+    /// (empty where nothing is observed).
+    pub observed: Vec<f64>,
 }
 
 impl RunSensitivities {
@@ -29,6 +34,20 @@ impl RunSensitivities {
     pub fn at(&self, row: usize, state: usize) -> &[f64] {
         let start = (row * self.dim + state) * self.columns;
         &self.values[start..start + self.columns]
+    }
+
+    /// The derivatives of data column `k` at `row` (a measured state, then an observable,
+    /// [`crate::record::Record::columns`] order) by every column.
+    pub fn column_at(&self, row: usize, k: usize) -> &[f64] {
+        match k.checked_sub(self.measured) {
+            None => self.at(row, k),
+            Some(j) => {
+                let rows = self.values.len() / (self.dim * self.columns).max(1);
+                let per_row = self.observed.len() / (rows * self.columns).max(1);
+                let start = (row * per_row + j) * self.columns;
+                &self.observed[start..start + self.columns]
+            }
+        }
     }
 }
 
@@ -48,20 +67,51 @@ impl Simulator {
         let mut s = self.initial_sensitivities(record, overrides, initial);
         let (dim, columns) = (state.len(), s.len() / state.len().max(1));
         let mut sensitive = Sensitive {
-            run: Run {
-                dim,
-                values: state.clone(),
-            },
+            run: Run::of_states(dim, state.clone()),
             sensitivities: RunSensitivities {
                 dim,
                 columns,
                 values: s.clone(),
+                measured: dim,
+                observed: Vec::new(),
             },
         };
         let how = (Renewal::Budget, Some(&mut s[..]));
         let segments = input_runs(record, end);
         self.run(record, segments, &mut state, how, &mut sensitive)?;
-        Ok((sensitive.run, sensitive.sensitivities))
+        let Sensitive {
+            mut run,
+            mut sensitivities,
+        } = sensitive;
+        self.observe_run(record, &mut run, 0);
+        self.observe_sensitivities(record, &run, &mut sensitivities);
+        Ok((run, sensitivities))
+    }
+
+    /// The observables' derivatives at every row of `run` by the chain rule: their
+    /// derivatives by the states times the states' sensitivities, plus their own by the
+    /// params (none where nothing is observed).
+    fn observe_sensitivities(
+        &mut self,
+        record: &Record,
+        run: &Run,
+        sensitivities: &mut RunSensitivities,
+    ) {
+        let Some(observation) = self.observation.take() else {
+            return;
+        };
+        let (dim, columns) = (sensitivities.dim, sensitivities.columns);
+        let mut out = vec![0.0; observation.count * columns];
+        sensitivities.measured = run.measured;
+        sensitivities.observed.clear();
+        for row in 0..run.rows() {
+            self.load(record, row, run.row(row));
+            let m = &sensitivities.values[row * dim * columns..(row + 1) * dim * columns];
+            let slots = self.system.slots_mut();
+            (observation.program).eval_product(slots, &mut self.scratch, m, columns, &mut out);
+            sensitivities.observed.extend_from_slice(&out);
+        }
+        self.observation = Some(observation);
     }
 
     /// The sensitivities a free run of `record` starts with (see the module documentation).

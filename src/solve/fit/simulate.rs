@@ -29,16 +29,44 @@ use std::ops::ControlFlow;
 const MAX_STEPS: usize = 20_000;
 
 /// States along a record, row-major: `values[row * dim + k]` is state `k` (measured, then
-/// hidden) at that row.
+/// hidden) at that row; with the measured outputs (observables) of the model at each row
+/// where the simulator observes them ([`Simulator::observe`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Run {
     /// States per row.
     pub dim: usize,
     /// The values.
     pub values: Vec<f64>,
+    /// Measured states per row (the columns before the observables, [`Run::column`]).
+    pub measured: usize,
+    /// Observables per row (row-major, [`crate::record::Normalisation::observables`]
+    /// order); empty where nothing is observed.
+    pub observed: Vec<f64>,
 }
 
 impl Run {
+    /// A run of states alone (no observable).
+    pub fn of_states(dim: usize, values: Vec<f64>) -> Run {
+        Run {
+            dim,
+            values,
+            measured: dim,
+            observed: Vec::new(),
+        }
+    }
+
+    /// Column `k` at `row` in [`crate::record::Record::columns`] order: a measured state,
+    /// then an observable.
+    pub fn column(&self, row: usize, k: usize) -> f64 {
+        match k.checked_sub(self.measured) {
+            None => self.values[row * self.dim + k],
+            Some(j) => {
+                let per_row = self.observed.len() / self.rows().max(1);
+                self.observed[row * per_row + j]
+            }
+        }
+    }
+
     /// The state at `row`.
     pub fn row(&self, row: usize) -> &[f64] {
         &self.values[row * self.dim..(row + 1) * self.dim]
@@ -67,6 +95,18 @@ pub struct Simulator {
     tolerances: Tolerances,
     pub(super) scratch: Vec<f64>,
     names: Vec<String>,
+    /// The observables' values and derivatives, where observed.
+    pub(super) observation: Option<Observation>,
+}
+
+/// The model outputs a fit compares with data columns, compiled with their derivatives by
+/// the states and the params (the chain rule onto a run's sensitivities).
+#[derive(Debug, Clone)]
+pub(super) struct Observation {
+    /// Values and derivatives by the state slots, then the param slots.
+    pub(super) program: JacobianProgram,
+    /// Number of observables.
+    pub(super) count: usize,
 }
 
 impl Simulator {
@@ -123,7 +163,49 @@ impl Simulator {
             correction_slots,
             system,
             scratch: Vec::new(),
+            observation: None,
         })
+    }
+
+    /// Computes model outputs `outputs` (indices, in the order of the data's observable
+    /// columns) at every row of every run from now on ([`Run::column`]).
+    pub fn observe(&mut self, model: &Model, outputs: &[usize]) -> Result<(), FitError> {
+        if outputs.is_empty() {
+            self.observation = None;
+            return Ok(());
+        }
+        let layout = self.system.layout();
+        let wrt: Vec<usize> = (layout.state_range()).chain(layout.param_range()).collect();
+        let exprs = outputs.iter().map(|&o| &model.outputs[o].expr);
+        let program = JacobianProgram::compile(exprs, layout, &wrt)
+            .map_err(|e| FitError::internal(e.to_string()))?;
+        self.observation = Some(Observation {
+            program,
+            count: outputs.len(),
+        });
+        Ok(())
+    }
+
+    /// Fills the observables of `run` (its row `r` at record row `first + r`) from its
+    /// states, the record's inputs and the current params; nothing where nothing is
+    /// observed.
+    pub fn observe_run(&mut self, record: &Record, run: &mut Run, first: usize) {
+        let measured = self.measured;
+        let Some(observation) = self.observation.take() else {
+            return;
+        };
+        let count = observation.count;
+        let columns = observation.program.columns();
+        let (mut values, mut jacobian) = (vec![0.0; count], vec![0.0; count * columns]);
+        run.observed.clear();
+        run.measured = measured;
+        for row in 0..run.rows() {
+            self.load(record, first + row, run.row(row));
+            let slots = self.system.slots_mut();
+            (observation.program).eval(slots, &mut self.scratch, &mut values, &mut jacobian);
+            run.observed.extend_from_slice(&values);
+        }
+        self.observation = Some(observation);
     }
 
     /// Integrates with `method` from now on.
@@ -306,7 +388,9 @@ impl Simulator {
             &mut push,
         )
         .map_err(|error| error.named(&self.names))?;
-        Ok(Run { dim, values })
+        let mut run = Run::of_states(dim, values);
+        self.observe_run(record, &mut run, 0);
+        Ok(run)
     }
 
     /// One-step predictions along rows `0..end - 1`: from row `i`'s measured cells (and,
@@ -334,8 +418,13 @@ impl Simulator {
         let how = (Renewal::Restart, None);
         self.run(record, segments, &mut state, how, &mut steps)
             .map_err(|error| error.named(&self.names))?;
-        let run = |values| Run { dim, values };
-        Ok((run(steps.starts), run(steps.predictions)))
+        let (mut starts, mut predictions) = (
+            Run::of_states(dim, steps.starts),
+            Run::of_states(dim, steps.predictions),
+        );
+        self.observe_run(record, &mut starts, 0);
+        self.observe_run(record, &mut predictions, 1);
+        Ok((starts, predictions))
     }
 }
 

@@ -197,6 +197,12 @@ impl Split {
             .map(|(record, part)| (record, part.train.clone()))
             .collect();
         let normalisation = Normalisation::over(&trained, model.states.len(), model.inputs.len());
+        let mut records = records;
+        let names: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
+        for record in &mut records {
+            record.align_observables(&normalisation.observables, &names);
+        }
+        let columns = normalisation.columns();
         let mut split = Split {
             records,
             parts,
@@ -206,7 +212,7 @@ impl Split {
             holdout,
             fit_hidden,
             normalisation,
-            declared: vec![None; model.states.len()],
+            declared: vec![None; columns],
         };
         split.plan_starts(model, false);
         split
@@ -218,7 +224,7 @@ impl Split {
     pub fn one_step_share(&self) -> f64 {
         let (mut paired, mut cells) = (0usize, 0usize);
         for (_, record, rows) in self.training() {
-            for column in &record.states {
+            for column in record.columns() {
                 for row in rows.clone().skip(1) {
                     if column[row].is_some() {
                         cells += 1;
@@ -230,15 +236,22 @@ impl Split {
         paired as f64 / cells.max(1) as f64
     }
 
-    /// Takes the declared measurement noise of the states (`ir::Noise`; outputs are not
-    /// diagnosed): their noise floor and the weights of their cells in the fits.
+    /// Takes the declared measurement noise of the measured states and observables
+    /// (`ir::Noise`): their noise floor and the weights of their cells in the fits.
     pub fn declare_noise(&mut self, noise: &[crate::ir::Noise]) {
+        let norm = &self.normalisation;
         for declared in noise {
-            let crate::ir::Measured::State(k) = declared.target else {
-                continue;
+            let k = match declared.target {
+                crate::ir::Measured::State(k) => k,
+                crate::ir::Measured::Output(output) => {
+                    match norm.observables.iter().position(|&o| o == output) {
+                        Some(j) => norm.state_std.len() + j,
+                        None => continue,
+                    }
+                }
             };
             let variances: Vec<f64> = (self.training())
-                .flat_map(|(_, record, rows)| record.states[k][rows].iter().flatten().copied())
+                .flat_map(|(_, record, rows)| record.column(k)[rows].iter().flatten().copied())
                 .map(|value| declared.variance(value))
                 .collect();
             let mean = variances.iter().sum::<f64>() / variances.len().max(1) as f64;
@@ -248,7 +261,8 @@ impl Split {
         }
     }
 
-    /// The weight of a measured cell of state `k` with value `value` in the fits: the
+    /// The weight of a measured cell of column `k` (a measured state or an observable,
+    /// [`Record::columns`]) with value `value` in the fits: the
     /// declared noise's root mean square over the state's training cells divided by the
     /// cell's own (1 without a declaration). Relative noise weighs small values more; the
     /// weights of a state average 1 in the square, so the fit's gap stays on the scale of the
@@ -363,13 +377,13 @@ impl Split {
         self.fitted_starts.len() + per_record * self.training().count()
     }
 
-    /// The measured state of every training cell, in the order of the fits' residuals
-    /// (experiment by experiment, row by row, state by state).
+    /// The measured column (state or observable) of every training cell, in the order of
+    /// the fits' residuals (experiment by experiment, row by row, column by column).
     pub fn training_cell_states(&self) -> Vec<usize> {
         let mut states = Vec::with_capacity(self.training_cells());
         for (_, record, rows) in self.training() {
             for row in rows {
-                for (k, column) in record.states.iter().enumerate() {
+                for (k, column) in record.columns().enumerate() {
                     if column[row].is_some() {
                         states.push(k);
                     }
@@ -398,7 +412,7 @@ impl Split {
             .filter(|(_, _, rows)| !rows.is_empty())
     }
 
-    /// Measured state cells in the training parts.
+    /// Measured cells (states and observables) in the training parts.
     pub fn training_cells(&self) -> usize {
         (self.training())
             .map(|(_, record, rows)| cells_in(record, rows))
@@ -415,14 +429,14 @@ impl Split {
     }
 }
 
-/// The rows of `rows` with at least one measured state cell.
+/// The rows of `rows` with at least one measured cell (a state or an observable).
 pub fn measured_rows(record: &Record, rows: Range<usize>) -> impl Iterator<Item = usize> + '_ {
-    rows.filter(|&row| record.states.iter().any(|cells| cells[row].is_some()))
+    rows.filter(|&row| record.columns().any(|cells| cells[row].is_some()))
 }
 
-/// Measured state cells of `record` in `rows`.
+/// Measured cells (states and observables) of `record` in `rows`.
 pub fn cells_in(record: &Record, rows: Range<usize>) -> usize {
-    (record.states.iter())
+    (record.columns())
         .map(|cells| cells[rows.clone()].iter().flatten().count())
         .sum()
 }

@@ -153,7 +153,7 @@ fn standard_errors(objective: &Objective, (columns, r): (&[Vec<f64>], &[f64])) -
     let cells: Vec<(usize, usize, usize, f64)> = (split.training())
         .flat_map(|(index, record, rows)| {
             rows.flat_map(move |row| {
-                (record.states.iter().enumerate())
+                (record.columns().enumerate())
                     .filter_map(move |(k, cells)| cells[row].map(|v| (index, row, k, v)))
             })
         })
