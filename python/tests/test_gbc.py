@@ -21,6 +21,11 @@ GB1 = ROOT / "models" / "bioreactor" / "gb1.gbm"
 STEPS = ROOT / "models" / "bioreactor" / "data" / "steps.csv"
 MONOD = ROOT / "models" / "diagnose" / "overflow" / "monod.gbm"
 OVERFLOW = ROOT / "models" / "diagnose" / "overflow" / "data" / "overflow.csv"
+# Small corpus scenarios (a few seconds per command) where the test compares the package
+# with the CLI, not a result: two lactic batches with a grey box, five yeast batches.
+SCENARIOS = ROOT / "bench" / "corpus" / "scenarios"
+S02_GREYBOX, S02_DATA = SCENARIOS / "s02" / "greybox.gbm", SCENARIOS / "s02" / "data.csv"
+S29_MODEL, S29_DATA = SCENARIOS / "s29" / "model.gbm", SCENARIOS / "s29" / "data.csv"
 
 
 def cli(*args):
@@ -155,12 +160,11 @@ def test_simulate_equals_the_cli(tmp_path):
 
 
 def test_compare_equals_the_cli(tmp_path):
-    greybox = ROOT / "bench" / "training" / "overflow_greybox.gbm"
-    flags = ["--holdout", "B4", "--seeds", 1, "--epochs", 2, "--jobs", 1]
-    cli("compare", greybox, OVERFLOW, *flags, "--json", tmp_path / "c.json")
+    flags = ["--holdout", "B2", "--seeds", 1, "--epochs", 2, "--jobs", 1]
+    cli("compare", S02_GREYBOX, S02_DATA, *flags, "--json", tmp_path / "c.json")
     expected = json.loads((tmp_path / "c.json").read_text())
-    result = gbc.compare(gbc.Model.from_file(greybox), {"overflow": read(OVERFLOW)},
-                         holdout=["B4"], seeds=1, epochs=2, jobs=1, progress=False)
+    result = gbc.compare(gbc.Model.from_file(S02_GREYBOX), {"data": read(S02_DATA)},
+                         holdout=["B2"], seeds=1, epochs=2, jobs=1, progress=False)
     def timeless(value):
         # Wall-clock seconds differ from run to run; every other field is the same.
         if isinstance(value, dict):
@@ -223,12 +227,12 @@ def test_an_interrupted_study_keeps_its_runs_and_goes_on(tmp_path):
 
 
 def test_an_ensemble_equals_the_cli(tmp_path):
-    flags = ["--ensemble", 3, "--holdout", "B4", "--jobs", 1, "--seed", 2]
-    cli("train", MONOD, OVERFLOW, *flags, "-o", tmp_path / "cli")
-    cli("predict", MONOD, OVERFLOW, "--weights", tmp_path / "cli", "--mode", "online",
+    flags = ["--ensemble", 3, "--holdout", "B1", "--jobs", 1, "--seed", 2]
+    cli("train", S29_MODEL, S29_DATA, *flags, "-o", tmp_path / "cli")
+    cli("predict", S29_MODEL, S29_DATA, "--weights", tmp_path / "cli", "--mode", "online",
         "-o", tmp_path / "cli.csv")
-    model = gbc.Model.from_file(MONOD)
-    ensemble = model.train({"overflow": read(OVERFLOW)}, ensemble=3, holdout=["B4"], jobs=1,
+    model = gbc.Model.from_file(S29_MODEL)
+    ensemble = model.train({"data": read(S29_DATA)}, ensemble=3, holdout=["B1"], jobs=1,
                            seed=2, output=tmp_path / "py", progress=False)
     assert isinstance(ensemble, gbc.Ensemble)
     expected = json.loads((tmp_path / "cli" / "ensemble.json").read_text())
@@ -243,13 +247,13 @@ def test_an_ensemble_equals_the_cli(tmp_path):
 
     assert timeless(ensemble.info) == timeless(expected)
     assert "coverage" in ensemble.summary
-    predicted = ensemble.predict({"overflow": read(OVERFLOW)}, mode="online")
+    predicted = ensemble.predict({"data": read(S29_DATA)}, mode="online")
     written = read(tmp_path / "cli.csv")
     assert list(predicted.columns) == list(written.columns)
     assert (predicted.drop(columns="experiment").to_numpy() ==
             written.drop(columns="experiment").to_numpy()).all()
     assert "<svg" in ensemble._repr_html_()
-    cli("export", MONOD, "--weights", tmp_path / "cli", "-o", tmp_path / "cli.onnx")
+    cli("export", S29_MODEL, "--weights", tmp_path / "cli", "-o", tmp_path / "cli.onnx")
     files = gbc.load_run(model, tmp_path / "py").export_onnx(tmp_path / "py.onnx")
     written = sorted(tmp_path.glob("cli*.onnx")) + sorted(tmp_path.glob("cli*.band.json"))
     assert len(files) == len(written) == len(ensemble.info["members"]) + 1
@@ -258,10 +262,10 @@ def test_an_ensemble_equals_the_cli(tmp_path):
 
 def test_cross_validation_equals_the_cli(tmp_path):
     flags = ["--cv", "--epochs", 2, "--seed", 4]
-    cli("train", MONOD, OVERFLOW, *flags, "-o", tmp_path / "cli")
+    cli("train", S29_MODEL, S29_DATA, *flags, "-o", tmp_path / "cli")
     expected = json.loads((tmp_path / "cli" / "cv" / "summary.json").read_text())
-    run = gbc.Model.from_file(MONOD).train({"overflow": read(OVERFLOW)}, cv=True, epochs=2,
-                                           seed=4, output=tmp_path / "py", progress=False)
+    run = gbc.Model.from_file(S29_MODEL).train({"data": read(S29_DATA)}, cv=True, epochs=2,
+                                               seed=4, output=tmp_path / "py", progress=False)
 
     def timeless(value):
         if isinstance(value, dict):
@@ -271,6 +275,7 @@ def test_cross_validation_equals_the_cli(tmp_path):
         return value
 
     assert timeless(run.cv) == timeless(expected)
-    assert [f["held_out"] for f in run.cv["folds"]] == ["B1", "B2", "B3", "B4"]
+    batches = sorted(read(S29_DATA)["experiment"].unique())
+    assert [f["held_out"] for f in run.cv["folds"]] == batches
     assert "cross-validation" in run.cv_table
     assert (tmp_path / "py" / "cv" / "summary.json").exists()
