@@ -7,7 +7,8 @@
 //! measured there, and hidden ones, carried along as in the offline error), once as it is
 //! and once with each correction slot `j` at a small `delta_j`: the sensitivity
 //! `s_ijk = d x_k(i+1) / d c_j` and the residual `r_ik = data_k(i+1) - x_k(i+1)` (only where
-//! state `k` is measured at rows `i` and `i + 1`) make the problem linear,
+//! column `k` is measured at rows `i` and `i + 1`; a column is a measured state or an
+//! observable, the model output at the stepped state) make the problem linear,
 //! `min_w sum_ik ((r_ik - sum_j s_ijk w_j . phi_ij) / std_k)^2 + ridge |w|^2`, solved through
 //! the normal equations with the ridge chosen by cross-validation over contiguous blocks of
 //! rows. A group's corrections (one per let) are fitted jointly this way. Corrections are
@@ -78,9 +79,11 @@ pub struct RecordPass {
     /// Filtered signals per row (inputs, measured states, then one per slot, at each time
     /// constant), empty without history.
     pub filtered: Vec<Vec<f64>>,
-    /// Sensitivities `s_ijk` per row, per slot, per measured state.
+    /// Sensitivities `s_ijk` per row, per slot, per measured column (the measured states,
+    /// then the observables).
     pub sensitivity: Vec<Vec<Vec<f64>>>,
-    /// Residuals `r_ik` per row (only where the state is measured at both ends).
+    /// Residuals `r_ik` per row, per measured column (only where it is measured at both
+    /// ends).
     pub residual: Vec<Vec<Option<f64>>>,
 }
 
@@ -155,6 +158,7 @@ fn record_pass(
     taus: &[f64],
 ) -> Result<RecordPass, IntegrationError> {
     let measured = record.states.len();
+    let columns = record.columns().count();
     let slots = corrected.loci.len();
     corrected.simulator.clear_corrections();
     let (starts, predictions) = corrected.simulator.one_step(record, overrides, end)?;
@@ -175,12 +179,11 @@ fn record_pass(
                 .collect(),
         );
         pass.locus.push(corrected.locus_values(record, row, state));
-        let predicted = predictions.row(row);
         pass.residual.push(
-            (0..measured)
+            (0..columns)
                 .map(
-                    |k| match (record.states[k][row], record.states[k][row + 1]) {
-                        (Some(_), Some(next)) => Some(next - predicted[k]),
+                    |k| match (record.column(k)[row], record.column(k)[row + 1]) {
+                        (Some(_), Some(next)) => Some(next - predictions.column(row, k)),
                         _ => None,
                     },
                 )
@@ -193,7 +196,7 @@ fn record_pass(
     let deltas: Vec<f64> = (0..slots)
         .map(|slot| probe(corrected.balance, &pass, slot, record))
         .collect();
-    let mut sensitivity = vec![vec![vec![0.0; measured]; slots]; rows];
+    let mut sensitivity = vec![vec![vec![0.0; columns]; slots]; rows];
     for (slot, &delta) in deltas.iter().enumerate() {
         let mut values = vec![0.0; slots];
         values[slot] = delta;
@@ -201,9 +204,13 @@ fn record_pass(
         for (row, per_row) in sensitivity.iter_mut().enumerate() {
             let mut state = starts.row(row).to_vec();
             corrected.simulator.step(record, row, &mut state)?;
-            let base = predictions.row(row);
-            per_row[slot] = (0..measured)
-                .map(|k| (state[k] - base[k]) / delta)
+            let observed = corrected.simulator.observe_state(record, row + 1, &state);
+            let moved = |k: usize| match k.checked_sub(measured) {
+                None => state[k],
+                Some(j) => observed[j],
+            };
+            per_row[slot] = (0..columns)
+                .map(|k| (moved(k) - predictions.column(row, k)) / delta)
                 .collect();
         }
     }
@@ -318,7 +325,9 @@ fn normal_equations(
     let n = width * slots;
     let mut folds: Vec<(NormalEquations, f64)> =
         (0..FOLDS).map(|_| (NormalEquations::new(n), 0.0)).collect();
-    let weights: Vec<f64> = norm.state_std.iter().map(|s| 1.0 / (s * s)).collect();
+    let weights: Vec<f64> = (0..norm.columns())
+        .map(|k| norm.column_std(k).powi(-2))
+        .collect();
     let total = pass.rows().max(1);
     let mut position = 0;
     let mut stacked = vec![0.0; n];

@@ -190,22 +190,30 @@ impl Simulator {
     /// states, the record's inputs and the current params; nothing where nothing is
     /// observed.
     pub fn observe_run(&mut self, record: &Record, run: &mut Run, first: usize) {
-        let measured = self.measured;
-        let Some(observation) = self.observation.take() else {
+        if self.observation.is_none() {
             return;
-        };
-        let count = observation.count;
-        let columns = observation.program.columns();
-        let (mut values, mut jacobian) = (vec![0.0; count], vec![0.0; count * columns]);
+        }
         run.observed.clear();
-        run.measured = measured;
+        run.measured = self.measured;
         for row in 0..run.rows() {
-            self.load(record, first + row, run.row(row));
-            let slots = self.system.slots_mut();
-            (observation.program).eval(slots, &mut self.scratch, &mut values, &mut jacobian);
+            let values = self.observe_state(record, first + row, run.row(row));
             run.observed.extend_from_slice(&values);
         }
+    }
+
+    /// The observables at `state` with the inputs of `row` and the current params (and
+    /// corrections); empty where nothing is observed.
+    pub fn observe_state(&mut self, record: &Record, row: usize, state: &[f64]) -> Vec<f64> {
+        let Some(observation) = self.observation.take() else {
+            return Vec::new();
+        };
+        let (count, columns) = (observation.count, observation.program.columns());
+        let (mut values, mut jacobian) = (vec![0.0; count], vec![0.0; count * columns]);
+        self.load(record, row, state);
+        let slots = self.system.slots_mut();
+        (observation.program).eval(slots, &mut self.scratch, &mut values, &mut jacobian);
         self.observation = Some(observation);
+        values
     }
 
     /// Integrates with `method` from now on.

@@ -67,6 +67,9 @@ pub struct Dopri5 {
     /// Work space of the stiffness monitor's exact Jacobian.
     jacobian: Vec<f64>,
     stats: Stats,
+    /// The step the last stretch proposed before it was cut to reach the stretch's end:
+    /// the next stretch of the same run starts with it ([`Dopri5::forget_step`] at a new run).
+    carried: Option<f64>,
 }
 
 /// The state of one integration while stepping.
@@ -79,6 +82,8 @@ struct Stepper {
     last_non_finite: bool,
     attempts: usize,
     monitor: Monitor,
+    /// The step proposed before the last one was cut to the stretch's end.
+    proposed: f64,
 }
 
 impl Dopri5 {
@@ -95,7 +100,14 @@ impl Dopri5 {
             sample: work(),
             jacobian: Vec::new(),
             stats: Stats::default(),
+            carried: None,
         }
+    }
+
+    /// Forgets the step carried from the last stretch: the next starts with Hairer's
+    /// heuristic (a new run, whose numbers must not depend on the runs before it).
+    pub(super) fn forget_step(&mut self) {
+        self.carried = None;
     }
 
     /// Work done since the integrator was made.
@@ -187,6 +199,7 @@ impl Dopri5 {
             }
         }
         samples.record_rest(y, sensitivities(&options));
+        self.carried = Some(stepper.proposed);
         Ok(Reached::End)
     }
 
@@ -206,9 +219,17 @@ impl Dopri5 {
         if let Some(sensitivity) = options.sensitivity.as_deref_mut() {
             sensitivity.first_stage(system, t0, y, &mut self.stats);
         }
+        // A stretch that goes on from the one before (the next input segment of one run)
+        // starts with the step that one was taking: an input switch every few minutes of a
+        // day-long record would otherwise pay the heuristic's cautious start at each.
+        let h = match self.carried.take() {
+            Some(h) if h.is_finite() && h > 0.0 => h.min(t1 - t0),
+            _ => self.initial_step(system, t0, y, t1 - t0),
+        };
         Ok(Stepper {
             t: t0,
-            h: self.initial_step(system, t0, y, t1 - t0),
+            h,
+            proposed: h,
             t_end: t1,
             previous_error: 1e-4,
             last_rejected: false,
@@ -296,6 +317,7 @@ impl Dopri5 {
             });
         }
         let remaining = stepper.t_end - stepper.t;
+        stepper.proposed = stepper.h;
         if stepper.t + 1.01 * stepper.h >= stepper.t_end {
             stepper.h = remaining;
             return Ok(true);

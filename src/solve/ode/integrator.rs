@@ -108,6 +108,7 @@ impl Integrator {
     /// Starts a new run: the step budget is whole again and the method choice starts over
     /// (explicit, unless only the implicit method runs).
     pub fn restart(&mut self) {
+        self.explicit.forget_step();
         self.attempts = 0;
         self.stiff = self.method == Method::Implicit;
         self.monitor = (self.method == Method::Auto).then_some(STIFF_WORK);
