@@ -103,10 +103,21 @@ pub fn state_gaps(
             online: online[k],
             offline: offline[k],
             noise: noise[k].variance,
-            noise_estimate: noise[k].describe(),
+            noise_estimate: if measured_anywhere(split, k) {
+                noise[k].describe()
+            } else {
+                "not measured (no cell in any experiment)".into()
+            },
             cells: cells[k],
         })
         .collect()
+}
+
+/// Whether column `k` (a measured state or an observable) has a cell in some experiment: a
+/// state the data never give (read only through outputs, or not at all) has no noise to
+/// estimate.
+fn measured_anywhere(split: &crate::solve::fit::split::Split, k: usize) -> bool {
+    (split.records.iter()).any(|record| record.column(k).iter().any(Option::is_some))
 }
 
 /// The error of the held-out free runs: the mean over states of each one's NMSE

@@ -379,6 +379,8 @@ fn a_gap_read_through_a_measured_output_is_found_as_through_its_state() {
     };
     assert_eq!(report.states.len(), 3, "{text}");
     assert_eq!(cells("P"), Some(0), "P is not measured: {text}");
+    let p = report.states.iter().find(|s| s.name == "P").unwrap();
+    assert!(p.noise_estimate.starts_with("not measured"), "{text}");
     assert!(cells("A").is_some_and(|c| c > 0), "{text}");
     assert!(
         report
