@@ -177,10 +177,10 @@ fn trimmed_mean(mut squares: Vec<f64>) -> (f64, f64) {
     )
 }
 
-/// Per measured column (state, then observable), the sum of the squares of its cells' residuals (rescaled to
-/// normalised units) and their count, from the residuals as
-/// [`super::fitter::Objective::residuals`] gives them (row by row, state by state, scaled by
-/// the square root of the training cells).
+/// Per measured column (state, then observable), the sum of the squares of its cells'
+/// residuals (rescaled to normalised units) and their count, from the residuals as
+/// [`super::fitter::Objective::residuals`] gives them (row by row, column by column, scaled
+/// by the square root of the training cells).
 pub fn by_state(split: &Split, residuals: &[f64]) -> Vec<(f64, usize)> {
     let columns = split.normalisation.columns();
     let mut sums = vec![(0.0, 0usize); columns];

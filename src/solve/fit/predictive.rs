@@ -231,8 +231,8 @@ fn first_cell_variance(split: &Split, index: usize, k: usize, noise: &[f64]) -> 
     cell_variance(split, k, cell.unwrap_or(0.0), noise)
 }
 
-/// The noise variance of a cell of column `k` (a measured state or an observable) reading `value`, in its unit squared: the
-/// declared noise at that value; else the level estimated from the data (`noise`,
+/// The noise variance of a cell of column `k` (a measured state or an observable) reading
+/// `value`, in its unit squared: the declared noise at that value; else the level estimated from the data (`noise`,
 /// z-scored, pooled over the state's training cells) taken as relative: spread over the
 /// cells in proportion to their squares (on the training cells it averages the pooled
 /// level). An assay's error grows with what it reads: the pooled level taken at an

@@ -24,6 +24,8 @@ pub struct RunSensitivities {
     pub values: Vec<f64>,
     /// Measured states per row (the data columns before the observables).
     pub measured: usize,
+    /// Observables per row.
+    pub observables: usize,
     /// The observables' derivatives, `observed[(row * observables + j) * columns + column]`
     /// (empty where nothing is observed).
     pub observed: Vec<f64>,
@@ -42,9 +44,7 @@ impl RunSensitivities {
         match k.checked_sub(self.measured) {
             None => self.at(row, k),
             Some(j) => {
-                let rows = self.values.len() / (self.dim * self.columns).max(1);
-                let per_row = self.observed.len() / (rows * self.columns).max(1);
-                let start = (row * per_row + j) * self.columns;
+                let start = (row * self.observables + j) * self.columns;
                 &self.observed[start..start + self.columns]
             }
         }
@@ -73,6 +73,7 @@ impl Simulator {
                 columns,
                 values: s.clone(),
                 measured: dim,
+                observables: 0,
                 observed: Vec::new(),
             },
         };
@@ -103,6 +104,7 @@ impl Simulator {
         let (dim, columns) = (sensitivities.dim, sensitivities.columns);
         let mut out = vec![0.0; observation.count * columns];
         sensitivities.measured = run.measured;
+        sensitivities.observables = observation.count;
         sensitivities.observed.clear();
         for row in 0..run.rows() {
             self.load(record, row, run.row(row));

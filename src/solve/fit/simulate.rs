@@ -39,8 +39,11 @@ pub struct Run {
     pub values: Vec<f64>,
     /// Measured states per row (the columns before the observables, [`Run::column`]).
     pub measured: usize,
-    /// Observables per row (row-major, [`crate::record::Normalisation::observables`]
-    /// order); empty where nothing is observed.
+    /// Observables per row.
+    pub observables: usize,
+    /// The observables, `observed[row * observables + j]`
+    /// ([`crate::record::Normalisation::observables`] order; empty where nothing is
+    /// observed).
     pub observed: Vec<f64>,
 }
 
@@ -51,6 +54,7 @@ impl Run {
             dim,
             values,
             measured: dim,
+            observables: 0,
             observed: Vec::new(),
         }
     }
@@ -60,10 +64,7 @@ impl Run {
     pub fn column(&self, row: usize, k: usize) -> f64 {
         match k.checked_sub(self.measured) {
             None => self.values[row * self.dim + k],
-            Some(j) => {
-                let per_row = self.observed.len() / self.rows().max(1);
-                self.observed[row * per_row + j]
-            }
+            Some(j) => self.observed[row * self.observables + j],
         }
     }
 
@@ -190,11 +191,12 @@ impl Simulator {
     /// states, the record's inputs and the current params; nothing where nothing is
     /// observed.
     pub fn observe_run(&mut self, record: &Record, run: &mut Run, first: usize) {
-        if self.observation.is_none() {
+        let Some(count) = self.observation.as_ref().map(|o| o.count) else {
             return;
-        }
+        };
         run.observed.clear();
         run.measured = self.measured;
+        run.observables = count;
         for row in 0..run.rows() {
             let values = self.observe_state(record, first + row, run.row(row));
             run.observed.extend_from_slice(&values);

@@ -274,6 +274,8 @@ impl Integrator {
         offset: usize,
         record: &mut Record,
     ) -> Result<Reached, IntegrationError> {
+        // The explicit step is no guide once the implicit method has taken over.
+        self.explicit.forget_step();
         if let (Some(s), Some(sensitivity)) = (&s, self.implicit_sensitivity.as_mut()) {
             sensitivity.set(s);
         }
