@@ -329,13 +329,17 @@ pub fn initial_states(context: &Context, base: &Simulator, x: &[f64]) -> Vec<Ini
     for (index, record) in split.records.iter().enumerate() {
         let overrides = split.overrides(index, fitted, simulator.hidden_count());
         let start = simulator.start_state(record, &overrides);
+        let observed = simulator.observed_start_states(record, &overrides);
         for (k, &how) in split.starts[index].iter().enumerate() {
             if !matches!(how, Start::Cell | Start::CellFitted(_)) {
                 found.push(InitialState {
                     experiment: record.name.clone(),
                     state: context.model.states[k].name.clone(),
                     value: start[k],
-                    origin: origin(how).into(),
+                    origin: match observed.contains(&k) {
+                        true => "from the first row's observables".into(),
+                        false => origin(how).into(),
+                    },
                 });
             }
         }

@@ -347,7 +347,7 @@ pub struct InitialState {
     /// Its value (under the model's fitted params).
     #[serde(with = "crate::json")]
     pub value: f64,
-    /// `declared`, `fitted` or `first measured value`.
+    /// `declared`, `fitted`, `first measured value` or `from the first row's observables`.
     pub origin: String,
 }
 

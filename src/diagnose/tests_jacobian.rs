@@ -178,3 +178,52 @@ fn jacobian_covers_measured_outputs() {
     check_model(&text, observed_records, false);
     check_model(&text, observed_records, true);
 }
+
+/// [`MODEL`] with X's start declared as a fixed guess (1.2): read only through `OD`, X
+/// starts where the first row's OD puts it, and its start moves with `c` (the OD's own
+/// param) and with nothing else; `x0` is moved into S's feed so that it stays an unknown.
+fn observed_start_model() -> String {
+    let text = MODEL
+        .replace("state X = x0, S", "state X = 1.2, S")
+        .replace("+ 0.2 * (3 - S)", "+ 0.2 * (x0 + 1.8 - S)");
+    format!("{text}{OBSERVED}")
+}
+
+/// A state read only through an observable starts where the observable's first cell puts
+/// it (the closed form of the OD's inverse), not at its declaration; without a first OD it
+/// starts at its declaration.
+#[test]
+fn a_state_read_only_through_an_output_starts_where_its_first_cell_puts_it() {
+    let text = observed_start_model();
+    let model = crate::driver::compile("culture", &text, &[]).unwrap().model;
+    let records = observed_records(&model);
+    let mut simulator = Simulator::new(&model, &[], Tolerances::default()).unwrap();
+    simulator.observe(&model, &[0, 1]).unwrap();
+    let c = 0.65;
+    simulator.set_params(&[0.35, 1.1, 0.03, c]);
+    for record in &records {
+        let Some(od) = record.observables[0].cells[0] else {
+            // No OD at the first row (the first experiment): X starts at its declaration.
+            assert_eq!(simulator.start_state(record, &[])[0], 1.2);
+            assert!(simulator.observed_start_states(record, &[]).is_empty());
+            continue;
+        };
+        let expected = (od - 0.4) / (c * (1.0 + record.inputs[0][0]));
+        assert!((expected - 1.2).abs() > 0.1, "the declaration would pass");
+        let start = simulator.start_state(record, &[]);
+        assert!(
+            (start[0] - expected).abs() < 1e-10 * expected,
+            "{}: X starts at {}, its OD says {expected}",
+            record.name,
+            start[0]
+        );
+        assert_eq!(simulator.observed_start_states(record, &[]), vec![0]);
+    }
+}
+
+/// The Jacobian with X's start solved from its OD: the chain through the solved start by
+/// `c`, the input and S's fitted start agrees with central differences.
+#[test]
+fn jacobian_covers_starts_read_through_outputs() {
+    check_model(&observed_start_model(), observed_records, false);
+}

@@ -73,6 +73,12 @@ impl JacobianProgram {
         self.columns
     }
 
+    /// The `(row, column)` of every entry that is not structurally zero: which expression
+    /// reads which slot.
+    pub fn structure(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.entries.iter().map(|&(row, column, _)| (row, column))
+    }
+
     /// Number of entries that are not structurally zero.
     #[cfg(test)]
     pub fn nonzeros(&self) -> usize {

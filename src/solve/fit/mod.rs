@@ -19,6 +19,7 @@ pub mod fitter;
 pub mod mechanism;
 pub mod model;
 pub mod noise;
+mod observed;
 pub mod predictive;
 pub mod sensitivity;
 pub mod simulate;

@@ -65,6 +65,7 @@ impl Simulator {
         self.system.set_extra_columns(initial.len());
         let mut state = self.start_state(record, overrides);
         let mut s = self.initial_sensitivities(record, overrides, initial);
+        self.observed_start_sensitivities(record, overrides, &state, &mut s);
         let (dim, columns) = (state.len(), s.len() / state.len().max(1));
         let mut sensitive = Sensitive {
             run: Run::of_states(dim, state.clone()),

@@ -259,6 +259,16 @@ impl Simulator {
         self.set_corrections(&[]);
     }
 
+    /// Number of measured states (the model's `state`s; the hidden ones follow them).
+    pub(super) fn measured_count(&self) -> usize {
+        self.measured
+    }
+
+    /// Whether state `k`'s declared initial value reads a param.
+    pub(super) fn init_reads_params(&self, k: usize) -> bool {
+        self.init_derivatives.structure().any(|(row, _)| row == k)
+    }
+
     /// Number of hidden states.
     pub fn hidden_count(&self) -> usize {
         self.hidden_init.len()
@@ -268,7 +278,9 @@ impl Simulator {
     /// `overrides` where given, else from its cell, else from its declared initial value
     /// (else 0, which [`super::split::Split`] never leaves); a hidden state from `overrides`
     /// (after the measured ones) where given, else from its declared initial value; both
-    /// under the current params.
+    /// under the current params. A measured state with none of these but a declaration
+    /// that reads no param, which a first-row observable reads, starts where that
+    /// observable puts it ([`super::observed`]).
     pub fn start_state(&mut self, record: &Record, overrides: &[Option<f64>]) -> Vec<f64> {
         let mut state = Vec::with_capacity(self.measured + self.hidden_init.len());
         for k in 0..self.measured {
@@ -291,6 +303,7 @@ impl Simulator {
             };
             state.push(value);
         }
+        self.solve_observed_starts(record, overrides, &mut state);
         state
     }
 
