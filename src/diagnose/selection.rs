@@ -2,10 +2,14 @@
 //!
 //! The candidates are sets of effects: every effect alone (the ranking,
 //! [`super::effects::rank_effects`]), and, unless one effect alone already leaves no
-//! significant gap, every pair among the best [`PAIRS_AMONG`] (and every triple among the
-//! best [`TRIPLES_AMONG`]), each fitted with all its params, warm-started from its members' single fits.
-//! Effects that only act together (a source of a species and its sink) are found this way;
-//! greedy forward selection stops at the first step, where neither alone helps.
+//! significant gap, every pair among the best [`PAIRS_AMONG`], each fitted with all its
+//! params, warm-started from its members' single fits. Effects that only act together (a
+//! source of a species and its sink) are found this way; greedy forward selection stops at
+//! the first step, where neither alone helps. Unless a pair then leaves no significant
+//! gap, the triples among the best [`TRIPLES_AMONG`] that contain a pair earning both its
+//! effects are fitted too (heredity: a triple is credited only over every pair inside it,
+//! and a third effect is looked for on top of two that act, not among effects no pair of
+//! which acts together).
 //!
 //! The choice uses the training fits only: Schwarz's criterion (BIC) on the training cells,
 //! and how much of the training gap above the noise floor a set removes. Free-run errors
@@ -108,7 +112,9 @@ pub fn select(
         if settled(&candidates) {
             break;
         }
-        candidates.extend(combinations(context, ranking, size, progress)?);
+        let earning = earning_pairs(&candidates, levels);
+        let wanted = |names: &[&str]| size == 2 || contains_any(names, &earning);
+        candidates.extend(combinations(context, ranking, (size, &wanted), progress)?);
     }
     candidates.sort_by(|a, b| a.criterion().total_cmp(&b.criterion()));
     let (selection, _) = decide(context, base, &candidates, levels);
@@ -237,12 +243,26 @@ fn reason_refused(base: &Scored, set: &Candidate, levels: Levels) -> Option<Stri
     }
 }
 
+/// The pairs among `candidates` that earn both their effects ([`earns_every_effect`]).
+fn earning_pairs(candidates: &[Candidate], levels: Levels) -> Vec<Vec<String>> {
+    (candidates.iter())
+        .filter(|c| c.effects.len() == 2 && earns_every_effect(c, candidates, levels))
+        .map(|c| c.effects.clone())
+        .collect()
+}
+
+/// Whether `names` contains every effect of one of `sets`.
+fn contains_any(names: &[&str], sets: &[Vec<String>]) -> bool {
+    (sets.iter()).any(|set| set.iter().all(|e| names.contains(&e.as_str())))
+}
+
 /// Every set of `size` candidates among the best [`PAIRS_AMONG`] (pairs) or
-/// [`TRIPLES_AMONG`] (triples) single candidates by BIC, fitted side by side.
+/// [`TRIPLES_AMONG`] (triples) single candidates by BIC that `wanted` keeps, fitted side
+/// by side.
 fn combinations(
     context: &Context,
     ranking: &Ranking,
-    size: usize,
+    (size, wanted): (usize, &(dyn Fn(&[&str]) -> bool + Sync)),
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Vec<Candidate>, DiagnoseError> {
     let mut singles: Vec<usize> = (0..ranking.scores.len()).collect();
@@ -255,7 +275,17 @@ fn combinations(
     } else {
         TRIPLES_AMONG
     });
-    let sets = subsets(&singles, size);
+    let names = |set: &[usize]| -> Vec<&str> {
+        (set.iter())
+            .map(|&i| ranking.scores[i].name.as_str())
+            .collect()
+    };
+    let sets: Vec<Vec<usize>> = (subsets(&singles, size).into_iter())
+        .filter(|set| wanted(&names(set)))
+        .collect();
+    if sets.is_empty() {
+        return Ok(Vec::new());
+    }
     progress(Progress::Stage {
         name: if size == 2 {
             "fitting pairs"
@@ -267,10 +297,7 @@ fn combinations(
     sets.par_iter()
         .enumerate()
         .map(|(index, set)| {
-            let names: Vec<&str> = set
-                .iter()
-                .map(|&i| ranking.scores[i].name.as_str())
-                .collect();
+            let names = names(set);
             let model = lower(context, &names)?;
             let mut start: BTreeMap<String, f64> = BTreeMap::new();
             for &i in set.iter().rev() {
