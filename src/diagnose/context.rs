@@ -61,7 +61,8 @@ pub struct Options {
     /// Whether hidden states start from values fitted per training experiment.
     pub fit_initial: bool,
     /// Whether the first row's measured cells of the training experiments are fitted as
-    /// unknowns (`--fit-starts`; else the free runs start at them, as the records spec says).
+    /// unknowns within their noise (the default; `--exact-starts` starts the free runs at
+    /// them, the records spec's literal reading).
     pub fit_starts: bool,
     /// Whether to search the loci (free corrections at every let, group and balance; most
     /// of the cost). Without it the report answers which effects and how far only.
@@ -87,7 +88,7 @@ impl Default for Options {
             span: None,
             dim: 5,
             fit_initial: false,
-            fit_starts: false,
+            fit_starts: true,
             locate: true,
             noise: None,
             min_rows: MIN_ROWS,

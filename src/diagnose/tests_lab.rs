@@ -91,7 +91,12 @@ fn overflow_with_uptake_is_credited_as_a_pair_at_the_acetate_balance() {
     }
     assert_eq!(fit.unknowns, pair.unknowns);
     let first = &report.locus[0];
-    assert_eq!((first.name.as_str(), first.kind), ("A", LocusKind::Balance));
+    assert_eq!(
+        (first.name.as_str(), first.kind),
+        ("A", LocusKind::Balance),
+        "{:?}",
+        report.locus
+    );
     // The acetate noise is not its curvature between assays: well under a tenth of its
     // variance (second differences alone take about a quarter).
     let acetate = report.states.iter().find(|s| s.name == "A").unwrap();
@@ -140,30 +145,41 @@ fn declared_noise_sets_the_floor_and_keeps_the_verdict() {
 
 /// A single batch with hidden biomass: its initial value, the uptake rates and the yield
 /// scale together. The fit holds the biomass start at its declared value, and the verdict
-/// is the same for three seeds.
+/// is the same for three seeds. With the measured starts taken as exact the truth (glucose
+/// repression) is credited or among those it cannot be told from; at the default (the
+/// measured starts fitted within their noise) the one batch's fitted starts take the
+/// training gap within 2x the noise floor, and glucose repression is still the effect that
+/// best explains it (docs/diagnose.md, "Measured starts").
 #[test]
 fn hidden_biomass_verdict_does_not_change_with_the_seed() {
-    let model = "models/diagnose/hidden_biomass/norepression.gbm";
-    let data = "models/diagnose/hidden_biomass/data/hidden_biomass.csv";
-    let verdicts: Vec<(Vec<String>, Vec<String>)> = (1..=3)
-        .map(|seed| {
-            let options = Options {
-                seed,
-                locate: false,
-                ..Options::default()
-            };
-            let report = diagnose_case(model, data, &[], &options);
-            let pinned = report.base_fit.pinned.iter().any(|(name, _)| name == "X0");
-            assert!(pinned, "{}", render::text(&report));
-            (report.selection.credited, report.selection.undecided)
-        })
-        .collect();
-    assert!(verdicts.windows(2).all(|w| w[0] == w[1]), "{verdicts:?}");
-    let (credited, undecided) = &verdicts[0];
-    // The truth (glucose repression) is credited, or among those it cannot be told from.
+    let verdicts = |fit_starts: bool, seeds: std::ops::RangeInclusive<u64>| {
+        let model = "models/diagnose/hidden_biomass/norepression.gbm";
+        let data = "models/diagnose/hidden_biomass/data/hidden_biomass.csv";
+        seeds
+            .map(|seed| {
+                let options = Options {
+                    seed,
+                    locate: false,
+                    fit_starts,
+                    ..Options::default()
+                };
+                let report = diagnose_case(model, data, &[], &options);
+                let pinned = report.base_fit.pinned.iter().any(|(name, _)| name == "X0");
+                assert!(pinned, "{}", render::text(&report));
+                let best = report.effects[0].name.clone();
+                (report.selection.credited, report.selection.undecided, best)
+            })
+            .collect::<Vec<_>>()
+    };
+    let exact = verdicts(false, 1..=3);
+    assert!(exact.windows(2).all(|w| w[0] == w[1]), "{exact:?}");
+    let (credited, undecided, _) = &exact[0];
     assert!(
         credited.contains(&"glucose_repression".to_string())
             || undecided.iter().any(|u| u.contains("glucose_repression")),
-        "{verdicts:?}"
+        "{exact:?}"
     );
+    let fitted = verdicts(true, 1..=2);
+    assert!(fitted.windows(2).all(|w| w[0] == w[1]), "{fitted:?}");
+    assert_eq!(fitted[0].2, "glucose_repression", "{fitted:?}");
 }

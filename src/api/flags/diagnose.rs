@@ -30,12 +30,15 @@ pub struct DiagnoseArgs {
     /// model's declarations say, e.g. records cut from one long run.
     #[arg(long)]
     pub fit_initial: bool,
-    /// Fit the first row's measured values of every training experiment with the params
-    /// (the cells stay residuals) instead of starting the free runs at them: for sparse,
-    /// noisy first assays (a small inoculum). On a misspecified model the fitted starts
-    /// absorb misfit that the held-out runs, started at their cells, do not have
-    /// (docs/diagnose.md).
+    /// Start every training free run at its first row's measured values, taken as exact
+    /// (the records spec's literal reading), instead of fitting them with the params within
+    /// their noise (the default: a first assay is a measurement as noisy as any other; its
+    /// cell stays a residual and bounds the start to 3 standard deviations of its noise).
     #[arg(long)]
+    pub exact_starts: bool,
+    /// The default since the measured starts are fitted (kept so that scripts that pass it
+    /// still run; see `--exact-starts`).
+    #[arg(long, hide = true, conflicts_with = "exact_starts")]
     pub fit_starts: bool,
     /// Hold every `const` at its declared value: only the model's effects are candidates.
     /// By default each constant a free run reads also competes, refitted as a param
@@ -118,7 +121,7 @@ impl DiagnoseArgs {
                 span: self.span,
                 dim: self.dim,
                 fit_initial: self.fit_initial,
-                fit_starts: self.fit_starts,
+                fit_starts: !self.exact_starts,
                 locate: !self.skip_loci,
                 min_rows: self.min_rows,
                 refit_constants: !self.hold_constants,

@@ -238,18 +238,27 @@ fn declared_text(noise: &crate::ir::Noise) -> String {
 /// missing lag or a wrong inoculum the model should be blamed for).
 pub const START_WIDTH: f64 = 3.0;
 
-/// Bounds every fitted start that has a measured first cell ([`Split::fitted_starts`] with
-/// `--fit-starts`) to the cell plus or minus [`START_WIDTH`] standard deviations of its
-/// noise: the declared noise at the cell's value, else the state's noise estimated from
-/// the data ([`noise_floors`]). A start whose noise is zero or unknown stays free.
+/// Bounds every fitted start that has a measured first cell ([`Split::fitted_starts`] of
+/// the diagnosis's default, `Start::CellFitted`) to the cell plus or minus [`START_WIDTH`]
+/// standard deviations of its noise: the declared noise at the cell's value, else the
+/// state's noise estimated from the data ([`noise_floors`]) read the tighter of two ways,
+/// as absolute (the pooled standard deviation) or as relative (scaled by the cell over the
+/// column's root mean square): the estimate does not say which, and a small first value
+/// (an inoculum) with relative noise is far more certain than the pooled deviation says.
+/// A start whose noise is zero or unknown stays free.
 pub fn bound_fitted_starts(split: &mut Split) {
     let floors = noise_floors(split);
+    let norm = &split.normalisation;
     split.start_bounds = (split.fitted_starts.iter())
         .map(|&(record, k)| {
             let cell = split.records[record].states[k].first().copied().flatten()?;
             let sigma = match &split.declared[k] {
                 Some((noise, _)) => noise.sigma(cell),
-                None => floors[k].variance.sqrt() * split.normalisation.state_std[k],
+                None => {
+                    let absolute = floors[k].variance.sqrt() * norm.state_std[k];
+                    let rms = norm.state_mean[k].hypot(norm.state_std[k]);
+                    absolute.min(absolute * cell.abs() / rms)
+                }
             };
             (sigma > 0.0 && sigma.is_finite())
                 .then_some((cell - START_WIDTH * sigma, cell + START_WIDTH * sigma))
