@@ -243,6 +243,9 @@ fn reason_refused(base: &Scored, set: &Candidate, levels: Levels) -> Option<Stri
     }
 }
 
+/// Which sets of effects (by name) a round of combinations fits.
+type Wanted<'a> = dyn Fn(&[&str]) -> bool + Sync + 'a;
+
 /// The pairs among `candidates` that earn both their effects ([`earns_every_effect`]).
 fn earning_pairs(candidates: &[Candidate], levels: Levels) -> Vec<Vec<String>> {
     (candidates.iter())
@@ -262,7 +265,7 @@ fn contains_any(names: &[&str], sets: &[Vec<String>]) -> bool {
 fn combinations(
     context: &Context,
     ranking: &Ranking,
-    (size, wanted): (usize, &(dyn Fn(&[&str]) -> bool + Sync)),
+    (size, wanted): (usize, &Wanted),
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Vec<Candidate>, DiagnoseError> {
     let mut singles: Vec<usize> = (0..ranking.scores.len()).collect();
