@@ -198,8 +198,7 @@ impl<'a> Context<'a> {
         let mut split = Split::with_min_rows(model, (train, held), parts, options.min_rows)?;
         split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
         if options.fit_starts {
-            split.fit_measured_starts(model);
-            crate::solve::fit::noise::bound_fitted_starts(&mut split);
+            crate::solve::fit::noise::fit_uncertain_starts(&mut split, model);
         }
         Ok(Context {
             problem: *problem,

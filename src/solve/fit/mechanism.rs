@@ -42,8 +42,7 @@ pub fn fit_mechanism(
     )?;
     split.declare_noise(options.noise.as_deref().unwrap_or(&model.noise));
     if options.fit_starts {
-        split.fit_measured_starts(model);
-        super::noise::bound_fitted_starts(&mut split);
+        super::noise::fit_uncertain_starts(&mut split, model);
     }
     let declared = BTreeMap::new();
     let starts = Starts::new(options.restarts);

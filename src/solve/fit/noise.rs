@@ -238,32 +238,54 @@ fn declared_text(noise: &crate::ir::Noise) -> String {
 /// missing lag or a wrong inoculum the model should be blamed for).
 pub const START_WIDTH: f64 = 3.0;
 
-/// Bounds every fitted start that has a measured first cell ([`Split::fitted_starts`] of
-/// the diagnosis's default, `Start::CellFitted`) to the cell plus or minus [`START_WIDTH`]
-/// standard deviations of its noise: the declared noise at the cell's value, else the
-/// state's noise estimated from the data ([`noise_floors`]) read the tighter of two ways,
-/// as absolute (the pooled standard deviation) or as relative (scaled by the cell over the
-/// column's root mean square): the estimate does not say which, and a small first value
-/// (an inoculum) with relative noise is far more certain than the pooled deviation says.
-/// A start whose noise is zero or unknown stays free.
-pub fn bound_fitted_starts(split: &mut Split) {
+/// Makes the first row's measured cells of every training experiment unknowns of the fit
+/// ([`Split::fit_measured_starts`], the diagnosis's default), each bounded to its cell plus
+/// or minus [`START_WIDTH`] standard deviations of its noise ([`start_sigma`]); a cell
+/// whose noise is not known to be above zero stays the exact start it was.
+pub fn fit_uncertain_starts(split: &mut Split, model: &crate::ir::Model) {
     let floors = noise_floors(split);
-    let norm = &split.normalisation;
+    let sigmas: Vec<Vec<Option<f64>>> = (0..split.records.len())
+        .map(|record| {
+            (0..model.states.len())
+                .map(|k| start_sigma(split, &floors, record, k))
+                .collect()
+        })
+        .collect();
+    let uncertain: Vec<Vec<bool>> = (sigmas.iter())
+        .map(|row| row.iter().map(Option::is_some).collect())
+        .collect();
+    split.fit_measured_starts(model, &uncertain);
     split.start_bounds = (split.fitted_starts.iter())
         .map(|&(record, k)| {
             let cell = split.records[record].states[k].first().copied().flatten()?;
-            let sigma = match &split.declared[k] {
-                Some((noise, _)) => noise.sigma(cell),
-                None => {
-                    let absolute = floors[k].variance.sqrt() * norm.state_std[k];
-                    let rms = norm.state_mean[k].hypot(norm.state_std[k]);
-                    absolute.min(absolute * cell.abs() / rms)
-                }
-            };
-            (sigma > 0.0 && sigma.is_finite())
-                .then_some((cell - START_WIDTH * sigma, cell + START_WIDTH * sigma))
+            let sigma = sigmas[record][k]?;
+            Some((cell - START_WIDTH * sigma, cell + START_WIDTH * sigma))
         })
         .collect();
+}
+
+/// The standard deviation of the noise of `record`'s first cell of state `k` (`None`
+/// where there is no cell or its noise is not known to be above zero): the declared noise
+/// at the cell's value; else the estimate from the data (`floors`) at the lower end of its
+/// one-standard-error interval (differences over a few sparse assays count curvature as
+/// noise; a start bounded by an inflated noise absorbs misfit), read the tighter of two
+/// ways, as absolute (the pooled deviation) or relative (scaled by the cell over the
+/// column's root mean square): the estimate does not say which, and a small first value
+/// (an inoculum) under relative noise is far more certain than the pooled deviation says.
+fn start_sigma(split: &Split, floors: &[NoiseEstimate], record: usize, k: usize) -> Option<f64> {
+    let cell = split.records[record].states[k].first().copied().flatten()?;
+    let norm = &split.normalisation;
+    let sigma = match &split.declared[k] {
+        Some((noise, _)) => noise.sigma(cell),
+        None => {
+            let floor = &floors[k];
+            let low = floor.variance * (1.0 - floor.relative_error).max(0.0);
+            let absolute = low.sqrt() * norm.state_std[k];
+            let rms = norm.state_mean[k].hypot(norm.state_std[k]);
+            absolute.min(absolute * cell.abs() / rms)
+        }
+    };
+    (sigma > 0.0 && sigma.is_finite()).then_some(sigma)
 }
 
 /// Per measured column (state, then observable), the noise estimate in normalised units

@@ -77,7 +77,7 @@ pub struct Split {
     pub fitted_starts: Vec<(usize, usize)>,
     /// Per fitted start (in the order of [`Split::fitted_starts`]), the range a fit may
     /// move it in: a measured first cell's plausible values given its noise
-    /// ([`super::noise::bound_fitted_starts`]); `None`: free.
+    /// ([`super::noise::fit_uncertain_starts`]); `None`: free.
     pub start_bounds: Vec<Option<(f64, f64)>>,
     /// How the held-out part was chosen.
     pub holdout: Holdout,
@@ -214,7 +214,7 @@ impl Split {
             normalisation,
             declared: vec![None; columns],
         };
-        split.plan_starts(model, false);
+        split.plan_starts(model, &[]);
         split
     }
 
@@ -282,23 +282,26 @@ impl Split {
     }
 
     /// Fits the first row's measured cells of every training experiment as unknowns
-    /// ([`Start::CellFitted`], `--fit-starts`) instead of starting the free runs at them.
-    pub fn fit_measured_starts(&mut self, model: &Model) {
+    /// ([`Start::CellFitted`]) where `uncertain[record][state]` says so, instead of starting
+    /// the free runs at them.
+    pub fn fit_measured_starts(&mut self, model: &Model, uncertain: &[Vec<bool>]) {
         self.starts.clear();
         self.fitted_starts.clear();
         self.start_bounds.clear();
-        self.plan_starts(model, true);
+        self.plan_starts(model, uncertain);
     }
 
     /// Decides where every measured state's free run starts (see the module documentation);
-    /// with `cells`, a training experiment's measured first cells are fitted starts.
-    fn plan_starts(&mut self, model: &Model, fit_cells: bool) {
+    /// a training experiment's measured first cells are fitted starts where `fit_cells`
+    /// says so (empty: none).
+    fn plan_starts(&mut self, model: &Model, fit_cells: &[Vec<bool>]) {
         for (index, (record, part)) in self.records.iter().zip(&self.parts).enumerate() {
             let mut starts = Vec::with_capacity(model.states.len());
             for (k, state) in model.states.iter().enumerate() {
                 let cells = &record.states[k];
                 let measured = cells.first().copied().flatten().is_some();
-                starts.push(if fit_cells && measured && !part.train.is_empty() {
+                let fit = (fit_cells.get(index)).is_some_and(|row| row.get(k) == Some(&true));
+                starts.push(if fit && measured && !part.train.is_empty() {
                     self.fitted_starts.push((index, k));
                     Start::CellFitted(self.fitted_starts.len() - 1)
                 } else if measured {

@@ -169,3 +169,43 @@ fn starts_come_from_cells_declarations_fits_or_first_values() {
         vec![None, Some(2.0), None, None]
     );
 }
+
+/// The diagnosis's default starts: a training experiment's measured first cell is fitted
+/// within 3 standard deviations of its declared noise at that cell; a state whose noise is
+/// not known to be above zero (undeclared, and the data a line with no scatter) keeps its
+/// exact start, and a held-out experiment starts at its cells.
+#[test]
+fn uncertain_first_cells_are_fitted_within_their_noise() {
+    let source = "model m\ninput u\nstate X = 1\nstate Y = 1\nparam k = 1\n\
+                  noise X = 10 %\nder X = -k * X + u\nder Y = X - Y\n";
+    let model = crate::driver::compile("m", source, &[]).unwrap().model;
+    let complete = |name: &str| {
+        Record::complete(
+            name,
+            (0..12).map(|k| k as f64).collect(),
+            vec![vec![0.5; 12]],
+            vec![
+                (0..12).map(|k| 2.0 + k as f64).collect(),
+                (0..12).map(|k| k as f64).collect(),
+            ],
+        )
+    };
+    let mut split = Split::new(
+        &model,
+        vec![complete("a")],
+        vec![complete("b")],
+        (Holdout::Experiments, false),
+    )
+    .unwrap();
+    split.declare_noise(&model.noise);
+    crate::solve::fit::noise::fit_uncertain_starts(&mut split, &model);
+    assert_eq!(split.starts[0], vec![Start::CellFitted(0), Start::Cell]);
+    assert_eq!(split.starts[1], vec![Start::Cell, Start::Cell]);
+    assert_eq!(split.fitted_starts, vec![(0, 0)]);
+    // X's first cell is 2: 10 % noise is 0.2, the bound 3 of them either side.
+    let (lo, hi) = split.start_bounds[0].unwrap();
+    assert!(
+        (lo - 1.4).abs() < 1e-12 && (hi - 2.6).abs() < 1e-12,
+        "{lo} {hi}"
+    );
+}
